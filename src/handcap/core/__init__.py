@@ -1,0 +1,17 @@
+"""Data model: marker, point-cloud and motion containers, errors, rotations."""
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerGaps, MarkerSequence, as_positions, marker_gaps
+from handcap.core.motion import HandMotion, ObjectMotion
+from handcap.core.points import PointCloudSequence
+
+__all__ = [
+    "HandcapError",
+    "HandMotion",
+    "MarkerGaps",
+    "MarkerSequence",
+    "ObjectMotion",
+    "PointCloudSequence",
+    "as_positions",
+    "marker_gaps",
+]

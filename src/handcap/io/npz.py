@@ -1,0 +1,122 @@
+"""handcap's own ``.npz`` files for every container (see File contracts in DESIGN.md).
+
+Every file carries a ``kind`` entry (``markers``, ``points``, ``hand_motion``,
+``object_motion``) so that a reader can say what it got; files written by other
+tools with the contract's keys but no ``kind`` are accepted too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence
+from handcap.core.motion import HandMotion, ObjectMotion
+from handcap.core.points import PointCloudSequence
+from handcap.io._files import load_npz, save_npz
+
+
+def _names(values) -> np.ndarray:
+    return np.array([str(v) for v in values], dtype=str) if len(values) else np.zeros(0, dtype="<U1")
+
+
+def _scalar(arrays, key, path, cast=float):
+    try:
+        return cast(np.asarray(arrays[key]).reshape(()))
+    except (ValueError, TypeError):
+        raise HandcapError(f"{path}: entry {key!r} must be a single value") from None
+
+
+def _check_kind(arrays, path, kind):
+    if "kind" in arrays and str(arrays["kind"]) != kind:
+        raise HandcapError(f"{path}: holds {arrays['kind']}, not {kind}")
+
+
+def npz_kind(path) -> str:
+    """Which container a handcap ``.npz`` holds, guessed from its keys if unlabeled."""
+    arrays = load_npz(path)
+    if "kind" in arrays:
+        return str(arrays["kind"])
+    for kind, key in (("markers", "positions"), ("points", "points"),
+                      ("hand_motion", "hand_pose"), ("object_motion", "rotation")):
+        if key in arrays:
+            return kind
+    raise HandcapError(f"{path}: not a handcap .npz (no positions, points, hand_pose or rotation)")
+
+
+def write_markers_npz(markers: MarkerSequence, path) -> None:
+    arrays = {"kind": np.array("markers"), "positions": markers.positions,
+              "names": _names(markers.names), "rate": np.array(markers.rate)}
+    if markers.residuals is not None:
+        arrays["residuals"] = markers.residuals
+    save_npz(path, arrays)
+
+
+def read_markers_npz(path) -> MarkerSequence:
+    arrays = load_npz(path, ("positions", "names", "rate"), "marker .npz file")
+    _check_kind(arrays, path, "markers")
+    try:
+        return MarkerSequence(arrays["positions"], list(arrays["names"]), _scalar(arrays, "rate", path),
+                              arrays.get("residuals"))
+    except HandcapError as err:
+        raise HandcapError(f"{path}: {err}") from None
+
+
+def write_points_npz(points: PointCloudSequence, path) -> None:
+    save_npz(path, {"kind": np.array("points"), "points": points.padded(), "rate": np.array(points.rate)})
+
+
+def read_points_npz(path) -> PointCloudSequence:
+    arrays = load_npz(path, ("points", "rate"), "point-cloud .npz file")
+    _check_kind(arrays, path, "points")
+    try:
+        return PointCloudSequence.from_padded(arrays["points"], _scalar(arrays, "rate", path))
+    except HandcapError as err:
+        raise HandcapError(f"{path}: {err}") from None
+
+
+def write_hand_motion(motion: HandMotion, path) -> None:
+    arrays = {"kind": np.array("hand_motion"), "betas": motion.betas,
+              "global_orient": motion.global_orient, "hand_pose": motion.hand_pose,
+              "transl": motion.transl, "rate": np.array(motion.rate), "side": np.array(motion.side),
+              "model": np.array(motion.model), "marker_names": _names(motion.marker_names)}
+    for key in ("phi", "joints", "marker_fit"):
+        if getattr(motion, key) is not None:
+            arrays[key] = getattr(motion, key)
+    save_npz(path, arrays)
+
+
+def read_hand_motion(path) -> HandMotion:
+    arrays = load_npz(path, ("betas", "global_orient", "hand_pose", "transl", "rate"), "hand-motion .npz file")
+    _check_kind(arrays, path, "hand_motion")
+    try:
+        return HandMotion(
+            arrays["betas"], arrays["global_orient"], arrays["hand_pose"], arrays["transl"],
+            _scalar(arrays, "rate", path), str(arrays.get("side", "right")), arrays.get("phi"),
+            str(arrays.get("model", "openhand")), arrays.get("joints"),
+            tuple(arrays.get("marker_names", ())), arrays.get("marker_fit"))
+    except HandcapError as err:
+        raise HandcapError(f"{path}: {err}") from None
+
+
+def write_object_motion(motion: ObjectMotion, path) -> None:
+    arrays = {"kind": np.array("object_motion"), "rotation": motion.rotation,
+              "translation": motion.translation, "rate": np.array(motion.rate),
+              "name": np.array(motion.name), "marker_names": _names(motion.marker_names)}
+    if motion.canonical is not None:
+        arrays["canonical"] = motion.canonical
+    for key, value in motion.state.items():
+        arrays[f"state_{key}"] = value
+    save_npz(path, arrays)
+
+
+def read_object_motion(path) -> ObjectMotion:
+    arrays = load_npz(path, ("rotation", "translation", "rate"), "object-motion .npz file")
+    _check_kind(arrays, path, "object_motion")
+    state = {k[len("state_"):]: v for k, v in arrays.items() if k.startswith("state_")}
+    try:
+        return ObjectMotion(arrays["rotation"], arrays["translation"], _scalar(arrays, "rate", path),
+                            str(arrays.get("name", "object")), tuple(arrays.get("marker_names", ())),
+                            arrays.get("canonical"), state)
+    except HandcapError as err:
+        raise HandcapError(f"{path}: {err}") from None
