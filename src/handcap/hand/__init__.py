@@ -15,8 +15,10 @@ from handcap.hand.anatomy import (
     joint_frames,
     phi_from_hand_pose,
 )
+from handcap.hand.mano import ManoHand
 from handcap.hand.model import HandModel, HandOutput
 from handcap.hand.openhand import OpenHand
+from handcap.hand.select import load_hand_model
 
 __all__ = [
     "JOINT_NAMES",
@@ -26,8 +28,10 @@ __all__ = [
     "TIP_NAMES",
     "HandModel",
     "HandOutput",
+    "ManoHand",
     "OpenHand",
     "hand_pose_from_phi",
     "joint_frames",
+    "load_hand_model",
     "phi_from_hand_pose",
 ]
