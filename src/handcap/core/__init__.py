@@ -15,3 +15,7 @@ __all__ = [
     "as_positions",
     "marker_gaps",
 ]
+
+from handcap.core.cameras import Camera, CameraRig  # noqa: E402
+
+__all__ += ["Camera", "CameraRig"]
