@@ -141,8 +141,6 @@ class MarkerSequence:
             if residuals.shape != positions.shape[:2]:
                 raise HandcapError(f"residuals must have shape {positions.shape[:2]}, got {residuals.shape}")
             residuals[np.isnan(positions[..., 0])] = np.nan
-            residuals.setflags(write=False)
-        positions.setflags(write=False)
         object.__setattr__(self, "positions", positions)
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "rate", check_rate(self.rate))

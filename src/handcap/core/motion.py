@@ -26,7 +26,6 @@ def _frames_array(value, name: str, width: tuple[int, ...], n_frames: int | None
     if n_frames is not None and value.shape[0] != n_frames:
         raise HandcapError(f"{name} has {value.shape[0]} frames, expected {n_frames}")
     value = value.copy()
-    value.setflags(write=False)
     return value
 
 
@@ -75,7 +74,6 @@ class HandMotion:
         betas = np.asarray(self.betas, dtype=np.float64).copy()
         if betas.shape != (10,):
             raise HandcapError(f"betas must have shape (10,), got {betas.shape}")
-        betas.setflags(write=False)
         orient = _frames_array(self.global_orient, "global_orient", (3,), None)
         n = orient.shape[0]
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 - frozen dataclass
@@ -153,7 +151,6 @@ class ObjectMotion:
             canonical = np.asarray(self.canonical, dtype=np.float64).copy()
             if canonical.shape != (len(names), 3):
                 raise HandcapError(f"canonical must have shape ({len(names)}, 3), got {canonical.shape}")
-            canonical.setflags(write=False)
             object.__setattr__(self, "canonical", canonical)
         state = {}
         for key, value in dict(self.state).items():

@@ -31,7 +31,6 @@ class PointCloudSequence:
             pts = np.array(pts, dtype=np.float64).reshape(-1, 3) if np.size(pts) else np.zeros((0, 3))
             if not np.isfinite(pts).all():
                 raise HandcapError(f"frame {t} holds non-finite points; drop missing points instead")
-            pts.setflags(write=False)
             checked.append(pts)
         object.__setattr__(self, "frames", tuple(checked))
         object.__setattr__(self, "rate", check_rate(self.rate))

@@ -1,0 +1,102 @@
+"""``handcap demo``: the end-to-end job on built-in data.
+
+Today it makes a synthetic DexterCap-style capture (dense checkerboard
+patches, a power grasp of a cylinder, twelve cameras at 20 Hz), writes the
+capture folder, a short summary and a picture of the hand with its markers.
+Later stages (solve, smooth, metrics) join it as they land.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from handcap.synth.scene import SynthConfig, synthesize, write_capture
+
+DEMO_CONFIG = SynthConfig(layout="dense-patches", motion="grasp", frames=120, rate=20.0, seed=7, min_views=3)
+
+
+def summarize(capture) -> dict:
+    """Frames, markers, visibility and gap statistics of a synthetic capture."""
+    markers = capture.markers
+    names = list(capture.truth["names"])
+    labeled = markers.select(names)
+    visible = capture.truth["visible"]
+    n_hand = len(capture.hand_motion.marker_names)
+    gaps = labeled.gap_summary()
+    per_camera = capture.truth["camera_visible"].mean(axis=(0, 2))
+    return {
+        "frames": markers.n_frames,
+        "rate_hz": markers.rate,
+        "duration_s": round(markers.duration, 3),
+        "layout": capture.config.layout,
+        "motion": capture.config.motion,
+        "object": capture.config.object_kind or "none",
+        "hand_markers": n_hand,
+        "object_markers": len(names) - n_hand,
+        "ghost_trajectories": markers.n_markers - len(names),
+        "cameras": len(capture.rig),
+        "min_views": capture.config.min_views,
+        "reconstructed_fraction": round(float(visible.mean()), 4),
+        "hand_reconstructed_fraction": round(float(visible[:, :n_hand].mean()), 4),
+        "seen_per_camera_fraction": [round(float(v), 4) for v in per_camera],
+        "missing_fraction": round(gaps["missing_fraction"], 4),
+        "gaps": gaps["gaps"],
+        "mean_gap_frames": round(gaps["mean_gap_frames"], 2),
+        "max_gap_frames": gaps["max_gap_frames"],
+        "mean_segment_frames": round(gaps["mean_segment_frames"], 2),
+        "label_swaps": int(len(capture.truth["swaps"])),
+        "detections_2d": int(len(capture.detections["frame"])),
+    }
+
+
+def picture(capture, frame: int | None = None) -> np.ndarray:
+    """RGB image of the hand, the object and the markers (green: reconstructed, red: lost)."""
+    from scipy.spatial.transform import Rotation
+
+    from handcap.hand import OpenHand
+    from handcap.synth.objects import make_object
+    from handcap.synth.render import View, render
+
+    motion = capture.hand_motion
+    holding = capture.object_motion.state["holding"] if capture.object_motion is not None else None
+    if frame is None:
+        frame = int(np.flatnonzero(holding)[len(np.flatnonzero(holding)) // 2]) if holding is not None \
+            and holding.any() else motion.n_frames // 2
+    hand = OpenHand(motion.side)
+    out = hand.forward(motion.betas, motion.global_orient[frame], motion.hand_pose[frame], motion.transl[frame])
+    meshes = [(out.vertices, hand.faces, (232, 190, 160))]
+    if capture.object_motion is not None:
+        obj = make_object(capture.config.object_kind, seed=capture.config.seed)
+        rot = Rotation.from_rotvec(capture.object_motion.rotation[frame]).as_matrix()
+        meshes.append((obj.vertices @ rot.T + capture.object_motion.translation[frame], obj.faces, (110, 150, 220)))
+    truth = capture.truth["positions"][frame]
+    seen = capture.truth["visible"][frame]
+    centre = out.vertices.mean(axis=0)
+    # Look from the camera that sees the most markers in this frame.
+    camera = capture.rig[int(np.argmax(capture.truth["camera_visible"][frame].sum(axis=1)))]
+    eye = centre + (camera.center - centre) / np.linalg.norm(camera.center - centre) * 0.42
+    view = View.looking_at(centre, eye, up=(0.0, 0.0, 1.0), size=(960, 720), fov_deg=36)
+    points = [(truth[seen], (40, 200, 60), 3), (truth[~seen], (230, 40, 40), 3)]
+    return render(view, meshes, points)
+
+
+def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
+    """Write the demo capture, ``summary.json``, ``summary.txt`` and ``hand.png`` into ``out``."""
+    from handcap.io._files import atomic_output
+    from handcap.synth.render import save_png
+
+    out = Path(out)
+    capture = synthesize(DEMO_CONFIG, progress=progress)
+    paths = write_capture(capture, out)
+    summary = summarize(capture)
+    text = "\n".join(f"{k:28s} {v}" for k, v in summary.items() if k != "seen_per_camera_fraction")
+    with atomic_output(out / "summary.json", "w") as fh:
+        json.dump(summary, fh, indent=2)
+    with atomic_output(out / "summary.txt", "w") as fh:
+        fh.write(text + "\n")
+    save_png(out / "hand.png", picture(capture))
+    summary["files"] = sorted(str(p) for p in list(paths.values()) + [out / "summary.json", out / "hand.png"])
+    return summary

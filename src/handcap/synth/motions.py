@@ -1,0 +1,410 @@
+"""Hand (and object) motions for synthetic captures.
+
+Every motion is made of key poses placed in time and joined by clamped cubic
+splines (zero velocity at the ends: smooth, no jumps), plus a small
+physiological tremor (band-limited noise below 6 Hz). Finger flexion follows
+the usual synergies: the DIP flexes two thirds as much as the PIP, and
+neighbouring fingers move together. Grasps close each finger along a path from
+an open to a closed pose until its skin touches the object (analytic signed
+distance, at most 1.5 mm of soft-tissue compression), so contacts are real
+and fingers pass behind the object for the cameras.
+
+World frame: metres, z up; the hand works around ``WORK_CENTRE``. In the
+neutral wrist pose the palm faces down and the fingers point along +x.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.optimize import least_squares
+from scipy.signal import butter, sosfiltfilt
+from scipy.spatial.transform import Rotation, RotationSpline
+
+from handcap.core.errors import HandcapError
+from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES
+
+MOTIONS = ("open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
+WORK_CENTRE = np.array([0.0, 0.0, 1.0])
+# Model axes (x distal, y dorsal, z = x cross y) to world: palm down, fingers along +x.
+NEUTRAL = Rotation.from_matrix(np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]))
+FINGERS = ("index", "middle", "ring", "pinky")
+_I = {n: i for i, n in enumerate(PHI_NAMES)}
+MIN_OBJECT_SECONDS = 2.5  # shortest take in which a hand can reach, grasp, carry and release
+DIP_PIP_RATIO = 2.0 / 3.0  # DIP flexion per unit PIP flexion (tendon coupling)
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A generated motion.
+
+    Attributes
+    ----------
+    phi : ndarray (T, 27)
+        Anatomical angles, radians.
+    global_orient : ndarray (T, 3)
+        Axis-angle of the wrist in the world.
+    transl : ndarray (T, 3)
+        Wrist joint position in the world, metres (OpenHand's wrist is its origin).
+    object_rotation, object_translation : ndarray (T, 3) or None
+        Object pose (axis-angle, metres) when the motion has an object.
+    holding : ndarray (T,) bool
+        True while the hand carries the object.
+    """
+
+    phi: np.ndarray
+    global_orient: np.ndarray
+    transl: np.ndarray
+    object_rotation: np.ndarray | None = None
+    object_translation: np.ndarray | None = None
+    holding: np.ndarray | None = None
+
+
+def _pose(**degrees) -> np.ndarray:
+    phi = np.zeros(27)
+    for name, value in degrees.items():
+        phi[_I[name]] = np.deg2rad(value)
+    return phi
+
+
+def finger_flexion(phi, finger: str, amount: float, *, mcp: float = 80.0, pip: float = 95.0) -> np.ndarray:
+    """``phi`` with one finger flexed to ``amount`` (0 straight .. 1 fist), DIP coupled to PIP."""
+    phi = phi.copy()
+    phi[_I[f"{finger}_mcp_bend"]] = np.deg2rad(mcp * amount)
+    phi[_I[f"{finger}_pip_bend"]] = np.deg2rad(pip * amount)
+    phi[_I[f"{finger}_dip_bend"]] = np.deg2rad(pip * amount) * DIP_PIP_RATIO
+    return phi
+
+
+def relaxed_pose() -> np.ndarray:
+    """A relaxed, slightly curled hand."""
+    phi = _pose(thumb_cmc_bend=5, thumb_cmc_spread=-10, thumb_mcp_bend=10, thumb_ip_bend=10)
+    for finger, amount in zip(FINGERS, (0.12, 0.15, 0.18, 0.2)):
+        phi = finger_flexion(phi, finger, amount)
+    return phi
+
+
+def fist_pose() -> np.ndarray:
+    phi = _pose(thumb_cmc_bend=45, thumb_cmc_spread=-15, thumb_cmc_twist=15, thumb_mcp_bend=35, thumb_ip_bend=45)
+    for finger in FINGERS:
+        phi = finger_flexion(phi, finger, 1.0)
+    return phi
+
+
+def natural_pose(rng) -> np.ndarray:
+    """A random pose of the kind people make: correlated flexion, modest spread and twist."""
+    base = rng.uniform(0.0, 0.9)
+    amounts = np.clip(base + np.cumsum(rng.normal(0, 0.12, 4)), 0.0, 1.0)
+    phi = np.zeros(27)
+    for finger, amount in zip(FINGERS, amounts):
+        phi = finger_flexion(phi, finger, amount, mcp=rng.uniform(60, 90), pip=rng.uniform(70, 105))
+        phi[_I[f"{finger}_mcp_spread"]] = np.deg2rad(rng.normal(0, 7))
+        phi[_I[f"{finger}_mcp_twist"]] = np.deg2rad(rng.normal(0, 4))
+    thumb = rng.uniform(0, 1)
+    phi[_I["thumb_cmc_bend"]] = np.deg2rad(-10 + 55 * thumb + rng.normal(0, 8))
+    phi[_I["thumb_cmc_spread"]] = np.deg2rad(rng.uniform(-25, 10))
+    phi[_I["thumb_cmc_twist"]] = np.deg2rad(20 * thumb + rng.normal(0, 6))
+    phi[_I["thumb_mcp_bend"]] = np.deg2rad(rng.uniform(0, 45))
+    phi[_I["thumb_ip_bend"]] = np.deg2rad(rng.uniform(-5, 60))
+    return np.clip(phi, PHI_LIMITS[:, 0], PHI_LIMITS[:, 1])
+
+
+# -- interpolation -------------------------------------------------------------
+
+def _spline(times, values, t):
+    return CubicSpline(times, values, axis=0, bc_type="clamped")(t)
+
+
+def _rotation_path(times, rotations: Rotation, t) -> Rotation:
+    # Make consecutive keys take the short way round, then spline in rotation space.
+    return RotationSpline(times, rotations)(t)
+
+
+def _tremor(rng, n, width, rate, amplitude, cutoff=6.0):
+    """Band-limited noise (T, width) with standard deviation ``amplitude``."""
+    noise = rng.normal(size=(n + 64, width))
+    sos = butter(2, min(cutoff / (rate / 2), 0.99), output="sos")
+    smooth = sosfiltfilt(sos, noise, axis=0)[32:32 + n]
+    return smooth / max(smooth.std(), 1e-12) * amplitude
+
+
+def _wrist_keys(rng, n_keys, *, turn_deg=25.0, move=0.05, centre=WORK_CENTRE, base=NEUTRAL):
+    rots = [base * Rotation.from_rotvec(np.deg2rad(rng.normal(0, turn_deg / 2, 3))) for _ in range(n_keys)]
+    pos = [centre + rng.normal(0, move / 2, 3) for _ in range(n_keys)]
+    return Rotation.concatenate(rots), np.array(pos)
+
+
+# -- grasping ----------------------------------------------------------------
+
+def _finger_vertices(hand, finger: str) -> np.ndarray:
+    seg = hand.segment_of_vertex
+    ids = [hand.segment_id(f"{finger}_{s}") for s in ("proximal", "middle", "distal")]
+    return np.flatnonzero(np.isin(seg, ids))
+
+
+_JOINT_GROUPS = {f: ((f"{f}_mcp_twist", f"{f}_mcp_spread", f"{f}_mcp_bend"), (f"{f}_pip_bend",), (f"{f}_dip_bend",))
+                 for f in FINGERS}
+_JOINT_GROUPS["thumb"] = (("thumb_cmc_twist", "thumb_cmc_spread", "thumb_cmc_bend"),
+                          ("thumb_mcp_twist", "thumb_mcp_spread", "thumb_mcp_bend"), ("thumb_ip_bend",))
+
+
+def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *, squeeze=0.0015, steps=40):
+    """Close each finger, joint after joint, until its skin touches the object.
+
+    Like a grasp planner's auto-grasp: the first joint of a finger turns from
+    its open towards its closed value until any part of the finger would press
+    deeper than ``squeeze`` into the object, then the next joint does the same,
+    so fingers wrap round what they hold.
+
+    Parameters
+    ----------
+    hand : HandModel
+    obj : SynthObject
+    object2hand : ndarray (4, 4)
+        Object frame to hand-model frame.
+    open_phi, closed_phi : ndarray (27,)
+    fingers : sequence of str
+        Fingers that close (others stay at ``open_phi``); ``"thumb"`` included.
+    squeeze : float
+        Deepest allowed skin compression, metres.
+
+    Returns
+    -------
+    phi : ndarray (27,)
+    contact : dict finger -> bool
+    """
+    hand2object = np.linalg.inv(object2hand)
+    phi = open_phi.copy()
+    contact = {}
+    s = np.linspace(0.0, 1.0, steps)
+    for finger in fingers:
+        verts_idx = _finger_vertices(hand, finger)
+        touched = False
+        for group in _JOINT_GROUPS[finger]:
+            idx = [_I[n] for n in group]
+            path = np.repeat(phi[None], steps, axis=0)
+            path[:, idx] = phi[idx] + s[:, None] * (closed_phi[idx] - phi[idx])
+            verts = hand.forward(phi=path).vertices[:, verts_idx]
+            depth = obj.signed_distance(verts @ hand2object[:3, :3].T + hand2object[:3, 3]).min(axis=1)
+            # A finger already resting on the object may slide along it, not into it.
+            blocked = np.flatnonzero(depth < min(-squeeze, depth[0] - squeeze))
+            k = steps - 1 if len(blocked) == 0 else max(blocked[0] - 1, 0)
+            touched |= len(blocked) > 0
+            phi[idx] = path[k, idx]
+        contact[finger] = touched
+    return phi, contact
+
+
+def _place_against_palm(hand, obj, rotation, start, direction, open_phi, *, clearance=0.001):
+    """Slide the object along ``direction`` from ``start`` until the open hand's palm and fingers are clear of it."""
+    thumb = np.isin(hand.segment_of_vertex, [hand.segment_id(f"thumb_{k}") for k in ("proximal", "middle", "distal")])
+    skin = hand.forward(phi=open_phi).vertices[~thumb]  # the thumb closes round it later
+    for step in np.arange(0.0, 0.08, 0.0005):
+        centre = start + step * direction
+        local = (skin - centre) @ rotation
+        if obj.signed_distance(local).min() >= clearance:
+            break
+    out = np.eye(4)
+    out[:3, :3] = rotation
+    out[:3, 3] = centre
+    return out
+
+
+def grasp_configuration(hand, obj, kind: str):
+    """Object pose in the hand frame and the grasping pose for a power or precision grasp.
+
+    Power: the object's long axis lies across the palm under the proximal
+    phalanges, against the palm; all five digits wrap round it. Precision: the
+    object sits between the thumb and the index and middle fingertips, where a
+    pinch of the object's width would put it; those three close on it.
+
+    Returns
+    -------
+    object2hand : ndarray (4, 4)
+    open_phi, grasp_phi : ndarray (27,)
+    """
+    palmar = np.array([0.0, -1.0, 0.0])
+    ulnar = np.array([0.0, 0.0, 1.0 if hand.is_right else -1.0])
+    if kind == "power":
+        # Object x towards the back of the hand, z along the hand's ulnar axis.
+        rotation = np.column_stack([-palmar, np.cross(ulnar, -palmar), ulnar])
+        mcp_x = hand.rest_joints()[4, 0]
+        start = np.array([mcp_x + 0.012, 0.0, 0.006 * ulnar[2]]) + palmar * obj.size[0]
+        open_phi = _pose(thumb_cmc_bend=-20, thumb_cmc_spread=10, thumb_mcp_bend=5)
+        for finger in FINGERS:
+            open_phi = finger_flexion(open_phi, finger, 0.05)
+        object2hand = _place_against_palm(hand, obj, rotation, start, palmar, open_phi)
+        closed = _pose(thumb_cmc_bend=70, thumb_cmc_spread=-30, thumb_cmc_twist=30, thumb_mcp_bend=55,
+                       thumb_ip_bend=80)
+        for finger in FINGERS:
+            closed = finger_flexion(closed, finger, 1.1, pip=100)
+        fingers = ("index", "middle", "ring", "pinky", "thumb")
+    else:
+        relaxed = relaxed_pose()
+        width = 2.0 * float(np.min(obj.size))
+        pinch = pinch_pose(hand, "index", relaxed, gap=width + 0.012)
+        # Thumb, index and middle open straight; the others stay relaxed.
+        open_phi = relaxed.copy()
+        open_phi[[i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", "index_", "middle_"))]] = 0.0
+        joints = hand.forward(phi=pinch, vertices=False).joints
+        centre = 0.5 * (joints[16] + joints[17]) + 0.25 * (joints[18] - joints[17])
+        object2hand = _place_against_palm(hand, obj, np.eye(3), centre, np.array([1.0, 0.0, 0.0]), open_phi)
+        closed = pinch_pose(hand, "index", relaxed, gap=0.0)
+        closed = finger_flexion(closed, "middle", 0.9)
+        fingers = ("index", "middle", "thumb")
+    grasp_phi, _ = close_until_contact(hand, obj, object2hand, open_phi, closed, fingers)
+    return object2hand, open_phi, grasp_phi
+
+
+def pinch_pose(hand, finger: str, start_phi, *, gap: float = 0.012) -> np.ndarray:
+    """Thumb and ``finger`` tips brought ``gap`` apart (pad to pad) by least squares."""
+    tips = {"index": 17, "middle": 18, "ring": 19, "pinky": 20}
+    idx = [i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", finger + "_"))]
+    lo, hi = PHI_LIMITS[idx, 0], PHI_LIMITS[idx, 1]
+
+    def residual(x):
+        phi = start_phi.copy()
+        phi[idx] = x
+        joints = hand.forward(phi=phi, vertices=False).joints
+        return np.r_[np.linalg.norm(joints[16] - joints[tips[finger]]) - gap, 0.05 * (x - start_phi[idx])]
+
+    x0 = np.clip(start_phi[idx], lo + 1e-6, hi - 1e-6)
+    fit = least_squares(residual, x0, bounds=(lo, hi), x_scale=0.3, max_nfev=200)
+    phi = start_phi.copy()
+    phi[idx] = fit.x
+    return phi
+
+
+# -- motions -----------------------------------------------------------------
+
+def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> Motion:
+    """Generate one of :data:`MOTIONS`.
+
+    Parameters
+    ----------
+    name : str
+    hand : HandModel
+    n_frames : int
+    rate : float
+        Frames per second.
+    rng : numpy.random.Generator
+    obj : SynthObject, optional
+        Needed by ``grasp``, ``precision`` and ``rotate-cube``.
+    """
+    if name not in MOTIONS:
+        raise HandcapError(f"unknown motion {name!r}; choose one of {', '.join(MOTIONS)}")
+    if n_frames < 2:
+        raise HandcapError(f"a motion needs at least 2 frames, got {n_frames}")
+    t = np.arange(n_frames) / rate
+    duration = max(t[-1], 1e-6)
+    object_motion = name in ("grasp", "precision", "rotate-cube")
+    if object_motion and obj is None:
+        raise HandcapError(f"motion {name!r} needs an object")
+    if name in ("grasp", "precision", "rotate-cube"):
+        if duration < MIN_OBJECT_SECONDS:
+            raise HandcapError(f"motion {name!r} needs at least {MIN_OBJECT_SECONDS:g} s to reach, grasp, carry and "
+                               f"release; {n_frames} frames at {rate:g} Hz last {duration:.2f} s: give more frames")
+        return _object_motion(name, hand, t, duration, rate, rng, obj)
+
+    n_keys = max(3, int(round(duration / {"open-close": 0.7, "tapping": 0.2, "pinch": 0.8,
+                                          "wrist": 0.7, "random": 0.6}[name])) + 1)
+    key_t = np.linspace(0.0, duration, n_keys)
+    relaxed = relaxed_pose()
+    if name == "open-close":
+        keys = [relaxed if k % 2 == 0 else fist_pose() for k in range(n_keys)]
+        turn, move = 15.0, 0.03
+    elif name == "tapping":
+        keys = []
+        for k in range(n_keys):
+            phi = relaxed.copy()
+            if k % 2 == 1:
+                finger = FINGERS[(k // 2) % 4]
+                phi = finger_flexion(phi, finger, 0.55, mcp=70, pip=60)
+            keys.append(phi)
+        turn, move = 5.0, 0.01
+    elif name == "pinch":
+        keys = []
+        for k in range(n_keys):
+            keys.append(relaxed if k % 2 == 0 else pinch_pose(hand, FINGERS[(k // 2) % 4], relaxed))
+        turn, move = 15.0, 0.03
+    elif name == "wrist":
+        keys = [relaxed + np.deg2rad(rng.normal(0, 3, 27)) for _ in range(n_keys)]
+        turn, move = 70.0, 0.15
+    else:
+        keys = [natural_pose(rng) for _ in range(n_keys)]
+        turn, move = 35.0, 0.08
+    phi = _spline(key_t, np.array(keys), t)
+    rots, pos = _wrist_keys(rng, n_keys, turn_deg=turn, move=move)
+    orient = _rotation_path(key_t, rots, t)
+    transl = _spline(key_t, pos, t)
+    return _finish(phi, orient, transl, rng, rate)
+
+
+def _finish(phi, orient: Rotation, transl, rng, rate, hold_slice=None):
+    n = len(phi)
+    phi = phi + _tremor(rng, n, 27, rate, np.deg2rad(0.4))
+    phi = np.clip(phi, PHI_LIMITS[:, 0], PHI_LIMITS[:, 1])
+    orient = orient * Rotation.from_rotvec(_tremor(rng, n, 3, rate, np.deg2rad(0.3)))
+    transl = transl + _tremor(rng, n, 3, rate, 0.0004)
+    return Motion(phi, orient.as_rotvec(), transl)
+
+
+def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
+    kind = "power" if name == "grasp" else "precision"
+    object2hand, open_phi, grasp_phi = grasp_configuration(hand, obj, kind)
+    # Timeline (fractions of the take): approach, close, carry, put down, open, leave.
+    f = np.array([0.0, 0.15, 0.28, 0.82, 0.92, 1.0]) * duration
+    n_carry = max(2, int(round((f[3] - f[2]) / 0.7)))
+    table_pose = np.eye(4)
+    table_pose[:3, :3] = (NEUTRAL * Rotation.from_rotvec(np.deg2rad(rng.normal(0, 10, 3)))).as_matrix() @ object2hand[:3, :3]
+    table_pose[:3, 3] = WORK_CENTRE + np.array([0.0, 0.0, -0.08]) + rng.normal(0, 0.02, 3) * [1, 1, 0]
+    wrist_at_grasp = table_pose @ np.linalg.inv(object2hand)
+    grasp_rot = Rotation.from_matrix(wrist_at_grasp[:3, :3])
+    grasp_pos = wrist_at_grasp[:3, 3]
+    up = np.array([0.0, 0.0, 1.0])
+    carry_rot, carry_pos = _wrist_keys(rng, n_carry, turn_deg=50.0, move=0.1, centre=grasp_pos + 0.12 * up,
+                                       base=grasp_rot)
+    put_down = carry_pos[-1].copy()
+    put_down[2] = grasp_pos[2]
+    key_t = np.concatenate([[f[0], f[1], f[2]], np.linspace(f[2], f[3], n_carry + 2)[1:-1], [f[3], f[4], f[5]]])
+    rots = Rotation.concatenate([grasp_rot * Rotation.from_rotvec([0.3, 0.0, 0.0]), grasp_rot, grasp_rot,
+                                 carry_rot, carry_rot[-1], carry_rot[-1],
+                                 carry_rot[-1] * Rotation.from_rotvec([0.3, 0.0, 0.0])])
+    approach = grasp_pos + 0.12 * up + grasp_rot.apply([-0.06, 0.0, 0.0])
+    pos = np.vstack([approach, grasp_pos, grasp_pos, carry_pos, put_down, put_down,
+                     put_down + 0.12 * up])
+    phis = np.vstack([open_phi, open_phi, grasp_phi] + [grasp_phi] * n_carry + [grasp_phi, open_phi, open_phi])
+    key_t, order = np.unique(key_t, return_index=True)
+    orient = _rotation_path(key_t, rots[order], t)
+    transl = _spline(key_t, pos[order], t)
+    phi = _spline(key_t, phis[order], t)
+    motion = _finish(phi, orient, transl, rng, rate)
+    holding = (t >= f[2]) & (t <= f[3])
+    # The object: on the table, then carried rigidly (turning in the fingers for
+    # rotate-cube, about the axis through the thumb and finger contacts), then put down.
+    wrist = np.zeros((len(t), 4, 4))
+    wrist[:, :3, :3] = Rotation.from_rotvec(motion.global_orient).as_matrix()
+    wrist[:, :3, 3] = motion.transl
+    wrist[:, 3, 3] = 1.0
+    in_hand = np.repeat(object2hand[None], len(t), axis=0)
+    if name == "rotate-cube":
+        joints = hand.forward(phi=grasp_phi, vertices=False).joints
+        axis = joints[16] - 0.5 * (joints[17] + joints[18])
+        axis /= np.linalg.norm(axis)
+        pivot = 0.5 * (joints[16] + 0.5 * (joints[17] + joints[18]))
+        progress = np.clip((t - f[2]) / max(f[3] - f[2], 1e-9), 0, 1)
+        angle = np.deg2rad(180.0) * (0.5 - 0.5 * np.cos(np.pi * progress))
+        turn = Rotation.from_rotvec(angle[:, None] * axis).as_matrix()
+        spin = np.tile(np.eye(4), (len(t), 1, 1))
+        spin[:, :3, :3] = turn
+        spin[:, :3, 3] = pivot - np.einsum("tij,j->ti", turn, pivot)
+        in_hand = spin @ in_hand
+    carried = wrist @ in_hand
+    first, last = np.flatnonzero(holding)[[0, -1]]
+    obj_pose = carried.copy()
+    obj_pose[:first] = carried[first]
+    obj_pose[last + 1:] = carried[last]
+    return Motion(motion.phi, motion.global_orient, motion.transl,
+                  Rotation.from_matrix(obj_pose[:, :3, :3]).as_rotvec(), obj_pose[:, :3, 3], holding)

@@ -1,0 +1,339 @@
+"""Synthetic captures with ground truth: the yardstick of every other stage.
+
+:func:`synthesize` moves the OpenHand (and an object) through a motion, sticks
+markers on the skin as a layout says, films them with a rig of cameras,
+decides visibility by ray casting against the hand and the object, and adds
+what real systems add: 3D jitter, 2D pixel noise, dropouts, ghost markers
+near real ones and label swaps. :func:`write_capture` writes the folder::
+
+    markers.c3d, markers.npz   labeled markers as a capture system gives them
+                               (layout and object markers, then ghosts as
+                               unlabeled trajectories named *0, *1, ...)
+    points.npz                 the same points per frame, unlabeled and shuffled
+    detections.npz             2D detections per camera (File contract)
+    cameras.toml               the rig (anipose style)
+    truth.npz                  hand motion (HandMotion keys: hand markers in
+                               marker_names / marker_fit), joints; every label
+                               (names) with its noise-free position (positions,
+                               normals), visibility (visible (T, M), camera_visible
+                               (T, C, M)), faults (dropped, swaps, ghosts), the
+                               marker attachment and the object motion
+    scene.toml                 every setting, to make the folder again
+
+Everything is deterministic for a seed: same settings, same bytes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence
+from handcap.core.motion import HandMotion, ObjectMotion, check_side
+from handcap.core.points import PointCloudSequence
+from handcap.hand import OpenHand
+from handcap.hand.attachment import MarkerAttachment
+from handcap.layouts import load_layout
+from handcap.synth.cameras import cage_rig
+from handcap.synth.faults import burst_dropouts, ghost_markers, swap_labels
+from handcap.synth.motions import MOTIONS, WORK_CENTRE, make_motion
+from handcap.synth.objects import OBJECTS, make_object
+from handcap.synth.visibility import camera_visibility
+
+DEFAULT_OBJECT = {"grasp": "cylinder", "precision": "sphere", "rotate-cube": "cube2x2"}
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Every setting of a synthetic capture (written to ``scene.toml``).
+
+    Attributes
+    ----------
+    layout : str
+        Shipped layout name or a layout TOML path.
+    motion : str
+        One of :data:`handcap.synth.motions.MOTIONS`.
+    frames : int
+    rate : float
+        Frames per second.
+    seed : int
+    side : {"right", "left"}
+    object : str
+        One of :data:`handcap.synth.objects.OBJECTS`, ``"none"``, or ``"auto"``
+        (the motion's usual object: cylinder for grasp, sphere for precision,
+        the 2x2x2 cube for rotate-cube, none otherwise).
+    betas : tuple of 10 float or None
+        Subject shape; None draws one from the seed (standard deviation 0.5).
+    cameras : int
+        Cameras on the cage.
+    min_views : int
+        Cameras that must see a marker for it to be reconstructed in 3D.
+    noise_mm : float
+        Standard deviation of the 3D jitter of reconstructed markers, millimetres.
+    pixel_noise : float
+        Standard deviation of 2D detection noise, pixels.
+    dropout : float
+        Extra fraction of samples lost in bursts (mean 5 frames).
+    ghost_rate : float
+        Ghost markers per second.
+    swap_rate : float
+        Label swaps per second.
+    outlier_rate : float
+        Fraction of 2D detections given a wrong marker id.
+    max_view_angle_deg : float or None
+        Patch corners seen more obliquely are not detected; None: the layout's
+        kind decides (75 degrees for patches, unlimited for spheres).
+    """
+
+    layout: str = "glove-13"
+    motion: str = "grasp"
+    frames: int = 600
+    rate: float = 100.0
+    seed: int = 0
+    side: str = "right"
+    object: str = "auto"
+    betas: tuple | None = None
+    cameras: int = 12
+    min_views: int = 2
+    noise_mm: float = 0.3
+    pixel_noise: float = 0.5
+    dropout: float = 0.01
+    ghost_rate: float = 1.0
+    swap_rate: float = 0.1
+    outlier_rate: float = 0.0
+    max_view_angle_deg: float | None = None
+
+    def __post_init__(self):
+        check_side(self.side)
+        if self.motion not in MOTIONS:
+            raise HandcapError(f"unknown motion {self.motion!r}; choose one of {', '.join(MOTIONS)}")
+        if self.object not in OBJECTS + ("none", "auto"):
+            raise HandcapError(f"unknown object {self.object!r}; choose one of {', '.join(OBJECTS)}, none, auto")
+        if not (isinstance(self.frames, int) and 2 <= self.frames <= 1_000_000):
+            raise HandcapError(f"frames must be an integer from 2 to 1000000, got {self.frames}")
+        if not (np.isfinite(self.rate) and 1 <= self.rate <= 10_000):
+            raise HandcapError(f"rate must be 1-10000 frames per second, got {self.rate}")
+        if not 1 <= self.cameras <= 24:
+            raise HandcapError(f"cameras must be 1-24, got {self.cameras}")
+        if not 1 <= self.min_views <= self.cameras:
+            raise HandcapError(f"min_views must be between 1 and the number of cameras ({self.cameras})")
+        for name in ("noise_mm", "pixel_noise", "ghost_rate", "swap_rate"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise HandcapError(f"{name} must be a non-negative number, got {value}")
+        for name in ("dropout", "outlier_rate"):
+            value = getattr(self, name)
+            if not 0 <= value < 1:
+                raise HandcapError(f"{name} must be a fraction in [0, 1), got {value}")
+        if self.betas is not None and len(self.betas) != 10:
+            raise HandcapError(f"betas must be 10 numbers, got {len(self.betas)}")
+        if self.motion in DEFAULT_OBJECT and self.object == "none":
+            raise HandcapError(f"motion {self.motion!r} needs an object; drop --object none")
+
+    @property
+    def object_kind(self) -> str | None:
+        kind = DEFAULT_OBJECT.get(self.motion) if self.object == "auto" else self.object
+        return None if kind in (None, "none") else kind
+
+
+@dataclass(frozen=True, eq=False)
+class SynthCapture:
+    """A synthetic capture in memory (see the module docstring for the files)."""
+
+    config: SynthConfig
+    markers: MarkerSequence
+    points: PointCloudSequence
+    detections: dict
+    rig: object
+    hand_motion: HandMotion
+    object_motion: ObjectMotion | None
+    truth: dict = field(repr=False)
+
+
+def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCapture:
+    """Make a synthetic capture.
+
+    Parameters
+    ----------
+    config : SynthConfig
+    progress : bool, optional
+        Show a progress bar (default: only on a terminal).
+    """
+    seeds = np.random.SeedSequence(config.seed).spawn(6)
+    rng_shape, rng_motion, rng_noise, rng_faults, rng_detect, rng_shuffle = (np.random.default_rng(s) for s in seeds)
+    hand = OpenHand(config.side)
+    layout = load_layout(config.layout, side=config.side)
+    betas = np.asarray(config.betas if config.betas is not None else rng_shape.normal(0, 0.5, 10), dtype=np.float64)
+    attachment = MarkerAttachment.from_layout(layout, hand, betas)
+    kind = config.object_kind
+    obj = make_object(kind, seed=config.seed) if kind else None
+
+    # 1. Motion and the hand surface in every frame.
+    motion = make_motion(config.motion, hand, config.frames, config.rate, rng_motion, obj)
+    hand_pose = hand.hand_pose_from_phi(motion.phi)
+    out = hand.forward(betas, motion.global_orient, hand_pose, motion.transl)
+    vertices, joints = out.vertices, out.joints
+    hand_markers = attachment.positions(vertices, hand.faces)
+    hand_normals = attachment.normals(vertices, hand.faces)
+
+    # 2. Object markers and triangles.
+    names = list(attachment.marker_names)
+    truth_markers, normals = hand_markers, hand_normals
+    object_motion = None
+    if obj is not None:
+        rot = Rotation.from_rotvec(motion.object_rotation).as_matrix()
+        obj_markers = np.einsum("tij,kj->tki", rot, obj.marker_positions) + motion.object_translation[:, None]
+        obj_normals = np.einsum("tij,kj->tki", rot, obj.marker_normals)
+        truth_markers = np.concatenate([hand_markers, obj_markers], axis=1)
+        normals = np.concatenate([hand_normals, obj_normals], axis=1)
+        names += list(obj.marker_names)
+        object_motion = ObjectMotion(motion.object_rotation, motion.object_translation, config.rate, obj.name,
+                                     obj.marker_names, obj.marker_positions,
+                                     {"holding": motion.holding.astype(np.int8)})
+
+    # 3. Cameras and visibility (ray casting against hand and object).
+    rig = cage_rig(config.cameras, target=tuple(WORK_CENTRE), seed=config.seed)
+    angle = config.max_view_angle_deg
+    if angle is None and layout.marker_kind == "patch":
+        angle = 75.0
+    n_hand = len(attachment)
+    max_angle = None if angle is None else np.deg2rad(angle)
+    n_frames, n_markers = truth_markers.shape[:2]
+    seen_by = np.zeros((n_frames, len(rig), n_markers), bool)
+    faces = hand.faces if obj is None else np.concatenate([hand.faces, obj.faces + vertices.shape[1]])
+    # tqdm: disable=None hides the bar when not on a terminal.
+    hidden = None if progress is None else not progress
+    for t in tqdm(range(n_frames), desc="visibility", unit="frame", disable=hidden, leave=False):
+        surface = vertices[t]
+        if obj is not None:
+            surface = np.concatenate([surface, obj.vertices @ Rotation.from_rotvec(motion.object_rotation[t]).as_matrix().T
+                                      + motion.object_translation[t]])
+        if max_angle is None:
+            seen_by[t] = camera_visibility(truth_markers[t], rig, surface, faces)
+        else:  # printed patches are on the hand; object markers stay spheres
+            seen_by[t, :, :n_hand] = camera_visibility(truth_markers[t, :n_hand], rig, surface, faces,
+                                                       normals=normals[t, :n_hand], max_view_angle=max_angle)
+            seen_by[t, :, n_hand:] = camera_visibility(truth_markers[t, n_hand:], rig, surface, faces)
+    reconstructed = seen_by.sum(axis=1) >= config.min_views
+
+    # 4. What the capture system reports: jitter, dropouts, swaps, ghosts.
+    observed = truth_markers + rng_noise.normal(0, config.noise_mm / 1000, truth_markers.shape)
+    dropped = burst_dropouts(rng_faults, (n_frames, n_markers), config.dropout)
+    observed[~reconstructed | dropped] = np.nan
+    observed, swaps = swap_labels(rng_faults, observed, config.swap_rate / config.rate)
+    ghosts, ghost_events = ghost_markers(rng_faults, observed, config.ghost_rate / config.rate)
+    ghost_names = [f"*{i}" for i in range(ghosts.shape[1])]
+    markers = MarkerSequence(np.concatenate([observed, ghosts], axis=1), names + ghost_names, config.rate)
+    padded = markers.positions.copy()
+    for t in range(n_frames):
+        padded[t] = padded[t, rng_shuffle.permutation(padded.shape[1])]
+    points = PointCloudSequence.from_padded(padded, config.rate)
+
+    # 5. 2D detections in every camera that sees a marker.
+    detections = _detections(rig, truth_markers, seen_by, names, config, rng_detect)
+
+    hand_motion = HandMotion(betas, motion.global_orient, hand_pose, motion.transl, config.rate, config.side,
+                             motion.phi, hand.name, joints, tuple(names[:n_hand]), hand_markers)
+    truth = {
+        "names": np.array(names), "positions": truth_markers, "normals": normals,
+        "visible": reconstructed, "camera_visible": seen_by, "dropped": dropped,
+        "swaps": np.array(swaps, dtype=np.int64).reshape(-1, 4),
+        "ghosts": np.array(ghost_events, dtype=np.int64).reshape(-1, 3),
+        "attachment_triangles": attachment.triangles, "attachment_barycentric": attachment.barycentric,
+        "attachment_offset": attachment.offset,
+    }
+    return SynthCapture(config, markers, points, detections, rig, hand_motion, object_motion, truth)
+
+
+def _detections(rig, truth_markers, seen_by, names, config, rng) -> dict:
+    frames, cams, marks, xys = [], [], [], []
+    for c, camera in enumerate(rig):
+        t_idx, m_idx = np.nonzero(seen_by[:, c, :])
+        pixels, _ = camera.project(truth_markers[t_idx, m_idx])
+        frames.append(t_idx)
+        cams.append(np.full(len(t_idx), c))
+        marks.append(m_idx)
+        xys.append(pixels)
+    frame, camera_idx, marker, xy = (np.concatenate(a) for a in (frames, cams, marks, xys))
+    xy = xy + rng.normal(0, config.pixel_noise, xy.shape)
+    wrong = rng.random(len(marker)) < config.outlier_rate
+    if wrong.any() and len(names) > 1:
+        shift = rng.integers(1, len(names), wrong.sum())
+        marker = marker.copy()
+        marker[wrong] = (marker[wrong] + shift) % len(names)
+    score = rng.uniform(0.7, 1.0, len(marker))
+    order = np.lexsort((marker, camera_idx, frame))
+    return {"camera_names": np.array(rig.names), "marker_names": np.array(names), "frame": frame[order],
+            "camera": camera_idx[order], "marker": marker[order], "xy": xy[order], "score": score[order],
+            "rate": np.array(config.rate), "wrong_id": wrong[order]}
+
+
+def write_capture(capture: SynthCapture, folder) -> dict:
+    """Write a capture folder (see the module docstring); returns the paths written.
+
+    Files are written atomically; other files in the folder are left alone.
+    """
+    from pathlib import Path
+
+    import tomli_w
+
+    from handcap.io import write_c3d, write_markers_npz, write_points_npz
+    from handcap.io._files import atomic_output, save_npz
+    from handcap.io.npz import write_hand_motion
+
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise HandcapError(f"{folder} exists and is not a folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {name: folder / name for name in ("markers.c3d", "markers.npz", "points.npz", "detections.npz",
+                                              "cameras.toml", "truth.npz", "scene.toml")}
+    write_c3d(capture.markers, paths["markers.c3d"])
+    write_markers_npz(capture.markers, paths["markers.npz"])
+    write_points_npz(capture.points, paths["points.npz"])
+    save_npz(paths["detections.npz"], capture.detections)
+    capture.rig.save(paths["cameras.toml"])
+    # truth.npz: the HandMotion keys (readable with read_hand_motion) plus the rest of the truth.
+    write_hand_motion(capture.hand_motion, paths["truth.npz"])
+    with np.load(paths["truth.npz"]) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays.update(capture.truth)
+    if capture.object_motion is not None:
+        om = capture.object_motion
+        arrays.update({"object_name": np.array(om.name), "object_rotation": om.rotation,
+                       "object_translation": om.translation, "object_marker_names": np.array(om.marker_names),
+                       "object_canonical": om.canonical, "object_holding": om.state["holding"]})
+    save_npz(paths["truth.npz"], arrays)
+    with atomic_output(paths["scene.toml"]) as fh:
+        fh.write(tomli_w.dumps(scene_table(capture.config)).encode())
+    return paths
+
+
+def scene_table(config: SynthConfig) -> dict:
+    """``scene.toml`` contents: every setting, plus the handcap version."""
+    from handcap import __version__
+    table = {k: v for k, v in asdict(config).items() if v is not None}
+    if config.betas is not None:
+        table["betas"] = [float(b) for b in config.betas]
+    table["handcap_version"] = __version__
+    return {"synth": table}
+
+
+def config_from_scene(path) -> SynthConfig:
+    """The settings stored in a ``scene.toml``."""
+    import tomllib
+    from pathlib import Path
+    try:
+        table = tomllib.loads(Path(path).read_text())["synth"]
+    except (OSError, KeyError, tomllib.TOMLDecodeError) as err:
+        raise HandcapError(f"{path}: not a handcap scene.toml ({err})") from None
+    table.pop("handcap_version", None)
+    if "betas" in table:
+        table["betas"] = tuple(table["betas"])
+    try:
+        return replace(SynthConfig(), **table)
+    except TypeError as err:
+        raise HandcapError(f"{path}: unknown setting ({err})") from None

@@ -1,0 +1,53 @@
+import numpy as np
+import trimesh
+
+from handcap.core.cameras import Camera, CameraRig
+from handcap.synth.visibility import camera_visibility, occluded
+
+K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+
+
+def looking_down_z(z=2.0):
+    # Camera at (0, 0, z) looking towards -z: world->camera flips y and z.
+    from scipy.spatial.transform import Rotation
+    rot = Rotation.from_matrix(np.diag([1.0, -1.0, -1.0])).as_rotvec()
+    return Camera("top", (640, 480), K, np.zeros(5), rot, np.array([0.0, 0.0, z]))
+
+
+def test_a_box_hides_what_is_under_it():
+    camera = looking_down_z()
+    box = trimesh.creation.box(extents=[0.2, 0.2, 0.1])
+    points = np.array([[0.0, 0.0, -0.2], [0.5, 0.0, -0.2], [0.0, 0.0, 0.2], [0.0, 0.0, 0.0501]])
+    hidden = occluded(camera, points, box.vertices, box.faces)
+    np.testing.assert_array_equal(hidden, [True, False, False, False])
+
+
+def test_culled_test_agrees_with_brute_force_rays():
+    rng = np.random.default_rng(0)
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    mesh.vertices *= [1.0, 0.5, 0.7]
+    points = rng.uniform(-0.2, 0.2, size=(400, 3))
+    points = points[~mesh.contains(points)]
+    camera = looking_down_z()
+    hidden = occluded(camera, points, mesh.vertices, mesh.faces)
+    direction = points - camera.center
+    length = np.linalg.norm(direction, axis=1)
+    hits, ray, _ = mesh.ray.intersects_location(np.repeat(camera.center[None], len(points), 0),
+                                               direction / length[:, None])
+    expect = np.zeros(len(points), bool)
+    for r, h in zip(ray, hits):
+        if np.linalg.norm(h - camera.center) < length[r] - 1e-4:
+            expect[r] = True
+    np.testing.assert_array_equal(hidden, expect)
+    assert 10 < expect.sum() < len(points) - 10
+
+
+def test_view_angle_and_image_bounds():
+    camera = looking_down_z()
+    rig = CameraRig((camera,))
+    flat = trimesh.creation.box(extents=[0.01, 0.01, 0.01])
+    flat.vertices += [5.0, 5.0, -5.0]  # far away, hides nothing
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [np.nan, 0, 0]])
+    normals = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    seen = camera_visibility(points, rig, flat.vertices, flat.faces, normals=normals, max_view_angle=np.deg2rad(75))
+    np.testing.assert_array_equal(seen[0], [True, False, False, False])
