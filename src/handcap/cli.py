@@ -10,7 +10,7 @@ from handcap.core.errors import HandcapError
 
 def _cmd_convert(args) -> None:
     from handcap.io import convert
-    markers = convert(args.input, args.output)
+    markers = convert(args.input, args.output, partial=args.partial)
     print(f"{args.output}: {markers.n_frames} frames, {markers.n_markers} markers at {markers.rate:g} Hz")
 
 
@@ -92,6 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      "writes C3D, TRC and .npz. Units become metres (.npz) or millimetres (C3D, TRC).")
     p.add_argument("input")
     p.add_argument("output")
+    p.add_argument("--partial", action="store_true",
+                   help="C3D: keep the complete frames of a file shorter than its header promises")
     p.set_defaults(run=_cmd_convert)
 
     _add_synth(verbs)

@@ -11,6 +11,9 @@ suffix    format                             read / write
 ``.trc``  TRC (OpenSim / Motion Analysis)    read, write
 ``.npz``  handcap's own                      read, write
 ========  =================================  ==============
+
+The UCI hand-postures table (static, unlabeled records, no frame rate) is not a
+marker file: read it with :func:`read_uci_postures`.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from handcap.io.npz import (
 )
 from handcap.io.qualisys import read_qualisys_tsv
 from handcap.io.trc import read_trc, write_trc
+from handcap.io.uci import UciPostures, read_uci_postures
 
 MARKER_READERS = {".c3d": read_c3d, ".tsv": read_qualisys_tsv, ".csv": read_motive_csv,
                   ".trc": read_trc, ".npz": read_markers_npz}
@@ -50,8 +54,15 @@ def _suffix(path, table, verb: str) -> str:
     return suffix
 
 
-def read_markers(path) -> MarkerSequence:
+def read_markers(path, *, partial: bool = False) -> MarkerSequence:
     """Read labeled markers from any supported file (format from the extension).
+
+    Parameters
+    ----------
+    path : str or Path
+    partial : bool
+        C3D only: keep the complete frames of a file shorter than its header
+        promises (see :func:`read_c3d`) instead of refusing it.
 
     Returns
     -------
@@ -63,9 +74,13 @@ def read_markers(path) -> MarkerSequence:
     HandcapError
         Unknown extension, unreadable, truncated or inconsistent file.
     """
-    reader = MARKER_READERS[_suffix(path, MARKER_READERS, "read")]
+    suffix = _suffix(path, MARKER_READERS, "read")
     existing_file(path)
-    return reader(path)
+    if partial:
+        if suffix != ".c3d":
+            raise HandcapError(f"{path}: reading part of a file is possible for C3D files only")
+        return read_c3d(path, partial=True)
+    return MARKER_READERS[suffix](path)
 
 
 def write_markers(markers: MarkerSequence, path) -> None:
@@ -88,18 +103,18 @@ def write_points(points: PointCloudSequence, path) -> None:
     write_points_npz(points, path)
 
 
-def convert(source, target) -> MarkerSequence:
+def convert(source, target, *, partial: bool = False) -> MarkerSequence:
     """Convert a marker file to another format; never writes over ``source``."""
     check_not_input(target, source)
-    markers = read_markers(source)
+    markers = read_markers(source, partial=partial)
     write_markers(markers, target)
     return markers
 
 
 __all__ = [
-    "atomic_output", "check_not_input", "convert", "existing_file", "load_npz", "npz_kind",
+    "UciPostures", "atomic_output", "check_not_input", "convert", "existing_file", "load_npz", "npz_kind",
     "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_motive_csv",
     "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_trc",
-    "save_npz", "write_c3d", "write_hand_motion", "write_markers", "write_markers_npz",
+    "read_uci_postures", "save_npz", "write_c3d", "write_hand_motion", "write_markers", "write_markers_npz",
     "write_object_motion", "write_points", "write_points_npz", "write_trc",
 ]
