@@ -81,7 +81,7 @@ def test_never_changes_the_callers_array():
     (dict(positions=np.zeros((3, 2, 3)), names=["a"], rate=1), "1 marker names for 2 markers"),
     (dict(positions=np.zeros((3, 2, 3)), names=["a", "a"], rate=1), "repeated: a"),
     (dict(positions=np.zeros((3, 1, 3)), names=["a"], rate=0), "positive"),
-    (dict(positions=np.zeros((3, 1, 3)), names=["a"], rate="fast"), "rate must be a number"),
+    (dict(positions=np.zeros((3, 1, 3)), names=["a"], rate="fast"), r"rate \(frames per second\) must be a number"),
     (dict(positions=np.full((3, 1, 3), np.inf), names=["a"], rate=1), "infinite"),
     (dict(positions=np.zeros((3, 1, 3)), names=["a"], rate=1, residuals=np.zeros(3)), "residuals"),
 ])

@@ -23,15 +23,20 @@ def as_positions(positions) -> np.ndarray:
     return positions
 
 
+def positive_number(value, what: str) -> float:
+    """``value`` as a float, checked to be finite and positive."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise HandcapError(f"{what} must be a number, got {value!r}") from None
+    if not np.isfinite(number) or number <= 0:
+        raise HandcapError(f"{what} must be a positive finite number, got {value!r}")
+    return number
+
+
 def check_rate(rate) -> float:
     """Return ``rate`` (Hz) as a float; reject non-finite or non-positive values."""
-    try:
-        rate = float(rate)
-    except (TypeError, ValueError):
-        raise HandcapError(f"rate must be a number in Hz, got {rate!r}") from None
-    if not np.isfinite(rate) or rate <= 0:
-        raise HandcapError(f"rate must be a positive number of frames per second, got {rate}")
-    return rate
+    return positive_number(rate, "rate (frames per second)")
 
 
 def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

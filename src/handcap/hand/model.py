@@ -8,6 +8,7 @@ inputs' dtype and device); the same code runs for both.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -44,7 +45,7 @@ class HandOutput:
     rotations: object
 
 
-class HandModel:
+class HandModel(ABC):
     """Base class: subclasses provide the rest shape; posing is shared.
 
     Subclasses set ``name``, ``side``, ``faces (F, 3)``, ``weights (V, 16)``,
@@ -88,6 +89,7 @@ class HandModel:
         return np.flatnonzero((seg == self.segment_id(name)).all(axis=1))
 
     # -- to implement --------------------------------------------------------
+    @abstractmethod
     def rest(self, betas):
         """Rest (flat) pose for shape ``betas``.
 
@@ -101,7 +103,6 @@ class HandModel:
         joints : array (..., 16, 3)
         tips : array (..., 5, 3)
         """
-        raise NotImplementedError  # abstract: OpenHand and ManoHand implement it
 
     def pose_corrective(self, rotations):
         """Vertex offsets (..., V, 3) added before skinning (MANO's pose blend shapes), or None."""

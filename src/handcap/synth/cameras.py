@@ -14,6 +14,7 @@ import numpy as np
 
 from handcap.core.cameras import Camera, CameraRig
 from handcap.core.errors import HandcapError
+from handcap.core.markers import positive_number
 from handcap.core.rotations import axis_angle_from_matrix
 
 # Diameter of the work volume each camera frames by default, metres.
@@ -105,7 +106,7 @@ def cage_rig(n_cameras: int = 12, *, cage_size=(2.0, 1.0, 2.0), target=(0.0, 0.0
                            f"[-{half[0]:g}, {half[0]:g}] x [-{half[1]:g}, {half[1]:g}] x [0, {cage[2]:g}] m")
     width, height = _resolution(resolution)
     if focal_px is not None:
-        focal_px = _positive(focal_px, "focal_px")
+        focal_px = positive_number(focal_px, "focal_px")
     try:
         scale = float(distortion_scale)
     except (TypeError, ValueError):
@@ -215,16 +216,6 @@ def _resolution(value) -> tuple[int, int]:
     if width <= 0 or height <= 0:
         raise HandcapError(f"resolution must be positive pixels (width, height), got {value!r}")
     return width, height
-
-
-def _positive(value, what: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise HandcapError(f"{what} must be a number, got {value!r}") from None
-    if not np.isfinite(number) or number <= 0:
-        raise HandcapError(f"{what} must be a positive finite number, got {value!r}")
-    return number
 
 
 __all__ = ["MAX_CAMERAS", "WORK_VOLUME_M", "cage_rig"]
