@@ -72,7 +72,10 @@ class MarkerAttachment:
 
         Each marker goes to the closest point of its own segment's triangles
         (segment-restricted closest point, as in DexterCap's calibration) on
-        the model's flat hand with shape ``betas``. Object markers are skipped.
+        the model's flat average hand (``betas = 0``, where layout positions
+        are given); the barycentric coordinates then carry the marker to the
+        same spot of any shape. ``betas`` is recorded as the subject's shape.
+        Object markers are skipped.
 
         Parameters
         ----------

@@ -151,27 +151,18 @@ class HandModel(ABC):
         -------
         HandOutput
         """
-        # 1. Inputs: one namespace, one batch shape, defaults filled in.
-        given = [a for a in (betas, global_orient, hand_pose, transl, phi) if a is not None]
-        like = next((a for a in given if is_torch_array(a)), None)
-        xp = array_namespace(like) if like is not None else np
-        dtype = like.dtype if like is not None else np.float64
-        device = like.device if like is not None else None
-        def conv(a):
-            if like is None:
-                return np.asarray(a, dtype=np.float64)
-            if is_torch_array(a):
-                return a if (a.dtype == dtype and a.device == device) else a.to(dtype=dtype, device=device)
-            return xp.asarray(np.asarray(a), dtype=dtype, device=device)
+        # 1. Inputs: one namespace (torch if any input is a tensor), one batch shape, defaults filled in.
+        like = next((a for a in (betas, global_orient, hand_pose, transl, phi) if is_torch_array(a)), None)
+        xp = np if like is None else array_namespace(like)
         global_orient, hand_pose, transl, phi, betas = (
-            None if a is None else conv(a) for a in (global_orient, hand_pose, transl, phi, betas))
+            None if a is None else _as_array(a, like) for a in (global_orient, hand_pose, transl, phi, betas))
         if hand_pose is not None and phi is not None:
             raise HandcapError("give hand_pose or phi, not both")
         batch = _batch_shape({"global_orient": (global_orient, 3), "hand_pose": (hand_pose, 45),
                               "transl": (transl, 3), "phi": (phi, 27)})
-        zeros = lambda n: xp.zeros(batch + (n,), dtype=dtype, device=device) if like is not None else np.zeros(batch + (n,))  # noqa: E731
+        zeros = lambda n: _as_array(np.zeros(batch + (n,)), like)  # noqa: E731
         if betas is None:
-            betas = conv(np.zeros(10))
+            betas = _as_array(np.zeros(10), like)
         if betas.shape[-1] != 10:
             raise HandcapError(f"betas must have 10 values, got shape {tuple(betas.shape)}")
         if phi is not None:
@@ -205,6 +196,17 @@ class HandModel(ABC):
         betas = np.zeros(10) if betas is None else np.asarray(betas, dtype=np.float64)
         _, joints, tips = self.rest(betas)
         return np.concatenate([joints, tips], axis=-2)
+
+
+def _as_array(value, like):
+    """``value`` as an array of the kind of ``like``: numpy float64 when ``like`` is None,
+    else a torch tensor of its dtype and device (tensors already so are passed through)."""
+    if like is None:
+        return np.asarray(value, dtype=np.float64)
+    if is_torch_array(value):
+        return value.to(dtype=like.dtype, device=like.device)
+    import torch
+    return torch.as_tensor(np.asarray(value), dtype=like.dtype, device=like.device)
 
 
 def _batch_shape(arrays: dict) -> tuple:

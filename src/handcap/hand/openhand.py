@@ -123,7 +123,6 @@ class OpenHand(HandModel):
         axes = self.frames[:, :, 0]
         # Outer products of the bone axes, for scaling along (x x^T) and across (I - x x^T) bones.
         self._along = axes[:, :, None] * axes[:, None, :]
-        self._parent_rest = joints[self.parents[1:].clip(0)]
 
     def __repr__(self) -> str:
         return f"OpenHand(side={self.side!r}, {self.n_vertices} vertices)"

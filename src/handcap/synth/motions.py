@@ -118,7 +118,7 @@ def _spline(times, values, t):
 
 
 def _rotation_path(times, rotations: Rotation, t) -> Rotation:
-    # Make consecutive keys take the short way round, then spline in rotation space.
+    # A C2 spline through the key orientations in rotation-vector space (scipy).
     return RotationSpline(times, rotations)(t)
 
 
