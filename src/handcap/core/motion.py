@@ -56,6 +56,8 @@ class HandMotion:
     marker_names : tuple of str, optional
     marker_fit : ndarray of shape (T, M, 3), optional
         Model-predicted marker positions in metres.
+    marker_residuals : ndarray of shape (T, M), optional
+        Distance between fitted and observed markers, metres (NaN where unobserved).
     """
 
     betas: np.ndarray
@@ -69,6 +71,7 @@ class HandMotion:
     joints: np.ndarray | None = None
     marker_names: tuple[str, ...] = field(default=())
     marker_fit: np.ndarray | None = None
+    marker_residuals: np.ndarray | None = None
 
     def __post_init__(self):
         betas = np.asarray(self.betas, dtype=np.float64).copy()
@@ -91,6 +94,8 @@ class HandMotion:
         set_("marker_names", names)
         if self.marker_fit is not None:
             set_("marker_fit", _frames_array(self.marker_fit, "marker_fit", (len(names), 3), n))
+        if self.marker_residuals is not None:
+            set_("marker_residuals", _frames_array(self.marker_residuals, "marker_residuals", (len(names),), n))
 
     @property
     def n_frames(self) -> int:
@@ -108,7 +113,7 @@ class HandMotion:
         pick = lambda a: None if a is None else a[sl]  # noqa: E731
         return HandMotion(self.betas, self.global_orient[sl], self.hand_pose[sl], self.transl[sl],
                           self.rate, self.side, pick(self.phi), self.model, pick(self.joints),
-                          self.marker_names, pick(self.marker_fit))
+                          self.marker_names, pick(self.marker_fit), pick(self.marker_residuals))
 
 
 @dataclass(frozen=True, eq=False)

@@ -80,7 +80,7 @@ def write_hand_motion(motion: HandMotion, path) -> None:
               "global_orient": motion.global_orient, "hand_pose": motion.hand_pose,
               "transl": motion.transl, "rate": np.array(motion.rate), "side": np.array(motion.side),
               "model": np.array(motion.model), "marker_names": _names(motion.marker_names)}
-    for key in ("phi", "joints", "marker_fit"):
+    for key in ("phi", "joints", "marker_fit", "marker_residuals"):
         if getattr(motion, key) is not None:
             arrays[key] = getattr(motion, key)
     save_npz(path, arrays)
@@ -94,7 +94,7 @@ def read_hand_motion(path) -> HandMotion:
             arrays["betas"], arrays["global_orient"], arrays["hand_pose"], arrays["transl"],
             _scalar(arrays, "rate", path), str(arrays.get("side", "right")), arrays.get("phi"),
             str(arrays.get("model", "openhand")), arrays.get("joints"),
-            tuple(arrays.get("marker_names", ())), arrays.get("marker_fit"))
+            tuple(arrays.get("marker_names", ())), arrays.get("marker_fit"), arrays.get("marker_residuals"))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
 

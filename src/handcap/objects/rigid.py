@@ -1,0 +1,211 @@
+"""Rigid bodies from markers: Kabsch/Umeyama alignment, RANSAC, 6-DoF tracking.
+
+Eq. (5) of DexterCap: per frame, the rotation R and translation t that best
+map an object's canonical marker positions onto the observed ones,
+
+    min_{R, t} sum_i w_i |x_i - (R c_i + t)|^2,
+
+solved in closed form by the SVD of the weighted cross-covariance (Kabsch
+1976, doi:10.1107/S0567739476001873; Umeyama 1991,
+doi:10.1109/34.88573). Outlier markers (mislabels, ghosts) are rejected by
+RANSAC over minimal triples, keeping the largest consensus set and refitting on
+it; canonical positions can be estimated from the data (generalised
+Procrustes: align every frame to the current mean shape, average, repeat).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence
+from handcap.core.motion import ObjectMotion
+from handcap.core.rotations import axis_angle_from_matrix
+
+
+def kabsch(source, target, weights=None):
+    """Best rotation and translation from ``source`` to ``target`` points, batched.
+
+    Parameters
+    ----------
+    source, target : ndarray (..., N, 3)
+        Corresponding points, metres.
+    weights : ndarray (..., N), optional
+        Non-negative weights (0 drops a point, e.g. a missing marker).
+
+    Returns
+    -------
+    rotation : ndarray (..., 3, 3)
+        Proper rotation (det +1), ``target ~ rotation @ source + translation``.
+    translation : ndarray (..., 3)
+    """
+    source = np.asarray(source, dtype=np.float64)
+    target = np.asarray(target, dtype=np.float64)
+    w = np.ones(source.shape[:-1]) if weights is None else np.asarray(weights, dtype=np.float64)
+    w = w / np.maximum(w.sum(axis=-1, keepdims=True), 1e-300)
+    src_mean = np.einsum("...n,...ni->...i", w, source)
+    tgt_mean = np.einsum("...n,...ni->...i", w, target)
+    src = np.where(w[..., None] > 0, source - src_mean[..., None, :], 0.0)
+    tgt = np.where(w[..., None] > 0, target - tgt_mean[..., None, :], 0.0)
+    cov = np.einsum("...n,...ni,...nj->...ij", w, tgt, src)
+    u, _, vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(u @ vt))
+    fix = np.ones(u.shape[:-1])
+    fix[..., -1] = d
+    rotation = (u * fix[..., None, :]) @ vt
+    translation = tgt_mean - np.einsum("...ij,...j->...i", rotation, src_mean)
+    return rotation, translation
+
+
+def ransac_kabsch(source, target, *, threshold: float = 0.005, iterations: int = 64, rng=None):
+    """Kabsch with RANSAC over triples: (rotation, translation, inliers) for one frame.
+
+    Parameters
+    ----------
+    source, target : ndarray (N, 3)
+        N >= 3 corresponding points.
+    threshold : float
+        A point is an inlier when the fit moves it within this distance, metres.
+    iterations : int
+        Random triples tried (all triples when there are fewer).
+    """
+    n = len(source)
+    if n < 3:
+        raise HandcapError(f"a rigid fit needs at least 3 points, got {n}")
+    rng = np.random.default_rng(0) if rng is None else rng
+    from itertools import combinations
+    triples = list(combinations(range(n), 3))
+    if len(triples) > iterations:
+        triples = [tuple(rng.choice(n, 3, replace=False)) for _ in range(iterations)]
+    triples = np.array(triples)
+    rot, trans = kabsch(source[triples], target[triples])  # (K, 3, 3), (K, 3)
+    moved = np.einsum("kij,nj->kni", rot, source) + trans[:, None]
+    err = np.linalg.norm(moved - target[None], axis=2)
+    inliers = err < threshold
+    # Largest consensus set; ties broken by the smallest inlier error.
+    score = inliers.sum(axis=1) - np.where(inliers, err, 0).sum(axis=1) / (threshold * n + 1e-12)
+    best = inliers[np.argmax(score)]
+    if best.sum() < 3:
+        best = np.ones(n, bool) if n == 3 else best
+    rot, trans = kabsch(source[best], target[best])
+    final = np.linalg.norm(source @ rot.T + trans - target, axis=1) < threshold
+    if final.sum() >= 3:
+        rot, trans = kabsch(source[final], target[final])
+        best = final
+    return rot, trans, best
+
+
+def canonical_from_markers(positions, *, iterations: int = 10) -> np.ndarray:
+    """Marker positions (M, 3) in a body frame, estimated from a take (generalised Procrustes).
+
+    Parameters
+    ----------
+    positions : ndarray (T, M, 3)
+        NaN where missing.
+
+    Returns
+    -------
+    canonical : ndarray (M, 3)
+        Centred on the mean marker position; axes along the first frame with
+        all markers seen (or most markers seen).
+    """
+    seen = ~np.isnan(positions[..., 0])
+    counts = seen.sum(axis=1)
+    if counts.max() < 3:
+        raise HandcapError("no frame sees 3 or more of the object's markers; cannot estimate its shape")
+    never = ~seen.any(axis=0)
+    if never.any():
+        raise HandcapError(f"markers {np.flatnonzero(never).tolist()} are never seen; cannot place them on the object")
+    ref = positions[int(np.argmax(counts))]
+    shape = np.where(np.isnan(ref), np.nanmean(positions, axis=0), ref)
+    shape = shape - shape.mean(axis=0)
+    usable = counts >= 3
+    data = np.where(seen[..., None], positions, 0.0)[usable]
+    weights = seen[usable].astype(float)
+    for _ in range(iterations):
+        rot, trans = kabsch(np.broadcast_to(shape, data.shape), data, weights)
+        local = np.einsum("tji,tnj->tni", rot, data - trans[:, None])  # R^T (x - t)
+        total = (local * weights[..., None]).sum(axis=0)
+        shape = total / weights.sum(axis=0)[:, None]
+        shape -= shape.mean(axis=0)
+    return shape
+
+
+@dataclass(frozen=True)
+class RigidTrack:
+    """Result of :func:`track_rigid`.
+
+    Attributes
+    ----------
+    motion : ObjectMotion
+        NaN rotation/translation in frames that could not be solved.
+    residuals : ndarray (T, M)
+        Distance of each inlier marker from its fitted position, metres (NaN otherwise).
+    inliers : ndarray (T, M) bool
+    unsolved : ndarray (F,) int
+        Frames with fewer than 3 (inlier) markers: reported, not guessed.
+    """
+
+    motion: ObjectMotion
+    residuals: np.ndarray
+    inliers: np.ndarray
+    unsolved: np.ndarray
+
+    @property
+    def mean_residual(self) -> float:
+        return float(np.nanmean(self.residuals)) if np.isfinite(self.residuals).any() else float("nan")
+
+
+def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: str = "object",
+                threshold: float = 0.005, seed: int = 0) -> RigidTrack:
+    """6-DoF pose per frame of a rigid body carrying markers.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+    names : sequence of str, optional
+        The body's markers (default: all of ``markers``).
+    canonical : ndarray (M, 3), optional
+        Their positions in the body frame, metres; estimated from the take when omitted.
+    name : str
+    threshold : float
+        RANSAC inlier distance, metres.
+    seed : int
+        For the RANSAC draws.
+
+    Returns
+    -------
+    RigidTrack
+    """
+    body = markers.select(list(names)) if names is not None else markers
+    if body.n_markers < 3:
+        raise HandcapError(f"a rigid body needs at least 3 markers, got {body.n_markers}: {', '.join(body.names)}")
+    positions = body.positions
+    canonical = canonical_from_markers(positions) if canonical is None else np.asarray(canonical, dtype=np.float64)
+    if canonical.shape != (body.n_markers, 3):
+        raise HandcapError(f"canonical positions must have shape ({body.n_markers}, 3), got {canonical.shape}")
+    rng = np.random.default_rng(seed)
+    n = body.n_frames
+    rotation = np.full((n, 3), np.nan)
+    translation = np.full((n, 3), np.nan)
+    residuals = np.full((n, body.n_markers), np.nan)
+    inliers = np.zeros((n, body.n_markers), bool)
+    unsolved = []
+    for t in range(n):
+        seen = np.flatnonzero(~np.isnan(positions[t, :, 0]))
+        if len(seen) < 3:
+            unsolved.append(t)
+            continue
+        rot, trans, ok = ransac_kabsch(canonical[seen], positions[t, seen], threshold=threshold, rng=rng)
+        if ok.sum() < 3:
+            unsolved.append(t)
+            continue
+        rotation[t] = axis_angle_from_matrix(rot)
+        translation[t] = trans
+        used = seen[ok]
+        inliers[t, used] = True
+        residuals[t, used] = np.linalg.norm(canonical[used] @ rot.T + trans - positions[t, used], axis=1)
+    motion = ObjectMotion(rotation, translation, markers.rate, name, body.names, canonical)
+    return RigidTrack(motion, residuals, inliers, np.array(unsolved, dtype=int))

@@ -1,0 +1,237 @@
+"""Levenberg-Marquardt pose fitting of attached markers, batched over frames.
+
+For every frame the cost is
+
+    sum_i huber(|x_i(q) - y_i|)                      observed markers (Eq. 2, robust)
+  + (w_lim  |clip(phi, low, high) - phi|)^2          joint limits (Eq. 3-4)
+  + (w_dip  (phi_dip - k phi_pip))^2                  DIP follows PIP (k = 2/3), per finger
+  + (w_rest |phi - phi_rest|)^2                        weak pull to a relaxed hand
+
+with ``q = (transl, rotation, phi)``. Each prior weight is in metres per radian:
+an angle off by one radian costs as much as a marker off by that many metres.
+Frames are independent, so a block of frames is solved at once: one batched
+normal-equation solve (33 x 33 per frame) per iteration, with the damping of
+every frame adapted on its own (Marquardt's rule) and Huber weights renewed
+each iteration (iteratively reweighted least squares).
+
+References
+----------
+Marquardt D.W. (1963) doi:10.1137/0111030; Nocedal J., Wright S.J. (2006)
+Numerical Optimization, ch. 10.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from handcap.core.rotations import matrix_from_axis_angle
+from handcap.hand.anatomy import PHI_JOINT, PHI_LIMITS, PHI_NAMES
+from handcap.solve.markers import N_PARAMS
+
+_I = {n: i for i, n in enumerate(PHI_NAMES)}
+#: (dip, pip) angle indices of the four fingers for the coupling prior.
+COUPLED = np.array([(_I[f"{f}_dip_bend"], _I[f"{f}_pip_bend"]) for f in ("index", "middle", "pinky", "ring")])
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Weights (metres per radian) and targets of the anatomical priors.
+
+    Attributes
+    ----------
+    limits : ndarray (27, 2)
+        Joint limits in radians (default :data:`handcap.hand.PHI_LIMITS`).
+    limit_weight : float
+        Eq. (3): cost of leaving the limits (0.1: 10 degrees out weigh as much
+        as a marker 17 mm off).
+    coupling : float
+        DIP flexion per unit PIP flexion (2/3: tendon coupling of the finger
+        flexors, as in handcap.synth).
+    coupling_weight : float
+        Strength of that coupling (0.01: 10 degrees off cost like 1.7 mm).
+    rest : ndarray (27,)
+        Relaxed hand the weak pull draws unconstrained angles towards.
+    rest_weight : float
+        Strength of the pull (0.001: 10 degrees cost like 0.17 mm).
+    """
+
+    limits: np.ndarray = field(default_factory=lambda: PHI_LIMITS.copy())
+    limit_weight: float = 0.1
+    coupling: float = 2.0 / 3.0
+    coupling_weight: float = 0.01
+    rest: np.ndarray | None = None
+    rest_weight: float = 0.001
+
+    def rest_phi(self) -> np.ndarray:
+        if self.rest is not None:
+            return np.asarray(self.rest, dtype=np.float64)
+        from handcap.synth.motions import relaxed_pose
+        return relaxed_pose()
+
+
+def huber_weights(norms, scale):
+    """IRLS weights of the Huber loss on residual norms: 1 inside ``scale``, ``scale / e`` beyond."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(norms <= scale, 1.0, scale / norms)
+
+
+def huber_cost(norms, scale):
+    return np.where(norms <= scale, 0.5 * norms**2, scale * (norms - 0.5 * scale))
+
+
+def prior_terms(phi, priors: Priors, held):
+    """Residuals (T, R) and their Jacobian (T, R, 27) of the priors; held angles get none."""
+    n = phi.shape[0]
+    low, high = priors.limits[:, 0], priors.limits[:, 1]
+    clipped = np.clip(phi, low, high)
+    r_lim = priors.limit_weight * (clipped - phi)
+    j_lim = np.zeros((n, 27, 27))
+    outside = (phi < low) | (phi > high)
+    idx = np.arange(27)
+    j_lim[:, idx, idx] = np.where(outside, -priors.limit_weight, 0.0)
+    dip, pip = COUPLED[:, 0], COUPLED[:, 1]
+    active = ~(held[:, dip] | held[:, pip])
+    r_cpl = priors.coupling_weight * (phi[:, dip] - priors.coupling * phi[:, pip]) * active
+    j_cpl = np.zeros((n, 4, 27))
+    rows = np.arange(4)
+    j_cpl[:, rows, dip] = priors.coupling_weight * active
+    j_cpl[:, rows, pip] = -priors.coupling_weight * priors.coupling * active
+    r_rest = priors.rest_weight * (phi - priors.rest_phi()) * ~held
+    j_rest = np.zeros((n, 27, 27))
+    j_rest[:, idx, idx] = priors.rest_weight * ~held
+    return np.concatenate([r_lim, r_cpl, r_rest], axis=1), np.concatenate([j_lim, j_cpl, j_rest], axis=1)
+
+
+def held_angles(model, observed) -> np.ndarray:
+    """Angles (T, 27) that no observed marker depends on (their segments and everything beyond are unseen)."""
+    carries = model._weights_below > 0.01  # (M, 16): marker m moves with joint j
+    constrained = (observed[:, :, None] & carries[None]).any(axis=1)  # (T, 16)
+    return ~constrained[:, PHI_JOINT]
+
+
+@dataclass
+class Poses:
+    """Pose parameters of T frames (arrays are modified in place by the solver)."""
+
+    transl: np.ndarray  # (T, 3)
+    rot: np.ndarray  # (T, 3, 3)
+    phi: np.ndarray  # (T, 27)
+
+    def copy(self) -> "Poses":
+        return Poses(self.transl.copy(), self.rot.copy(), self.phi.copy())
+
+    def take(self, index) -> "Poses":
+        return Poses(self.transl[index], self.rot[index], self.phi[index])
+
+    def put(self, index, other: "Poses") -> None:
+        self.transl[index], self.rot[index], self.phi[index] = other.transl, other.rot, other.phi
+
+
+def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, scale):
+    """Total cost per frame (T,), and the pieces the next step needs."""
+    kin = model.kinematics(poses.transl, poses.rot, poses.phi)
+    x = model.positions(poses.transl, poses.rot, poses.phi, kin=kin)
+    resid = np.where(observed[..., None], x - target, 0.0)
+    norms = np.linalg.norm(resid, axis=-1)
+    r_p, j_p = prior_terms(poses.phi, priors, held)
+    cost = huber_cost(norms, scale).sum(axis=1) + 0.5 * (r_p**2).sum(axis=1)
+    return cost, (kin, resid, norms, r_p, j_p)
+
+
+def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *, scale: float = 0.005,
+                        iterations: int = 10, tolerance: float = 1e-6, held=None, lam: float = 1e-3):
+    """Fit poses to observed markers, every frame at once.
+
+    Parameters
+    ----------
+    model : MarkerModel
+    target : ndarray (T, M, 3)
+        Observed marker positions, metres (ignored where not ``observed``).
+    observed : ndarray (T, M) bool
+    poses : Poses
+        Initial poses; not modified.
+    priors : Priors
+    scale : float
+        Huber scale, metres: markers further off than this count linearly.
+    iterations : int
+    tolerance : float
+        Stop a frame once its step is shorter than this (metres / radians).
+    held : ndarray (T, 27) bool, optional
+        Angles kept at their initial value (default: :func:`held_angles`).
+
+    Returns
+    -------
+    poses : Poses
+    cost : ndarray (T,)
+    """
+    poses = poses.copy()
+    n = len(poses.transl)
+    held = held_angles(model, observed) if held is None else held
+    fixed = np.concatenate([np.zeros((n, 6), bool), held], axis=1)
+    blind = ~observed.any(axis=1)  # frames without a single marker keep their start
+    fixed[blind] = True
+    damping = np.full(n, lam)
+    active = ~blind
+    cost, parts = frame_costs(model, poses, target, observed, held, priors, scale)
+    eye = np.eye(N_PARAMS)
+    buffer = np.zeros((n, 3, model.n_markers, N_PARAMS))  # Jacobians, zero outside their structure
+    for _ in range(iterations):
+        if not active.any():
+            break
+        idx = np.flatnonzero(active)
+        kin, resid, norms, r_p, j_p = (p[idx] if not isinstance(p, tuple) else tuple(k[idx] for k in p)
+                                       for p in parts)
+        sub = poses.take(idx)
+        jac = model.jacobian(sub.transl, sub.rot, sub.phi, kin=kin, out=buffer[:len(idx)])  # (t, 3, M, 33)
+        root_w = np.sqrt(huber_weights(norms, scale) * observed[idx])  # (t, M)
+        jac *= root_w[:, None, :, None]  # rows scaled by sqrt(w): J^T W J = (sqrt(w) J)^T (sqrt(w) J)
+        m3 = jac.shape[2] * 3
+        flat = jac.reshape(len(idx), m3, N_PARAMS)
+        flat_t = np.swapaxes(flat, 1, 2)
+        hess = np.matmul(flat_t, flat)
+        grad = np.matmul(flat_t, (np.swapaxes(resid, 1, 2) * root_w[:, None]).reshape(len(idx), m3, 1))[..., 0]
+        hess[:, 6:, 6:] += np.matmul(np.swapaxes(j_p, 1, 2), j_p)
+        grad[:, 6:] += np.einsum("trp,tr->tp", j_p, r_p)
+        f = fixed[idx]
+        hess[f[:, :, None] | f[:, None, :]] = 0.0
+        hess += eye * f[:, :, None]
+        grad[f] = 0.0
+        diag = np.diagonal(hess, axis1=1, axis2=2)
+        system = hess + (damping[idx, None] * np.maximum(diag, 1e-9))[:, :, None] * eye
+        step = -np.linalg.solve(system, grad[..., None])[..., 0]
+        trial = Poses(sub.transl + step[:, :3], matrix_from_axis_angle(step[:, 3:6]) @ sub.rot, sub.phi + step[:, 6:])
+        new_cost, new_parts = frame_costs(model, trial, target[idx], observed[idx], held[idx], priors, scale)
+        better = new_cost <= cost[idx]
+        good = idx[better]
+        gain = (cost[idx] - new_cost) / np.maximum(cost[idx], 1e-300)
+        poses.put(good, trial.take(better))
+        cost[good] = new_cost[better]
+        parts = _merge(parts, new_parts, idx, better)
+        damping[good] = np.maximum(damping[good] / 3.0, 1e-7)
+        damping[idx[~better]] *= 4.0
+        # Done when the step is tiny or changes the cost by less than 1e-6 of it, either way
+        # (near the minimum the approximate Jacobian's steps neither gain nor lose).
+        converged = (np.abs(step).max(axis=1) < tolerance) | (np.abs(gain) < 1e-6)
+        active[idx[converged]] = False
+        active[idx[damping[idx] > 1e8]] = False
+    return poses, cost
+
+
+def _merge(parts, new_parts, idx, better):
+    """Copy the accepted frames' cached pieces into the full-batch cache."""
+    out = []
+    for old, new in zip(parts, new_parts):
+        if isinstance(old, tuple):
+            merged = tuple(_put(o, n, idx, better) for o, n in zip(old, new))
+            out.append(merged)
+        else:
+            out.append(_put(old, new, idx, better))
+    return tuple(out)
+
+
+def _put(old, new, idx, better):
+    old = old.copy()
+    old[idx[better]] = new[better]
+    return old

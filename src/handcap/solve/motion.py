@@ -1,0 +1,231 @@
+"""Hand motion from labeled markers: ``solve_hand``.
+
+Per frame, the pose that brings the attached markers onto the observed ones
+(Eq. 2-4 of DexterCap, with a robust loss and the anatomical priors of
+:class:`handcap.solve.lm.Priors`), warm-started from the previous frames:
+
+1. A rigid start for every frame: Kabsch alignment of the markers on the palm
+   (all markers when fewer than three palm markers are seen).
+2. Key frames 0.1 s apart, solved one after the other, each starting from the
+   finger pose of the one before.
+3. The frames between, solved together by batched Levenberg-Marquardt, each
+   starting from the key frames' angles joined linearly.
+4. Frames that end far worse than the rest (a poor local minimum) are solved
+   again from the previous frame's pose.
+5. An angle that no visible marker depends on (its segment and every segment
+   beyond it unseen) keeps its value from the previous frame, as in the paper;
+   in the first frames, the relaxed pose of the priors. A frame with no marker
+   at all keeps the whole previous pose.
+
+Methods: ``lm`` (the above, default) and ``adam`` (the paper's optimiser,
+:mod:`handcap.solve.adam`), kept as the baseline.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from tqdm import tqdm
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence
+from handcap.core.motion import HandMotion
+from handcap.core.rotations import axis_angle_from_matrix
+from handcap.objects.rigid import kabsch
+from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
+from handcap.solve.markers import MarkerModel
+
+METHODS = ("lm", "adam")
+
+
+def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[str]]:
+    """Positions (T, M, 3) of the named markers in ``markers`` (NaN columns for absent names).
+
+    Returns the array and the names found nowhere in the file.
+    """
+    out = np.full((markers.n_frames, len(names), 3), np.nan)
+    absent = []
+    for i, name in enumerate(names):
+        try:
+            out[:, i] = markers.positions[:, markers.index(name)]
+        except HandcapError:
+            absent.append(name)
+    return out, absent
+
+
+def rigid_start(model: MarkerModel, target, observed, rest_phi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-frame rotation and translation from the palm markers (Kabsch).
+
+    Returns rotation (T, 3, 3), translation (T, 3) and a (T,) mask of frames
+    where at least three markers made the alignment possible.
+    """
+    n = len(target)
+    rest = model.positions(np.zeros((1, 3)), np.eye(3)[None], rest_phi[None])[0]
+    palm = model.marker_weights[:, 0] > 0.9
+    use_palm = (observed & palm).sum(axis=1) >= 3
+    weights = np.where(use_palm[:, None], observed & palm, observed).astype(float)
+    ok = weights.sum(axis=1) >= 3
+    src = np.broadcast_to(rest, target.shape)
+    tgt = np.where(observed[..., None], target, 0.0)
+    rot = np.tile(np.eye(3), (n, 1, 1))
+    trans = np.zeros((n, 3))
+    if ok.any():
+        r, t = kabsch(src[ok], tgt[ok], weights[ok])
+        rot[ok] = r
+        # Kabsch gives y = R x + t about the origin; the model turns about the wrist joint J0.
+        j0 = model.rest_joints[0]
+        trans[ok] = t + np.einsum("tij,j->ti", r, j0) - j0
+    return rot, trans, ok
+
+
+def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = "lm", priors: Priors | None = None,
+               robust_scale: float = 0.005, iterations: int = 8, first_iterations: int = 60,
+               progress: bool | None = None) -> HandMotion:
+    """Solve hand motion from labeled markers.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+        Labeled markers, metres; names are matched to the attachment's
+        (a ``Subject:`` prefix is ignored). Markers of the attachment absent
+        from the file are treated as never seen; other markers are ignored.
+    attachment : MarkerAttachment
+    hand : HandModel, optional
+        The attachment's model (OpenHand of its side by default).
+    method : {"lm", "adam"}
+    priors : Priors, optional
+    robust_scale : float
+        Huber scale of the marker residuals, metres (lm).
+    iterations, first_iterations : int
+        Levenberg-Marquardt iterations per frame (twice as many for key
+        frames), and for the first frame.
+    progress : bool, optional
+        Progress bar (default: on a terminal only).
+
+    Returns
+    -------
+    HandMotion
+        ``phi``, ``hand_pose``, ``global_orient``, ``transl``, ``joints`` (T, 21, 3),
+        ``marker_fit`` (T, M, 3) for every attached marker (also those missing
+        in the input) and ``marker_residuals`` (T, M) metres (NaN where missing).
+
+    Raises
+    ------
+    HandcapError
+        Unknown method, or no marker of the attachment in ``markers``.
+    """
+    if method not in METHODS:
+        raise HandcapError(f"unknown solve method {method!r}; choose one of {', '.join(METHODS)}")
+    hand = _hand_for(attachment) if hand is None else hand
+    priors = Priors() if priors is None else priors
+    names = list(attachment.marker_names)
+    target, absent = observed_markers(markers, names)
+    if len(absent) == len(names):
+        raise HandcapError(f"none of the attachment's markers ({', '.join(names[:6])}...) is in the input; "
+                           f"the input has {', '.join(markers.names[:6])}...")
+    observed = ~np.isnan(target[..., 0])
+    if not observed.any():
+        raise HandcapError("the input has no visible marker of the attachment in any frame")
+    model = MarkerModel(hand, attachment)
+    if method == "adam":
+        from handcap.solve.adam import solve_adam
+        poses = solve_adam(model, target, observed, priors, progress=progress)
+    else:
+        poses = _solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
+                          first_iterations, progress)
+    return _motion(hand, model, poses, target, observed, markers.rate, names)
+
+
+def _hand_for(attachment):
+    if attachment.model != "openhand":
+        raise HandcapError(f"the attachment was made for the {attachment.model} model: pass hand=ManoHand.load(...)")
+    from handcap.hand import OpenHand
+    return OpenHand(attachment.side)
+
+
+def _solve_lm(model, target, observed, priors, scale, rate, iterations, first_iterations, progress) -> Poses:
+    n = len(target)
+    rest = priors.rest_phi()
+    rot0, trans0, rigid_ok = rigid_start(model, target, observed, rest)
+    held = held_angles(model, observed)
+    solved = Poses(trans0.copy(), rot0.copy(), np.tile(rest, (n, 1)))
+    hidden = None if progress is None else not progress
+    bar = tqdm(total=n, desc="solve", unit="frame", disable=hidden, leave=False)
+    # 1. Key frames, 0.1 s apart, one after the other, each starting from the one before.
+    stride = max(1, int(round(KEY_SECONDS * rate)))
+    keys = np.unique(np.r_[np.arange(0, n, stride), n - 1])
+    previous = None
+    for k in keys:
+        init = solved.take(slice(k, k + 1)).copy()
+        if previous is not None:
+            init.phi[:] = previous.phi
+            if not rigid_ok[k]:
+                init.rot[:], init.transl[:] = previous.rot, previous.transl
+        result, _ = levenberg_marquardt(model, target[k:k + 1], observed[k:k + 1], init, priors, scale=scale,
+                                        iterations=first_iterations if previous is None else 2 * iterations,
+                                        held=held[k:k + 1])
+        solved.put(slice(k, k + 1), result)
+        previous = result
+        bar.update(1)
+    # 2. The frames between, all at once, starting from the key frames' angles joined linearly.
+    between = np.setdiff1d(np.arange(n), keys)
+    if len(between):
+        solved.phi[between] = _interpolate(keys, solved.phi[keys], between)
+        lost = between[~rigid_ok[between]]
+        nearest = keys[np.clip(np.searchsorted(keys, lost) - 1, 0, len(keys) - 1)]
+        solved.rot[lost], solved.transl[lost] = solved.rot[nearest], solved.transl[nearest]
+        for chunk in np.array_split(between, max(1, int(np.ceil(len(between) / CHUNK)))):
+            result, _ = levenberg_marquardt(model, target[chunk], observed[chunk], solved.take(chunk), priors,
+                                            scale=scale, iterations=iterations, held=held[chunk])
+            solved.put(chunk, result)
+            bar.update(len(chunk))
+    bar.close()
+    # 3. Frames ending far worse than the rest start again from the frame before.
+    cost = _costs(model, solved, target, observed, held, priors, scale)
+    _retry_outliers(model, target, observed, solved, cost, priors, scale, iterations, held)
+    # 4. Angles nothing constrains keep the previous frame's value (the paper's rule).
+    _forward_fill(solved.phi, held, rest)
+    return solved
+
+
+KEY_SECONDS = 0.1  # spacing of the key frames solved one after the other
+CHUNK = 128  # frames per batched solve (bounds memory: 128 x 3M x 33 Jacobian entries)
+
+
+def _interpolate(keys, values, at):
+    """Values (len(at), 27) joined linearly between key frames."""
+    return np.stack([np.interp(at, keys, values[:, d]) for d in range(values.shape[1])], axis=1)
+
+
+def _costs(model, poses, target, observed, held, priors, scale):
+    from handcap.solve.lm import frame_costs
+    return frame_costs(model, poses, target, observed, held, priors, scale)[0]
+
+
+def _forward_fill(phi, held, rest) -> None:
+    """Held angles take the value of the frame before (the relaxed pose before any)."""
+    for t in range(len(phi)):
+        prev = phi[t - 1] if t > 0 else rest
+        phi[t, held[t]] = prev[held[t]]
+
+
+def _retry_outliers(model, target, observed, poses: Poses, cost, priors, scale, iterations, held) -> None:
+    """Solve again, from the previous frame's pose, frames that ended far worse than the rest (in place)."""
+    per_marker = cost / np.maximum(observed.sum(axis=1), 1)
+    bad = np.flatnonzero(per_marker > max(9.0 * np.median(per_marker), 0.5 * 0.003**2))
+    for t in bad[bad > 0]:
+        init = poses.take(slice(t, t + 1)).copy()
+        init.phi[:] = poses.phi[t - 1]
+        retry, c = levenberg_marquardt(model, target[t:t + 1], observed[t:t + 1], init, priors, scale=scale,
+                                       iterations=3 * iterations, held=held[t:t + 1])
+        if c[0] < cost[t]:
+            poses.put(slice(t, t + 1), retry)
+
+
+def _motion(hand, model, poses: Poses, target, observed, rate, names) -> HandMotion:
+    orient = axis_angle_from_matrix(poses.rot)
+    hand_pose = hand.hand_pose_from_phi(poses.phi)
+    joints = hand.forward(model.betas, orient, hand_pose, poses.transl, vertices=False).joints
+    fit = model.positions(poses.transl, poses.rot, poses.phi)
+    residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), np.nan)
+    return HandMotion(model.betas, orient, hand_pose, poses.transl, rate, hand.side, poses.phi, hand.name,
+                      joints, tuple(names), fit, residuals)
