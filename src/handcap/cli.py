@@ -24,7 +24,8 @@ def _cmd_synth(args) -> None:
                              seed=args.seed, side=args.side, object=args.object, betas=betas, cameras=args.cameras,
                              min_views=args.min_views, noise_mm=args.noise_mm, pixel_noise=args.pixel_noise,
                              dropout=args.dropout, ghost_rate=args.ghost_rate, swap_rate=args.swap_rate,
-                             outlier_rate=args.outlier_rate, max_view_angle_deg=args.max_view_angle)
+                             outlier_rate=args.outlier_rate, max_view_angle_deg=args.max_view_angle,
+                             placement_mm=args.placement_mm, subject_seed=args.subject_seed)
     capture = synthesize(config)
     write_capture(capture, args.out)
     m = capture.markers
@@ -70,6 +71,10 @@ def _add_synth(verbs) -> None:
     p.add_argument("--swap-rate", type=float, default=d.swap_rate, help="label swaps per second")
     p.add_argument("--outlier-rate", type=float, default=d.outlier_rate, help="fraction of 2D detections with a wrong id")
     p.add_argument("--max-view-angle", type=float, default=None, help="degrees; default 75 for patches, none for spheres")
+    p.add_argument("--placement-mm", type=float, default=d.placement_mm,
+                   help="how far markers sit from their nominal layout spots, mm (default %(default)s)")
+    p.add_argument("--subject-seed", type=int, default=None,
+                   help="seed of the subject (hand shape, marker placement); share it between the takes of a session")
     p.add_argument("--scene", help="take every setting from a scene.toml written by an earlier run")
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(run=_cmd_synth)

@@ -1,6 +1,9 @@
 """Hand (and object) motions for synthetic captures.
 
-Every motion is made of key poses placed in time and joined by clamped cubic
+Motions: ``calibration`` (an open hand slowly turned every way, for marker
+attachment calibration), ``open-close``, ``tapping``, ``pinch``, ``grasp``
+(power grasp), ``precision``, ``rotate-cube`` (in-hand rotation), ``wrist``
+and ``random``. Every motion is made of key poses placed in time and joined by clamped cubic
 splines (zero velocity at the ends: smooth, no jumps), plus a small
 physiological tremor (band-limited noise below 6 Hz). Finger flexion follows
 the usual synergies: the DIP flexes two thirds as much as the PIP, and
@@ -26,7 +29,7 @@ from scipy.spatial.transform import Rotation, RotationSpline
 from handcap.core.errors import HandcapError
 from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES
 
-MOTIONS = ("open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
+MOTIONS = ("calibration", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
 WORK_CENTRE = np.array([0.0, 0.0, 1.0])
 # Model axes (x distal, y dorsal, z = x cross y) to world: palm down, fingers along +x.
 NEUTRAL = Rotation.from_matrix(np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]))
@@ -308,11 +311,16 @@ def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> M
                                f"release; {n_frames} frames at {rate:g} Hz last {duration:.2f} s: give more frames")
         return _object_motion(name, hand, t, duration, rate, rng, obj)
 
-    n_keys = max(3, int(round(duration / {"open-close": 0.7, "tapping": 0.2, "pinch": 0.8,
+    n_keys = max(3, int(round(duration / {"calibration": 1.0, "open-close": 0.7, "tapping": 0.2, "pinch": 0.8,
                                           "wrist": 0.7, "random": 0.6}[name])) + 1)
     key_t = np.linspace(0.0, duration, n_keys)
     relaxed = relaxed_pose()
-    if name == "open-close":
+    if name == "calibration":
+        # An open hand, fingers a little apart, slowly turned every way (DexterCap section 3.4.2).
+        open_hand = _pose(index_mcp_spread=-6, ring_mcp_spread=5, pinky_mcp_spread=9, thumb_cmc_spread=-8)
+        keys = [open_hand + np.deg2rad(rng.normal(0, 2, 27)) for _ in range(n_keys)]
+        turn, move = 80.0, 0.06
+    elif name == "open-close":
         keys = [relaxed if k % 2 == 0 else fist_pose() for k in range(n_keys)]
         turn, move = 15.0, 0.03
     elif name == "tapping":

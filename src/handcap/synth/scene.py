@@ -87,6 +87,16 @@ class SynthConfig:
     max_view_angle_deg : float or None
         Patch corners seen more obliquely are not detected; None: the layout's
         kind decides (75 degrees for patches, unlimited for spheres).
+    placement_mm : float
+        How far from their nominal spots markers are stuck on, millimetres
+        (standard deviation along the skin): each printed patch is shifted and
+        turned as one piece (turn: 3 degrees per millimetre), each sphere marker
+        moves on its own. The layout file keeps the nominal spots, so a
+        calibration has something to find.
+    subject_seed : int or None
+        Seed of the subject: hand shape (when ``betas`` is None) and marker
+        placement. Takes with the same subject seed share them, like the
+        calibration take and the takes of one session. None: ``seed``.
     """
 
     layout: str = "glove-13"
@@ -106,6 +116,8 @@ class SynthConfig:
     swap_rate: float = 0.1
     outlier_rate: float = 0.0
     max_view_angle_deg: float | None = None
+    placement_mm: float = 3.0
+    subject_seed: int | None = None
 
     def __post_init__(self):
         check_side(self.side)
@@ -121,7 +133,7 @@ class SynthConfig:
             raise HandcapError(f"cameras must be 1-24, got {self.cameras}")
         if not 1 <= self.min_views <= self.cameras:
             raise HandcapError(f"min_views must be between 1 and the number of cameras ({self.cameras})")
-        for name in ("noise_mm", "pixel_noise", "ghost_rate", "swap_rate"):
+        for name in ("noise_mm", "pixel_noise", "ghost_rate", "swap_rate", "placement_mm"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise HandcapError(f"{name} must be a non-negative number, got {value}")
@@ -154,6 +166,48 @@ class SynthCapture:
     truth: dict = field(repr=False)
 
 
+def misplaced(layout, hand, sigma: float, rng):
+    """The layout with its markers stuck on a little off their nominal spots (see ``placement_mm``).
+
+    Shifts happen on the flat template and every marker is put back on the
+    skin of its own segment (closest point), so it stays where a marker can be.
+    """
+    from handcap.core.geometry import closest_points_on_mesh
+    from handcap.layouts import LayoutMarker, MarkerLayout
+    if sigma <= 0:
+        return layout
+    template = hand.forward().vertices
+    positions = layout.positions()
+    moved = positions.copy()
+    groups = {}
+    for i, m in enumerate(layout.markers):
+        if not m.on_object:
+            groups.setdefault(m.patch if (m.patch and layout.marker_kind == "patch") else m.name, []).append(i)
+    for members in groups.values():
+        pts = positions[members]
+        centre = pts.mean(axis=0)
+        seg_faces = hand.segment_faces(layout.markers[members[0]].segment)
+        _, face, _ = closest_points_on_mesh(centre[None], template, hand.faces[seg_faces])
+        tri = template[hand.faces[seg_faces[face[0]]]]
+        normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+        normal /= np.linalg.norm(normal)
+        shift = rng.normal(0, sigma, 3)
+        shift -= normal * (shift @ normal)
+        angle = rng.normal(0, np.deg2rad(3.0) * sigma * 1000) if len(members) > 1 else 0.0
+        turn = Rotation.from_rotvec(angle * normal).as_matrix()
+        moved[members] = (pts - centre) @ turn.T + centre + shift
+    markers = []
+    for i, m in enumerate(layout.markers):
+        if m.on_object:
+            markers.append(m)
+            continue
+        seg_faces = hand.segment_faces(m.segment)
+        point, _, _ = closest_points_on_mesh(moved[i][None], template, hand.faces[seg_faces])
+        markers.append(LayoutMarker(m.name, m.segment, point[0], m.patch))
+    return MarkerLayout(layout.name, layout.side, tuple(markers), layout.rigid, layout.marker_radius,
+                        layout.marker_kind, layout.description)
+
+
 def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCapture:
     """Make a synthetic capture.
 
@@ -164,11 +218,15 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
         Show a progress bar (default: only on a terminal).
     """
     seeds = np.random.SeedSequence(config.seed).spawn(6)
-    rng_shape, rng_motion, rng_noise, rng_faults, rng_detect, rng_shuffle = (np.random.default_rng(s) for s in seeds)
+    _, rng_motion, rng_noise, rng_faults, rng_detect, rng_shuffle = (np.random.default_rng(s) for s in seeds)
+    # The subject (hand shape, where the markers are stuck) can be shared between takes.
+    subject = np.random.SeedSequence(config.seed if config.subject_seed is None else config.subject_seed).spawn(2)
+    rng_shape, rng_place = (np.random.default_rng(s) for s in subject)
     hand = OpenHand(config.side)
     layout = load_layout(config.layout, side=config.side)
     betas = np.asarray(config.betas if config.betas is not None else rng_shape.normal(0, 0.5, 10), dtype=np.float64)
-    attachment = MarkerAttachment.from_layout(layout, hand, betas)
+    attachment = MarkerAttachment.from_layout(misplaced(layout, hand, config.placement_mm / 1000, rng_place),
+                                              hand, betas)
     kind = config.object_kind
     obj = make_object(kind, seed=config.seed) if kind else None
 

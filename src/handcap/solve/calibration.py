@@ -1,0 +1,271 @@
+"""Marker attachment calibration: where each marker sits on its segment (Eq. 1-2 of DexterCap).
+
+From a calibration take (the subject holds an open hand and slowly turns it
+so every marker is seen) and a layout, find for every marker the triangle and
+barycentric coordinates on its own segment's submesh (and, optionally, its
+height off the skin), together with the pose of every calibration frame:
+
+1. Start from the layout's nominal spots (or, for markers without one, the
+   middle of the back of their segment).
+2. Solve the pose of every calibration frame with the current attachment
+   (the motion solver; fingers drawn towards an open hand, as the subject was
+   asked to hold one).
+3. Move each observed marker into its segment's rest frame (undo that
+   segment's skinning transform) and take the median over frames: a robust
+   version of recomputing the closest triangle frame by frame.
+4. Move each marker towards that estimate (see :func:`relaxation`; at most
+   2 cm from its nominal spot) and put it at the closest point of its
+   segment's submesh (segment-restricted closest point), with the normal
+   distance as its offset when offsets are estimated.
+5. Repeat 2-4 until no marker moves by more than 0.1 mm; with ``fit_shape``,
+   also refit the 10 shape values to all frames between rounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from handcap.core.errors import HandcapError
+from handcap.core.geometry import closest_points_on_mesh
+from handcap.core.markers import MarkerSequence
+from handcap.hand.attachment import MarkerAttachment
+from handcap.solve.lm import Poses, Priors
+from handcap.solve.markers import MarkerModel
+from handcap.solve.motion import _solve_lm, observed_markers
+
+#: How strongly calibration frames are drawn to the open hand, metres per radian.
+OPEN_HAND_WEIGHT = 0.02
+#: Furthest a marker may end from its nominal spot, metres.
+MAX_SHIFT = 0.02
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Result of :func:`calibrate_attachment`.
+
+    Attributes
+    ----------
+    attachment : MarkerAttachment
+    poses : Poses
+        Poses of the calibration frames used.
+    frames : ndarray (F,) int
+        Which frames of the input those are.
+    residuals : ndarray (F, M)
+        Marker errors of the final fit, metres (NaN where unobserved).
+    rounds : int
+    """
+
+    attachment: MarkerAttachment
+    poses: Poses
+    frames: np.ndarray
+    residuals: np.ndarray
+    rounds: int
+
+    @property
+    def mre(self) -> float:
+        """Mean marker error of the calibration fit, metres."""
+        return float(np.nanmean(self.residuals))
+
+
+def initial_attachment(layout, hand, betas) -> MarkerAttachment:
+    """The layout's nominal spots; markers without one go to the middle of the back of their segment."""
+    from handcap.layouts import LayoutMarker, MarkerLayout
+    layout = layout.for_side(hand.side)
+    template = hand.forward().vertices
+    seg = hand.segment_of_vertex
+    dorsal = np.array([0.0, 1.0, 0.0])
+    markers = []
+    for m in layout.hand_markers:
+        if m.position is None:
+            verts = template[seg == hand.segment_id(m.segment)]
+            centre = verts.mean(axis=0)
+            # The skin point of the segment furthest towards the back, near its middle.
+            score = (verts - centre) @ dorsal - 0.5 * np.linalg.norm((verts - centre) * [1, 0, 1], axis=1)
+            m = LayoutMarker(m.name, m.segment, verts[np.argmax(score)], m.patch)
+        markers.append(m)
+    placed = MarkerLayout(layout.name, layout.side, tuple(markers), layout.rigid, layout.marker_radius,
+                          layout.marker_kind, layout.description)
+    return MarkerAttachment.from_layout(placed, hand, betas)
+
+
+def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=None, frames=None,
+                         max_frames: int = 120, fit_shape: bool = False, estimate_offset: bool = False,
+                         rounds: int = 30, tolerance: float = 1e-4, priors: Priors | None = None) -> Calibration:
+    """Calibrate where the markers of a layout sit on the hand.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+        The calibration take, metres.
+    layout : MarkerLayout
+        The markers to calibrate (a user's own layout works like a shipped one).
+    hand : HandModel, optional
+        OpenHand of the layout's side by default.
+    betas : ndarray (10,), optional
+        Known shape (e.g. from :func:`handcap.solve.shape.betas_from_scan`); zeros by default.
+    frames : slice or sequence of int, optional
+        Frames of ``markers`` to use (default all).
+    max_frames : int
+        At most this many frames, evenly spread, are used.
+    fit_shape : bool
+        Estimate the shape values jointly with the attachment.
+    estimate_offset : bool
+        Estimate each marker's height off the skin instead of the layout's radius.
+    rounds : int
+    tolerance : float
+        Stop when no marker moves more than this, metres.
+    priors : Priors, optional
+        Defaults pull the fingers towards the open hand (``OPEN_HAND_WEIGHT``).
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    HandcapError
+        A layout marker never seen in the calibration frames, or too few frames.
+    """
+    if hand is None:
+        from handcap.hand import OpenHand
+        hand = OpenHand(layout.side)
+    layout = layout.for_side(hand.side)
+    betas = np.zeros(10) if betas is None else np.asarray(betas, dtype=np.float64)
+    chosen = np.arange(markers.n_frames)[frames] if isinstance(frames, slice) else \
+        (np.arange(markers.n_frames) if frames is None else np.asarray(frames, dtype=int))
+    if len(chosen) > max_frames:
+        chosen = chosen[np.linspace(0, len(chosen) - 1, max_frames).round().astype(int)]
+    names = [m.name for m in layout.hand_markers]
+    target, absent = observed_markers(markers, names)
+    if absent:
+        raise HandcapError(f"layout markers absent from the calibration take: {', '.join(absent)}")
+    target = target[chosen]
+    observed = ~np.isnan(target[..., 0])
+    usable = observed.sum(axis=1) >= 3
+    if usable.sum() < 3:
+        raise HandcapError(f"only {usable.sum()} calibration frames show 3 or more markers; need at least 3")
+    target, observed, chosen = target[usable], observed[usable], chosen[usable]
+    never = [n for n, seen in zip(names, observed.any(axis=0)) if not seen]
+    if never:
+        raise HandcapError(f"markers never seen in the calibration frames: {', '.join(never)}; "
+                           f"use frames where the hand shows every marker")
+    if priors is None:
+        priors = Priors(rest=np.zeros(27), rest_weight=OPEN_HAND_WEIGHT)
+    attachment = initial_attachment(layout, hand, betas)
+    radius = layout.marker_radius
+    nominal = MarkerModel(hand, attachment).rest_markers
+    step = relaxation(attachment, hand)
+    previous_error = np.inf
+    done = 0
+    for done in range(1, rounds + 1):
+        model = MarkerModel(hand, attachment)
+        poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
+        if fit_shape:
+            betas = _fit_shape(hand, attachment, poses, target, observed)
+            attachment = replace(attachment, betas=betas)
+            model = MarkerModel(hand, attachment)
+            poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
+        fit = model.positions(poses.transl, poses.rot, poses.phi)
+        error = float(np.mean(np.linalg.norm(fit - np.nan_to_num(target), axis=-1)[observed]))
+        if step == 1.0 and error > 0.98 * previous_error:
+            break  # sparse layout: the fit no longer improves (see relaxation)
+        previous_error = error
+        goal = rest_frame_medians(model, poses, target, observed)
+        goal = model.rest_markers + step * (goal - model.rest_markers)
+        away = goal - nominal
+        far = np.linalg.norm(away, axis=1, keepdims=True)
+        goal = nominal + away * np.minimum(1.0, MAX_SHIFT / np.maximum(far, 1e-12))
+        updated = _reattach(model, hand, attachment, goal, radius, estimate_offset)
+        moved = np.linalg.norm(MarkerModel(hand, updated).rest_markers - model.rest_markers, axis=1).max()
+        attachment = updated
+        if moved < tolerance:
+            break
+    model = MarkerModel(hand, attachment)
+    poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
+    fit = model.positions(poses.transl, poses.rot, poses.phi)
+    residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), np.nan)
+    return Calibration(attachment, poses, chosen, residuals, done)
+
+
+def rest_frame_medians(model, poses, target, observed) -> np.ndarray:
+    """Median over frames of each observed marker moved into the rest pose (M, 3), metres.
+
+    Each marker's own segment (largest skinning weight) is undone:
+    ``x = R (r - J) + P`` gives ``r = R^T (x - P) + J``.
+    """
+    world_rot, world_pos, _ = model.kinematics(poses.transl, poses.rot, poses.phi)
+    segment = np.argmax(model.marker_weights, axis=1)
+    local = np.einsum("fmji,fmj->fmi", world_rot[:, segment], np.nan_to_num(target) - world_pos[:, segment])
+    local += model.rest_joints[segment]
+    local[~observed] = np.nan
+    return np.nanmedian(local, axis=0)
+
+
+def relaxation(attachment, hand) -> float:
+    """How far each round moves the markers towards their new estimate.
+
+    Poses and attachment are estimated in turn, which converges linearly;
+    over-relaxing (1.5) halves the rounds when every marked segment carries
+    at least four markers (patch layouts: each segment's pose is fixed by its
+    own markers). Sparse layouts take plain steps (1.0): there the poses lean
+    on the priors (an open hand), and once the fit stops improving (by 2 % a
+    round) further rounds only drift the markers towards what makes the
+    calibration frames look like the prior's flat hand, so they stop there.
+    """
+    segment = hand.segment_of_vertex[hand.faces[attachment.triangles, 0]]
+    counts = np.bincount(segment, minlength=16)
+    return 1.5 if counts[counts > 0].min() >= 4 else 1.0
+
+
+def _reattach(model, hand, attachment, goal, radius, estimate_offset) -> MarkerAttachment:
+    """New triangles, barycentric coordinates (and offsets) for markers placed at ``goal`` (rest pose)."""
+    segment = np.argmax(model.marker_weights, axis=1)  # each marker's own segment
+    median = goal
+    rest_vertices, _, _ = hand.rest(attachment.betas)
+    triangles = attachment.triangles.copy()
+    bary = attachment.barycentric.copy()
+    offset = attachment.offset.copy()
+    faces = hand.faces
+    tri_segment = hand.segment_of_vertex[faces]
+    for seg in np.unique(segment):
+        members = np.flatnonzero(segment == seg)
+        own = np.flatnonzero((tri_segment == seg).all(axis=1))
+        closest, face, b = closest_points_on_mesh(median[members], rest_vertices, faces[own], candidates=32)
+        triangles[members] = own[face]
+        bary[members] = b
+        if estimate_offset:
+            tri = rest_vertices[faces[own[face]]]
+            normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+            offset[members] = np.clip(((median[members] - closest) * normal).sum(axis=1), 0.0, 0.03)
+        else:
+            offset[members] = radius
+    return MarkerAttachment(attachment.marker_names, triangles, bary, offset, attachment.betas,
+                            attachment.model, attachment.side)
+
+
+#: A shape value of 1 (one standard deviation) must pay for itself by this much RMS marker error, metres.
+SHAPE_PRIOR = 0.0005
+
+
+def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
+    """Shape values that bring the posed markers closest to the observed ones (poses fixed).
+
+    A Gaussian prior on the shape values (zero mean, unit deviation) keeps the
+    hand average where the markers say little: moving a value by one unit must
+    lower the mean square marker error by ``SHAPE_PRIOR**2``. Values stay
+    within three deviations.
+    """
+    rows = observed
+    weight = SHAPE_PRIOR * np.sqrt(observed.sum())
+
+    def residual(betas):
+        model = MarkerModel(hand, replace(attachment, betas=betas))
+        fit = model.positions(poses.transl, poses.rot, poses.phi)
+        return np.concatenate([(fit - np.nan_to_num(target))[rows].ravel(), weight * betas])
+
+    result = least_squares(residual, attachment.betas, bounds=(-3.0, 3.0), diff_step=1e-3, max_nfev=40)
+    return result.x
