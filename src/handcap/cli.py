@@ -37,9 +37,232 @@ def _cmd_demo(args) -> None:
     from handcap.demo import run_demo
     summary = run_demo(args.out)
     for key, value in summary.items():
-        if key not in ("files", "seen_per_camera_fraction"):
+        if key not in ("files", "seen_per_camera_fraction", "metrics"):
             print(f"{key:28s} {value}")
-    print(f"wrote {len(summary['files'])} files to {args.out}/ (picture: {args.out}/hand.png)")
+    print("\nsolved motion against the ground truth:")
+    print(summary["metrics"])
+    print(f"\nwrote {len(summary['files'])} files to {args.out}/ (picture: {args.out}/hand.png)")
+
+
+
+def _frames_arg(text: str | None):
+    """``A:B`` (frames, either end optional) -> slice."""
+    if text is None:
+        return None
+    try:
+        a, b = text.split(":")
+        return slice(int(a) if a else None, int(b) if b else None)
+    except ValueError:
+        raise HandcapError(f"--frames must be A:B with frame numbers (either may be left out), got {text!r}") from None
+
+
+def _betas_arg(text: str | None):
+    """10 comma-separated numbers, or a .npz holding ``betas``."""
+    import numpy as np
+    if text is None:
+        return None
+    if text.endswith(".npz"):
+        from handcap.io import load_npz
+        return np.asarray(load_npz(text, ("betas",), "file with betas")["betas"], dtype=float).reshape(10)
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise HandcapError(f"--betas must be 10 comma-separated numbers or a .npz file, got {text!r}") from None
+    if len(values) != 10:
+        raise HandcapError(f"--betas needs 10 values, got {len(values)}")
+    return np.array(values)
+
+
+def _cmd_calibrate_markers(args) -> None:
+    from handcap.io import check_not_input, read_markers
+    from handcap.layouts import load_layout
+    from handcap.solve import calibrate_attachment
+    check_not_input(args.out, args.input)
+    markers = read_markers(args.input)
+    layout = load_layout(args.layout, side=args.side)
+    result = calibrate_attachment(markers, layout, betas=_betas_arg(args.betas), frames=_frames_arg(args.frames),
+                                  fit_shape=args.fit_shape, estimate_offset=args.estimate_offset)
+    result.attachment.save(args.out)
+    print(f"{args.out}: {len(result.attachment)} markers from {len(result.frames)} frames, {result.rounds} rounds, "
+          f"calibration MRE {1000 * result.mre:.2f} mm")
+
+
+def _cmd_solve(args) -> None:
+    import time
+
+    import numpy as np
+
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.io import check_not_input, read_markers, write_hand_motion
+    from handcap.solve import solve_hand
+    check_not_input(args.out, args.input, args.attachment)
+    markers = read_markers(args.input)
+    attachment = MarkerAttachment.load(args.attachment)
+    start = time.perf_counter()
+    motion = solve_hand(markers, attachment, method=args.method, filter_cutoff=args.filter_cutoff,
+                        filter_order=args.filter_order)
+    seconds = time.perf_counter() - start
+    write_hand_motion(motion, args.out)
+    residuals = motion.marker_residuals
+    print(f"{args.out}: {motion.n_frames} frames in {seconds:.1f} s ({motion.n_frames / seconds:.0f} frames/s, "
+          f"{args.method}), MRE {1000 * np.nanmean(residuals):.2f} ± {1000 * np.nanstd(residuals):.2f} mm"
+          + (f", low-passed at {args.filter_cutoff:g} Hz" if args.filter_cutoff else ""))
+
+
+def _cmd_track_object(args) -> None:
+    import numpy as np
+
+    from handcap.io import check_not_input, load_npz, read_markers, write_object_motion
+    from handcap.objects import track_rigid
+    check_not_input(args.out, args.input)
+    markers = read_markers(args.input)
+    names = _expand_names(markers, args.markers)
+    canonical = None if args.canonical is None else load_npz(args.canonical, ("canonical",), "object file")["canonical"]
+    track = track_rigid(markers, names, canonical, name=args.name, threshold=args.threshold_mm / 1000)
+    write_object_motion(track.motion, args.out)
+    unsolved = track.unsolved
+    listed = ", ".join(map(str, unsolved[:10])) + (" ..." if len(unsolved) > 10 else "")
+    print(f"{args.out}: {track.motion.n_frames} frames, mean residual {1000 * track.mean_residual:.2f} mm, "
+          f"{int(np.sum(~track.inliers & ~np.isnan(markers.select(names).positions[..., 0])))} outlier samples, "
+          f"{len(unsolved)} frames with fewer than 3 markers" + (f": {listed}" if len(unsolved) else ""))
+
+
+def _expand_names(markers, text: str) -> list[str]:
+    """Comma-separated marker names; shell-style patterns (``boite:*``) pick every match."""
+    from fnmatch import fnmatchcase
+    names = []
+    for item in (n.strip() for n in text.split(",") if n.strip()):
+        if any(c in item for c in "*?["):
+            found = [n for n in markers.names if fnmatchcase(n, item)]
+            if not found:
+                raise HandcapError(f"no marker matches {item!r}")
+            names += [n for n in found if n not in names]
+        else:
+            names.append(item)
+    return names
+
+
+def _cmd_metrics(args) -> None:
+    import json
+
+    from handcap.quality.report import metrics_table, motion_metrics
+    metrics = motion_metrics(args.motion, truth=args.truth, markers=args.markers, obj=args.object,
+                             object_mesh=args.object_mesh, attachment=args.attachment,
+                             leave_one_out=args.leave_one_out)
+    print(metrics_table(metrics))
+    if args.out:
+        from handcap.io import atomic_output
+        with atomic_output(args.out, "w") as fh:
+            json.dump(metrics, fh, indent=2)
+
+
+def _cmd_shape(args) -> None:
+    import numpy as np
+
+    from handcap.hand import OpenHand
+    from handcap.io import save_npz
+    from handcap.solve import MEASUREMENTS, betas_from_measurements, betas_from_scan, hand_measurements
+    hand = OpenHand(args.side)
+    if (args.scan is None) == (args.lengths is None):
+        raise HandcapError("give either --scan or --lengths")
+    if args.scan:
+        betas, chamfer = betas_from_scan(hand, _scan_points(args.scan))
+        note = f"Chamfer distance {1000 * chamfer:.2f} mm"
+    else:
+        lengths = {}
+        for item in args.lengths.split(","):
+            key, _, value = item.partition("=")
+            try:
+                lengths[key.strip()] = float(value) / 1000
+            except ValueError:
+                raise HandcapError(f"--lengths takes name=millimetres pairs ({', '.join(MEASUREMENTS)}), "
+                                   f"got {item!r}") from None
+        betas = betas_from_measurements(hand, **lengths)
+        note = "from " + ", ".join(lengths)
+    save_npz(args.out, {"betas": betas})
+    m = hand_measurements(hand, betas)
+    print(f"{args.out}: betas {np.round(betas, 2).tolist()} ({note}); hand length {1000 * m['hand_length']:.1f} mm, "
+          f"breadth {1000 * m['hand_breadth']:.1f} mm")
+
+
+def _scan_points(path):
+    import numpy as np
+
+    from handcap.io import existing_file, load_npz
+    path = existing_file(path)
+    if path.suffix.lower() == ".npz":
+        return load_npz(path, ("points",), "scan .npz (points)")["points"]
+    import trimesh
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as err:  # trimesh raises many types for unreadable files
+        raise HandcapError(f"{path}: not a readable mesh or point cloud ({err})") from None
+    vertices = np.asarray(getattr(loaded, "vertices", []), dtype=float)
+    if vertices.ndim != 2 or len(vertices) == 0:
+        raise HandcapError(f"{path}: holds no points")
+    return vertices
+
+
+def _add_solve(verbs) -> None:
+    from handcap.layouts import SHIPPED
+    from handcap.solve import MEASUREMENTS, METHODS
+    p = verbs.add_parser("calibrate-markers", help="find where the markers sit on the hand from a calibration take",
+                         description="Calibrate the marker attachment (triangle, barycentric coordinates, offset of "
+                                     "every marker on its segment) from a take of an open hand slowly turned.")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
+    p.add_argument("--side", choices=("right", "left"), default=None, help="hand side (default: the layout's)")
+    p.add_argument("--frames", help="frames to use, A:B (default all)")
+    p.add_argument("--betas", help="known shape: 10 comma-separated values or a .npz with betas")
+    p.add_argument("--fit-shape", action="store_true", help="estimate the 10 shape values too")
+    p.add_argument("--estimate-offset", action="store_true", help="estimate each marker's height off the skin")
+    p.add_argument("--out", required=True, help="attachment .npz")
+    p.set_defaults(run=_cmd_calibrate_markers)
+
+    p = verbs.add_parser("solve", help="solve hand motion from labeled markers",
+                         description="Per-frame hand pose from labeled markers with a calibrated attachment.")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("--attachment", required=True, help="attachment .npz from calibrate-markers")
+    p.add_argument("--method", choices=METHODS, default="lm", help="lm (default) or adam (the paper's, slow)")
+    p.add_argument("--filter-cutoff", type=float, default=None, help="low-pass the motion at this frequency, Hz")
+    p.add_argument("--filter-order", type=int, default=2, help="Butterworth order (default %(default)s)")
+    p.add_argument("--out", required=True, help="hand motion .npz")
+    p.set_defaults(run=_cmd_solve)
+
+    p = verbs.add_parser("track-object", help="6-DoF motion of a rigid object from its markers",
+                         description="Kabsch with RANSAC per frame; the object's marker geometry is estimated from "
+                                     "the take unless --canonical gives it. Frames with fewer than 3 markers are "
+                                     "reported and left empty (NaN), not guessed.")
+    p.add_argument("input", help="labeled markers")
+    p.add_argument("--markers", required=True,
+                   help="comma-separated names of the object's markers (3 or more); patterns such as 'boite:*' work")
+    p.add_argument("--canonical", help="object .npz with canonical (M, 3) marker positions")
+    p.add_argument("--name", default="object")
+    p.add_argument("--threshold-mm", type=float, default=5.0, help="RANSAC inlier distance (default %(default)s)")
+    p.add_argument("--out", required=True, help="object motion .npz")
+    p.set_defaults(run=_cmd_track_object)
+
+    p = verbs.add_parser("metrics", help="quality metrics of a solved motion",
+                         description="MRE, joint error against ground truth, leave-one-marker-out error, MSNR, jerk, "
+                                     "penetration, diversity and coherence (definitions in handcap.quality.metrics).")
+    p.add_argument("motion", help="hand motion .npz")
+    p.add_argument("--truth", help="ground truth (truth.npz of handcap synth, or a hand motion .npz)")
+    p.add_argument("--markers", help="the labeled markers the motion was solved from (for MRE)")
+    p.add_argument("--attachment", help="attachment .npz (for --leave-one-out)")
+    p.add_argument("--leave-one-out", action="store_true", help="solve again without each marker (slow)")
+    p.add_argument("--object", help="object motion .npz (for penetration)")
+    p.add_argument("--object-mesh", help="the object's mesh (any format trimesh reads), metres, object frame")
+    p.add_argument("--out", help="also write the metrics as JSON")
+    p.set_defaults(run=_cmd_metrics)
+
+    p = verbs.add_parser("shape", help="estimate the 10 shape values from a scan or measured lengths",
+                         description=f"From a 3D scan of an open hand (mesh or .npz points, metres) or measured "
+                                     f"lengths in millimetres ({', '.join(MEASUREMENTS)}).")
+    p.add_argument("--scan", help="scan mesh (.ply .obj .stl ...) or .npz with points")
+    p.add_argument("--lengths", help="e.g. hand_length=190,hand_breadth=87 (millimetres)")
+    p.add_argument("--side", choices=("right", "left"), default="right")
+    p.add_argument("--out", required=True, help=".npz with betas")
+    p.set_defaults(run=_cmd_shape)
 
 
 def _add_synth(verbs) -> None:
@@ -102,6 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=_cmd_convert)
 
     _add_synth(verbs)
+    _add_solve(verbs)
     return parser
 
 

@@ -1,0 +1,13 @@
+"""From labeled markers to hand motion: attachment calibration, shape, motion solve.
+
+    attachment = calibrate_attachment(calibration_take, layout).attachment
+    motion = solve_hand(markers, attachment)          # HandMotion, metres and radians
+"""
+
+from handcap.solve.calibration import Calibration, calibrate_attachment
+from handcap.solve.lm import Priors
+from handcap.solve.motion import METHODS, solve_hand
+from handcap.solve.shape import MEASUREMENTS, betas_from_measurements, betas_from_scan, hand_measurements
+
+__all__ = ["Calibration", "MEASUREMENTS", "METHODS", "Priors", "betas_from_measurements", "betas_from_scan",
+           "calibrate_attachment", "hand_measurements", "solve_hand"]

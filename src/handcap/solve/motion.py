@@ -79,6 +79,7 @@ def rigid_start(model: MarkerModel, target, observed, rest_phi) -> tuple[np.ndar
 
 def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = "lm", priors: Priors | None = None,
                robust_scale: float = 0.005, iterations: int = 8, first_iterations: int = 60,
+               filter_cutoff: float | None = None, filter_order: int = 2,
                progress: bool | None = None) -> HandMotion:
     """Solve hand motion from labeled markers.
 
@@ -98,6 +99,12 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     iterations, first_iterations : int
         Levenberg-Marquardt iterations per frame (twice as many for key
         frames), and for the first frame.
+    filter_cutoff : float, optional
+        Low-pass the solved translation, orientation and angles at this
+        frequency (Hz, zero-phase Butterworth, :mod:`handcap.quality.filters`);
+        joints, ``marker_fit`` and residuals then describe the smoothed motion.
+    filter_order : int
+        Order of that filter.
     progress : bool, optional
         Progress bar (default: on a terminal only).
 
@@ -132,7 +139,18 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     else:
         poses = _solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
                           first_iterations, progress)
+    if filter_cutoff is not None:
+        poses = _smoothed(poses, markers.rate, filter_cutoff, filter_order)
     return _motion(hand, model, poses, target, observed, markers.rate, names)
+
+
+def _smoothed(poses: Poses, rate, cutoff, order) -> Poses:
+    from scipy.spatial.transform import Rotation
+
+    from handcap.quality.filters import lowpass, smooth_rotations
+    orient = smooth_rotations(axis_angle_from_matrix(poses.rot), rate, cutoff, order)
+    return Poses(lowpass(poses.transl, rate, cutoff, order), Rotation.from_rotvec(orient).as_matrix(),
+                 lowpass(poses.phi, rate, cutoff, order))
 
 
 def _hand_for(attachment):

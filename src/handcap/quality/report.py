@@ -1,0 +1,95 @@
+"""Metrics of a solved take from its files, as a table (``handcap metrics``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+
+
+def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_mesh=None, attachment=None,
+                   leave_one_out: bool = False) -> dict:
+    """Every metric that the given files allow, as plain numbers (millimetres, m/s^3, dB).
+
+    Parameters
+    ----------
+    motion_path : path
+        Hand motion ``.npz`` (from ``handcap solve``).
+    truth : path, optional
+        ``truth.npz`` of a synthetic capture (or any hand motion with joints):
+        joint position error.
+    markers : path, optional
+        The labeled markers the motion was solved from: MRE against them.
+    obj, object_mesh : paths, optional
+        Object motion ``.npz`` and the object's mesh in its own frame: penetration.
+    attachment : path, optional
+        Needed with ``leave_one_out`` (re-solves the take once per marker).
+    """
+    from handcap.hand import OpenHand
+    from handcap.io import read_hand_motion, read_markers, read_object_motion
+    from handcap.quality import metrics as q
+    from handcap.solve.motion import observed_markers
+
+    motion = read_hand_motion(motion_path)
+    if motion.joints is None:
+        raise HandcapError(f"{motion_path}: has no joints; solve it with handcap solve")
+    out = {"frames": motion.n_frames, "rate_hz": motion.rate}
+    if motion.marker_residuals is not None:
+        s = q.Stat.of(motion.marker_residuals)
+        out["mre_mm"] = [1000 * s.mean, 1000 * s.std]
+    if markers is not None:
+        observed, _ = observed_markers(read_markers(markers), list(motion.marker_names))
+        s = q.marker_reconstruction_error(motion.marker_fit, observed)
+        out["mre_mm"] = [1000 * s.mean, 1000 * s.std]
+    if truth is not None:
+        true = read_hand_motion(truth)
+        if true.joints is None or true.n_frames != motion.n_frames:
+            raise HandcapError(f"{truth}: needs joints for the same {motion.n_frames} frames")
+        s = q.joint_position_error(motion.joints, true.joints)
+        out["joint_error_mm"] = [1000 * s.mean, 1000 * s.std]
+        per_joint = np.linalg.norm(motion.joints - true.joints, axis=-1).mean(axis=0)
+        out["joint_error_per_joint_mm"] = [round(1000 * float(v), 3) for v in per_joint]
+    out["msnr_db"] = q.msnr(motion.joints)
+    s = q.jerk(motion.joints, motion.rate)
+    out["jerk_m_s3"] = [s.mean, s.std]
+    object_motion = read_object_motion(obj) if obj is not None else None
+    diversity, coherence = q.diversity_coherence(
+        q.pose_features(motion.joints, None if object_motion is None else object_motion.translation))
+    out["diversity"], out["coherence"] = diversity, coherence
+    if object_motion is not None and object_mesh is not None:
+        import trimesh
+        mesh = trimesh.load(object_mesh, force="mesh", process=False)
+        hand = OpenHand(motion.side)
+        verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
+        world = object_motion.transform_points(np.asarray(mesh.vertices))
+        s = q.penetration(verts, world, np.asarray(mesh.faces))
+        out["penetration_mm"] = [1000 * s.mean, 1000 * s.std, s.count]
+    if leave_one_out:
+        if attachment is None or markers is None:
+            raise HandcapError("--leave-one-out needs --markers and --attachment")
+        from handcap.hand.attachment import MarkerAttachment
+        loo = q.leave_one_marker_out(read_markers(markers), MarkerAttachment.load(attachment))
+        out["leave_one_out_mm"] = {k: 1000 * v.mean for k, v in loo.items()}
+    return out
+
+
+def metrics_table(metrics: dict) -> str:
+    """A human-readable table of :func:`motion_metrics`."""
+    lines = []
+    fmt = {"mre_mm": "MRE (mm)", "joint_error_mm": "joint error (mm)", "msnr_db": "MSNR (dB)",
+           "jerk_m_s3": "jerk (m/s^3)", "diversity": "diversity", "coherence": "coherence",
+           "penetration_mm": "penetration (mm)", "frames": "frames", "rate_hz": "rate (Hz)"}
+    for key, label in fmt.items():
+        if key not in metrics:
+            continue
+        value = metrics[key]
+        if isinstance(value, list):
+            text = f"{value[0]:.3f} ± {value[1]:.3f}" + (f"  ({value[2]} frames)" if len(value) > 2 else "")
+        elif isinstance(value, float):
+            text = f"{value:.3f}"
+        else:
+            text = str(value)
+        lines.append(f"{label:22s} {text}")
+    for name, value in metrics.get("leave_one_out_mm", {}).items():
+        lines.append(f"{'leave-one-out ' + name:22s} {value:.2f} mm")
+    return "\n".join(lines)
