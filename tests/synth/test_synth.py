@@ -150,7 +150,7 @@ def test_clean_capture_equals_truth_where_seen():
 
 def test_faults_happen_at_their_rates():
     config = SynthConfig(layout="glove-13", motion="random", frames=1000, rate=100, ghost_rate=5, swap_rate=1,
-                         dropout=0.05, outlier_rate=0.1, seed=2)
+                         dropout=0.05, outlier_rate=0.1, seed=2, cameras=3)
     capture = synthesize(config)
     truth = capture.truth
     assert len(truth["ghosts"]) == pytest.approx(50, abs=22)  # Poisson, 5 per second for 10 s

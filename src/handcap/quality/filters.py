@@ -91,12 +91,17 @@ def _continuous(path) -> np.ndarray:
     out = path.copy()
     for t in range(1, len(out)):
         angle = np.linalg.norm(out[t])
-        if angle < 1e-12:
+        prev = out[t - 1]
+        if angle < 1e-6:  # near a whole turn the axis is undefined: keep the previous one
+            norm = np.linalg.norm(prev)
+            if norm > 0:
+                axis = prev / norm
+                out[t] = out[t] + axis * 2 * np.pi * np.round(norm / (2 * np.pi))
             continue
         axis = out[t] / angle
-        # Of the equivalent vectors axis * (angle - 2 pi k), take the one closest to the previous.
-        candidates = [axis * (angle + 2 * np.pi * k) for k in (-1, 0, 1)]
-        out[t] = min(candidates, key=lambda c: np.linalg.norm(c - out[t - 1]))
+        # Of the equivalent vectors axis * (angle + 2 pi k), take the one closest to the previous.
+        k = np.round((prev @ axis - angle) / (2 * np.pi))
+        out[t] = axis * (angle + 2 * np.pi * k)
     return out
 
 

@@ -105,6 +105,19 @@ def solve_adam(model, target, observed, priors, *, learning_rate: float = LEARNI
     d6 = torch.tensor(np.concatenate([rot0[0][:, 0], rot0[0][:, 1]]))
     phi = torch.tensor(rest)
     hidden = None if progress is None else not progress
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # tensors of a few hundred numbers: threads only add overhead
+    try:
+        _adam_frames(markers, target, observed, held, out, transl, d6, phi, low, high, lam, learning_rate,
+                     iterations, first_iterations, hidden)
+    finally:
+        torch.set_num_threads(threads)
+    return out
+
+
+def _adam_frames(markers, target, observed, held, out, transl, d6, phi, low, high, lam, learning_rate,
+                 iterations, first_iterations, hidden):
+    n = len(target)
     for t in tqdm(range(n), desc="solve (adam)", unit="frame", disable=hidden, leave=False):
         seen = np.flatnonzero(observed[t])
         if len(seen) == 0:
@@ -127,4 +140,3 @@ def solve_adam(model, target, observed, priors, *, learning_rate: float = LEARNI
         out.transl[t] = transl.numpy()
         out.rot[t] = rotation_from_6d(d6).numpy()
         out.phi[t] = phi.numpy()
-    return out

@@ -95,7 +95,7 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     method : {"lm", "adam"}
     priors : Priors, optional
     robust_scale : float
-        Huber scale of the marker residuals, metres (lm).
+        Scale of the Cauchy loss on marker residuals, metres (lm).
     iterations, first_iterations : int
         Levenberg-Marquardt iterations per frame (twice as many for key
         frames), and for the first frame.

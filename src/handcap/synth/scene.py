@@ -165,6 +165,14 @@ class SynthCapture:
     object_motion: ObjectMotion | None
     truth: dict = field(repr=False)
 
+    @property
+    def attachment(self) -> MarkerAttachment:
+        """Where the hand markers really sit (the ground truth a calibration should find)."""
+        t = self.truth
+        return MarkerAttachment(self.hand_motion.marker_names, t["attachment_triangles"],
+                                t["attachment_barycentric"], t["attachment_offset"], self.hand_motion.betas,
+                                self.hand_motion.model, self.hand_motion.side)
+
 
 def misplaced(layout, hand, sigma: float, rng):
     """The layout with its markers stuck on a little off their nominal spots (see ``placement_mm``).

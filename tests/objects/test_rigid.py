@@ -1,0 +1,86 @@
+"""Rigid bodies: Kabsch against hand-built transforms, RANSAC, shape estimation, the real Vicon box."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from handcap import HandcapError, MarkerSequence
+from handcap.objects import canonical_from_markers, kabsch, ransac_kabsch, track_rigid
+
+
+def test_kabsch_recovers_a_transform_built_by_hand_batched_and_single():
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(5, 6, 3))
+    rot = Rotation.random(5, random_state=1).as_matrix()
+    trans = rng.normal(size=(5, 3))
+    moved = np.einsum("bij,bnj->bni", rot, pts) + trans[:, None]
+    r, t = kabsch(pts, moved)
+    np.testing.assert_allclose(r, rot, atol=1e-12)
+    np.testing.assert_allclose(t, trans, atol=1e-12)
+    r0, t0 = kabsch(pts[0], moved[0])
+    np.testing.assert_allclose(r0, r[0], atol=1e-12)
+    # Weight 0 drops a point; a mirrored target still yields a proper rotation.
+    bad = moved[0].copy()
+    bad[2] += 10.0
+    w = np.ones(6)
+    w[2] = 0
+    np.testing.assert_allclose(kabsch(pts[0], bad, w)[0], rot[0], atol=1e-12)
+    assert np.linalg.det(kabsch(pts[0], pts[0] * [-1, 1, 1])[0]) == pytest.approx(1.0)
+
+
+def test_ransac_rejects_a_mislabelled_marker():
+    rng = np.random.default_rng(2)
+    canonical = rng.uniform(-0.05, 0.05, size=(8, 3))
+    rot = Rotation.random(random_state=3).as_matrix()
+    observed = canonical @ rot.T + [0.1, 0.2, 0.3]
+    observed[4] += [0.03, 0.0, 0.0]
+    r, t, inliers = ransac_kabsch(canonical, observed, threshold=0.002)
+    assert not inliers[4] and inliers.sum() == 7
+    np.testing.assert_allclose(r, rot, atol=1e-9)
+
+
+def test_canonical_shape_from_a_take_matches_the_body_up_to_a_rigid_motion():
+    rng = np.random.default_rng(4)
+    body = rng.uniform(-0.05, 0.05, size=(6, 3))
+    rots = Rotation.random(50, random_state=5).as_matrix()
+    positions = np.einsum("tij,nj->tni", rots, body) + rng.normal(size=(50, 1, 3))
+    positions[rng.random((50, 6)) < 0.2] = np.nan
+    shape = canonical_from_markers(positions)
+    r, t = kabsch(shape, body - body.mean(axis=0))
+    np.testing.assert_allclose(shape @ r.T + t, body - body.mean(axis=0), atol=1e-9)
+
+
+def test_real_vicon_box(shared_data):
+    from handcap.io import read_markers
+    markers = read_markers(shared_data / "markers" / "ezc3d" / "Vicon.c3d")
+    names = [n for n in markers.names if n.startswith("boite:")]
+    track = track_rigid(markers, names, name="boite")
+    assert len(names) == 8
+    assert track.mean_residual < 0.001  # issue 3: within 1 mm
+    assert len(track.unsolved) == 0
+    span = np.ptp(track.motion.translation, axis=0).max()
+    assert span > 0.3  # the box moves about 45 cm
+
+
+def test_frames_with_fewer_than_three_markers_are_reported_not_guessed(shared_data):
+    from handcap.io import read_markers
+    markers = read_markers(shared_data / "markers" / "ezc3d" / "Vicon.c3d")
+    box = markers.select([n for n in markers.names if n.startswith("boite:")])
+    positions = box.positions.copy()
+    positions[100:110, 2:] = np.nan  # only two markers left
+    track = track_rigid(MarkerSequence(positions, box.names, box.rate))
+    np.testing.assert_array_equal(track.unsolved, np.arange(100, 110))
+    assert np.isnan(track.motion.rotation[100:110]).all()
+    assert np.isfinite(track.motion.rotation[:100]).all()
+
+
+def test_bad_inputs():
+    m = MarkerSequence(np.zeros((4, 2, 3)), ["a", "b"], 100)
+    with pytest.raises(HandcapError, match="at least 3 markers"):
+        track_rigid(m)
+    nan = MarkerSequence(np.full((4, 3, 3), np.nan), ["a", "b", "c"], 100)
+    with pytest.raises(HandcapError, match="no frame sees 3"):
+        track_rigid(nan)
+    ok = MarkerSequence(np.random.default_rng(0).normal(size=(4, 3, 3)), ["a", "b", "c"], 100)
+    with pytest.raises(HandcapError, match="canonical positions must have shape"):
+        track_rigid(ok, canonical=np.zeros((2, 3)))

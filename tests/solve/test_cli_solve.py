@@ -1,0 +1,75 @@
+"""The command line of the solve stage: a small session end to end, and bad input exits 2."""
+
+import json
+
+import numpy as np
+import pytest
+
+from handcap.cli import main
+from handcap.io import read_hand_motion, read_object_motion
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    root = tmp_path_factory.mktemp("session")
+    assert main(["synth", "--layout", "tips-5", "--motion", "calibration", "--frames", "60", "--seed", "1",
+                 "--subject-seed", "3", "--out", str(root / "cal")]) == 0
+    assert main(["synth", "--layout", "tips-5", "--motion", "precision", "--frames", "60", "--rate", "20",
+                 "--seed", "2", "--subject-seed", "3", "--out", str(root / "take")]) == 0
+    return root
+
+
+def test_calibrate_solve_metrics(session, capsys):
+    att, motion, metrics = session / "att.npz", session / "motion.npz", session / "metrics.json"
+    assert main(["calibrate-markers", str(session / "cal" / "markers.c3d"), "--layout", "tips-5",
+                 "--fit-shape", "--out", str(att)]) == 0
+    assert main(["solve", str(session / "take" / "markers.c3d"), "--attachment", str(att),
+                 "--filter-cutoff", "5", "--out", str(motion)]) == 0
+    solved = read_hand_motion(motion)
+    assert solved.n_frames == 60 and solved.marker_residuals.shape == (60, 8)
+    assert main(["metrics", str(motion), "--truth", str(session / "take" / "truth.npz"),
+                 "--markers", str(session / "take" / "markers.c3d"), "--out", str(metrics)]) == 0
+    out = capsys.readouterr().out
+    assert "joint error (mm)" in out and "MSNR" in out
+    values = json.loads(metrics.read_text())
+    assert values["joint_error_mm"][0] < 15 and values["mre_mm"][0] < 5
+
+
+def test_track_object_from_the_synthetic_object_markers(session, capsys):
+    out = session / "object.npz"
+    assert main(["track-object", str(session / "take" / "markers.npz"), "--markers", "sphere_*",
+                 "--name", "ball", "--out", str(out)]) == 0
+    motion = read_object_motion(out)
+    truth = np.load(session / "take" / "truth.npz")
+    seen = np.isfinite(motion.translation[:, 0])
+    # The estimated body frame is centred on the markers' mean; the sphere's markers surround its centre.
+    err = np.linalg.norm(motion.translation[seen] - truth["object_translation"][seen], axis=1)
+    assert np.median(err) < 0.01
+    assert "mean residual" in capsys.readouterr().out
+
+
+def test_shape_from_lengths(tmp_path, capsys):
+    assert main(["shape", "--lengths", "hand_length=195,hand_breadth=88", "--out", str(tmp_path / "b.npz")]) == 0
+    assert np.load(tmp_path / "b.npz")["betas"][0] > 0.5
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["solve", "MISSING.c3d", "--attachment", "a.npz", "--out", "m.npz"], "no such file"),
+    (["calibrate-markers", "{take}/markers.c3d", "--layout", "nope", "--out", "a.npz"], "unknown layout"),
+    (["calibrate-markers", "{take}/markers.c3d", "--layout", "glove-13", "--out", "a.npz"], "absent from"),
+    (["calibrate-markers", "{take}/markers.c3d", "--layout", "tips-5", "--frames", "x", "--out", "a.npz"], "--frames"),
+    (["track-object", "{take}/markers.c3d", "--markers", "thumb_tip,index_tip", "--out", "o.npz"], "at least 3"),
+    (["track-object", "{take}/markers.c3d", "--markers", "cube_*", "--out", "o.npz"], "no marker matches"),
+    (["solve", "{take}/markers.c3d", "--attachment", "{take}/truth.npz", "--out", "m.npz"], "attachment"),
+    (["solve", "{take}/markers.c3d", "--attachment", "{take}/truth.npz", "--out", "{take}/markers.c3d"],
+     "overwrite the input"),
+    (["shape", "--lengths", "hand_length=big", "--out", "b.npz"], "--lengths"),
+    (["metrics", "{take}/markers.npz"], "not a hand-motion"),
+])
+def test_bad_input_exits_2_with_one_line(session, tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(tmp_path)
+    before = (session / "take" / "markers.c3d").read_bytes()
+    assert main([a.format(take=session / "take") for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert (session / "take" / "markers.c3d").read_bytes() == before
