@@ -310,6 +310,24 @@ def test_pose_blend_shapes_are_used(mano_dir, model):
     assert np.abs(hand.forward(hand_pose=pose).vertices - verts).max() > 1e-3
 
 
+def test_attached_markers_on_mano_follow_its_pose_blend_shapes(mano_dir):
+    # The solver's marker model takes MANO's correctives path; it must equal the skinned mesh.
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.layouts import load_layout
+    from handcap.solve.markers import MarkerModel
+    hand = ManoHand.load(mano_dir)
+    rng = np.random.default_rng(6)
+    att = MarkerAttachment.from_layout(load_layout("glove-13"), hand, rng.normal(size=10) * 0.5)
+    model = MarkerModel(hand, att)
+    assert model.has_correctives
+    phi = rng.normal(scale=0.3, size=(3, 27))
+    rot = Rotation.from_rotvec(rng.normal(size=(3, 3))).as_matrix()
+    transl = rng.normal(size=(3, 3))
+    out = hand.forward(att.betas, Rotation.from_matrix(rot).as_rotvec(), phi=phi, transl=transl)
+    np.testing.assert_allclose(model.positions(transl, rot, phi), att.positions(out.vertices, hand.faces),
+                               atol=1e-12)
+
+
 def test_zero_pose_is_the_template_not_the_hands_mean(mano_dir, model):
     out = ManoHand.load(mano_dir).forward()
     np.testing.assert_allclose(out.vertices, model["v_template"], atol=1e-15)

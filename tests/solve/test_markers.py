@@ -39,3 +39,30 @@ def test_positions_exact_and_jacobian_matches_finite_differences(side, layout):
     assert np.abs(jac - numeric).max() < 3e-3 * np.abs(numeric).max()
     rigid = model.marker_weights.max(axis=1) > 0.999
     assert np.abs(jac - numeric)[:, :, rigid].max() < 1e-3 * np.abs(numeric).max()
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+@pytest.mark.parametrize("layout", ["glove-13", "dense-patches"])
+def test_normal_equations_equal_the_dense_products(side, layout):
+    # The solver never forms J: its J^T W J and J^T W r must equal those of the dense Jacobian.
+    hand = OpenHand(side)
+    rng = np.random.default_rng(2)
+    att = MarkerAttachment.from_layout(load_layout(layout), hand, rng.normal(size=10) * 0.5)
+    model = MarkerModel(hand, att)
+    n, m = 3, model.n_markers
+    phi = rng.uniform(PHI_LIMITS[:, 0], PHI_LIMITS[:, 1], (n, 27))
+    rot = Rotation.from_rotvec(rng.normal(size=(n, 3))).as_matrix()
+    transl = rng.normal(size=(n, 3))
+    weights = rng.uniform(0, 1, (n, m)) * (rng.uniform(size=(n, m)) > 0.2)
+    resid = rng.normal(scale=0.01, size=(n, m, 3))
+    jac = np.swapaxes(model.jacobian(transl, rot, phi), 1, 2).reshape(n, 3 * m, 33)  # rows (marker, axis)
+    w = np.repeat(weights, 3, axis=1)
+    hess = np.einsum("tkp,tk,tkq->tpq", jac, w, jac)
+    grad = np.einsum("tkp,tk->tp", jac, w * resid.reshape(n, -1))
+    h64, g64 = model.normal_equations(transl, rot, phi, resid, weights, dtype=np.float64)
+    np.testing.assert_allclose(h64, hess, atol=1e-12 * np.abs(hess).max())
+    np.testing.assert_allclose(g64, grad, atol=1e-12 * np.abs(grad).max())
+    h32, g32 = model.normal_equations(transl, rot, phi, resid, weights)
+    assert h32.dtype == np.float64
+    np.testing.assert_allclose(h32, hess, atol=1e-5 * np.abs(hess).max())
+    np.testing.assert_allclose(g32, grad, atol=1e-5 * np.abs(grad).max())

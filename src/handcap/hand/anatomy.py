@@ -102,6 +102,35 @@ These are the defaults of the joint-limit penalty; pass your own (27, 2) array
 to override them.
 """
 
+DIP_PIP_RATIO = 2.0 / 3.0  # DIP flexion per unit PIP flexion (tendon coupling of the finger flexors)
+_PHI_INDEX = {n: i for i, n in enumerate(PHI_NAMES)}
+
+
+def pose_from_degrees(**degrees) -> np.ndarray:
+    """Angles (27,) in radians from named angles in degrees (``index_pip_bend=30``); the rest zero."""
+    phi = np.zeros(27)
+    for name, value in degrees.items():
+        phi[_PHI_INDEX[name]] = np.deg2rad(value)
+    return phi
+
+
+def finger_flexion(phi, finger: str, amount: float, *, mcp: float = 80.0, pip: float = 95.0) -> np.ndarray:
+    """``phi`` (27,) with one finger flexed to ``amount`` (0 straight .. 1 fist, MCP ``mcp`` and PIP ``pip``
+    degrees at 1), its DIP coupled to the PIP by :data:`DIP_PIP_RATIO`."""
+    phi = phi.copy()
+    phi[_PHI_INDEX[f"{finger}_mcp_bend"]] = np.deg2rad(mcp * amount)
+    phi[_PHI_INDEX[f"{finger}_pip_bend"]] = np.deg2rad(pip * amount)
+    phi[_PHI_INDEX[f"{finger}_dip_bend"]] = np.deg2rad(pip * amount) * DIP_PIP_RATIO
+    return phi
+
+
+def relaxed_pose() -> np.ndarray:
+    """A relaxed, slightly curled hand (27,) radians: fingers 12-20 % of a fist, the thumb a little in."""
+    phi = pose_from_degrees(thumb_cmc_bend=5, thumb_cmc_spread=-10, thumb_mcp_bend=10, thumb_ip_bend=10)
+    for finger, amount in zip(("index", "middle", "ring", "pinky"), (0.12, 0.15, 0.18, 0.2)):
+        phi = finger_flexion(phi, finger, amount)
+    return phi
+
 
 def hand_axes(rest_joints, is_right: bool):
     """Distal, palmar and ulnar unit vectors of a hand in its rest pose.

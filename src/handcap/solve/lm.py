@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from handcap.core.rotations import matrix_from_axis_angle
-from handcap.hand.anatomy import PHI_JOINT, PHI_LIMITS, PHI_NAMES
+from handcap.hand.anatomy import DIP_PIP_RATIO, PHI_JOINT, PHI_LIMITS, PHI_NAMES, relaxed_pose
 from handcap.solve.markers import N_PARAMS
 
 _I = {n: i for i, n in enumerate(PHI_NAMES)}
@@ -60,7 +60,7 @@ class Priors:
 
     limits: np.ndarray = field(default_factory=lambda: PHI_LIMITS.copy())
     limit_weight: float = 0.1
-    coupling: float = 2.0 / 3.0
+    coupling: float = DIP_PIP_RATIO
     coupling_weight: float = 0.01
     rest: np.ndarray | None = None
     rest_weight: float = 0.001
@@ -68,7 +68,6 @@ class Priors:
     def rest_phi(self) -> np.ndarray:
         if self.rest is not None:
             return np.asarray(self.rest, dtype=np.float64)
-        from handcap.synth.motions import relaxed_pose
         return relaxed_pose()
 
 
@@ -146,7 +145,8 @@ def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, sca
 
 
 def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *, scale: float = 0.005,
-                        iterations: int = 10, tolerance: float = 1e-6, held=None, lam: float = 1e-3):
+                        iterations: int = 10, tolerance: float = 3e-5, gain_tolerance: float = 1e-3, held=None,
+                        lam: float = 1e-3):
     """Fit poses to observed markers, every frame at once.
 
     Parameters
@@ -163,7 +163,10 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         hardly count (see :func:`robust_weights`).
     iterations : int
     tolerance : float
-        Stop a frame once its step is shorter than this (metres / radians).
+        Stop a frame once its step is shorter than this (metres / radians;
+        default 0.03 mm, well below marker noise).
+    gain_tolerance : float
+        Or once an accepted step lowers its cost by less than this fraction.
     held : ndarray (T, 27) bool, optional
         Angles kept at their initial value (default: :func:`held_angles`).
 
@@ -182,7 +185,6 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     active = ~blind
     cost, parts = frame_costs(model, poses, target, observed, held, priors, scale)
     eye = np.eye(N_PARAMS)
-    buffer = np.zeros((n, 3, model.n_markers, N_PARAMS))  # Jacobians, zero outside their structure
     for _ in range(iterations):
         if not active.any():
             break
@@ -190,14 +192,8 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         kin, resid, norms, r_p, j_p = (p[idx] if not isinstance(p, tuple) else tuple(k[idx] for k in p)
                                        for p in parts)
         sub = poses.take(idx)
-        jac = model.jacobian(sub.transl, sub.rot, sub.phi, kin=kin, out=buffer[:len(idx)])  # (t, 3, M, 33)
-        root_w = np.sqrt(robust_weights(norms, scale) * observed[idx])  # (t, M)
-        jac *= root_w[:, None, :, None]  # rows scaled by sqrt(w): J^T W J = (sqrt(w) J)^T (sqrt(w) J)
-        m3 = jac.shape[2] * 3
-        flat = jac.reshape(len(idx), m3, N_PARAMS)
-        flat_t = np.swapaxes(flat, 1, 2)
-        hess = np.matmul(flat_t, flat)
-        grad = np.matmul(flat_t, (np.swapaxes(resid, 1, 2) * root_w[:, None]).reshape(len(idx), m3, 1))[..., 0]
+        weights = robust_weights(norms, scale) * observed[idx]  # IRLS: J^T W J and J^T W r
+        hess, grad = model.normal_equations(sub.transl, sub.rot, sub.phi, resid, weights, kin=kin)
         hess[:, 6:, 6:] += np.matmul(np.swapaxes(j_p, 1, 2), j_p)
         grad[:, 6:] += np.einsum("trp,tr->tp", j_p, r_p)
         f = fixed[idx]
@@ -217,9 +213,9 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         parts = _merge(parts, new_parts, idx, better)
         damping[good] = np.maximum(damping[good] / 3.0, 1e-7)
         damping[idx[~better]] *= 4.0
-        # Done when the step is tiny or changes the cost by less than 1e-6 of it, either way
-        # (near the minimum the approximate Jacobian's steps neither gain nor lose).
-        converged = (np.abs(step).max(axis=1) < tolerance) | (np.abs(gain) < 1e-6)
+        # Done when the step is tiny, or an accepted step gained less than gain_tolerance of the cost
+        # (a rejected one raises the damping and tries a shorter step).
+        converged = (np.abs(step).max(axis=1) < tolerance) | (better & (gain < gain_tolerance))
         active[idx[converged]] = False
         active[idx[damping[idx] > 1e8]] = False
     return poses, cost

@@ -16,11 +16,19 @@ marker carried by segment k (k below j in the tree) by ``w x (y_k - p_j)``.
 On the rigid parts of the hand, where markers sit, this is the exact
 derivative; in blend zones it is a close approximation, which Gauss-Newton
 tolerates because the residuals themselves are exact.
+
+Speed: skinning, the barycentric blend, triangle edges and every lever arm are
+linear in the 16 segments' affine maps, so each is one matrix product of a
+precomputed (rows, 64) matrix with the maps of all frames. The solver asks for
+``J^T W J`` and ``J^T W r`` (:meth:`MarkerModel.normal_equations`), built from
+the few non-zero entries per marker in single precision, never the dense
+(3M x 33) Jacobian; :meth:`MarkerModel.jacobian` remains for checks and users.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import csr_matrix
 
 from handcap.hand.anatomy import PARENTS, PHI_AXIS, PHI_JOINT
 from handcap.hand.kinematics import chain_transforms
@@ -43,13 +51,34 @@ def descendants() -> np.ndarray:
 DESCENDANTS = descendants()
 
 
-def skew(v) -> np.ndarray:
-    """Cross-product matrices (..., 3, 3) of vectors (..., 3): ``skew(a) @ b == a x b``."""
-    v = np.asarray(v)
-    z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+def cross(a, b) -> np.ndarray:
+    """``a x b`` over the last axis (3); a few times faster than ``np.cross`` on small batches."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def cross0(a, b) -> np.ndarray:
+    """``a x b`` over the first axis (3, ...): for component-first arrays."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _affine_columns(world_rot, world_pos, rest_joints) -> np.ndarray:
+    """The segments' affine maps ``x -> R_j x + t_j`` as a (64, 3T) matrix: row ``4 j + b``, column ``3 t + a``.
+
+    ``t_j`` moves joint j's rest position to its posed one. A row vector
+    ``[w_j x_j, w_j]`` over the 16 segments times this matrix gives the blended
+    point ``sum_j w_j (R_j x_j + t_j)`` for every frame at once.
+    """
+    trans = world_pos - np.einsum("tjab,jb->tja", world_rot, rest_joints)
+    maps = np.concatenate([world_rot, trans[..., None]], axis=-1)  # (T, 16, 3, 4)
+    return maps.transpose(1, 3, 0, 2).reshape(64, -1)
+
+
+def _affine_rows(weights, points) -> np.ndarray:
+    """Rows (N, 64) ``[w_j p, w_j]`` for points (N, 3) blended by segment weights (N, 16)."""
+    aug = np.concatenate([points, np.ones((len(points), 1))], axis=1)  # (N, 4)
+    return (weights[:, :, None] * aug[:, None, :]).reshape(len(points), 64)
 
 
 def local_rotations(phi, frames) -> np.ndarray:
@@ -64,15 +93,6 @@ def local_rotations(phi, frames) -> np.ndarray:
     e[..., 1, 0], e[..., 1, 1], e[..., 1, 2] = sb * cs, sb * ss * st + cb * ct, sb * ss * ct - cb * st
     e[..., 2, 0], e[..., 2, 1], e[..., 2, 2] = -ss, cs * st, cs * ct
     return frames @ e @ np.swapaxes(frames, -1, -2)
-
-
-def _cross_columns(axes, lever):
-    """``axes[k] x lever[k]`` for every marker: axes (T, K, 3), lever (T, 3, M) or (T, K, 3, M) -> (T, K, 3, M)."""
-    if lever.ndim == 3:
-        lever = lever[:, None]
-    ax, ay, az = (axes[..., i, None] for i in range(3))
-    lx, ly, lz = lever[:, :, 0], lever[:, :, 1], lever[:, :, 2]
-    return np.stack([ay * lz - az * ly, az * lx - ax * lz, ax * ly - ay * lx], axis=2)
 
 
 class MarkerModel:
@@ -106,6 +126,10 @@ class MarkerModel:
         self.rest_markers = np.einsum("mk,mki->mi", bary, tri) + attachment.offset[:, None] * normal
         self.marker_weights = np.einsum("mk,mkj->mj", bary, hand.weights[corners])  # (M, 16)
         self._weights_below = self.marker_weights @ DESCENDANTS.T  # [m, j]: weight carried by joints below j
+        skin = _affine_rows(self.vertex_weights, self.rest_vertices)[self.corner_index]  # (M, 3 corners, 64)
+        # Rows giving the marker's spot on the skin and its triangle's two edges, from the maps.
+        self._marker_affine = np.concatenate([np.einsum("mk,mkc->mc", bary, skin), skin[:, 1] - skin[:, 0],
+                                              skin[:, 2] - skin[:, 0]])  # (3M, 64)
         self.has_correctives = type(hand).pose_corrective is not HandModel.pose_corrective
         self._prepare_jacobian()
 
@@ -123,18 +147,22 @@ class MarkerModel:
     def positions(self, transl, rot, phi, *, kin=None) -> np.ndarray:
         """Marker positions (T, M, 3) in metres, exact."""
         world_rot, world_pos, rotations = kin if kin is not None else self.kinematics(transl, rot, phi)
-        rest = self.rest_vertices
-        if self.has_correctives:
-            rest = rest + self.hand.pose_corrective(rotations)[:, self.vertex_ids]
         n_frames = len(world_rot)
-        trans = world_pos - np.einsum("tjab,jb->tja", world_rot, self.rest_joints)
-        maps = np.concatenate([world_rot.reshape(n_frames, 16, 9), trans], axis=2)  # (T, 16, 12)
-        blended = np.matmul(self.vertex_weights, maps)  # (T, K, 12): linear blend skinning
-        verts = (blended[..., :9].reshape(n_frames, -1, 3, 3) @ rest[..., None])[..., 0] + blended[..., 9:]
-        tri = verts[:, self.corner_index]  # (T, M, 3, 3)
-        normal = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+        if self.has_correctives:  # rest shape changes with the pose: blend the maps, then apply them
+            rest = self.rest_vertices + self.hand.pose_corrective(rotations)[:, self.vertex_ids]
+            trans = world_pos - np.einsum("tjab,jb->tja", world_rot, self.rest_joints)
+            maps = np.concatenate([world_rot.reshape(n_frames, 16, 9), trans], axis=2)  # (T, 16, 12)
+            blended = np.matmul(self.vertex_weights, maps)  # (T, K, 12): linear blend skinning
+            verts = (blended[..., :9].reshape(n_frames, -1, 3, 3) * rest[..., None, :]).sum(axis=-1) + blended[..., 9:]
+            tri = verts[:, self.corner_index]  # (T, M, 3, 3)
+            on_skin = np.einsum("mk,tmki->tmi", self.attachment.barycentric, tri)
+            edges = tri[:, :, 1:] - tri[:, :, :1]  # (T, M, 2, 3)
+        else:  # skinning, barycentric blend and triangle edges are linear in the maps: one product
+            columns = _affine_columns(world_rot, world_pos, self.rest_joints)
+            parts = (self._marker_affine @ columns).reshape(3, self.n_markers, n_frames, 3)
+            on_skin, edges = np.swapaxes(parts[0], 0, 1), parts[1:].transpose(2, 1, 0, 3)  # (T, M, 3), (T, M, 2, 3)
+        normal = cross(edges[:, :, 0], edges[:, :, 1])
         normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-        on_skin = np.einsum("mk,tmki->tmi", self.attachment.barycentric, tri)
         return on_skin + self.attachment.offset[None, :, None] * normal
 
     def jacobian(self, transl, rot, phi, *, kin=None, out=None) -> np.ndarray:
@@ -149,13 +177,7 @@ class MarkerModel:
         """
         world_rot, world_pos, _ = kin if kin is not None else self.kinematics(transl, rot, phi)
         n_frames, m = len(transl), self.n_markers
-        trans = world_pos - np.einsum("tjab,jb->tja", world_rot, self.rest_joints)
-        # The marker as carried by each segment it is skinned to: (P, T, 3) for the P (marker, segment) pairs.
-        seg, mark = self._pair_segment, self._pair_marker
-        carried = np.einsum("tpab,pb->pta", world_rot[:, seg], self.rest_markers[mark]) + np.swapaxes(trans[:, seg], 0, 1)
-        # Lever arm of every (joint, marker) pair: weighted sum over the segments below the joint.
-        lever = (self._lever_matrix @ carried.reshape(len(seg), -1)).reshape(-1, n_frames, 3)
-        lever -= self._lever_weight[:, None, None] * np.swapaxes(world_pos[:, self._lever_joint], 0, 1)
+        lever = self._levers(world_rot, world_pos)
         jac = np.zeros((n_frames, 3, m, N_PARAMS)) if out is None else out
         for a in range(3):
             jac[:, a, :, a] = 1.0
@@ -164,12 +186,90 @@ class MarkerModel:
         jac[:, 1, :, 3], jac[:, 2, :, 3] = -rz, ry
         jac[:, 0, :, 4], jac[:, 2, :, 4] = rz, -rx
         jac[:, 0, :, 5], jac[:, 1, :, 5] = -ry, rx
-        axes = self.dof_axes(phi, world_rot)  # (T, 27, 3)
-        cols = axes[:, self._entry_dof]  # (T, E, 3)
-        arms = np.swapaxes(lever[self._entry_lever], 0, 1)  # (T, E, 3)
         flat = jac.reshape(n_frames, 3, m * N_PARAMS)
-        flat[:, :, self._entry_flat] = np.swapaxes(np.cross(cols, arms), 1, 2)
+        flat[:, :, self._entry_flat] = self._angle_columns(phi, world_rot, lever).transpose(2, 0, 1)
         return jac
+
+    def normal_equations(self, transl, rot, phi, resid, weights, *, kin=None, dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
+        """Gauss-Newton matrix ``J^T W J`` (T, 33, 33) and gradient ``J^T W r`` (T, 33), without forming J.
+
+        Equal to the products with :meth:`jacobian` (to rounding), but built
+        from the few non-zero entries per marker: the translation columns are
+        the identity, the rotation columns ``-[r]x`` (r: the marker from the
+        wrist), and each angle column a 3-vector ``g`` for the markers below
+        its joint. Cost grows with the number of (marker, angle) entries, not
+        with markers x 33.
+
+        Parameters
+        ----------
+        resid : ndarray (T, M, 3)
+            Residuals (model minus observed), metres; zero where unobserved.
+        weights : ndarray (T, M)
+            Weight of every marker's squared residual (0 where unobserved).
+        dtype : numpy dtype
+            Working precision (float32 by default: relative error about 1e-6,
+            harmless for the step, while costs stay in float64).
+        """
+        world_rot, world_pos, _ = kin if kin is not None else self.kinematics(transl, rot, phi)
+        c = self._constants(dtype)
+        # Lever arms are differences of positions (decimetres), so single precision loses nothing
+        # a Gauss-Newton step needs, and halves the memory traffic of this, the solver's hot spot.
+        world_rot, world_pos = world_rot.astype(dtype, copy=False), world_pos.astype(dtype, copy=False)
+        resid, weights = resid.astype(dtype, copy=False), weights.astype(dtype, copy=False)
+        n_frames, m = len(transl), self.n_markers
+        lever = self._levers(world_rot, world_pos, c)
+        r = np.swapaxes(lever[:m], 0, 1)  # (T, M, 3): markers from the wrist joint
+        g = self._angle_columns(phi, world_rot, lever)  # (T, E, 3)
+        w = weights
+        wr = w[..., None] * r
+        w_sum, wr_sum = w.sum(axis=1), wr.sum(axis=1)
+        hess = np.empty((n_frames, N_PARAMS, N_PARAMS))  # float64: the solve follows
+        eye3 = np.eye(3, dtype=dtype)
+        hess[:, :3, :3] = w_sum[:, None, None] * eye3
+        # J_t^T J_r = -[sum w r]x; J_r^T J_r = sum w (|r|^2 I - r r^T).
+        sx, sy, sz = wr_sum[:, 0], wr_sum[:, 1], wr_sum[:, 2]
+        zero = np.zeros_like(sx)
+        h_tr = np.stack([np.stack([zero, sz, -sy], -1), np.stack([-sz, zero, sx], -1),
+                         np.stack([sy, -sx, zero], -1)], -2)
+        hess[:, :3, 3:6] = h_tr
+        hess[:, 3:6, :3] = np.swapaxes(h_tr, 1, 2)
+        rr = np.einsum("tmi,tmj->tij", wr, r)
+        hess[:, 3:6, 3:6] = np.trace(rr, axis1=1, axis2=2)[:, None, None] * eye3 - rr
+        # Angle columns (3, E, T): J_t^T g = g, J_r^T g = r x g, summed per angle over its entries.
+        em = self._entry_marker
+        w_e = w.T[em]  # (E, T)
+        wg = g * w_e
+        r_e = np.moveaxis(lever[em], 2, 0)  # (3, E, T)
+        to_dof_t = c.entry_to_dof_t  # (27, E)
+        hess[:, :3, 6:] = np.matmul(to_dof_t, wg).transpose(2, 0, 1)
+        hess[:, 3:6, 6:] = np.matmul(to_dof_t, cross0(r_e, wg)).transpose(2, 0, 1)
+        hess[:, 6:, :6] = np.swapaxes(hess[:, :6, 6:], 1, 2)
+        # Angle-angle: g_e . g_f w for the entry pairs that share a marker.
+        dots = (wg[:, self._pair_e] * g[:, self._pair_f]).sum(axis=0)  # (pairs, T)
+        hess[:, 6:, 6:] = (c.cell_from_pair @ dots).T.reshape(n_frames, 27, 27)
+        res_e = resid.T[:, em]  # (3, E, T)
+        grad = np.empty((n_frames, N_PARAMS))
+        wres = w[..., None] * resid
+        grad[:, :3] = wres.sum(axis=1)
+        grad[:, 3:6] = cross(r, wres).sum(axis=1)
+        grad[:, 6:] = (to_dof_t @ (wg * res_e).sum(axis=0)).T
+        return hess, grad
+
+    def _levers(self, world_rot, world_pos, c=None) -> np.ndarray:
+        """Lever arm (L, T, 3) of every (joint, marker) pair, rows 0..M-1 being joint 0 (the wrist).
+
+        The lever of joint j and marker m is the blend, over the segments k below
+        j, of the marker as carried by k (``R_k x_m + t_k``) less the joint's
+        position (``R_j J_j + t_j``): linear in the segments' affine maps, so all
+        of them are one product of a precomputed (L, 64) matrix with the maps.
+        """
+        c = self._constants(world_rot.dtype) if c is None else c
+        return (c.lever_affine @ _affine_columns(world_rot, world_pos, c.rest_joints)).reshape(-1, len(world_rot), 3)
+
+    def _angle_columns(self, phi, world_rot, lever) -> np.ndarray:
+        """Derivative (3, E, T) of each entry's marker by its angle: the angle's world axis x the lever arm."""
+        axes = self.dof_axes(phi, world_rot).T.astype(lever.dtype, copy=False)  # (3, 27, T)
+        return cross0(axes[:, self._entry_dof], np.moveaxis(lever[self._entry_lever], 2, 0))
 
     def _prepare_jacobian(self) -> None:
         """Sparse structure: (marker, segment) pairs, (joint, marker) levers, (lever, angle) entries."""
@@ -186,10 +286,13 @@ class MarkerModel:
         self._lever_joint = np.concatenate(joints)
         self._lever_marker = np.concatenate(markers)
         self._lever_weight = self._weights_below[self._lever_marker, self._lever_joint]
-        from scipy.sparse import csr_matrix
         carries = DESCENDANTS[self._lever_joint[:, None], seg[None, :]] * (self._lever_marker[:, None] == mark[None, :])
         values = carries * weights[mark, seg][None, :]
-        self._lever_matrix = csr_matrix(values)
+        # Levers as rows over the segments' affine maps: the marker as carried by each segment below
+        # the joint, weighted, less the joint's own position (see _levers).
+        carried_rows = _affine_rows(np.eye(16)[seg], self.rest_markers[mark])  # (P, 64)
+        joint_rows = _affine_rows(np.eye(16)[self._lever_joint], self.rest_joints[self._lever_joint])
+        self._lever_affine = values @ carried_rows - self._lever_weight[:, None] * joint_rows  # (L, 64)
         entry_lever, entry_dof = [], []
         for d, j in enumerate(PHI_JOINT):
             rows = np.flatnonzero(self._lever_joint == j)
@@ -199,6 +302,34 @@ class MarkerModel:
         self._entry_dof = np.concatenate(entry_dof)
         self._entry_marker = self._lever_marker[self._entry_lever]
         self._entry_flat = self._entry_marker * N_PARAMS + 6 + self._entry_dof
+        self._entry_to_dof = np.zeros((len(self._entry_dof), 27))
+        self._entry_to_dof[np.arange(len(self._entry_dof)), self._entry_dof] = 1.0
+        # Pairs of entries on one marker (e <= f) and the Hessian cells (d_e, d_f), (d_f, d_e) they add to.
+        order = np.argsort(self._entry_marker, kind="stable")
+        starts = np.searchsorted(self._entry_marker[order], np.arange(self.n_markers + 1))
+        pe, pf = [], []
+        for a, b in zip(starts[:-1], starts[1:]):
+            ids = order[a:b]
+            i, j = np.triu_indices(len(ids))
+            pe.append(ids[i])
+            pf.append(ids[j])
+        self._pair_e, self._pair_f = np.concatenate(pe), np.concatenate(pf)
+        de, df = self._entry_dof[self._pair_e], self._entry_dof[self._pair_f]
+        rows = np.r_[np.arange(len(de)), np.flatnonzero(de != df)]
+        cells = np.r_[de * 27 + df, (df * 27 + de)[de != df]]
+        self._pair_to_cell = csr_matrix((np.ones(len(rows)), (rows, cells)), shape=(len(de), 27 * 27))
+
+    def _constants(self, dtype):
+        """The precomputed arrays of the sparse structure in the working precision (cached)."""
+        dtype = np.dtype(dtype)
+        cache = self.__dict__.setdefault("_by_dtype", {})
+        if dtype not in cache:
+            from types import SimpleNamespace
+            cache[dtype] = SimpleNamespace(
+                rest_joints=self.rest_joints.astype(dtype), lever_affine=self._lever_affine.astype(dtype),
+                entry_to_dof_t=np.ascontiguousarray(self._entry_to_dof.T, dtype=dtype),
+                cell_from_pair=self._pair_to_cell.T.tocsr().astype(dtype))
+        return cache[dtype]
 
     def dof_axes(self, phi, world_rot) -> np.ndarray:
         """World axis (T, 27, 3) of every anatomical angle (intrinsic z-y'-x'' Euler axes)."""

@@ -206,7 +206,7 @@ def _solve_lm(model, target, observed, priors, scale, rate, iterations, first_it
 
 
 KEY_SECONDS = 0.1  # spacing of the key frames solved one after the other
-CHUNK = 128  # frames per batched solve (bounds memory: 128 x 3M x 33 Jacobian entries)
+CHUNK = 32  # frames per batched solve: small enough that the work arrays stay in cache
 
 
 def _interpolate(keys, values, at):

@@ -27,7 +27,8 @@ from scipy.signal import butter, sosfiltfilt
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from handcap.core.errors import HandcapError
-from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES
+from handcap.hand.anatomy import DIP_PIP_RATIO, PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
+from handcap.hand.anatomy import pose_from_degrees as _pose
 
 MOTIONS = ("calibration", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
 WORK_CENTRE = np.array([0.0, 0.0, 1.0])
@@ -36,7 +37,6 @@ NEUTRAL = Rotation.from_matrix(np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]))
 FINGERS = ("index", "middle", "ring", "pinky")
 _I = {n: i for i, n in enumerate(PHI_NAMES)}
 MIN_OBJECT_SECONDS = 2.5  # shortest take in which a hand can reach, grasp, carry and release
-DIP_PIP_RATIO = 2.0 / 3.0  # DIP flexion per unit PIP flexion (tendon coupling)
 
 
 @dataclass(frozen=True)
@@ -63,30 +63,6 @@ class Motion:
     object_rotation: np.ndarray | None = None
     object_translation: np.ndarray | None = None
     holding: np.ndarray | None = None
-
-
-def _pose(**degrees) -> np.ndarray:
-    phi = np.zeros(27)
-    for name, value in degrees.items():
-        phi[_I[name]] = np.deg2rad(value)
-    return phi
-
-
-def finger_flexion(phi, finger: str, amount: float, *, mcp: float = 80.0, pip: float = 95.0) -> np.ndarray:
-    """``phi`` with one finger flexed to ``amount`` (0 straight .. 1 fist), DIP coupled to PIP."""
-    phi = phi.copy()
-    phi[_I[f"{finger}_mcp_bend"]] = np.deg2rad(mcp * amount)
-    phi[_I[f"{finger}_pip_bend"]] = np.deg2rad(pip * amount)
-    phi[_I[f"{finger}_dip_bend"]] = np.deg2rad(pip * amount) * DIP_PIP_RATIO
-    return phi
-
-
-def relaxed_pose() -> np.ndarray:
-    """A relaxed, slightly curled hand."""
-    phi = _pose(thumb_cmc_bend=5, thumb_cmc_spread=-10, thumb_mcp_bend=10, thumb_ip_bend=10)
-    for finger, amount in zip(FINGERS, (0.12, 0.15, 0.18, 0.2)):
-        phi = finger_flexion(phi, finger, amount)
-    return phi
 
 
 def fist_pose() -> np.ndarray:
