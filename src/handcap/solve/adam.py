@@ -24,7 +24,7 @@ from tqdm import tqdm
 from handcap.core.rotations import matrix_from_euler_zyx
 from handcap.hand.anatomy import PHI_AXIS, PHI_JOINT
 from handcap.hand.kinematics import chain_transforms
-from handcap.solve.lm import Poses, held_angles
+from handcap.solve.lm import Poses, unconstrained_angles
 
 LEARNING_RATE = 0.002
 ITERATIONS = 400
@@ -96,7 +96,7 @@ def solve_adam(model, target, observed, priors, *, learning_rate: float = LEARNI
     markers = TorchMarkers(model)
     rest = priors.rest_phi()
     rot0, trans0, _ = rigid_start(model, target, observed, rest)
-    held = held_angles(model, observed)
+    held = unconstrained_angles(model, observed)  # the paper holds every unconstrained angle
     low = torch.tensor(priors.limits[:, 0])
     high = torch.tensor(priors.limits[:, 1])
     lam = priors.limit_weight**2

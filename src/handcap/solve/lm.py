@@ -34,6 +34,9 @@ from handcap.solve.markers import N_PARAMS
 _I = {n: i for i, n in enumerate(PHI_NAMES)}
 #: (dip, pip) angle indices of the four fingers for the coupling prior.
 COUPLED = np.array([(_I[f"{f}_dip_bend"], _I[f"{f}_pip_bend"]) for f in ("index", "middle", "pinky", "ring")])
+#: (pip, mcp) flexion indices of the four fingers and (ip, mcp) of the thumb for the synergy prior.
+SYNERGY = np.array([(_I[f"{f}_pip_bend"], _I[f"{f}_mcp_bend"]) for f in ("index", "middle", "pinky", "ring")]
+                   + [(_I["thumb_ip_bend"], _I["thumb_mcp_bend"])])
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,14 @@ class Priors:
         flexors, as in handcap.synth).
     coupling_weight : float
         Strength of that coupling (0.01: 10 degrees off cost like 1.7 mm).
+    synergy : float
+        PIP (thumb: IP) flexion per unit MCP flexion, applied only where no
+        marker constrains the PIP (IP) joint and none did earlier in the take
+        (e.g. a fingertip marker lost for the whole take): 1.0, the ratio of
+        the mean functional flexion postures of daily activities (MCP 61 deg,
+        PIP 60 deg; Hume M.C. et al. 1990, J Hand Surg 15A:240-243).
+    synergy_weight : float
+        Strength of that synergy (0.01).
     rest : ndarray (27,)
         Relaxed hand the weak pull draws unconstrained angles towards.
     rest_weight : float
@@ -62,6 +73,8 @@ class Priors:
     limit_weight: float = 0.1
     coupling: float = DIP_PIP_RATIO
     coupling_weight: float = 0.01
+    synergy: float = 1.0
+    synergy_weight: float = 0.01
     rest: np.ndarray | None = None
     rest_weight: float = 0.001
 
@@ -85,8 +98,12 @@ def robust_cost(norms, scale):
     return 0.5 * scale**2 * np.log1p((norms / scale) ** 2)
 
 
-def prior_terms(phi, priors: Priors, held):
-    """Residuals (T, R) and their Jacobian (T, R, 27) of the priors; held angles get none."""
+def prior_terms(phi, priors: Priors, held, free=None):
+    """Residuals (T, R) and their Jacobian (T, R, 27) of the priors; held angles get none.
+
+    ``free`` (T, 27) marks the angles no marker constrains now or did before:
+    their PIP (IP) follows the MCP by the synergy prior.
+    """
     n = phi.shape[0]
     low, high = priors.limits[:, 0], priors.limits[:, 1]
     clipped = np.clip(phi, low, high)
@@ -102,17 +119,37 @@ def prior_terms(phi, priors: Priors, held):
     rows = np.arange(4)
     j_cpl[:, rows, dip] = priors.coupling_weight * active
     j_cpl[:, rows, pip] = -priors.coupling_weight * priors.coupling * active
+    distal, mcp = SYNERGY[:, 0], SYNERGY[:, 1]
+    follows = np.zeros((n, len(SYNERGY)), bool) if free is None else free[:, distal] & ~held[:, mcp]
+    r_syn = priors.synergy_weight * (phi[:, distal] - priors.synergy * phi[:, mcp]) * follows
+    j_syn = np.zeros((n, len(SYNERGY), 27))
+    rows = np.arange(len(SYNERGY))
+    j_syn[:, rows, distal] = priors.synergy_weight * follows
+    j_syn[:, rows, mcp] = -priors.synergy_weight * priors.synergy * follows
     r_rest = priors.rest_weight * (phi - priors.rest_phi()) * ~held
     j_rest = np.zeros((n, 27, 27))
     j_rest[:, idx, idx] = priors.rest_weight * ~held
-    return np.concatenate([r_lim, r_cpl, r_rest], axis=1), np.concatenate([j_lim, j_cpl, j_rest], axis=1)
+    return (np.concatenate([r_lim, r_cpl, r_syn, r_rest], axis=1),
+            np.concatenate([j_lim, j_cpl, j_syn, j_rest], axis=1))
 
 
-def held_angles(model, observed) -> np.ndarray:
+def unconstrained_angles(model, observed) -> np.ndarray:
     """Angles (T, 27) that no observed marker depends on (their segments and everything beyond are unseen)."""
     carries = model._weights_below > 0.01  # (M, 16): marker m moves with joint j
     constrained = (observed[:, :, None] & carries[None]).any(axis=1)  # (T, 16)
     return ~constrained[:, PHI_JOINT]
+
+
+def held_angles(model, observed) -> np.ndarray:
+    """Angles (T, 27) to hold at the previous frame's value, as in DexterCap.
+
+    Those unconstrained now (:func:`unconstrained_angles`) that markers did
+    constrain in an earlier frame. Angles never constrained so far are not
+    held: the anatomical priors set them (see :class:`Priors`).
+    """
+    unconstrained = unconstrained_angles(model, observed)
+    seen_before = np.logical_or.accumulate(~unconstrained, axis=0)
+    return unconstrained & seen_before
 
 
 @dataclass
@@ -133,13 +170,13 @@ class Poses:
         self.transl[index], self.rot[index], self.phi[index] = other.transl, other.rot, other.phi
 
 
-def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, scale):
+def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, scale, free=None):
     """Total cost per frame (T,), and the pieces the next step needs."""
     kin = model.kinematics(poses.transl, poses.rot, poses.phi)
     x = model.positions(poses.transl, poses.rot, poses.phi, kin=kin)
     resid = np.where(observed[..., None], x - target, 0.0)
     norms = np.linalg.norm(resid, axis=-1)
-    r_p, j_p = prior_terms(poses.phi, priors, held)
+    r_p, j_p = prior_terms(poses.phi, priors, held, free)
     cost = robust_cost(norms, scale).sum(axis=1) + 0.5 * (r_p**2).sum(axis=1)
     return cost, (kin, resid, norms, r_p, j_p)
 
@@ -168,7 +205,8 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     gain_tolerance : float
         Or once an accepted step lowers its cost by less than this fraction.
     held : ndarray (T, 27) bool, optional
-        Angles kept at their initial value (default: :func:`held_angles`).
+        Angles kept at their initial value (default: :func:`held_angles` of
+        these frames). Unconstrained angles not held are set by the priors.
 
     Returns
     -------
@@ -178,12 +216,13 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     poses = poses.copy()
     n = len(poses.transl)
     held = held_angles(model, observed) if held is None else held
+    free = unconstrained_angles(model, observed) & ~held
     fixed = np.concatenate([np.zeros((n, 6), bool), held], axis=1)
     blind = ~observed.any(axis=1)  # frames without a single marker keep their start
     fixed[blind] = True
     damping = np.full(n, lam)
     active = ~blind
-    cost, parts = frame_costs(model, poses, target, observed, held, priors, scale)
+    cost, parts = frame_costs(model, poses, target, observed, held, priors, scale, free)
     eye = np.eye(N_PARAMS)
     for _ in range(iterations):
         if not active.any():
@@ -204,7 +243,8 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         system = hess + (damping[idx, None] * np.maximum(diag, 1e-9))[:, :, None] * eye
         step = -np.linalg.solve(system, grad[..., None])[..., 0]
         trial = Poses(sub.transl + step[:, :3], matrix_from_axis_angle(step[:, 3:6]) @ sub.rot, sub.phi + step[:, 6:])
-        new_cost, new_parts = frame_costs(model, trial, target[idx], observed[idx], held[idx], priors, scale)
+        new_cost, new_parts = frame_costs(model, trial, target[idx], observed[idx], held[idx], priors, scale,
+                                          free[idx])
         better = new_cost <= cost[idx]
         good = idx[better]
         gain = (cost[idx] - new_cost) / np.maximum(cost[idx], 1e-300)

@@ -13,9 +13,12 @@ Per frame, the pose that brings the attached markers onto the observed ones
 4. Frames that end far worse than the rest (a poor local minimum) are solved
    again from the previous frame's pose.
 5. An angle that no visible marker depends on (its segment and every segment
-   beyond it unseen) keeps its value from the previous frame, as in the paper;
-   in the first frames, the relaxed pose of the priors. A frame with no marker
-   at all keeps the whole previous pose.
+   beyond it unseen) keeps its value from the previous frame, as in the paper,
+   once markers have constrained it; an angle no marker has constrained yet
+   (a fingertip marker missing from the start, or from the whole take) is set
+   by the anatomical priors instead: DIP follows PIP, PIP follows MCP, and a
+   weak pull to the relaxed hand. A frame with no marker at all keeps the
+   whole previous pose.
 
 Methods: ``lm`` (the above, default) and ``adam`` (the paper's optimiser,
 :mod:`handcap.solve.adam`), kept as the baseline.
@@ -31,7 +34,7 @@ from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
 from handcap.core.rotations import axis_angle_from_matrix
 from handcap.objects.rigid import kabsch
-from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
+from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
 from handcap.solve.markers import MarkerModel
 
 METHODS = ("lm", "adam")
@@ -215,8 +218,8 @@ def _interpolate(keys, values, at):
 
 
 def _costs(model, poses, target, observed, held, priors, scale):
-    from handcap.solve.lm import frame_costs
-    return frame_costs(model, poses, target, observed, held, priors, scale)[0]
+    free = unconstrained_angles(model, observed) & ~held
+    return frame_costs(model, poses, target, observed, held, priors, scale, free)[0]
 
 
 def _forward_fill(phi, held, rest) -> None:
