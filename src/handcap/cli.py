@@ -303,7 +303,8 @@ def _add_synth(verbs) -> None:
     p.set_defaults(run=_cmd_synth)
 
     p = verbs.add_parser("demo", help="run the main job on built-in data into demo-output/",
-                         description="Synthetic DexterCap-style capture, summary and picture (demo-output/).")
+                         description="Synthetic DexterCap-style session -> marker calibration -> solve -> 5 Hz smoothing -> "
+                                     "metrics against the truth, written to demo-output/.")
     p.add_argument("--out", default="demo-output")
     p.set_defaults(run=_cmd_demo)
 

@@ -133,9 +133,18 @@ def prior_terms(phi, priors: Priors, held, free=None):
             np.concatenate([j_lim, j_cpl, j_syn, j_rest], axis=1))
 
 
+#: A marker constrains a joint when at least this share of its skinning moves with the joint. A marker
+#: near the PIP on the proximal phalanx moves a few per cent with the PIP: far too little to set it.
+CONSTRAINING_WEIGHT = 0.3
+
+
 def unconstrained_angles(model, observed) -> np.ndarray:
-    """Angles (T, 27) that no observed marker depends on (their segments and everything beyond are unseen)."""
-    carries = model._weights_below > 0.01  # (M, 16): marker m moves with joint j
+    """Angles (T, 27) that no observed marker sets (their segments and everything beyond are unseen).
+
+    A marker sets the angles of the joints that carry at least
+    :data:`CONSTRAINING_WEIGHT` of it.
+    """
+    carries = model._weights_below >= CONSTRAINING_WEIGHT  # (M, 16): marker m moves with joint j
     constrained = (observed[:, :, None] & carries[None]).any(axis=1)  # (T, 16)
     return ~constrained[:, PHI_JOINT]
 
