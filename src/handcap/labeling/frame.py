@@ -1,0 +1,258 @@
+"""The hand's local frame from its rigid back-of-hand markers, found among unlabeled points.
+
+The rigid markers (three or more, e.g. the triad on the back of a glove) keep
+their distances to each other. In every frame the points whose pairwise
+distances match the trained ones (within a tolerance) are taken as those
+markers; among several candidates, the one closest to the previous frame's
+prediction wins. Kabsch then gives the hand's rotation and translation, which
+map hand-frame coordinates to the world: ``world = R @ local + t``.
+
+Other markers can match the distances too (three finger markers, or a ghost
+near a missing back marker), so candidates are ranked by the distance error,
+by how far the hand would have jumped since the previous frame, and, when the caller gives one, by how well the
+other points fit the spatial model in that frame.
+
+When fewer than three rigid markers can be found, the markers that can (at
+least two, near where the previous frame puts them) correct the previous
+transform; with fewer, the previous transform is kept for a few frames and the
+frame is reported as lost after that.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.objects.rigid import canonical_from_markers, kabsch
+
+
+@dataclass(frozen=True)
+class RigidSet:
+    """The rigid markers of a hand: names and positions in the hand frame.
+
+    Attributes
+    ----------
+    names : tuple of str (R,)
+    canonical : ndarray (R, 3)
+        Metres, hand frame (centred on the markers' mean).
+    tolerance : float
+        A pair of points matches a pair of markers when their distances differ
+        by less than this, metres.
+    """
+
+    names: tuple
+    canonical: np.ndarray
+    tolerance: float
+
+    @classmethod
+    def from_training(cls, names, positions, *, min_tolerance: float = 0.003) -> "RigidSet":
+        """From labeled training positions (T, R, 3) of the rigid markers, metres, NaN where missing."""
+        positions = np.asarray(positions, dtype=np.float64)
+        if len(names) < 3:
+            raise HandcapError(f"a hand frame needs at least 3 rigid markers, got {len(names)}: {', '.join(names)}")
+        seen = ~np.isnan(positions[..., 0])
+        for name, s in zip(names, seen.T):
+            if not s.any():
+                raise HandcapError(f"rigid marker {name!r} never appears in the training take")
+        if (seen.sum(axis=1) >= 3).sum() < 3:
+            raise HandcapError("the training take shows 3 rigid markers together in fewer than 3 frames")
+        canonical = canonical_from_markers(positions)
+        # How much the distances vary over the take (skin, glove, noise): tolerance = 4 standard deviations.
+        i, j = np.triu_indices(len(names), 1)
+        d = np.linalg.norm(positions[:, i] - positions[:, j], axis=-1)
+        spread = np.nanstd(d, axis=0)
+        tolerance = float(max(min_tolerance, 4 * np.nanmax(spread)))
+        return cls(tuple(names), canonical, tolerance)
+
+    def to_arrays(self) -> dict:
+        return {"rigid_names": np.array(self.names), "rigid_canonical": self.canonical,
+                "rigid_tolerance": np.float64(self.tolerance)}
+
+    @classmethod
+    def from_arrays(cls, data) -> "RigidSet":
+        return cls(tuple(str(n) for n in data["rigid_names"]), np.asarray(data["rigid_canonical"], dtype=np.float64),
+                   float(data["rigid_tolerance"]))
+
+
+@dataclass
+class HandPose:
+    """Hand frame of one frame: ``world = rotation @ local + translation``; ``points`` (R,) index or -1."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    points: np.ndarray
+    found: bool
+
+
+class HandFrameFinder:
+    """Finds a hand's rigid markers frame after frame (keeps the previous pose).
+
+    Parameters
+    ----------
+    rigid : RigidSet
+    max_hold : int
+        Frames the previous transform is kept when the rigid markers cannot be found.
+    search_radius : float
+        How far from their predicted place markers are looked for when fewer
+        than three are found, metres.
+    jump_scale : float
+        A candidate whose markers moved this far (mean, metres) since the
+        previous frame pays as much as one at the distance tolerance. Soft: a
+        wrong previous frame must not lock the right one out.
+    """
+
+    def __init__(self, rigid: RigidSet, *, max_hold: int = 10, search_radius: float = 0.02,
+                 jump_scale: float = 0.02):
+        self.rigid = rigid
+        self.max_hold = max_hold
+        self.search_radius = search_radius
+        self.jump_scale = jump_scale
+        self.full_set_bonus = 3.0  # log-likelihood a full set found by distances is preferred by
+        self.previous: HandPose | None = None
+        self.held = 0
+        c = rigid.canonical
+        n = len(c)
+        self._pairs = np.array([(a, b) for a in range(n) for b in range(a + 1, n)])
+        self._dist = np.linalg.norm(c[self._pairs[:, 0]] - c[self._pairs[:, 1]], axis=1)
+        # The three markers spanning the largest triangle anchor the search.
+        best, area = (0, 1, 2), -1.0
+        for a in range(n):
+            for b in range(a + 1, n):
+                for d in range(b + 1, n):
+                    ar = np.linalg.norm(np.cross(c[b] - c[a], c[d] - c[a]))
+                    if ar > area:
+                        best, area = (a, b, d), ar
+        self._anchor = np.array(best)
+
+    def reset(self) -> None:
+        self.previous = None
+        self.held = 0
+
+    def find(self, points, fit=None) -> HandPose | None:
+        """The hand pose in a frame of points (K, 3); None when it is lost.
+
+        Parameters
+        ----------
+        points : ndarray (K, 3)
+        fit : callable (rotation, translation, used) -> float, optional
+            How well the other points fit in a candidate frame (log-likelihood,
+            higher is better; ``used`` is the (R,) point index of the rigid
+            markers); a tenth of it counts against a squared tolerance of
+            distance error.
+
+        Returns
+        -------
+        HandPose or None
+            ``found`` is False when the pose was carried over from an earlier frame.
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        tracked = self._from_previous(points) if self.previous is not None and self.held == 0 else None
+        if tracked is not None and (tracked.points >= 0).all():
+            pose = tracked  # every rigid marker where the previous frame puts it
+        else:
+            pose = self._search(points, fit)
+            if pose is None:
+                pose = tracked
+            elif tracked is not None and fit is not None:
+                # Two markers tracked, or a full set found elsewhere (which may have borrowed another
+                # marker for a missing one): keep whichever frame explains the other points better.
+                if fit(tracked.rotation, tracked.translation, tracked.points) > \
+                        fit(pose.rotation, pose.translation, pose.points) + self.full_set_bonus:
+                    pose = tracked
+        if pose is not None:
+            self.previous, self.held = pose, 0
+            return pose
+        if self.previous is not None and self.held < self.max_hold:
+            self.held += 1
+            prev = self.previous
+            return HandPose(prev.rotation, prev.translation, np.full(len(self.rigid.names), -1), False)
+        self.previous = None
+        return None
+
+    def _search(self, points, fit=None) -> HandPose | None:
+        """All rigid markers of the anchor triangle by distance matching, then the rest near their places."""
+        k = len(points)
+        if k < 3:
+            return None
+        c, tol = self.rigid.canonical, self.rigid.tolerance
+        a, b, d = self._anchor
+        dist = np.linalg.norm(points[:, None] - points[None], axis=-1)
+        ab, ad, bd = (np.linalg.norm(c[x] - c[y]) for x, y in ((a, b), (a, d), (b, d)))
+        e_ab, e_ad, e_bd = np.abs(dist - ab), np.abs(dist - ad), np.abs(dist - bd)
+        ok = (e_ab < tol)[:, :, None] & (e_ad < tol)[:, None, :] & (e_bd < tol)[None, :, :]
+        cand = np.argwhere(ok)  # (n, 3): points for markers a, b, d
+        if not len(cand):
+            return None
+        err = (e_ab[cand[:, 0], cand[:, 1]] ** 2 + e_ad[cand[:, 0], cand[:, 2]] ** 2
+               + e_bd[cand[:, 1], cand[:, 2]] ** 2) / tol**2
+        src = c[[a, b, d]]
+        rot, trans = kabsch(np.broadcast_to(src, (len(cand), 3, 3)), points[cand])
+        score = err.copy()
+        if self.previous is not None and self.held == 0:
+            moved = np.linalg.norm(np.einsum("nij,rj->nri", rot, c) + trans[:, None]
+                                   - (c @ self.previous.rotation.T + self.previous.translation), axis=-1).mean(axis=1)
+            score += (moved / self.jump_scale) ** 2
+        # Every distance within tolerance can still leave a poor fit; refuse those.
+        resid = np.linalg.norm(np.einsum("nij,rj->nri", rot, src) + trans[:, None] - points[cand], axis=-1).max(axis=1)
+        score[resid > tol] = np.inf
+        if fit is not None:
+            for n in np.flatnonzero(np.isfinite(score)):
+                used = np.full(len(c), -1)
+                used[[a, b, d]] = cand[n]
+                score[n] -= 0.1 * fit(rot[n], trans[n], used)
+        best = int(np.argmin(score))
+        if not np.isfinite(score[best]):
+            return None
+        index = np.full(len(c), -1)
+        index[[a, b, d]] = cand[best]
+        return self._complete(points, rot[best], trans[best], index)
+
+    def _complete(self, points, rot, trans, index) -> HandPose:
+        """Add the other rigid markers near their predicted places and refit on all found."""
+        c = self.rigid.canonical
+        predicted = c @ rot.T + trans
+        taken = set(index[index >= 0].tolist())
+        for r in np.flatnonzero(index < 0):
+            d = np.linalg.norm(points - predicted[r], axis=1)
+            for p in np.argsort(d):
+                if d[p] > self.rigid.tolerance:
+                    break
+                if p not in taken:
+                    index[r] = p
+                    taken.add(int(p))
+                    break
+        found = index >= 0
+        if found.sum() > 3:
+            rot, trans = kabsch(c[found], points[index[found]])
+        return HandPose(rot, trans, index, True)
+
+    def _from_previous(self, points) -> HandPose | None:
+        """Two or more rigid markers near their previous places: correct the previous transform."""
+        prev = self.previous
+        c = self.rigid.canonical
+        predicted = c @ prev.rotation.T + prev.translation
+        if not len(points):
+            return None
+        d = np.linalg.norm(points[None] - predicted[:, None], axis=-1)  # (R, K)
+        index = np.full(len(c), -1)
+        taken = set()
+        for r in np.argsort(d.min(axis=1)):
+            p = int(np.argmin(d[r]))
+            if d[r, p] < self.search_radius and p not in taken:
+                index[r] = p
+                taken.add(p)
+        found = index >= 0
+        if found.sum() < 2:
+            return None
+        if found.sum() == len(c):
+            rot, trans = kabsch(c, points[index])
+            worst = np.linalg.norm(c @ rot.T + trans - points[index], axis=1).max()
+            if worst < self.rigid.tolerance:
+                return HandPose(rot, trans, index, True)
+        # Found markers at full weight; the missing ones where the previous frame put them, weakly.
+        target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
+        weights = np.where(found, 1.0, 0.05)
+        rot, trans = kabsch(c, target, weights)
+        return HandPose(rot, trans, index, True)

@@ -1,0 +1,182 @@
+"""Constant-acceleration Kalman filters for many markers at once (Section 3.2 of the paper).
+
+State per marker: position, velocity and acceleration along each axis. The
+three axes share the dynamics, the (isotropic) noise and the times of their
+updates, so they share one 3x3 covariance: a batch of B filters is a state
+(B, 3, 3) (``[position, velocity, acceleration] x axis``) and a covariance
+(B, 3, 3). Process noise: white jerk of spectral density ``q`` (m^2/s^5);
+measurement noise: ``r`` (m^2) per axis.
+
+The transition log-likelihood of a hypothesis (Eq. 3) is the sum over its
+markers of ``log N(innovation; 0, S)`` with ``S = s I`` the innovation
+covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+
+
+@dataclass(frozen=True)
+class KalmanSettings:
+    """Noise and timing of the filters.
+
+    Attributes
+    ----------
+    dt : float
+        Seconds between frames.
+    jerk : float
+        Spectral density of the white jerk driving the model, m^2/s^5.
+    measurement : float
+        Variance of a measured coordinate, m^2.
+    initial_velocity, initial_acceleration : float
+        Variances of the unknown velocity (m^2/s^2) and acceleration (m^2/s^4)
+        of a newly started filter.
+    """
+
+    dt: float
+    jerk: float
+    measurement: float
+    initial_velocity: float = 0.5**2
+    initial_acceleration: float = 20.0**2
+
+    def __post_init__(self):
+        for name in ("dt", "jerk", "measurement"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise HandcapError(f"Kalman {name} must be a positive number, got {value}")
+
+    @property
+    def transition(self) -> np.ndarray:
+        dt = self.dt
+        return np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+
+    @property
+    def process(self) -> np.ndarray:
+        """Process noise covariance (3, 3) of one axis over one frame (continuous white jerk)."""
+        dt, q = self.dt, self.jerk
+        return q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6],
+                             [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                             [dt**3 / 6, dt**2 / 2, dt]])
+
+    @classmethod
+    def from_training(cls, positions, rate: float) -> "KalmanSettings":
+        """Noise levels that best explain labeled training trajectories (T, M, 3), metres, at ``rate`` Hz.
+
+        Maximum likelihood over a grid: the filters are run over the training
+        trajectories for every pair of measurement noise (0.05 to 5 mm) and
+        jerk density (10 to 10^8 m^2/s^5), and the pair whose one-step
+        innovations are most likely wins (the innovation likelihood is the
+        exact likelihood of the data under the model).
+        """
+        pos = np.asarray(positions, dtype=np.float64)
+        dt = 1.0 / float(rate)
+        seen = ~np.isnan(pos[..., 0])
+        if (seen[1:] & seen[:-1]).sum() < 30:
+            raise HandcapError("too few pairs of consecutive samples in the training take to tune the Kalman filters")
+        best, best_ll = None, -np.inf
+        for sigma in (0.05e-3, 0.1e-3, 0.2e-3, 0.35e-3, 0.5e-3, 0.75e-3, 1e-3, 1.5e-3, 2e-3, 3e-3, 5e-3):
+            for jerk in 10.0 ** np.arange(1, 8.5, 0.5):
+                settings = cls(dt, float(jerk), sigma**2)
+                ll = _innovation_log_likelihood(settings, pos)
+                if ll > best_ll:
+                    best, best_ll = settings, ll
+        return best
+
+
+def _innovation_log_likelihood(settings: "KalmanSettings", positions) -> float:
+    """Total log-likelihood of the one-step innovations of filters run along trajectories (T, M, 3)."""
+    n_frames, n_markers = positions.shape[:2]
+    filters = KalmanBatch(settings, n_markers)
+    total = 0.0
+    for t in range(n_frames):
+        measured = positions[t]
+        has = ~np.isnan(measured[:, 0])
+        state, cov = filters.predicted()
+        use = has & (filters.age >= 2) & (filters.missed <= 10)
+        if use.any():
+            s = cov[use, 0, 0] + settings.measurement
+            total += KalmanBatch.log_likelihood(measured[use] - state[use, 0], s).sum()
+        lost = filters.missed > 10
+        filters.step(np.where((lost & has)[:, None], np.nan, measured))
+        filters.restart(lost & has, measured)
+    return float(total)
+
+
+class KalmanBatch:
+    """B independent constant-acceleration filters over 3D positions.
+
+    Attributes
+    ----------
+    state : ndarray (B, 3, 3)
+        ``state[b, :, a]`` = position, velocity, acceleration of axis a.
+    cov : ndarray (B, 3, 3)
+        Shared covariance of the three axes' states.
+    age : ndarray (B,) int
+        Updates since the filter (re)started.
+    missed : ndarray (B,) int
+        Frames since the last update (0 right after one).
+    """
+
+    def __init__(self, settings: KalmanSettings, n: int):
+        self.settings = settings
+        self._f = settings.transition
+        self._q = settings.process
+        self.state = np.zeros((n, 3, 3))
+        self.cov = np.zeros((n, 3, 3))
+        self.age = np.zeros(n, dtype=np.int64)
+        self.missed = np.full(n, 1 << 30, dtype=np.int64)  # never seen
+
+    def copy_from(self, other: "KalmanBatch", index) -> None:
+        """Replace every filter by ``other``'s filters ``index`` (B,)."""
+        self.state = other.state[index].copy()
+        self.cov = other.cov[index].copy()
+        self.age = other.age[index].copy()
+        self.missed = other.missed[index].copy()
+
+    def predicted(self) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted state and covariance one frame ahead (nothing changed)."""
+        f = self._f
+        return f @ self.state, f @ self.cov @ f.T + self._q
+
+    def innovation_variance(self, cov_pred) -> np.ndarray:
+        """Per-axis variance (B,) of the innovation for predicted covariances (B, 3, 3)."""
+        return cov_pred[:, 0, 0] + self.settings.measurement
+
+    @staticmethod
+    def log_likelihood(residual, variance) -> np.ndarray:
+        """``log N(residual; 0, variance I3)`` for residuals (..., 3) and variances (...)."""
+        return -1.5 * np.log(2 * np.pi * variance) - 0.5 * (residual**2).sum(axis=-1) / variance
+
+    def step(self, measured) -> None:
+        """Advance one frame: predict every filter, update those with a measurement.
+
+        Parameters
+        ----------
+        measured : ndarray (B, 3)
+            Measured position per filter, NaN for none (the filter coasts).
+        """
+        state, cov = self.predicted()
+        has = ~np.isnan(measured[:, 0])
+        if has.any():
+            s = cov[has, 0, 0] + self.settings.measurement
+            gain = cov[has, :, 0] / s[:, None]  # (b, 3)
+            innovation = measured[has] - state[has, 0]  # (b, 3 axes)
+            state[has] += gain[:, :, None] * innovation[:, None, :]
+            cov[has] -= gain[:, :, None] * cov[has, 0, None, :]
+        self.state, self.cov = state, cov
+        self.missed = np.where(has, 0, self.missed + 1)
+        self.age = np.where(has, self.age + 1, self.age)
+
+    def restart(self, which, positions) -> None:
+        """Start filters ``which`` (B,) bool afresh at ``positions`` (B, 3): zero velocity and acceleration."""
+        s = self.settings
+        self.state[which] = 0.0
+        self.state[which, 0] = positions[which]
+        self.cov[which] = np.diag([s.measurement, s.initial_velocity, s.initial_acceleration])
+        self.age[which] = 1
+        self.missed[which] = 0

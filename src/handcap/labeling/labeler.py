@@ -1,0 +1,511 @@
+"""Online labeling of unlabeled finger markers (Alexanderson, Beskow et al.; see the module docs).
+
+Per frame:
+
+1. The hand frame from its rigid back markers (:mod:`handcap.labeling.frame`),
+   or a transform the caller gives; the other points are moved into it.
+2. The (labels x points) log-likelihoods of the spatial model (Eq. 1-2).
+3. The N best assignments of labels to points (Murty), where a label may be
+   occluded (score ``log(1/M)``) and a point may be a ghost; pairings below
+   ``theta_min`` are not allowed (the paper's filter, made exact).
+4. Kalman filters per label per hypothesis (constant acceleration) score
+   every transition from the previous frame's hypotheses (Eq. 3); a label
+   occluded in the new hypothesis scores as a residual at the gate (``gate``
+   standard deviations), so a match must be better than that to be preferred
+   to a gap; a label coasts at most ``max_coast`` frames and is started afresh
+   after longer gaps, without a temporal score for its first ``warmup``
+   updates.
+5. Viterbi: every new hypothesis takes its best predecessor. Online, frame
+   t is decided ``lag`` frames later (0: at once) by tracing back from the
+   best hypothesis; offline, on the whole take.
+
+Beyond the paper: each frame also gets the assignment that is best for spatial
+and temporal evidence together given each previous hypothesis (a tracking
+hypothesis), so a correct but spatially unlikely assignment (a finger in a
+pose the training take barely covered) is not lost when it is outside the N
+spatially best.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence
+from handcap.labeling.frame import HandFrameFinder, RigidSet
+from handcap.labeling.kalman import KalmanBatch, KalmanSettings
+from handcap.labeling.murty import k_best_assignments
+from handcap.labeling.spatial import SpatialModel
+from handcap.labeling.viterbi import backtrack, viterbi_step
+from handcap.objects.rigid import kabsch
+
+
+@dataclass(frozen=True)
+class LabelingModel:
+    """What a labeler learns from a labeled range-of-motion take.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Every label: the rigid markers, then the others (the order of output).
+    rigid : RigidSet or None
+        The back-of-hand markers; None when the caller gives the hand frame.
+    spatial : SpatialModel
+        Mixtures of the other markers in the hand frame.
+    kalman : KalmanSettings
+    """
+
+    names: tuple
+    rigid: RigidSet | None
+    spatial: SpatialModel
+    kalman: KalmanSettings
+
+    @property
+    def free_names(self) -> tuple:
+        return self.spatial.names
+
+    @classmethod
+    def train(cls, markers: MarkerSequence, names=None, rigid=None, *, transforms=None, components: int = 3,
+              seed: int = 0) -> "LabelingModel":
+        """Train on a labeled take.
+
+        Parameters
+        ----------
+        markers : MarkerSequence
+            Labeled training take (a range of motion), metres.
+        names : sequence of str, optional
+            The labels to learn (default: every marker of the take).
+        rigid : sequence of str, optional
+            Which of them are the rigid back-of-hand markers (3 or more).
+        transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
+            Hand frame per training frame (``world = R @ local + t``), when
+            there are no rigid markers.
+        components : int
+            Mixture components per label.
+        seed : int
+        """
+        names = list(markers.names if names is None else names)
+        rigid = list(rigid or [])
+        missing = [n for n in names if n not in markers.names and n not in markers.short_names]
+        if missing:
+            raise HandcapError(f"labels not in the training take: {', '.join(missing)}")
+        unknown = [n for n in rigid if n not in names]
+        if unknown:
+            raise HandcapError(f"rigid markers not among the labels: {', '.join(unknown)}")
+        positions = np.stack([markers.positions[:, _index(markers, n)] for n in names], axis=1)
+        for n, s in zip(names, ~np.isnan(positions[..., 0]).T):
+            if not s.any():
+                raise HandcapError(f"marker {n!r} never appears in the training take")
+        free = [n for n in names if n not in rigid]
+        if not free:
+            raise HandcapError("every label is rigid: nothing left to label")
+        ordered = rigid + free
+        positions = positions[:, [names.index(n) for n in ordered]]
+        if rigid:
+            rigid_set = RigidSet.from_training(rigid, positions[:, :len(rigid)])
+            rot, trans, ok = _rigid_transforms(rigid_set.canonical, positions[:, :len(rigid)])
+        elif transforms is not None:
+            rot, trans = (np.asarray(a, dtype=np.float64) for a in transforms)
+            if rot.shape != (markers.n_frames, 3, 3) or trans.shape != (markers.n_frames, 3):
+                raise HandcapError(f"transforms must be ((T, 3, 3), (T, 3)) with T = {markers.n_frames}")
+            ok = np.isfinite(rot).all(axis=(1, 2)) & np.isfinite(trans).all(axis=1)
+            rigid_set = None
+        else:
+            raise HandcapError("give the rigid back-of-hand markers (rigid=...) or the hand frame per frame "
+                               "(transforms=...)")
+        if ok.sum() < 10:
+            raise HandcapError(f"the hand frame is known in only {ok.sum()} training frames")
+        local = np.full((markers.n_frames, len(free), 3), np.nan)
+        local[ok] = np.einsum("tji,tmj->tmi", rot[ok], positions[ok, len(rigid):] - trans[ok, None])
+        spatial = SpatialModel.fit(free, local, components=components, seed=seed)
+        kalman = KalmanSettings.from_training(positions[:, len(rigid):], markers.rate)
+        return cls(tuple(ordered), rigid_set, spatial, kalman)
+
+    def save(self, path) -> None:
+        from handcap.io._files import save_npz
+        data = {"kind": np.array("labeling_model"), "names": np.array(self.names), **self.spatial.to_arrays(),
+                "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
+        if self.rigid is not None:
+            data.update(self.rigid.to_arrays())
+        save_npz(path, data)
+
+    @classmethod
+    def load(cls, path) -> "LabelingModel":
+        from handcap.io._files import load_npz
+        data = load_npz(path, required=("names", "gmm_weights", "gmm_means", "gmm_precision_chol", "kalman"),
+                        what="labeling model")
+        dt, jerk, measurement = (float(v) for v in data["kalman"])
+        rigid = RigidSet.from_arrays(data) if "rigid_names" in data else None
+        return cls(tuple(str(n) for n in data["names"]), rigid, SpatialModel.from_arrays(data),
+                   KalmanSettings(dt, jerk, measurement))
+
+
+def _index(markers, name):
+    return markers.index(name)
+
+
+def _rigid_transforms(canonical, positions):
+    """Kabsch per frame from labeled rigid markers (T, R, 3); frames with < 3 markers are not ok."""
+    seen = ~np.isnan(positions[..., 0])
+    ok = seen.sum(axis=1) >= 3
+    rot = np.tile(np.eye(3), (len(positions), 1, 1))
+    trans = np.zeros((len(positions), 3))
+    if ok.any():
+        r, t = kabsch(np.broadcast_to(canonical, positions[ok].shape), np.nan_to_num(positions[ok]),
+                      seen[ok].astype(float))
+        rot[ok], trans[ok] = r, t
+    return rot, trans, ok
+
+
+@dataclass
+class _Frame:
+    """What is kept of a frame until it is decided."""
+
+    n_points: int
+    rigid_points: np.ndarray  # (R,) point index per rigid label, -1
+    hypotheses: np.ndarray  # (N, F) point index per free label, -1 occluded
+    back: np.ndarray  # (N,) best predecessor in the frame before
+    scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K,) rows that were points
+
+
+class OnlineLabeler:
+    """Streaming labeler: ``update(points) -> labels``.
+
+    Parameters
+    ----------
+    model : LabelingModel
+    hypotheses : int
+        N, the assignment hypotheses per frame (the paper: 5).
+    lag : int
+        Frames of look-ahead before a frame is decided (0: strictly online).
+    theta_min : float
+        Least log-likelihood (per m^3) of a label-point pairing (the paper: -2).
+    max_coast : int
+        Frames a label's filter runs on prediction alone (the paper: 10).
+    warmup : int
+        Updates of a restarted filter before it scores transitions (the paper: 2).
+    gate : float
+        A label occluded in a hypothesis scores like a measurement this many
+        standard deviations off its prediction.
+    jump_cost : float
+        A measurement further off than the gate scores ``jump_cost`` below a
+        gap (log-likelihood), however far: real markers do jump, and a
+        spatially convincing point should still be kept.
+    tracking : bool
+        Add the tracking hypotheses (see the module docs).
+    max_hold : int
+        Frames the hand frame is carried over when its markers are lost.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Label of each index in the returned arrays.
+    lost_frames : list of int
+        Frames where the hand frame could not be found (every free label
+        reported as a gap there).
+    """
+
+    def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
+                 max_coast: int = 10, warmup: int = 2, gate: float = 6.0, jump_cost: float = 6.0,
+                 tracking: bool = True, max_hold: int = 10):
+        if not (isinstance(hypotheses, (int, np.integer)) and hypotheses >= 1):
+            raise HandcapError(f"hypotheses must be a whole number >= 1, got {hypotheses}")
+        if not (isinstance(lag, (int, np.integer)) and lag >= 0):
+            raise HandcapError(f"lag must be a whole number of frames >= 0, got {lag}")
+        self.model = model
+        self.names = model.names
+        self.n_hyp = int(hypotheses)
+        self.lag = int(lag)
+        self.theta_min = float(theta_min)
+        self.max_coast = int(max_coast)
+        self.warmup = int(warmup)
+        self.gate = float(gate)
+        self.jump_cost = float(jump_cost)
+        self.tracking = bool(tracking)
+        self.n_rigid = 0 if model.rigid is None else len(model.rigid.names)
+        self.n_free = len(model.free_names)
+        self.finder = None if model.rigid is None else HandFrameFinder(model.rigid, max_hold=max_hold)
+        self.lost_frames: list[int] = []
+        self.frame_index = 0
+        self._filters = KalmanBatch(model.kalman, self.n_free)  # one hypothesis to start with
+        self._scores = np.zeros(1)
+        self._pending: deque[_Frame] = deque()
+        self._occluded_score = np.log(1.0 / self.n_free)
+
+    # -- public ---------------------------------------------------------------------------
+    def update(self, points, transform=None):
+        """Label one frame.
+
+        Parameters
+        ----------
+        points : ndarray (K, 3)
+            Unlabeled points of the frame, metres, any order (NaN rows are ignored).
+        transform : (ndarray (3, 3), ndarray (3,)), optional
+            The hand frame (``world = R @ local + t``); required when the model
+            has no rigid markers.
+
+        Returns
+        -------
+        ndarray (K_d,) int or None
+            Labels of the points of the frame decided now (frame ``t - lag``,
+            in the order its points were given): an index into ``names``, or
+            -1 for a point that is no marker. None while the first ``lag``
+            frames are still open.
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.size == 0:
+            points = np.zeros((0, 3))
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise HandcapError(f"points must have shape (K, 3), got {points.shape}")
+        valid = ~np.isnan(points).any(axis=1)
+        frame = self._step(points[valid], transform)
+        frame.n_points = len(points)
+        frame.valid = valid
+        self._pending.append(frame)
+        self.frame_index += 1
+        if len(self._pending) > self.lag:
+            return self._decide_oldest()
+        return None
+
+    def flush(self) -> list[np.ndarray]:
+        """Decide every frame still open (end of a take); returns their labels, oldest first."""
+        pending = self._pending
+        if not pending:
+            return []
+        path = backtrack([pending[i].back for i in range(1, len(pending))], int(np.argmax(pending[-1].scores)))
+        out = [self._labels(frame, h) for frame, h in zip(pending, path)]
+        pending.clear()
+        return out
+
+    # -- one frame ------------------------------------------------------------------------
+    def _step(self, points, transform) -> _Frame:
+        n_rigid, n_free = self.n_rigid, self.n_free
+        self._points = points
+        rigid_points = np.full(n_rigid, -1)
+        pose = None
+        if transform is not None:
+            rot, trans = (np.asarray(a, dtype=np.float64) for a in transform)
+            if rot.shape != (3, 3) or trans.shape != (3,):
+                raise HandcapError("transform must be (rotation (3, 3), translation (3,))")
+            pose = (rot, trans)
+        elif self.finder is not None:
+            found = self.finder.find(points, self._frame_fit)
+            if found is not None:
+                pose = (found.rotation, found.translation)
+                rigid_points = found.points
+        else:
+            raise HandcapError("this labeling model has no rigid markers: pass transform=(R, t) every frame")
+        if pose is None:
+            self.lost_frames.append(self.frame_index)
+            hyps = np.full((1, n_free), -1)
+            world = np.zeros((0, 3))
+            candidates = np.zeros(0, dtype=int)
+            emission = np.zeros(1)
+        else:
+            candidates = np.setdiff1d(np.arange(len(points)), rigid_points[rigid_points >= 0])
+            world = points[candidates]
+            hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0])
+        # Observed positions (N, F, 3) of every hypothesis. The filters track world positions: the hand
+        # frame (spatial model) can be off when a back marker is missing, the points themselves are not.
+        obs = np.full(hyps.shape + (3,), np.nan)
+        seen = hyps >= 0
+        obs[seen] = world[hyps[seen]]
+        state_pred, cov_pred = self._filters.predicted()
+        n_prev = len(self._scores)
+        pred = state_pred[:, 0].reshape(n_prev, n_free, 3)
+        var = self._filters.innovation_variance(cov_pred).reshape(n_prev, n_free)
+        trackable = ((self._filters.missed <= self.max_coast) & (self._filters.age >= self.warmup)).reshape(n_prev,
+                                                                                                     n_free)
+        if self.tracking and len(world):
+            extra = self._tracking_hypotheses(world, pred, var, trackable)
+            if len(extra):
+                hyps, emission, obs = self._merge_hypotheses(hyps, emission, extra, world)
+        transition = self._transitions(obs, pred, var, trackable)  # (N_prev, N)
+        scores, back = viterbi_step(self._scores, transition, emission)
+        scores -= scores.max()
+        self._advance_filters(back, obs)
+        self._scores = scores
+        # Store point indices of the frame (candidates map hypothesis indices back to points).
+        mapped = np.where(hyps >= 0, candidates[np.maximum(hyps, 0)] if len(candidates) else -1, -1)
+        return _Frame(len(points), rigid_points, mapped, back, scores)
+
+    def _frame_fit(self, rot, trans, used) -> float:
+        """How well the other points fit the spatial model in a candidate hand frame."""
+        others = np.setdiff1d(np.arange(len(self._points)), used[used >= 0])
+        if not len(others):
+            return 0.0
+        ll = self.model.spatial.log_likelihood((self._points[others] - trans) @ rot)
+        return float(np.maximum(ll.max(axis=1), self.theta_min).sum())
+
+    def _spatial_hypotheses(self, local):
+        """The N best assignments (N, F) of candidate indices (-1: occluded) and their scores (N,)."""
+        n_free = self.n_free
+        ll = self.model.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
+        cost = np.full((n_free, len(local) + n_free), np.inf)
+        allowed = ll >= self.theta_min
+        cost[:, :len(local)][allowed] = -ll[allowed]
+        cost[np.arange(n_free), len(local) + np.arange(n_free)] = -self._occluded_score
+        best = k_best_assignments(cost, self.n_hyp)
+        hyps = np.array([c for c, _ in best])
+        hyps = np.where(hyps < len(local), hyps, -1)
+        emission = -np.array([t for _, t in best])
+        self._last_ll = ll
+        return hyps, emission
+
+    def _emission(self, hyps) -> np.ndarray:
+        """Spatial score of hypotheses (N, F): log-likelihood of each pairing, ``log(1/M)`` for a gap and
+        for a pairing below ``theta_min`` (the paper's filtered assignment)."""
+        ll = self._last_ll
+        f = np.arange(self.n_free)
+        values = np.where(hyps >= 0, ll[f, np.maximum(hyps, 0)] if ll.shape[1] else 0.0, self._occluded_score)
+        values = np.where((hyps >= 0) & (values < self.theta_min), self._occluded_score, values)
+        return values.sum(axis=1)
+
+    def _tracking_hypotheses(self, world, pred, var, trackable) -> np.ndarray:
+        """For each previous hypothesis, the assignment best for spatial and temporal evidence together."""
+        n_free, k = self.n_free, len(world)
+        ll = self._last_ll
+        allowed = ll >= self.theta_min
+        out = []
+        for n in range(len(pred)):
+            r = world[None, :, :] - pred[n][:, None, :]  # (F, K, 3)
+            temporal = KalmanBatch.log_likelihood(r, var[n][:, None])  # (F, K)
+            at_gate = -1.5 * np.log(2 * np.pi * var[n]) - 0.5 * self.gate**2
+            # A pairing the spatial model filters out may still be made when the marker's own track
+            # vouches for it (a pose the training take did not cover); spatially it then scores as a gap.
+            within = trackable[n][:, None] & (temporal >= at_gate[:, None])
+            spatial = np.where(allowed, ll, self._occluded_score)
+            temporal = np.maximum(temporal, (at_gate - self.jump_cost)[:, None])
+            reward = spatial + np.where(trackable[n][:, None], temporal, 0.0)
+            occluded = self._occluded_score + np.where(trackable[n], at_gate, 0.0)
+            ok = allowed | within
+            cost = np.full((n_free, k + n_free), np.inf)
+            cost[:, :k][ok] = -reward[ok]
+            cost[np.arange(n_free), k + np.arange(n_free)] = -occluded
+            best = k_best_assignments(cost, 1)
+            if best:
+                cols = best[0][0]
+                out.append(np.where(cols < k, cols, -1))
+        return np.array(out) if out else np.zeros((0, n_free), dtype=int)
+
+    def _merge_hypotheses(self, hyps, emission, extra, world):
+        known = {tuple(h) for h in hyps}
+        new = [h for h in extra if tuple(h) not in known and not known.add(tuple(h))]
+        if new:
+            hyps = np.concatenate([hyps, np.array(new)])
+            emission = np.concatenate([emission, self._emission(np.array(new))])
+        obs = np.full(hyps.shape + (3,), np.nan)
+        seen = hyps >= 0
+        obs[seen] = world[hyps[seen]]
+        return hyps, emission, obs
+
+    def _transitions(self, obs, pred, var, trackable) -> np.ndarray:
+        """Eq. 3 for every (previous, new) hypothesis pair: (N_prev, N)."""
+        residual = obs[None, :, :, :] - pred[:, None, :, :]  # (P, N, F, 3)
+        ll = KalmanBatch.log_likelihood(residual, var[:, None, :])  # NaN where occluded
+        at_gate = -1.5 * np.log(2 * np.pi * var) - 0.5 * self.gate**2  # (P, F)
+        observed = ~np.isnan(obs[None, :, :, 0])
+        # A measurement beyond the gate (a marker that jumped: real reconstructions do) costs a fixed
+        # jump_cost more than a gap, so strong spatial evidence can still keep it.
+        ll = np.maximum(ll, (at_gate - self.jump_cost)[:, None, :])
+        terms = np.where(observed, ll, at_gate[:, None, :])
+        terms = np.where(trackable[:, None, :], terms, 0.0)
+        return terms.sum(axis=-1)
+
+    def _advance_filters(self, back, obs) -> None:
+        """Filters of the new hypotheses: their predecessors' filters stepped with their observations."""
+        n_new, n_free = obs.shape[:2]
+        prev = self._filters
+        index = (back[:, None] * n_free + np.arange(n_free)).ravel()
+        filters = KalmanBatch(prev.settings, 0)
+        filters.copy_from(prev, index)
+        measured = obs.reshape(-1, 3)
+        lost = filters.missed > self.max_coast  # a gap longer than the filters may coast through
+        has = ~np.isnan(measured[:, 0])
+        coast = np.where(lost & has, np.nan, 0.0)[:, None] + measured
+        filters.step(coast)
+        filters.restart(lost & has, measured)
+        self._filters = filters
+
+    # -- decisions ------------------------------------------------------------------------
+    def _decide_oldest(self) -> np.ndarray:
+        """Trace back from the best current hypothesis to the oldest open frame; emit its labels."""
+        pending = self._pending
+        path = backtrack([pending[i].back for i in range(1, len(pending))], int(np.argmax(pending[-1].scores)))
+        oldest = pending.popleft()
+        return self._labels(oldest, path[0])
+
+    def _labels(self, frame: _Frame, h: int) -> np.ndarray:
+        valid_index = np.flatnonzero(frame.valid)
+        labels = np.full(frame.n_points, -1)
+        for r, p in enumerate(frame.rigid_points):
+            if p >= 0:
+                labels[valid_index[p]] = r
+        for f, p in enumerate(frame.hypotheses[h]):
+            if p >= 0:
+                labels[valid_index[p]] = self.n_rigid + f
+        return labels
+
+
+@dataclass(frozen=True)
+class LabelResult:
+    """A labeled take.
+
+    Attributes
+    ----------
+    markers : MarkerSequence
+        (T, M, 3) positions of every label, NaN where the labeler reports a gap.
+    labels : list of ndarray
+        Per frame, the label index (into ``markers.names``) of every input point, -1 for none.
+    lost_frames : ndarray (L,) int
+        Frames where the hand frame could not be found.
+    """
+
+    markers: MarkerSequence
+    labels: list
+    lost_frames: np.ndarray
+
+
+def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False,
+               progress: bool | None = None, **options) -> LabelResult:
+    """Label a whole take, frame by frame as a live labeler would (or on the whole take with ``offline``).
+
+    Parameters
+    ----------
+    points : PointCloudSequence or MarkerSequence
+        Unlabeled points; a MarkerSequence's names and columns are ignored.
+    model : LabelingModel
+    transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
+        Hand frame per frame (for models without rigid markers).
+    offline : bool
+        Decide every frame on the whole take (Viterbi over everything) instead of online.
+    progress : bool, optional
+    options
+        :class:`OnlineLabeler` settings (``hypotheses``, ``lag``, ``theta_min``, ...).
+    """
+    from tqdm import tqdm
+
+    from handcap.core.points import PointCloudSequence
+    if isinstance(points, MarkerSequence):
+        points = PointCloudSequence.from_markers(points)
+    if offline:
+        options["lag"] = points.n_frames
+    labeler = OnlineLabeler(model, **options)
+    labels = []
+    hidden = None if progress is None else not progress
+    for t, frame in enumerate(tqdm(points.frames, desc="label", unit="frame", disable=hidden, leave=False)):
+        transform = None if transforms is None else (transforms[0][t], transforms[1][t])
+        out = labeler.update(frame, transform)
+        if out is not None:
+            labels.append(out)
+    labels.extend(labeler.flush())
+    positions = np.full((points.n_frames, len(model.names), 3), np.nan)
+    for t, (frame, lab) in enumerate(zip(points.frames, labels)):
+        hit = lab >= 0
+        positions[t, lab[hit]] = frame[hit]
+    return LabelResult(MarkerSequence(positions, model.names, points.rate), labels,
+                       np.array(labeler.lost_frames, dtype=int))

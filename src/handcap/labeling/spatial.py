@@ -1,0 +1,111 @@
+"""Spatial model: one Gaussian mixture per marker label in the hand's frame (Eq. 1-2 of the paper).
+
+Fitted by EM (scikit-learn ``GaussianMixture``, full covariances) on a labeled
+range-of-motion take moved into the hand frame. Evaluation is done here, in
+numpy, for a whole frame of points at once: the (labels x points) matrix of
+log-likelihoods.
+
+Units: metres, so a log-likelihood is a log density per cubic metre. Near the
+centre of a 1 cm wide component it is about +11; the paper's tolerance
+``theta_min = -2`` then means about five standard deviations away.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+
+#: Fewest training samples of a label for a mixture fit.
+MIN_SAMPLES = 20
+
+
+@dataclass(frozen=True)
+class SpatialModel:
+    """Gaussian mixtures of M labels with L components each.
+
+    Attributes
+    ----------
+    names : tuple of str (M,)
+    weights : ndarray (M, L)
+    means : ndarray (M, L, 3)
+        Metres, hand frame.
+    precision_chol : ndarray (M, L, 3, 3)
+        Cholesky factors of the precision matrices (``Sigma^-1 = P P^T``).
+    log_norm : ndarray (M, L)
+        ``log w - 1.5 log(2 pi) + log det P``: everything but the quadratic term.
+    """
+
+    names: tuple
+    weights: np.ndarray
+    means: np.ndarray
+    precision_chol: np.ndarray
+    log_norm: np.ndarray
+
+    @classmethod
+    def fit(cls, names, local, *, components: int = 3, seed: int = 0, reg_covar: float = 1e-6) -> "SpatialModel":
+        """Fit one mixture per label.
+
+        Parameters
+        ----------
+        names : sequence of str (M,)
+        local : ndarray (T, M, 3)
+            Labeled training positions in the hand frame, metres; NaN where missing.
+        components : int
+            Mixture components per label (the paper: 3).
+        seed : int
+            EM initialisation seed (k-means++), for reproducible models.
+        reg_covar : float
+            Added to every covariance diagonal, m^2 (1e-6: a 1 mm floor).
+        """
+        from sklearn.mixture import GaussianMixture
+        local = np.asarray(local, dtype=np.float64)
+        weights, means, chols = [], [], []
+        for i, name in enumerate(names):
+            samples = local[:, i][~np.isnan(local[:, i]).any(axis=1)]
+            if len(samples) < MIN_SAMPLES:
+                raise HandcapError(f"marker {name!r} appears in only {len(samples)} training frames; "
+                                   f"a spatial model needs at least {MIN_SAMPLES}")
+            n = min(components, max(1, len(np.unique(samples.round(4), axis=0)) // 2))
+            gmm = GaussianMixture(n, covariance_type="full", reg_covar=reg_covar, random_state=seed,
+                                  n_init=1, max_iter=200).fit(samples)
+            w, mu, pc = gmm.weights_, gmm.means_, gmm.precisions_cholesky_
+            if n < components:  # pad with components of zero weight
+                pad = components - n
+                w = np.r_[w, np.zeros(pad)]
+                mu = np.r_[mu, np.repeat(mu[:1], pad, axis=0)]
+                pc = np.r_[pc, np.repeat(pc[:1], pad, axis=0)]
+            weights.append(w)
+            means.append(mu)
+            chols.append(pc)
+        weights, means, chols = np.array(weights), np.array(means), np.array(chols)
+        log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)
+        with np.errstate(divide="ignore"):
+            log_norm = np.log(weights) - 1.5 * np.log(2 * np.pi) + log_det
+        return cls(tuple(names), weights, means, chols, log_norm)
+
+    def log_likelihood(self, points) -> np.ndarray:
+        """Log-likelihood (M, K) of every label for every point (K, 3) in the hand frame (Eq. 1)."""
+        points = np.asarray(points, dtype=np.float64)
+        diff = points[None, None, :, :] - self.means[:, :, None, :]  # (M, L, K, 3)
+        y = np.einsum("mlkj,mlji->mlki", diff, self.precision_chol)
+        terms = self.log_norm[:, :, None] - 0.5 * (y * y).sum(axis=-1)  # (M, L, K)
+        top = terms.max(axis=1, keepdims=True)
+        top = np.where(np.isfinite(top), top, 0.0)
+        return (top + np.log(np.exp(terms - top).sum(axis=1, keepdims=True)))[:, 0]
+
+    def to_arrays(self, prefix: str = "gmm_") -> dict:
+        return {f"{prefix}names": np.array(self.names), f"{prefix}weights": self.weights,
+                f"{prefix}means": self.means, f"{prefix}precision_chol": self.precision_chol}
+
+    @classmethod
+    def from_arrays(cls, data, prefix: str = "gmm_") -> "SpatialModel":
+        weights = np.asarray(data[f"{prefix}weights"], dtype=np.float64)
+        chols = np.asarray(data[f"{prefix}precision_chol"], dtype=np.float64)
+        log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)
+        with np.errstate(divide="ignore"):
+            log_norm = np.log(weights) - 1.5 * np.log(2 * np.pi) + log_det
+        return cls(tuple(str(n) for n in data[f"{prefix}names"]), weights,
+                   np.asarray(data[f"{prefix}means"], dtype=np.float64), chols, log_norm)
