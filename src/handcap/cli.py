@@ -203,6 +203,112 @@ def _scan_points(path):
     return vertices
 
 
+def _cmd_label(args) -> None:
+    from pathlib import Path
+
+    from handcap.io import check_not_input, read_markers, read_points, write_markers
+    from handcap.labeling import LabelingModel, label_take
+    from handcap.layouts import load_layout
+    check_not_input(args.out, args.input, args.train)
+    layout = load_layout(args.layout)
+    points = read_points(args.input)
+    if args.model and Path(args.train).suffix.lower() == ".npz" and _is_labeling_model(args.train):
+        model = LabelingModel.load(args.train)
+    else:
+        train = read_markers(args.train)
+        model = LabelingModel.train(train, layout.names, layout.rigid, seed=args.seed)
+    options = {} if args.method == "nearest" else dict(hypotheses=args.hypotheses, lag=args.lag)
+    result = label_take(points, model, offline=args.offline, method=args.method, **options)
+    write_markers(result.markers, args.out)
+    if args.model:
+        model.save(args.model)
+    seen = (result.markers.positions[..., 0] == result.markers.positions[..., 0]).mean()
+    lost = result.lost_frames
+    print(f"{args.out}: {points.n_frames} frames, {len(model.names)} labels, {100 * seen:.1f} % of label-frames "
+          f"filled; hand frame not found in {len(lost)} frames" + (f" (first: {lost[0]})" if len(lost) else ""))
+
+
+def _is_labeling_model(path) -> bool:
+    from handcap.io import load_npz
+    return str(load_npz(path).get("kind", "")) == "labeling_model"
+
+
+def _cmd_score_labels(args) -> None:
+    import json
+
+    from handcap.io import read_markers
+    from handcap.labeling import score_labels
+    score = score_labels(read_markers(args.labeled), read_markers(args.truth))
+    print(score.table(f"{args.labeled} against {args.truth}"))
+    if args.json:
+        from handcap.io import atomic_output
+        with atomic_output(args.json, "w") as fh:
+            json.dump(score.to_dict(), fh, indent=2)
+
+
+def _cmd_corrupt(args) -> None:
+    from pathlib import Path
+
+    from handcap.io import check_not_input, read_markers, write_markers
+    from handcap.labeling import corrupt
+    out = Path(args.out)
+    truth_path = out.with_name(out.stem + ".truth" + out.suffix)
+    check_not_input(args.out, args.input)
+    check_not_input(truth_path, args.input)
+    markers = read_markers(args.input)
+    names = None
+    if args.layout:
+        from handcap.layouts import load_layout
+        names = load_layout(args.layout).names
+    unlabeled, truth = corrupt(markers, ghost_rate=args.ghost_rate, dropout=args.dropout, seed=args.seed,
+                               names=names)
+    write_markers(unlabeled, out)
+    write_markers(truth, truth_path)
+    extra = int((unlabeled.positions[..., 0] == unlabeled.positions[..., 0]).sum()
+                - (truth.positions[..., 0] == truth.positions[..., 0]).sum())
+    print(f"{out}: {unlabeled.n_frames} frames of unlabeled points ({extra} ghost samples); truth in {truth_path}")
+
+
+def _add_label(verbs) -> None:
+    from handcap.layouts import SHIPPED
+    p = verbs.add_parser("label", help="label unlabeled finger markers online (GMM + N-best + Kalman + Viterbi)",
+                         description="Every point of IN is treated as unlabeled, whatever its name or slot. The "
+                                     "labels and the spatial model come from ROM, a labeled range-of-motion take "
+                                     "(any marker format) with the layout's markers; the layout's rigid markers give "
+                                     "the hand frame.")
+    p.add_argument("input", help="unlabeled points: any marker file, or a points .npz")
+    p.add_argument("--train", required=True, help="labeled range-of-motion take (or a model .npz with --model)")
+    p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
+    p.add_argument("--hypotheses", type=int, default=5, help="N best assignments per frame (default %(default)s)")
+    p.add_argument("--lag", type=int, default=0, help="look-ahead frames before deciding (default 0: online)")
+    p.add_argument("--offline", action="store_true", help="decide on the whole take")
+    p.add_argument("--method", choices=("viterbi", "nearest"), default="viterbi",
+                   help="the labeler, or the nearest-neighbour baseline")
+    p.add_argument("--model", help="also save the trained model here (.npz); if --train is such a model, use it")
+    p.add_argument("--seed", type=int, default=0, help="seed of the mixture fits")
+    p.add_argument("--out", required=True, help="labeled markers (.c3d .trc .npz)")
+    p.set_defaults(run=_cmd_label)
+
+    p = verbs.add_parser("score-labels", help="score a labeling against the truth (Table 1 categories)",
+                         description="Correct labels (gaps included), erroneous labels, false markers, false "
+                                     "occlusions per marker and overall; gaps, mean gap and segment length.")
+    p.add_argument("labeled", help="labeled markers written by handcap label")
+    p.add_argument("--truth", required=True, help="the true labels (e.g. the .truth file of handcap corrupt)")
+    p.add_argument("--json", help="also write the scores as JSON")
+    p.set_defaults(run=_cmd_score_labels)
+
+    p = verbs.add_parser("corrupt", help="make a labeling test: strip labels, shuffle, add ghosts and dropouts",
+                         description="Writes the unlabeled points to --out and the truth (the labeled take with the "
+                                     "same dropouts) beside it as NAME.truth.EXT.")
+    p.add_argument("input", help="a labeled take")
+    p.add_argument("--out", required=True, help="unlabeled points (.c3d .trc .npz)")
+    p.add_argument("--ghost-rate", type=float, default=2.0, help="ghost markers per second (default %(default)s)")
+    p.add_argument("--dropout", type=float, default=0.05, help="extra fraction of samples dropped (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--layout", help="keep only this layout's markers")
+    p.set_defaults(run=_cmd_corrupt)
+
+
 def _add_solve(verbs) -> None:
     from handcap.layouts import SHIPPED
     from handcap.solve import MEASUREMENTS, METHODS
@@ -327,6 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_synth(verbs)
     _add_solve(verbs)
+    _add_label(verbs)
     return parser
 
 

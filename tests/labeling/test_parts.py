@@ -101,3 +101,30 @@ def test_spatial_model_matches_scikit_learn():
         np.testing.assert_allclose(model.log_likelihood(query)[i], ref.score_samples(query), rtol=1e-9)
     again = SpatialModel.from_arrays(model.to_arrays())
     np.testing.assert_array_equal(again.log_likelihood(query), model.log_likelihood(query))
+
+
+def test_noise_tuning_scores_every_setting_like_the_filters_do():
+    # The vectorised grid search must give each setting the likelihood a KalmanBatch run gives it.
+    from handcap.labeling.kalman import _innovation_log_likelihoods
+    rng = np.random.default_rng(0)
+    pos = np.cumsum(np.cumsum(rng.normal(0, 1e-6, (400, 3, 3)), axis=0), axis=0) + rng.normal(0, 3e-4, (400, 3, 3))
+    pos[rng.uniform(size=(400, 3)) < 0.05] = np.nan
+    pos[100:120, 1] = np.nan  # longer than 10 frames: a restart
+
+    def by_filters(s):
+        batch, total = KalmanBatch(s, 3), 0.0
+        for z in pos:
+            has = ~np.isnan(z[:, 0])
+            state, cov = batch.predicted()
+            use = has & (batch.age >= 2) & (batch.missed <= 10)
+            total += KalmanBatch.log_likelihood(z[use] - state[use, 0], cov[use, 0, 0] + s.measurement).sum()
+            lost = batch.missed > 10
+            batch.step(np.where((lost & has)[:, None], np.nan, z))
+            batch.restart(lost & has, z)
+        return total
+
+    jerk, measurement = np.array([10.0, 1e4, 1e6]), np.array([1e-8, 1e-7, 4e-8])
+    expected = [by_filters(KalmanSettings(0.01, j, m)) for j, m in zip(jerk, measurement)]
+    np.testing.assert_allclose(_innovation_log_likelihoods(0.01, jerk, measurement, pos), expected, rtol=1e-10)
+    tuned = KalmanSettings.from_training(pos, 100.0)
+    assert np.isclose(np.sqrt(tuned.measurement), 3e-4, rtol=0.5)  # the noise put in

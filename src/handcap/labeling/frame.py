@@ -28,6 +28,19 @@ from handcap.core.errors import HandcapError
 from handcap.objects.rigid import canonical_from_markers, kabsch
 
 
+def _kabsch(source, target, weights=None):
+    """One frame of :func:`handcap.objects.rigid.kabsch` (N, 3) -> (R, t), without the batch machinery."""
+    w = np.ones(len(source)) if weights is None else weights
+    w = w / w.sum()
+    src_mean, tgt_mean = w @ source, w @ target
+    cov = ((target - tgt_mean) * w[:, None]).T @ (source - src_mean)
+    u, _, vt = np.linalg.svd(cov)
+    if np.linalg.det(u @ vt) < 0:
+        u[:, -1] = -u[:, -1]
+    rot = u @ vt
+    return rot, tgt_mean - rot @ src_mean
+
+
 @dataclass(frozen=True)
 class RigidSet:
     """The rigid markers of a hand: names and positions in the hand frame.
@@ -225,7 +238,7 @@ class HandFrameFinder:
                     break
         found = index >= 0
         if found.sum() > 3:
-            rot, trans = kabsch(c[found], points[index[found]])
+            rot, trans = _kabsch(c[found], points[index[found]])
         return HandPose(rot, trans, index, True)
 
     def _from_previous(self, points) -> HandPose | None:
@@ -247,12 +260,12 @@ class HandFrameFinder:
         if found.sum() < 2:
             return None
         if found.sum() == len(c):
-            rot, trans = kabsch(c, points[index])
+            rot, trans = _kabsch(c, points[index])
             worst = np.linalg.norm(c @ rot.T + trans - points[index], axis=1).max()
             if worst < self.rigid.tolerance:
                 return HandPose(rot, trans, index, True)
         # Found markers at full weight; the missing ones where the previous frame put them, weakly.
         target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
         weights = np.where(found, 1.0, 0.05)
-        rot, trans = kabsch(c, target, weights)
+        rot, trans = _kabsch(c, target, weights)
         return HandPose(rot, trans, index, True)

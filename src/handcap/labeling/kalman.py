@@ -78,33 +78,57 @@ class KalmanSettings:
         seen = ~np.isnan(pos[..., 0])
         if (seen[1:] & seen[:-1]).sum() < 30:
             raise HandcapError("too few pairs of consecutive samples in the training take to tune the Kalman filters")
-        best, best_ll = None, -np.inf
-        for sigma in (0.05e-3, 0.1e-3, 0.2e-3, 0.35e-3, 0.5e-3, 0.75e-3, 1e-3, 1.5e-3, 2e-3, 3e-3, 5e-3):
-            for jerk in 10.0 ** np.arange(1, 8.5, 0.5):
-                settings = cls(dt, float(jerk), sigma**2)
-                ll = _innovation_log_likelihood(settings, pos)
-                if ll > best_ll:
-                    best, best_ll = settings, ll
-        return best
+        sigmas = np.array([0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0]) * 1e-3
+        jerks = 10.0 ** np.arange(1, 8.5, 0.5)
+        measurement = np.repeat(sigmas**2, len(jerks))
+        jerk = np.tile(jerks, len(sigmas))
+        ll = _innovation_log_likelihoods(dt, jerk, measurement, pos)
+        best = int(np.argmax(ll))
+        return cls(dt, float(jerk[best]), float(measurement[best]))
 
 
-def _innovation_log_likelihood(settings: "KalmanSettings", positions) -> float:
-    """Total log-likelihood of the one-step innovations of filters run along trajectories (T, M, 3)."""
-    n_frames, n_markers = positions.shape[:2]
-    filters = KalmanBatch(settings, n_markers)
-    total = 0.0
-    for t in range(n_frames):
-        measured = positions[t]
-        has = ~np.isnan(measured[:, 0])
-        state, cov = filters.predicted()
-        use = has & (filters.age >= 2) & (filters.missed <= 10)
+def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int = 10) -> np.ndarray:
+    """Log-likelihood (C,) of the one-step innovations of trajectories (T, M, 3) under C noise settings.
+
+    All settings run at once: filters (C, M) restarted after gaps longer than
+    ``max_coast`` frames, innovations counted once a filter has had 2 updates.
+    """
+    base = KalmanSettings(dt, 1.0, 1.0)
+    f, q0 = base.transition, base.process
+    n_settings, n_markers = len(jerk), positions.shape[1]
+    q = jerk[:, None, None, None] * q0  # (C, 1, 3, 3)
+    r = measurement[:, None]  # (C, 1)
+    state = np.zeros((n_settings, n_markers, 3, 3))
+    cov = np.zeros((n_settings, n_markers, 3, 3))
+    age = np.zeros(n_markers, dtype=np.int64)
+    missed = np.full(n_markers, 1 << 30)
+    total = np.zeros(n_settings)
+    start = np.diag([1.0, base.initial_velocity, base.initial_acceleration])
+    for z in positions:
+        has = ~np.isnan(z[:, 0])
+        state = f @ state
+        cov = f @ cov @ f.T + q
+        use = has & (age >= 2) & (missed <= max_coast)
+        s = cov[:, :, 0, 0] + r  # (C, M)
         if use.any():
-            s = cov[use, 0, 0] + settings.measurement
-            total += KalmanBatch.log_likelihood(measured[use] - state[use, 0], s).sum()
-        lost = filters.missed > 10
-        filters.step(np.where((lost & has)[:, None], np.nan, measured))
-        filters.restart(lost & has, measured)
-    return float(total)
+            innovation = z[use] - state[:, use, 0]  # (C, u, 3)
+            total += (-1.5 * np.log(2 * np.pi * s[:, use]) - 0.5 * (innovation**2).sum(-1) / s[:, use]).sum(axis=1)
+        update = has & (missed <= max_coast)
+        if update.any():
+            gain = cov[:, update][..., 0] / s[:, update, None]  # (C, u, 3)
+            innovation = z[update] - state[:, update, 0]
+            state[:, update] += gain[..., None] * innovation[:, :, None, :]
+            cov[:, update] -= gain[..., None] * cov[:, update, 0, None, :]
+        fresh = has & (missed > max_coast)
+        if fresh.any():
+            state[:, fresh] = 0.0
+            state[:, fresh, 0] = z[fresh]
+            cov[:, fresh] = start
+            cov[:, fresh, 0, 0] = measurement[:, None]
+        age = np.where(has, age + 1, age)
+        age[fresh] = 1
+        missed = np.where(has, 0, missed + 1)
+    return total
 
 
 class KalmanBatch:

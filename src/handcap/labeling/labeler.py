@@ -306,7 +306,9 @@ class OnlineLabeler:
             candidates = np.zeros(0, dtype=int)
             emission = np.zeros(1)
         else:
-            candidates = np.setdiff1d(np.arange(len(points)), rigid_points[rigid_points >= 0])
+            free = np.ones(len(points), bool)
+            free[rigid_points[rigid_points >= 0]] = False
+            candidates = np.flatnonzero(free)
             world = points[candidates]
             hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0])
         # Observed positions (N, F, 3) of every hypothesis. The filters track world positions: the hand
@@ -367,30 +369,31 @@ class OnlineLabeler:
 
     def _tracking_hypotheses(self, world, pred, var, trackable) -> np.ndarray:
         """For each previous hypothesis, the assignment best for spatial and temporal evidence together."""
+        from scipy.optimize import linear_sum_assignment
         n_free, k = self.n_free, len(world)
         ll = self._last_ll
-        allowed = ll >= self.theta_min
-        out = []
+        allowed = ll >= self.theta_min  # (F, K)
+        residual = world[None, None, :, :] - pred[:, :, None, :]  # (P, F, K, 3)
+        temporal = KalmanBatch.log_likelihood(residual, var[:, :, None])  # (P, F, K)
+        at_gate = -1.5 * np.log(2 * np.pi * var) - 0.5 * self.gate**2  # (P, F)
+        # A pairing the spatial model filters out may still be made when the marker's own track
+        # vouches for it (a pose the training take did not cover); spatially it then scores as a gap.
+        track = trackable[:, :, None]
+        within = track & (temporal >= at_gate[:, :, None])
+        spatial = np.where(allowed, ll, self._occluded_score)
+        temporal = np.maximum(temporal, (at_gate - self.jump_cost)[:, :, None])
+        reward = spatial[None] + np.where(track, temporal, 0.0)
+        occluded = self._occluded_score + np.where(trackable, at_gate, 0.0)  # (P, F)
+        ok = allowed[None] | within
+        cost = np.full((len(pred), n_free, k + n_free), np.inf)
+        cost[:, :, :k] = np.where(ok, -reward, np.inf)
+        rows = np.arange(n_free)
+        cost[:, rows, k + rows] = -occluded
+        out = np.full((len(pred), n_free), -1)
         for n in range(len(pred)):
-            r = world[None, :, :] - pred[n][:, None, :]  # (F, K, 3)
-            temporal = KalmanBatch.log_likelihood(r, var[n][:, None])  # (F, K)
-            at_gate = -1.5 * np.log(2 * np.pi * var[n]) - 0.5 * self.gate**2
-            # A pairing the spatial model filters out may still be made when the marker's own track
-            # vouches for it (a pose the training take did not cover); spatially it then scores as a gap.
-            within = trackable[n][:, None] & (temporal >= at_gate[:, None])
-            spatial = np.where(allowed, ll, self._occluded_score)
-            temporal = np.maximum(temporal, (at_gate - self.jump_cost)[:, None])
-            reward = spatial + np.where(trackable[n][:, None], temporal, 0.0)
-            occluded = self._occluded_score + np.where(trackable[n], at_gate, 0.0)
-            ok = allowed | within
-            cost = np.full((n_free, k + n_free), np.inf)
-            cost[:, :k][ok] = -reward[ok]
-            cost[np.arange(n_free), k + np.arange(n_free)] = -occluded
-            best = k_best_assignments(cost, 1)
-            if best:
-                cols = best[0][0]
-                out.append(np.where(cols < k, cols, -1))
-        return np.array(out) if out else np.zeros((0, n_free), dtype=int)
+            r, c = linear_sum_assignment(cost[n])
+            out[n, r] = np.where(c < k, c, -1)
+        return out
 
     def _merge_hypotheses(self, hyps, emission, extra, world):
         known = {tuple(h) for h in hyps}
@@ -428,7 +431,8 @@ class OnlineLabeler:
         has = ~np.isnan(measured[:, 0])
         coast = np.where(lost & has, np.nan, 0.0)[:, None] + measured
         filters.step(coast)
-        filters.restart(lost & has, measured)
+        if (lost & has).any():
+            filters.restart(lost & has, measured)
         self._filters = filters
 
     # -- decisions ------------------------------------------------------------------------
@@ -470,7 +474,7 @@ class LabelResult:
     lost_frames: np.ndarray
 
 
-def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False,
+def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False, method: str = "viterbi",
                progress: bool | None = None, **options) -> LabelResult:
     """Label a whole take, frame by frame as a live labeler would (or on the whole take with ``offline``).
 
@@ -483,6 +487,9 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         Hand frame per frame (for models without rigid markers).
     offline : bool
         Decide every frame on the whole take (Viterbi over everything) instead of online.
+    method : {"viterbi", "nearest"}
+        The labeler, or the nearest-neighbour baseline
+        (:class:`handcap.labeling.baseline.NearestNeighbourLabeler`).
     progress : bool, optional
     options
         :class:`OnlineLabeler` settings (``hypotheses``, ``lag``, ``theta_min``, ...).
@@ -492,9 +499,15 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
     from handcap.core.points import PointCloudSequence
     if isinstance(points, MarkerSequence):
         points = PointCloudSequence.from_markers(points)
-    if offline:
-        options["lag"] = points.n_frames
-    labeler = OnlineLabeler(model, **options)
+    if method == "nearest":
+        from handcap.labeling.baseline import NearestNeighbourLabeler
+        labeler = NearestNeighbourLabeler(model, **options)
+    elif method == "viterbi":
+        if offline:
+            options["lag"] = points.n_frames
+        labeler = OnlineLabeler(model, **options)
+    else:
+        raise HandcapError(f"unknown labeling method {method!r}; choose viterbi or nearest")
     labels = []
     hidden = None if progress is None else not progress
     for t, frame in enumerate(tqdm(points.frames, desc="label", unit="frame", disable=hidden, leave=False)):
@@ -508,4 +521,4 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         hit = lab >= 0
         positions[t, lab[hit]] = frame[hit]
     return LabelResult(MarkerSequence(positions, model.names, points.rate), labels,
-                       np.array(labeler.lost_frames, dtype=int))
+                       np.array(getattr(labeler, "lost_frames", []), dtype=int))

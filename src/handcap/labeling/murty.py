@@ -37,6 +37,13 @@ def _solve(cost):
 def k_best_assignments(cost, k: int) -> list[tuple[np.ndarray, float]]:
     """The ``k`` cheapest assignments of rows to distinct columns, cheapest first.
 
+    The problem is first split into its independent parts (connected
+    components of the rows and columns joined by finite costs): a part with
+    one row is just its sorted options, a larger part goes to Murty's
+    algorithm, and the k best totals of the parts together come from a heap
+    over their ranked lists. Labels far apart in space rarely compete, so
+    most parts are single rows and few assignment problems are solved.
+
     Parameters
     ----------
     cost : ndarray (R, C), R <= C
@@ -55,15 +62,81 @@ def k_best_assignments(cost, k: int) -> list[tuple[np.ndarray, float]]:
         raise ValueError(f"more rows ({n_rows}) than columns ({n_cols})")
     if n_rows == 0:
         return [(np.zeros(0, dtype=np.intp), 0.0)]
+    if k == 1:  # the best alone: one assignment problem
+        best = _solve(cost)
+        return [] if best is None else [best]
+    finite = np.isfinite(cost)
+    if not finite.any(axis=1).all():
+        return []
+    # Rows joined when they share a column, closed transitively (R is small: a few boolean products).
+    f = finite.astype(np.float64)
+    reach = (f @ f.T) > 0
+    while True:
+        wider = (reach.astype(np.float64) @ reach) > 0
+        if (wider == reach).all():
+            break
+        reach = wider
+    component = np.argmax(reach, axis=1)  # the first row of each row's part names it
+    order = np.argsort(cost, axis=1, kind="stable")[:, :k]
+    ranked_costs = np.take_along_axis(cost, order, axis=1)
+    parts = []
+    for label in np.unique(component):
+        rows = np.flatnonzero(component == label)
+        if len(rows) == 1:
+            i = rows[0]
+            n = int(np.isfinite(ranked_costs[i]).sum())
+            ranked = [(order[i, j:j + 1], float(ranked_costs[i, j])) for j in range(n)]
+        else:
+            cols = np.flatnonzero(finite[rows].any(axis=0))
+            if len(cols) < len(rows):
+                return []
+            ranked = [(cols[a], t) for a, t in _murty(cost[np.ix_(rows, cols)], k)]
+            if not ranked:
+                return []
+        parts.append((rows, ranked))
+    if len(parts) == 1:
+        rows, ranked = parts[0]
+        return [(_assemble(parts, (i,), n_rows), t) for i, (_, t) in enumerate(ranked)]
+    return [(_assemble(parts, pick, n_rows), total) for pick, total in _k_best_sums([p[1] for p in parts], k)]
+
+
+def _assemble(parts, pick, n_rows) -> np.ndarray:
+    out = np.empty(n_rows, dtype=np.intp)
+    for (rows, ranked), i in zip(parts, pick):
+        out[rows] = ranked[i][0]
+    return out
+
+
+def _k_best_sums(lists, k):
+    """The k smallest totals choosing one entry from each ranked list: (indices, total), best first."""
+    start = tuple(0 for _ in lists)
+    heap = [(sum(lst[0][1] for lst in lists), start)]
+    seen = {start}
+    out = []
+    while heap and len(out) < k:
+        total, pick = heapq.heappop(heap)
+        out.append((pick, total))
+        for j, lst in enumerate(lists):
+            if pick[j] + 1 < len(lst):
+                nxt = pick[:j] + (pick[j] + 1,) + pick[j + 1:]
+                if nxt not in seen:
+                    seen.add(nxt)
+                    heapq.heappush(heap, (total - lst[pick[j]][1] + lst[pick[j] + 1][1], nxt))
+    return out
+
+
+def _murty(cost, k: int) -> list[tuple[np.ndarray, float]]:
+    """Murty's ranking of the k best assignments of one connected part (R <= C)."""
+    n_rows, n_cols = cost.shape
     first = _solve(cost)
     if first is None:
         return []
     out = []
     # A subproblem: rows < `fixed` forced to their columns in `columns` (its best solution), and the
     # (row, column) pairs in `excluded` forbidden. Heap entries: (total, tie-breaker, columns, fixed, excluded).
+    finite = np.isfinite(cost)
     counter = 0
     heap = [(first[1], counter, first[0], 0, ())]
-    all_cols = np.arange(n_cols)
     while heap and len(out) < k:
         total, _, columns, fixed, excluded = heapq.heappop(heap)
         out.append((columns, total))
@@ -71,24 +144,32 @@ def k_best_assignments(cost, k: int) -> list[tuple[np.ndarray, float]]:
             break
         # Partition the rest of this subproblem (Murty): for each row r >= fixed, the solutions that
         # agree with `columns` on rows < r and give row r another column.
-        base = cost.copy()
-        for r, c in excluded:
-            base[r, c] = np.inf
+        base, allowed = cost, finite
+        if excluded:
+            base, allowed = cost.copy(), finite.copy()
+            for r, c in excluded:
+                base[r, c] = np.inf
+                allowed[r, c] = False
         forced_cost = float(cost[np.arange(fixed), columns[:fixed]].sum())
-        free_cols = np.setdiff1d(all_cols, columns[:fixed])
+        free = np.ones(n_cols, bool)
+        free[columns[:fixed]] = False
         for r in range(fixed, n_rows):
-            sub = base[r:][:, free_cols]
-            sub[0, np.searchsorted(free_cols, columns[r])] = np.inf
-            solved = _solve(sub)
-            if solved is not None:
-                cols_sub, sub_total = solved
-                new = columns.copy()
-                new[r:] = free_cols[cols_sub]
-                counter += 1
-                child_excluded = tuple((rr, cc) for rr, cc in excluded if rr > r) + ((r, int(columns[r])),) \
-                    + tuple((rr, cc) for rr, cc in excluded if rr == r)
-                heapq.heappush(heap, (forced_cost + sub_total, counter, new, r, child_excluded))
+            own = columns[r]
+            others = allowed[r] & free
+            others[own] = False
+            if others.any():  # otherwise no solution differs from this one first at row r
+                free_cols = np.flatnonzero(free)
+                sub = base[r:][:, free_cols]
+                sub[0, np.searchsorted(free_cols, own)] = np.inf
+                solved = _solve(sub)
+                if solved is not None:
+                    cols_sub, sub_total = solved
+                    new = columns.copy()
+                    new[r:] = free_cols[cols_sub]
+                    counter += 1
+                    child_excluded = tuple(e for e in excluded if e[0] >= r) + ((r, int(own)),)
+                    heapq.heappush(heap, (forced_cost + sub_total, counter, new, r, child_excluded))
             # The children after this one keep row r at its column.
-            forced_cost += cost[r, columns[r]]
-            free_cols = free_cols[free_cols != columns[r]]
+            forced_cost += cost[r, own]
+            free[own] = False
     return out

@@ -90,7 +90,7 @@ class SpatialModel:
         """Log-likelihood (M, K) of every label for every point (K, 3) in the hand frame (Eq. 1)."""
         points = np.asarray(points, dtype=np.float64)
         diff = points[None, None, :, :] - self.means[:, :, None, :]  # (M, L, K, 3)
-        y = np.einsum("mlkj,mlji->mlki", diff, self.precision_chol)
+        y = diff @ self.precision_chol  # (M, L, K, 3): whitened offsets
         terms = self.log_norm[:, :, None] - 0.5 * (y * y).sum(axis=-1)  # (M, L, K)
         top = terms.max(axis=1, keepdims=True)
         top = np.where(np.isfinite(top), top, 0.0)

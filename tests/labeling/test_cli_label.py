@@ -1,0 +1,59 @@
+"""corrupt -> label -> score-labels from the command line, on the real glove recording; bad input exits 2."""
+
+import json
+
+import numpy as np
+import pytest
+
+from handcap.cli import main
+from handcap.io import read_markers, write_markers
+
+
+@pytest.fixture(scope="module")
+def takes(shared_data, tmp_path_factory):
+    root = tmp_path_factory.mktemp("label")
+    take = read_markers(shared_data / "markers" / "hand_embodiment_glove" / "recording.tsv")
+    write_markers(take[:2000], root / "rom.c3d")
+    write_markers(take[2000:2600], root / "test.c3d")
+    return root
+
+
+def test_corrupt_label_score(takes, capsys):
+    r = takes
+    assert main(["corrupt", str(r / "test.c3d"), "--layout", "glove-13", "--ghost-rate", "2", "--dropout", "0.05",
+                 "--seed", "0", "--out", str(r / "unl.c3d")]) == 0
+    assert (r / "unl.truth.c3d").exists()
+    before = (r / "unl.c3d").read_bytes()
+    assert main(["label", str(r / "unl.c3d"), "--train", str(r / "rom.c3d"), "--layout", "glove-13",
+                 "--model", str(r / "model.npz"), "--out", str(r / "labeled.c3d")]) == 0
+    assert (r / "unl.c3d").read_bytes() == before  # the input is never touched
+    labeled = read_markers(r / "labeled.c3d")
+    assert labeled.names[:3] == ("hand_top", "hand_left", "hand_right") and labeled.n_frames == 600
+    capsys.readouterr()
+    assert main(["score-labels", str(r / "labeled.c3d"), "--truth", str(r / "unl.truth.c3d"),
+                 "--json", str(r / "score.json")]) == 0
+    assert "false occlusion" in capsys.readouterr().out
+    score = json.loads((r / "score.json").read_text())
+    assert score["instances"] == 600 * 13 and score["correct_percent"] > 99.5
+    # The saved model labels the same way without training again.
+    assert main(["label", str(r / "unl.c3d"), "--train", str(r / "model.npz"), "--model", str(r / "model.npz"),
+                 "--layout", "glove-13", "--out", str(r / "again.npz")]) == 0
+    np.testing.assert_allclose(read_markers(r / "again.npz").positions, labeled.positions, atol=1e-6)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["label", "{r}/test.c3d", "--train", "{r}/rom.c3d", "--layout", "nope", "--out", "{r}/x.c3d"], "unknown layout"),
+    (["label", "{r}/test.c3d", "--train", "{r}/rom.c3d", "--layout", "joints-19", "--out", "{r}/x.c3d"],
+     "not in the training take"),
+    (["label", "{r}/test.c3d", "--train", "{r}/rom.c3d", "--layout", "glove-13", "--out", "{r}/test.c3d"],
+     "input"),
+    (["label", "{r}/test.c3d", "--train", "{r}/rom.c3d", "--layout", "glove-13", "--hypotheses", "0",
+      "--out", "{r}/x.c3d"], "hypotheses"),
+    (["score-labels", "{r}/test.c3d", "--truth", "{r}/rom.c3d"], "frames"),
+    (["corrupt", "{r}/test.c3d", "--dropout", "1.5", "--out", "{r}/c.c3d"], "dropout"),
+    (["corrupt", "{r}/missing.c3d", "--out", "{r}/c.c3d"], "missing.c3d"),
+])
+def test_bad_input_exits_2_with_one_line(takes, capsys, argv, message):
+    assert main([a.format(r=takes) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
