@@ -77,40 +77,37 @@ def k_best_assignments(cost, k: int) -> list[tuple[np.ndarray, float]]:
             break
         reach = wider
     component = np.argmax(reach, axis=1)  # the first row of each row's part names it
-    order = np.argsort(cost, axis=1, kind="stable")[:, :k]
-    ranked_costs = np.take_along_axis(cost, order, axis=1)
-    parts = []
-    for label in np.unique(component):
+    size = np.bincount(component, minlength=n_rows)[component]
+    single = np.flatnonzero(size == 1)  # rows that compete with no other: their options, best first
+    order = np.argsort(cost[single], axis=1, kind="stable")[:, :k]
+    ranked_costs = np.take_along_axis(cost[single], order, axis=1)
+    lists = [row[np.isfinite(row)] for row in ranked_costs]
+    groups = []
+    for label in np.unique(component[size > 1]):
         rows = np.flatnonzero(component == label)
-        if len(rows) == 1:
-            i = rows[0]
-            n = int(np.isfinite(ranked_costs[i]).sum())
-            ranked = [(order[i, j:j + 1], float(ranked_costs[i, j])) for j in range(n)]
-        else:
-            cols = np.flatnonzero(finite[rows].any(axis=0))
-            if len(cols) < len(rows):
-                return []
-            ranked = [(cols[a], t) for a, t in _murty(cost[np.ix_(rows, cols)], k)]
-            if not ranked:
-                return []
-        parts.append((rows, ranked))
-    if len(parts) == 1:
-        rows, ranked = parts[0]
-        return [(_assemble(parts, (i,), n_rows), t) for i, (_, t) in enumerate(ranked)]
-    return [(_assemble(parts, pick, n_rows), total) for pick, total in _k_best_sums([p[1] for p in parts], k)]
-
-
-def _assemble(parts, pick, n_rows) -> np.ndarray:
-    out = np.empty(n_rows, dtype=np.intp)
-    for (rows, ranked), i in zip(parts, pick):
-        out[rows] = ranked[i][0]
+        cols = np.flatnonzero(finite[rows].any(axis=0))
+        if len(cols) < len(rows):
+            return []
+        ranked = [(cols[a], t) for a, t in _murty(cost[np.ix_(rows, cols)], k)]
+        if not ranked:
+            return []
+        groups.append((rows, ranked))
+        lists.append(np.array([t for _, t in ranked]))
+    out = []
+    n_single = len(single)
+    for pick, total in _k_best_sums([lst.tolist() for lst in lists], k):
+        columns = np.empty(n_rows, dtype=np.intp)
+        columns[single] = order[np.arange(n_single), pick[:n_single]]
+        for (rows, ranked), i in zip(groups, pick[n_single:]):
+            columns[rows] = ranked[i][0]
+        out.append((columns, float(total)))
     return out
 
 
 def _k_best_sums(lists, k):
-    """The k smallest totals choosing one entry from each ranked list: (indices, total), best first."""
-    start = tuple(0 for _ in lists)
-    heap = [(sum(lst[0][1] for lst in lists), start)]
+    """The k smallest totals choosing one entry from each ranked list (ascending arrays): (indices, total)."""
+    start = (0,) * len(lists)
+    heap = [(sum(lst[0] for lst in lists), start)]
     seen = {start}
     out = []
     while heap and len(out) < k:
@@ -121,7 +118,7 @@ def _k_best_sums(lists, k):
                 nxt = pick[:j] + (pick[j] + 1,) + pick[j + 1:]
                 if nxt not in seen:
                     seen.add(nxt)
-                    heapq.heappush(heap, (total - lst[pick[j]][1] + lst[pick[j] + 1][1], nxt))
+                    heapq.heappush(heap, (total - lst[pick[j]] + lst[pick[j] + 1], nxt))
     return out
 
 
