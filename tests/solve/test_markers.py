@@ -10,17 +10,21 @@ from handcap.layouts import load_layout
 from handcap.solve.markers import MarkerModel
 
 
+def _random_poses(side, layout, seed, n):
+    """A marker model of a random subject and n random poses within the joint limits."""
+    hand = OpenHand(side)
+    rng = np.random.default_rng(seed)
+    att = MarkerAttachment.from_layout(load_layout(layout), hand, rng.normal(size=10) * 0.5)
+    phi = rng.uniform(PHI_LIMITS[:, 0], PHI_LIMITS[:, 1], (n, 27))
+    rot = Rotation.from_rotvec(rng.normal(size=(n, 3))).as_matrix()
+    return hand, att, MarkerModel(hand, att), rng, rng.normal(size=(n, 3)), rot, phi
+
+
 @pytest.mark.parametrize("side", ["right", "left"])
 @pytest.mark.parametrize("layout", ["glove-13", "dense-patches"])
 def test_positions_exact_and_jacobian_matches_finite_differences(side, layout):
-    hand = OpenHand(side)
-    rng = np.random.default_rng(1)
-    att = MarkerAttachment.from_layout(load_layout(layout), hand, rng.normal(size=10) * 0.5)
-    model = MarkerModel(hand, att)
     n = 2
-    phi = rng.uniform(PHI_LIMITS[:, 0], PHI_LIMITS[:, 1], (n, 27))
-    rot = Rotation.from_rotvec(rng.normal(size=(n, 3))).as_matrix()
-    transl = rng.normal(size=(n, 3))
+    hand, att, model, rng, transl, rot, phi = _random_poses(side, layout, 1, n)
     x = model.positions(transl, rot, phi)
     out = hand.forward(att.betas, Rotation.from_matrix(rot).as_rotvec(), phi=phi, transl=transl)
     np.testing.assert_allclose(x, att.positions(out.vertices, hand.faces), atol=1e-12)
@@ -45,14 +49,9 @@ def test_positions_exact_and_jacobian_matches_finite_differences(side, layout):
 @pytest.mark.parametrize("layout", ["glove-13", "dense-patches"])
 def test_normal_equations_equal_the_dense_products(side, layout):
     # The solver never forms J: its J^T W J and J^T W r must equal those of the dense Jacobian.
-    hand = OpenHand(side)
-    rng = np.random.default_rng(2)
-    att = MarkerAttachment.from_layout(load_layout(layout), hand, rng.normal(size=10) * 0.5)
-    model = MarkerModel(hand, att)
-    n, m = 3, model.n_markers
-    phi = rng.uniform(PHI_LIMITS[:, 0], PHI_LIMITS[:, 1], (n, 27))
-    rot = Rotation.from_rotvec(rng.normal(size=(n, 3))).as_matrix()
-    transl = rng.normal(size=(n, 3))
+    n = 3
+    _, _, model, rng, transl, rot, phi = _random_poses(side, layout, 2, n)
+    m = model.n_markers
     weights = rng.uniform(0, 1, (n, m)) * (rng.uniform(size=(n, m)) > 0.2)
     resid = rng.normal(scale=0.01, size=(n, m, 3))
     jac = np.swapaxes(model.jacobian(transl, rot, phi), 1, 2).reshape(n, 3 * m, 33)  # rows (marker, axis)
