@@ -79,6 +79,20 @@ class RigidSet:
         tolerance = float(max(min_tolerance, 4 * np.nanmax(spread)))
         return cls(tuple(names), canonical, tolerance)
 
+    @classmethod
+    def for_object(cls, names, canonical, *, tolerance: float = 0.0015) -> "RigidSet":
+        """A rigid object's markers from their positions in its frame (M, 3), metres.
+
+        Truly rigid bodies keep their distances to within the reconstruction
+        noise, so the tolerance is tighter than a glove's (1.5 mm): a fingertip
+        touching the object must not pass for one of its markers.
+        """
+        canonical = np.asarray(canonical, dtype=np.float64)
+        if canonical.ndim != 2 or canonical.shape != (len(names), 3) or len(names) < 3:
+            raise HandcapError(f"an object needs 3 or more markers with canonical positions (M, 3); got "
+                               f"{len(names)} names and shape {canonical.shape}")
+        return cls(tuple(names), canonical, float(tolerance))
+
     def to_arrays(self) -> dict:
         return {"rigid_names": np.array(self.names), "rigid_canonical": self.canonical,
                 "rigid_tolerance": np.float64(self.tolerance)}
@@ -265,7 +279,18 @@ class HandFrameFinder:
             if worst < self.rigid.tolerance:
                 return HandPose(rot, trans, index, True)
         # Found markers at full weight; the missing ones where the previous frame put them, weakly.
-        target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
-        weights = np.where(found, 1.0, 0.05)
-        rot, trans = _kabsch(c, target, weights)
+        for _ in range(2):
+            target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
+            weights = np.where(found, 1.0, 0.05)
+            rot, trans = _kabsch(c, target, weights)
+            # A claimed point must sit where the rigid shape puts it; another marker that merely came
+            # near a hidden one's old place (a fingertip on an object) does not.
+            off = np.linalg.norm(c @ rot.T + trans - points[np.maximum(index, 0)], axis=1)
+            wrong = found & (off > self.rigid.tolerance)
+            if not wrong.any():
+                return HandPose(rot, trans, index, True)
+            index[wrong] = -1
+            found = index >= 0
+            if found.sum() < 2:
+                return None
         return HandPose(rot, trans, index, True)

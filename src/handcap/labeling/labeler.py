@@ -170,6 +170,7 @@ class _Frame:
     back: np.ndarray  # (N,) best predecessor in the frame before
     scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
     valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K,) rows that were points
+    object_points: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # (O,) point per object label
 
 
 class OnlineLabeler:
@@ -199,6 +200,13 @@ class OnlineLabeler:
         Add the tracking hypotheses (see the module docs).
     max_hold : int
         Frames the hand frame is carried over when its markers are lost.
+    objects : sequence of RigidSet
+        Rigid objects whose markers are in the stream (a held cylinder, a
+        box): found by their marker distances like the hand's back markers,
+        labelled with their own names (after the hand's), and kept out of the
+        fingers' candidates. Without them, an object marker near a hidden
+        fingertip is a plausible finger marker that moves smoothly with the
+        hand.
 
     Attributes
     ----------
@@ -211,13 +219,15 @@ class OnlineLabeler:
 
     def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
                  max_coast: int = 10, warmup: int = 2, gate: float = 6.0, jump_cost: float = 6.0,
-                 tracking: bool = True, max_hold: int = 10):
+                 tracking: bool = True, max_hold: int = 10, objects=()):
         if not (isinstance(hypotheses, (int, np.integer)) and hypotheses >= 1):
             raise HandcapError(f"hypotheses must be a whole number >= 1, got {hypotheses}")
         if not (isinstance(lag, (int, np.integer)) and lag >= 0):
             raise HandcapError(f"lag must be a whole number of frames >= 0, got {lag}")
         self.model = model
-        self.names = model.names
+        self.objects = tuple(objects)
+        self.names = model.names + tuple(n for o in self.objects for n in o.names)
+        self._object_finders = [HandFrameFinder(o, max_hold=0) for o in self.objects]
         self.n_hyp = int(hypotheses)
         self.lag = int(lag)
         self.theta_min = float(theta_min)
@@ -292,6 +302,11 @@ class OnlineLabeler:
             if rot.shape != (3, 3) or trans.shape != (3,):
                 raise HandcapError("transform must be (rotation (3, 3), translation (3,))")
             pose = (rot, trans)
+        # The hand's back markers first (their spatial fit ranks candidates), then each object's among
+        # the points left; the fingers are labelled among what remains.
+        self._points = points
+        if transform is not None:
+            pass
         elif self.finder is not None:
             found = self.finder.find(points, self._frame_fit)
             if found is not None:
@@ -299,6 +314,17 @@ class OnlineLabeler:
                 rigid_points = found.points
         else:
             raise HandcapError("this labeling model has no rigid markers: pass transform=(R, t) every frame")
+        hand_view = np.setdiff1d(np.arange(len(points)), rigid_points[rigid_points >= 0])
+        object_points = np.full(sum(len(o.names) for o in self.objects), -1)
+        at = 0
+        for finder in self._object_finders:
+            found = finder.find(points[hand_view])
+            n = len(finder.rigid.names)
+            if found is not None and found.found:
+                got = found.points >= 0
+                object_points[at:at + n][got] = hand_view[found.points[got]]
+                hand_view = np.setdiff1d(hand_view, hand_view[found.points[got]])
+            at += n
         if pose is None:
             self.lost_frames.append(self.frame_index)
             hyps = np.full((1, n_free), -1)
@@ -306,9 +332,7 @@ class OnlineLabeler:
             candidates = np.zeros(0, dtype=int)
             emission = np.zeros(1)
         else:
-            free = np.ones(len(points), bool)
-            free[rigid_points[rigid_points >= 0]] = False
-            candidates = np.flatnonzero(free)
+            candidates = hand_view
             world = points[candidates]
             hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0])
         # Observed positions (N, F, 3) of every hypothesis. The filters track world positions: the hand
@@ -333,7 +357,7 @@ class OnlineLabeler:
         self._scores = scores
         # Store point indices of the frame (candidates map hypothesis indices back to points).
         mapped = np.where(hyps >= 0, candidates[np.maximum(hyps, 0)] if len(candidates) else -1, -1)
-        return _Frame(len(points), rigid_points, mapped, back, scores)
+        return _Frame(len(points), rigid_points, mapped, back, scores, object_points=object_points)
 
     def _frame_fit(self, rot, trans, used) -> float:
         """How well the other points fit the spatial model in a candidate hand frame."""
@@ -452,6 +476,9 @@ class OnlineLabeler:
         for f, p in enumerate(frame.hypotheses[h]):
             if p >= 0:
                 labels[valid_index[p]] = self.n_rigid + f
+        for o, p in enumerate(frame.object_points):
+            if p >= 0:
+                labels[valid_index[p]] = len(self.model.names) + o
         return labels
 
 
@@ -516,9 +543,10 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         if out is not None:
             labels.append(out)
     labels.extend(labeler.flush())
-    positions = np.full((points.n_frames, len(model.names), 3), np.nan)
+    names = labeler.names
+    positions = np.full((points.n_frames, len(names), 3), np.nan)
     for t, (frame, lab) in enumerate(zip(points.frames, labels)):
         hit = lab >= 0
         positions[t, lab[hit]] = frame[hit]
-    return LabelResult(MarkerSequence(positions, model.names, points.rate), labels,
+    return LabelResult(MarkerSequence(positions, names, points.rate), labels,
                        np.array(getattr(labeler, "lost_frames", []), dtype=int))
