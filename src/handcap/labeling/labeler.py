@@ -95,7 +95,7 @@ class LabelingModel:
         unknown = [n for n in rigid if n not in names]
         if unknown:
             raise HandcapError(f"rigid markers not among the labels: {', '.join(unknown)}")
-        positions = np.stack([markers.positions[:, _index(markers, n)] for n in names], axis=1)
+        positions = np.stack([markers.positions[:, markers.index(n)] for n in names], axis=1)
         for n, s in zip(names, ~np.isnan(positions[..., 0]).T):
             if not s.any():
                 raise HandcapError(f"marker {n!r} never appears in the training take")
@@ -141,10 +141,6 @@ class LabelingModel:
         rigid = RigidSet.from_arrays(data) if "rigid_names" in data else None
         return cls(tuple(str(n) for n in data["names"]), rigid, SpatialModel.from_arrays(data),
                    KalmanSettings(dt, jerk, measurement))
-
-
-def _index(markers, name):
-    return markers.index(name)
 
 
 def _rigid_transforms(canonical, positions):
@@ -297,16 +293,13 @@ class OnlineLabeler:
         self._points = points
         rigid_points = np.full(n_rigid, -1)
         pose = None
+        # The hand's frame (given, or from its back markers, ranked by the spatial fit), then each
+        # object's markers among the points left; the fingers are labelled among what remains.
         if transform is not None:
             rot, trans = (np.asarray(a, dtype=np.float64) for a in transform)
             if rot.shape != (3, 3) or trans.shape != (3,):
                 raise HandcapError("transform must be (rotation (3, 3), translation (3,))")
             pose = (rot, trans)
-        # The hand's back markers first (their spatial fit ranks candidates), then each object's among
-        # the points left; the fingers are labelled among what remains.
-        self._points = points
-        if transform is not None:
-            pass
         elif self.finder is not None:
             found = self.finder.find(points, self._frame_fit)
             if found is not None:
