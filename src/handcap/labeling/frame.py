@@ -1,21 +1,24 @@
 """The hand's local frame from its rigid back-of-hand markers, found among unlabeled points.
 
-The rigid markers (three or more, e.g. the triad on the back of a glove) keep
-their distances to each other. In every frame the points whose pairwise
-distances match the trained ones (within a tolerance) are taken as those
-markers; among several candidates, the one closest to the previous frame's
-prediction wins. Kabsch then gives the hand's rotation and translation, which
-map hand-frame coordinates to the world: ``world = R @ local + t``.
+The rigid markers (three or more: the triad on the back of a glove, or the
+markers of a held object) keep their distances to each other. A set is
+tracked from frame to frame: each marker takes the point nearest its place in
+the previous pose, and claimed points that break the rigid distances are
+dropped (a ghost or a fingertip near a hidden marker's place). When some
+marker is missing, the set is also searched for afresh: triangles of points
+whose distances match one of a few anchor triangles of markers (the largest,
+and for each of its markers the largest without it, so that one hidden marker
+hides no object), each candidate pose scored by its distance error, by how
+many markers it explains (an object needs four), by how far it moved since
+the previous frame and, when the caller gives one, by how well the other
+points fit the spatial model in that frame. Kabsch then gives the rotation
+and translation that map hand-frame coordinates to the world:
+``world = R @ local + t``.
 
-Other markers can match the distances too (three finger markers, or a ghost
-near a missing back marker), so candidates are ranked by the distance error,
-by how far the hand would have jumped since the previous frame, and, when the caller gives one, by how well the
-other points fit the spatial model in that frame.
-
-When fewer than three rigid markers can be found, the markers that can (at
-least two, near where the previous frame puts them) correct the previous
-transform; with fewer, the previous transform is kept for a few frames and the
-frame is reported as lost after that.
+When only two markers can be tracked, they correct the previous transform
+(the missing ones are held weakly where they were); with fewer, the previous
+transform is kept for a few frames and the frame is reported as lost after
+that.
 """
 
 from __future__ import annotations
@@ -128,6 +131,12 @@ class HandFrameFinder:
         A candidate whose markers moved this far (mean, metres) since the
         previous frame pays as much as one at the distance tolerance. Soft: a
         wrong previous frame must not lock the right one out.
+
+    Attributes
+    ----------
+    suspect : bool
+        Set by the caller when the last frame fitted poorly: the next frame is
+        searched afresh even when every marker is where it was.
     """
 
     def __init__(self, rigid: RigidSet, *, max_hold: int = 10, search_radius: float = 0.02,
@@ -139,19 +148,19 @@ class HandFrameFinder:
         self.full_set_bonus = 3.0  # log-likelihood a full set found by distances is preferred by
         self.previous: HandPose | None = None
         self.held = 0
+        self.suspect = False
         c = rigid.canonical
         n = len(c)
-        self._pairs = np.array([(a, b) for a in range(n) for b in range(a + 1, n)])
-        self._dist = np.linalg.norm(c[self._pairs[:, 0]] - c[self._pairs[:, 1]], axis=1)
-        # The three markers spanning the largest triangle anchor the search.
-        best, area = (0, 1, 2), -1.0
-        for a in range(n):
-            for b in range(a + 1, n):
-                for d in range(b + 1, n):
-                    ar = np.linalg.norm(np.cross(c[b] - c[a], c[d] - c[a]))
-                    if ar > area:
-                        best, area = (a, b, d), ar
-        self._anchor = np.array(best)
+        self._canon_dist = np.linalg.norm(c[:, None] - c[None], axis=-1)
+        # The triangles of largest area anchor the search (several, so that one hidden marker does not
+        # hide an object); a candidate must then explain at least min_found markers.
+        tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
+        order = tri[np.argsort(-np.linalg.norm(np.cross(c[tri[:, 1]] - c[tri[:, 0]], c[tri[:, 2]] - c[tri[:, 0]]),
+                                               axis=1), kind="stable")]
+        # The largest, then for each of its markers the largest without it: any one hidden marker leaves one.
+        anchors = [order[0]] + [order[~(order == m).any(axis=1)][0] for m in order[0] if n > 3]
+        self._anchors = np.unique(np.array(anchors), axis=0)
+        self.min_found = 3 if n <= 4 else 4
 
     def reset(self) -> None:
         self.previous = None
@@ -176,17 +185,22 @@ class HandFrameFinder:
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         tracked = self._from_previous(points) if self.previous is not None and self.held == 0 else None
-        if tracked is not None and (tracked.points >= 0).all():
+        if tracked is not None and (tracked.points >= 0).all() and not self.suspect:
             pose = tracked  # every rigid marker where the previous frame puts it
         else:
             pose = self._search(points, fit)
             if pose is None:
                 pose = tracked
-            elif tracked is not None and fit is not None:
-                # Two markers tracked, or a full set found elsewhere (which may have borrowed another
-                # marker for a missing one): keep whichever frame explains the other points better.
-                if fit(tracked.rotation, tracked.translation, tracked.points) > \
-                        fit(pose.rotation, pose.translation, pose.points) + self.full_set_bonus:
+            elif tracked is not None and not np.array_equal(tracked.points, pose.points):
+                # Markers tracked, or a set found elsewhere by distances (which may have borrowed another
+                # marker for a missing one): keep whichever explains more markers, or, for a hand, the
+                # other points better.
+                if fit is not None:
+                    if fit(tracked.rotation, tracked.translation, tracked.points) > \
+                            fit(pose.rotation, pose.translation, pose.points) + self.full_set_bonus:
+                        pose = tracked
+                elif (tracked.points >= 0).sum() >= (pose.points >= 0).sum() or \
+                        self._moved(pose) > self.search_radius:
                     pose = tracked
         if pose is not None:
             self.previous, self.held = pose, 0
@@ -198,42 +212,55 @@ class HandFrameFinder:
         self.previous = None
         return None
 
+    def _moved(self, pose: HandPose) -> float:
+        """Mean distance (metres) the rigid markers moved from the previous pose to ``pose``."""
+        c, prev = self.rigid.canonical, self.previous
+        return float(np.linalg.norm(c @ (pose.rotation - prev.rotation).T + pose.translation - prev.translation,
+                                    axis=1).mean())
+
     def _search(self, points, fit=None) -> HandPose | None:
-        """All rigid markers of the anchor triangle by distance matching, then the rest near their places."""
+        """Anchor triangles of rigid markers by distance matching, then the other markers near their places."""
         k = len(points)
         if k < 3:
             return None
         c, tol = self.rigid.canonical, self.rigid.tolerance
-        a, b, d = self._anchor
         dist = np.linalg.norm(points[:, None] - points[None], axis=-1)
-        ab, ad, bd = (np.linalg.norm(c[x] - c[y]) for x, y in ((a, b), (a, d), (b, d)))
-        e_ab, e_ad, e_bd = np.abs(dist - ab), np.abs(dist - ad), np.abs(dist - bd)
-        ok = (e_ab < tol)[:, :, None] & (e_ad < tol)[:, None, :] & (e_bd < tol)[None, :, :]
-        cand = np.argwhere(ok)  # (n, 3): points for markers a, b, d
+        cands, anchors = [], []
+        for a, b, d in self._anchors:
+            e_ab, e_ad, e_bd = (np.abs(dist - self._canon_dist[x, y]) for x, y in ((a, b), (a, d), (b, d)))
+            ok = (e_ab < tol)[:, :, None] & (e_ad < tol)[:, None, :] & (e_bd < tol)[None, :, :]
+            found = np.argwhere(ok)  # (n, 3): points for markers a, b, d
+            cands.append(found)
+            anchors.append(np.broadcast_to((a, b, d), found.shape))
+        cand, anchor = np.concatenate(cands), np.concatenate(anchors)
         if not len(cand):
             return None
-        err = (e_ab[cand[:, 0], cand[:, 1]] ** 2 + e_ad[cand[:, 0], cand[:, 2]] ** 2
-               + e_bd[cand[:, 1], cand[:, 2]] ** 2) / tol**2
-        src = c[[a, b, d]]
-        rot, trans = kabsch(np.broadcast_to(src, (len(cand), 3, 3)), points[cand])
-        score = err.copy()
-        if self.previous is not None and self.held == 0:
-            moved = np.linalg.norm(np.einsum("nij,rj->nri", rot, c) + trans[:, None]
-                                   - (c @ self.previous.rotation.T + self.previous.translation), axis=-1).mean(axis=1)
-            score += (moved / self.jump_scale) ** 2
+        src = c[anchor]  # (n, 3, 3)
+        rot, trans = kabsch(src, points[cand])
         # Every distance within tolerance can still leave a poor fit; refuse those.
-        resid = np.linalg.norm(np.einsum("nij,rj->nri", rot, src) + trans[:, None] - points[cand], axis=-1).max(axis=1)
-        score[resid > tol] = np.inf
+        resid = np.linalg.norm(np.einsum("nij,nrj->nri", rot, src) + trans[:, None] - points[cand], axis=-1)
+        score = (resid**2).sum(axis=1) / tol**2
+        score[resid.max(axis=1) > tol] = np.inf
+        # Each candidate's markers where it puts them: how many have a point there (its support).
+        placed = np.einsum("nij,rj->nri", rot, c) + trans[:, None]  # (n, R, 3)
+        near = np.linalg.norm(placed[:, :, None] - points[None, None], axis=-1).min(axis=2)  # (n, R)
+        support = (near < tol).sum(axis=1)
+        score[support < min(self.min_found, len(c))] = np.inf
+        score -= 2.0 * support
+        if self.previous is not None and self.held == 0:
+            moved = np.linalg.norm(placed - (c @ self.previous.rotation.T + self.previous.translation),
+                                   axis=-1).mean(axis=1)
+            score += (moved / self.jump_scale) ** 2
         if fit is not None:
             for n in np.flatnonzero(np.isfinite(score)):
                 used = np.full(len(c), -1)
-                used[[a, b, d]] = cand[n]
+                used[anchor[n]] = cand[n]
                 score[n] -= 0.1 * fit(rot[n], trans[n], used)
         best = int(np.argmin(score))
         if not np.isfinite(score[best]):
             return None
         index = np.full(len(c), -1)
-        index[[a, b, d]] = cand[best]
+        index[anchor[best]] = cand[best]
         return self._complete(points, rot[best], trans[best], index)
 
     def _complete(self, points, rot, trans, index) -> HandPose:
@@ -258,7 +285,7 @@ class HandFrameFinder:
     def _from_previous(self, points) -> HandPose | None:
         """Two or more rigid markers near their previous places: correct the previous transform."""
         prev = self.previous
-        c = self.rigid.canonical
+        c, tol = self.rigid.canonical, self.rigid.tolerance
         predicted = c @ prev.rotation.T + prev.translation
         if not len(points):
             return None
@@ -270,27 +297,46 @@ class HandFrameFinder:
             if d[r, p] < self.search_radius and p not in taken:
                 index[r] = p
                 taken.add(p)
+        # Another point that came near a hidden marker's old place (a ghost, a fingertip) must not be taken
+        # for it: the claimed points have to keep the rigid distances among themselves.
+        index = self._consistent(points, index, d)
         found = index >= 0
         if found.sum() < 2:
             return None
-        if found.sum() == len(c):
+        if found.all():
             rot, trans = _kabsch(c, points[index])
-            worst = np.linalg.norm(c @ rot.T + trans - points[index], axis=1).max()
-            if worst < self.rigid.tolerance:
-                return HandPose(rot, trans, index, True)
+            return HandPose(rot, trans, index, True)
         # Found markers at full weight; the missing ones where the previous frame put them, weakly.
-        for _ in range(2):
-            target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
-            weights = np.where(found, 1.0, 0.05)
-            rot, trans = _kabsch(c, target, weights)
-            # A claimed point must sit where the rigid shape puts it; another marker that merely came
-            # near a hidden one's old place (a fingertip on an object) does not.
-            off = np.linalg.norm(c @ rot.T + trans - points[np.maximum(index, 0)], axis=1)
-            wrong = found & (off > self.rigid.tolerance)
-            if not wrong.any():
-                return HandPose(rot, trans, index, True)
-            index[wrong] = -1
+        target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
+        rot, trans = _kabsch(c, target, np.where(found, 1.0, 0.05))
+        # A missing marker may be a point that was further from its old place than another one.
+        now = c @ rot.T + trans
+        for r in np.flatnonzero(~found):
+            near = np.linalg.norm(points - now[r], axis=1)
+            near[index[found]] = np.inf
+            p = int(np.argmin(near))
+            if near[p] < tol:
+                index[r] = p
+        if (index >= 0).sum() > found.sum():
+            index = self._consistent(points, index, d)
             found = index >= 0
-            if found.sum() < 2:
-                return None
+            target = np.where(found[:, None], points[np.maximum(index, 0)], predicted)
+            rot, trans = _kabsch(c, target, np.where(found, 1.0, 0.05))
         return HandPose(rot, trans, index, True)
+
+    def _consistent(self, points, index, dist) -> np.ndarray:
+        """Drop claimed points (index (R,), -1 none) until their pairwise distances match the rigid ones;
+        the marker with the most mismatches goes first, then the one further from its old place
+        (``dist`` (R, K))."""
+        index = index.copy()
+        tol = self.rigid.tolerance
+        while (index >= 0).sum() >= 2:
+            f = np.flatnonzero(index >= 0)
+            p = points[index[f]]
+            err = np.abs(np.linalg.norm(p[:, None] - p[None], axis=-1) - self._canon_dist[np.ix_(f, f)])
+            bad = err > tol
+            if not bad.any():
+                break
+            key = bad.sum(axis=1) + np.tanh(dist[f, index[f]] / self.search_radius)  # count, then distance
+            index[f[np.argmax(key)]] = -1
+        return index

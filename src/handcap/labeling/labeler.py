@@ -241,6 +241,8 @@ class OnlineLabeler:
         self._scores = np.zeros(1)
         self._pending: deque[_Frame] = deque()
         self._occluded_score = np.log(1.0 / self.n_free)
+        self._fit_level = None  # running mean of the per-point spatial fit
+        self.suspect_drop = 4.0  # a fit this far below it has the hand frame searched afresh
 
     # -- public ---------------------------------------------------------------------------
     def update(self, points, transform=None):
@@ -290,34 +292,38 @@ class OnlineLabeler:
     # -- one frame ------------------------------------------------------------------------
     def _step(self, points, transform) -> _Frame:
         n_rigid, n_free = self.n_rigid, self.n_free
-        self._points = points
+        # Each object's markers first (a rigid object with many markers is the surest find), then the
+        # hand's frame among the points left (given, or from its back markers, ranked by the spatial
+        # fit); the fingers are labelled among what remains.
+        rest = np.arange(len(points))
+        object_points = np.full(sum(len(o.names) for o in self.objects), -1)
+        at = 0
+        for finder in self._object_finders:
+            found = finder.find(points[rest])
+            n = len(finder.rigid.names)
+            if found is not None and found.found:
+                got = found.points >= 0
+                object_points[at:at + n][got] = rest[found.points[got]]
+                rest = np.delete(rest, found.points[got])
+            at += n
+        self._points = points[rest]
         rigid_points = np.full(n_rigid, -1)
         pose = None
-        # The hand's frame (given, or from its back markers, ranked by the spatial fit), then each
-        # object's markers among the points left; the fingers are labelled among what remains.
         if transform is not None:
             rot, trans = (np.asarray(a, dtype=np.float64) for a in transform)
             if rot.shape != (3, 3) or trans.shape != (3,):
                 raise HandcapError("transform must be (rotation (3, 3), translation (3,))")
             pose = (rot, trans)
         elif self.finder is not None:
-            found = self.finder.find(points, self._frame_fit)
+            found = self.finder.find(self._points, self._frame_fit)
             if found is not None:
                 pose = (found.rotation, found.translation)
-                rigid_points = found.points
+                got = found.points >= 0
+                rigid_points[got] = rest[found.points[got]]
+                rest = np.delete(rest, found.points[got])
         else:
             raise HandcapError("this labeling model has no rigid markers: pass transform=(R, t) every frame")
-        hand_view = np.setdiff1d(np.arange(len(points)), rigid_points[rigid_points >= 0])
-        object_points = np.full(sum(len(o.names) for o in self.objects), -1)
-        at = 0
-        for finder in self._object_finders:
-            found = finder.find(points[hand_view])
-            n = len(finder.rigid.names)
-            if found is not None and found.found:
-                got = found.points >= 0
-                object_points[at:at + n][got] = hand_view[found.points[got]]
-                hand_view = np.setdiff1d(hand_view, hand_view[found.points[got]])
-            at += n
+        hand_view = rest
         if pose is None:
             self.lost_frames.append(self.frame_index)
             hyps = np.full((1, n_free), -1)
@@ -328,6 +334,7 @@ class OnlineLabeler:
             candidates = hand_view
             world = points[candidates]
             hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0])
+            self._watch_frame()
         # Observed positions (N, F, 3) of every hypothesis. The filters track world positions: the hand
         # frame (spatial model) can be off when a back marker is missing, the points themselves are not.
         obs = np.full(hyps.shape + (3,), np.nan)
@@ -359,6 +366,19 @@ class OnlineLabeler:
             return 0.0
         ll = self.model.spatial.log_likelihood((self._points[others] - trans) @ rot)
         return float(np.maximum(ll.max(axis=1), self.theta_min).sum())
+
+    def _watch_frame(self) -> None:
+        """Flag the hand finder when the points fit far worse than they usually do in the hand frame (mean
+        best log-likelihood per point): a wrong set of back markers can be tracked as well as the right one,
+        so the next frame is searched afresh."""
+        if self.finder is None or not self._last_ll.size:
+            return
+        fit = float(np.maximum(self._last_ll.max(axis=0), self.theta_min).mean())
+        if self._fit_level is None:
+            self._fit_level = fit
+        self.finder.suspect = fit < self._fit_level - self.suspect_drop
+        if not self.finder.suspect:
+            self._fit_level += 0.05 * (fit - self._fit_level)
 
     def _spatial_hypotheses(self, local):
         """The N best assignments (N, F) of candidate indices (-1: occluded) and their scores (N,)."""

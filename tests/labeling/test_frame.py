@@ -1,0 +1,79 @@
+"""Finding rigid marker sets (a hand's back markers, an object) among unlabeled points, against known poses."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from handcap.labeling.frame import HandFrameFinder, RigidSet
+
+TRIAD = np.array([[0.0, 0.03, 0.0], [-0.03, -0.02, 0.0], [0.035, -0.015, 0.0]])
+
+
+def place(canonical, rotvec, shift):
+    rot = Rotation.from_rotvec(rotvec).as_matrix()
+    return canonical @ rot.T + shift, rot
+
+
+def test_triad_found_among_clutter_with_its_pose():
+    rng = np.random.default_rng(0)
+    finder = HandFrameFinder(RigidSet(("a", "b", "c"), TRIAD - TRIAD.mean(0), 0.003))
+    world, rot = place(finder.rigid.canonical, [0.3, -0.5, 1.0], [0.2, 0.1, 1.0])
+    clutter = rng.uniform(-0.15, 0.15, (12, 3)) + [0.2, 0.1, 1.0]
+    order = rng.permutation(15)
+    points = np.concatenate([world, clutter])[order]
+    pose = finder.find(points)
+    assert pose.found
+    np.testing.assert_array_equal(order[pose.points], [0, 1, 2])
+    np.testing.assert_allclose(pose.rotation, rot, atol=1e-9)
+
+
+def test_a_dropped_back_marker_is_not_replaced_by_a_look_alike_triangle():
+    # Three other points form the triad's shape 6 cm away; when one back marker drops out, the two left
+    # keep the hand where it is rather than jumping to the look-alike.
+    canonical = TRIAD - TRIAD.mean(0)
+    finder = HandFrameFinder(RigidSet(("a", "b", "c"), canonical, 0.003))
+    hand, _ = place(canonical, [0, 0, 0], [0, 0, 1.0])
+    look_alike, _ = place(canonical, [0, 0.4, 0], [0.06, 0.0, 1.0])
+    assert (finder.find(np.concatenate([hand, look_alike])).points == [0, 1, 2]).all()
+    pose = finder.find(np.concatenate([hand[1:], look_alike]))
+    np.testing.assert_array_equal(pose.points, [-1, 0, 1])
+    np.testing.assert_allclose(pose.translation, [0, 0, 1.0], atol=1e-3)
+    # A stray point near the hidden marker's place does not pass for it: it breaks the rigid distances.
+    stray = hand[0] + [0.008, 0, 0]
+    pose = finder.find(np.concatenate([hand[1:], [stray], look_alike]))
+    np.testing.assert_array_equal(pose.points, [-1, 0, 1])
+
+
+def test_object_found_with_its_best_triangle_hidden_and_not_from_a_chance_triangle():
+    rng = np.random.default_rng(3)
+    canonical = rng.normal(scale=0.04, size=(8, 3))
+    canonical -= canonical.mean(0)
+    rigid = RigidSet.for_object([f"o{i}" for i in range(8)], canonical)
+    world, rot = place(canonical, [1.0, 0.2, -0.4], [0.0, 0.3, 0.9])
+    for hidden in range(8):  # whichever marker is hidden, the object is found afresh from the others
+        finder = HandFrameFinder(rigid, max_hold=0)
+        pose = finder.find(np.delete(world, hidden, axis=0))
+        assert pose.found and (pose.points >= 0).sum() == 7
+        np.testing.assert_allclose(pose.rotation, rot, atol=1e-6)
+    # Three points that happen to match one triangle of the object, and nothing else: not the object.
+    fresh = HandFrameFinder(rigid, max_hold=0)
+    a, b, c = finder._anchors[0]
+    chance, _ = place(canonical[[a, b, c]], [0.2, 0.2, 0.2], [0.5, 0.0, 1.0])
+    assert fresh.find(np.concatenate([chance, rng.uniform(-0.3, 0.3, (5, 3))])) is None
+
+
+def test_a_suspect_frame_is_searched_afresh_and_leaves_a_look_alike():
+    # Locked onto a look-alike (the real triad was hidden when the hand was first found), the finder keeps
+    # tracking it while its markers stay put; flagged as suspect, it searches and the fit picks the hand.
+    canonical = TRIAD - TRIAD.mean(0)
+    finder = HandFrameFinder(RigidSet(("a", "b", "c"), canonical, 0.003))
+    hand, _ = place(canonical, [0, 0, 0], [0, 0, 1.0])
+    look_alike, _ = place(canonical, [0, 0.4, 0], [0.06, 0.0, 1.0])
+    finder.find(look_alike)
+    both = np.concatenate([look_alike, hand])
+
+    def fit(rot, trans, used):  # the other points fit well only in the hand's true frame
+        return -4e3 * np.linalg.norm(trans - [0, 0, 1.0])  # 240 at the look-alike, as measured in a grasp
+
+    assert (finder.find(both, fit).points == [0, 1, 2]).all()
+    finder.suspect = True
+    assert (finder.find(both, fit).points == [3, 4, 5]).all()
