@@ -70,6 +70,31 @@ def test_kalman_filter_matches_the_textbook_equations():
         np.testing.assert_allclose(batch.cov[0], p[:3, :3], rtol=1e-9, atol=1e-15)
 
 
+
+def test_successors_equal_copy_step_and_restart():
+    # The labeler's one-call advance against the separate operations: pick filters, step, restart the lost.
+    s = KalmanSettings(dt=0.01, jerk=50.0, measurement=(0.3e-3) ** 2)
+    rng = np.random.default_rng(4)
+    batch = KalmanBatch(s, 6)
+    batch.restart(np.ones(6, bool), rng.normal(size=(6, 3)))
+    for t in range(15):  # filters 4 and 5 go unseen from frame 3 on: past max_coast = 10
+        z = rng.normal(scale=0.01, size=(6, 3)) + t * 0.001
+        z[4:] = np.nan if t >= 3 else z[4:]
+        batch.step(z)
+    index = np.array([0, 0, 2, 4, 5, 1, 3])
+    measured = rng.normal(size=(7, 3))
+    measured[[1, 4]] = np.nan
+    fast = batch.successors(index, measured, batch.predicted(), max_coast=10)
+    slow = KalmanBatch(s, 0)
+    slow.copy_from(batch, index)
+    lost = (slow.missed > 10) & ~np.isnan(measured[:, 0])
+    assert lost.tolist() == [False, False, False, True, False, False, False]
+    slow.step(np.where(lost[:, None], np.nan, measured))
+    slow.restart(lost, measured)
+    for name in ("state", "cov", "age", "missed"):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=1e-12, atol=0, err_msg=name)
+
+
 @pytest.mark.parametrize("seed", range(20))
 def test_viterbi_equals_exhaustive_search(seed):
     rng = np.random.default_rng(seed)

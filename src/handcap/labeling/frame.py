@@ -32,15 +32,22 @@ from handcap.objects.rigid import canonical_from_markers, kabsch
 
 
 def _kabsch(source, target, weights=None):
-    """One frame of :func:`handcap.objects.rigid.kabsch` (N, 3) -> (R, t), without the batch machinery."""
-    w = np.ones(len(source)) if weights is None else weights
-    w = w / w.sum()
-    src_mean, tgt_mean = w @ source, w @ target
-    cov = ((target - tgt_mean) * w[:, None]).T @ (source - src_mean)
+    """One frame of :func:`handcap.objects.rigid.kabsch` (N, 3) -> (R, t), without the batch machinery
+    (a streaming labeler runs it every frame: few numpy calls, the determinant in plain Python)."""
+    if weights is None:
+        share = 1.0 / len(source)  # (ndarray.mean costs more than the sum here)
+        src_mean, tgt_mean = source.sum(axis=0) * share, target.sum(axis=0) * share
+        cov = (target - tgt_mean).T @ (source - src_mean)
+    else:
+        w = weights / weights.sum()
+        src_mean, tgt_mean = w @ source, w @ target
+        cov = ((target - tgt_mean) * w[:, None]).T @ (source - src_mean)
     u, _, vt = np.linalg.svd(cov)
-    if np.linalg.det(u @ vt) < 0:
-        u[:, -1] = -u[:, -1]
     rot = u @ vt
+    (a, b, c), (d, e, f), (g, h, i) = rot.tolist()
+    if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0:
+        u[:, -1] = -u[:, -1]
+        rot = u @ vt
     return rot, tgt_mean - rot @ src_mean
 
 
@@ -152,6 +159,9 @@ class HandFrameFinder:
         c = rigid.canonical
         n = len(c)
         self._canon_dist = np.linalg.norm(c[:, None] - c[None], axis=-1)
+        self._rows = np.arange(n)
+        self._pair_i, self._pair_j = np.triu_indices(n, 1)
+        self._pair_dist = self._canon_dist[self._pair_i, self._pair_j]
         # The triangles of largest area anchor the search (several, so that one hidden marker does not
         # hide an object); a candidate must then explain at least min_found markers.
         tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
@@ -289,7 +299,16 @@ class HandFrameFinder:
         predicted = c @ prev.rotation.T + prev.translation
         if not len(points):
             return None
-        d = np.linalg.norm(points[None] - predicted[:, None], axis=-1)  # (R, K)
+        diff = points[None] - predicted[:, None]
+        d = np.sqrt(np.einsum("rkx,rkx->rk", diff, diff))  # (R, K)
+        nearest = d.argmin(axis=1)
+        if d[self._rows, nearest].max() < self.search_radius and len(set(nearest.tolist())) == len(c):
+            # The usual frame: every marker has its own point near its place, at the rigid distances.
+            p = points[nearest]
+            e = p[self._pair_i] - p[self._pair_j]
+            if (np.abs(np.sqrt(np.einsum("px,px->p", e, e)) - self._pair_dist) <= tol).all():
+                rot, trans = _kabsch(c, p)
+                return HandPose(rot, trans, nearest, True)
         index = np.full(len(c), -1)
         taken = set()
         for r in np.argsort(d.min(axis=1)):

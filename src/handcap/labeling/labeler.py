@@ -20,8 +20,9 @@ Per frame:
    best hypothesis; offline, on the whole take.
 
 Beyond the paper: each frame also gets the assignment that is best for spatial
-and temporal evidence together given each previous hypothesis (a tracking
-hypothesis), so a correct but spatially unlikely assignment (a finger in a
+and temporal evidence together given the best previous hypothesis (a tracking
+hypothesis; from every previous hypothesis labels no better on the real glove
+and synthetic takes), so a correct but spatially unlikely assignment (a finger in a
 pose the training take barely covered) is not lost when it is outside the N
 spatially best.
 """
@@ -193,7 +194,7 @@ class OnlineLabeler:
         gap (log-likelihood), however far: real markers do jump, and a
         spatially convincing point should still be kept.
     tracking : bool
-        Add the tracking hypotheses (see the module docs).
+        Add the tracking hypothesis (see the module docs).
     max_hold : int
         Frames the hand frame is carried over when its markers are lost.
     objects : sequence of RigidSet
@@ -224,6 +225,8 @@ class OnlineLabeler:
         self.objects = tuple(objects)
         self.names = model.names + tuple(n for o in self.objects for n in o.names)
         self._object_finders = [HandFrameFinder(o, max_hold=0) for o in self.objects]
+        self._n_object_markers = sum(len(o.names) for o in self.objects)
+        self._rows = np.arange(len(model.free_names))
         self.n_hyp = int(hypotheses)
         self.lag = int(lag)
         self.theta_min = float(theta_min)
@@ -241,6 +244,7 @@ class OnlineLabeler:
         self._scores = np.zeros(1)
         self._pending: deque[_Frame] = deque()
         self._occluded_score = np.log(1.0 / self.n_free)
+        self.tracked_predecessors = 100
         self._fit_level = None  # running mean of the per-point spatial fit
         self.suspect_drop = 4.0  # a fit this far below it has the hand frame searched afresh
 
@@ -296,7 +300,7 @@ class OnlineLabeler:
         # hand's frame among the points left (given, or from its back markers, ranked by the spatial
         # fit); the fingers are labelled among what remains.
         rest = np.arange(len(points))
-        object_points = np.full(sum(len(o.names) for o in self.objects), -1)
+        object_points = np.full(self._n_object_markers, -1)
         at = 0
         for finder in self._object_finders:
             found = finder.find(points[rest])
@@ -306,7 +310,7 @@ class OnlineLabeler:
                 object_points[at:at + n][got] = rest[found.points[got]]
                 rest = np.delete(rest, found.points[got])
             at += n
-        self._points = points[rest]
+        self._points = points[rest] if self.objects else points
         rigid_points = np.full(n_rigid, -1)
         pose = None
         if transform is not None:
@@ -323,40 +327,42 @@ class OnlineLabeler:
                 rest = np.delete(rest, found.points[got])
         else:
             raise HandcapError("this labeling model has no rigid markers: pass transform=(R, t) every frame")
-        hand_view = rest
+        filters = self._filters
+        n_prev = len(self._scores)
+        state_pred, cov_pred = self._predicted = filters.predicted()
+        pred = state_pred[:, 0].reshape(n_prev, n_free, 3)
+        var = filters.innovation_variance(cov_pred).reshape(n_prev, n_free)
+        trackable = ((filters.missed <= self.max_coast) & (filters.age >= self.warmup)).reshape(n_prev, n_free)
+        self._log_norm_all = -1.5 * np.log(2 * np.pi * var)  # (P, F): Gaussian normaliser of each filter
+        self._at_gate_all = self._log_norm_all - 0.5 * self.gate**2
         if pose is None:
             self.lost_frames.append(self.frame_index)
             hyps = np.full((1, n_free), -1)
             world = np.zeros((0, 3))
-            candidates = np.zeros(0, dtype=int)
             emission = np.zeros(1)
         else:
-            candidates = hand_view
-            world = points[candidates]
+            world = points[rest]
             hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0])
             self._watch_frame()
+            if self.tracking and len(world):
+                best = int(np.argmax(self._scores))
+                self._log_norm, self._at_gate = self._log_norm_all[best], self._at_gate_all[best]
+                extra = self._tracking_hypothesis(world, pred[best], var[best], trackable[best])
+                if not (hyps == extra).all(axis=1).any():
+                    hyps = np.concatenate([hyps, extra])
+                    emission = np.append(emission, self._emission(extra))
         # Observed positions (N, F, 3) of every hypothesis. The filters track world positions: the hand
         # frame (spatial model) can be off when a back marker is missing, the points themselves are not.
-        obs = np.full(hyps.shape + (3,), np.nan)
         seen = hyps >= 0
+        obs = np.full(hyps.shape + (3,), np.nan)
         obs[seen] = world[hyps[seen]]
-        state_pred, cov_pred = self._filters.predicted()
-        n_prev = len(self._scores)
-        pred = state_pred[:, 0].reshape(n_prev, n_free, 3)
-        var = self._filters.innovation_variance(cov_pred).reshape(n_prev, n_free)
-        trackable = ((self._filters.missed <= self.max_coast) & (self._filters.age >= self.warmup)).reshape(n_prev,
-                                                                                                     n_free)
-        if self.tracking and len(world):
-            extra = self._tracking_hypotheses(world, pred, var, trackable)
-            if len(extra):
-                hyps, emission, obs = self._merge_hypotheses(hyps, emission, extra, world)
         transition = self._transitions(obs, pred, var, trackable)  # (N_prev, N)
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
         self._advance_filters(back, obs)
         self._scores = scores
-        # Store point indices of the frame (candidates map hypothesis indices back to points).
-        mapped = np.where(hyps >= 0, candidates[np.maximum(hyps, 0)] if len(candidates) else -1, -1)
+        # Store point indices of the frame (rest maps hypothesis indices back to points).
+        mapped = np.where(seen, rest[np.maximum(hyps, 0)] if len(rest) else -1, -1)
         return _Frame(len(points), rigid_points, mapped, back, scores, object_points=object_points)
 
     def _frame_fit(self, rot, trans, used) -> float:
@@ -373,7 +379,7 @@ class OnlineLabeler:
         so the next frame is searched afresh."""
         if self.finder is None or not self._last_ll.size:
             return
-        fit = float(np.maximum(self._last_ll.max(axis=0), self.theta_min).mean())
+        fit = float(np.maximum(self._last_ll.max(axis=0), self.theta_min).sum()) / self._last_ll.shape[1]
         if self._fit_level is None:
             self._fit_level = fit
         self.finder.suspect = fit < self._fit_level - self.suspect_drop
@@ -385,9 +391,8 @@ class OnlineLabeler:
         n_free = self.n_free
         ll = self.model.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
         cost = np.full((n_free, len(local) + n_free), np.inf)
-        allowed = ll >= self.theta_min
-        cost[:, :len(local)][allowed] = -ll[allowed]
-        cost[np.arange(n_free), len(local) + np.arange(n_free)] = -self._occluded_score
+        cost[:, :len(local)] = np.where(ll >= self.theta_min, -ll, np.inf)
+        cost[self._rows, len(local) + self._rows] = -self._occluded_score
         best = k_best_assignments(cost, self.n_hyp)
         hyps = np.array([c for c, _ in best])
         hyps = np.where(hyps < len(local), hyps, -1)
@@ -404,73 +409,46 @@ class OnlineLabeler:
         values = np.where((hyps >= 0) & (values < self.theta_min), self._occluded_score, values)
         return values.sum(axis=1)
 
-    def _tracking_hypotheses(self, world, pred, var, trackable) -> np.ndarray:
-        """For each previous hypothesis, the assignment best for spatial and temporal evidence together."""
+    def _tracking_hypothesis(self, world, pred, var, trackable) -> np.ndarray:
+        """The assignment (1, F) best for spatial and temporal evidence together, given the best previous
+        hypothesis' filters: predictions ``pred`` (F, 3), variances ``var`` (F,), ``trackable`` (F,)."""
         from scipy.optimize import linear_sum_assignment
         n_free, k = self.n_free, len(world)
         ll = self._last_ll
         allowed = ll >= self.theta_min  # (F, K)
-        residual = world[None, None, :, :] - pred[:, :, None, :]  # (P, F, K, 3)
-        temporal = KalmanBatch.log_likelihood(residual, var[:, :, None])  # (P, F, K)
-        at_gate = -1.5 * np.log(2 * np.pi * var) - 0.5 * self.gate**2  # (P, F)
+        diff = world[None] - pred[:, None]
+        temporal = self._log_norm[:, None] - 0.5 * np.einsum("fkx,fkx->fk", diff, diff) / var[:, None]  # (F, K)
+        at_gate = self._at_gate  # (F,) of this hypothesis
         # A pairing the spatial model filters out may still be made when the marker's own track
         # vouches for it (a pose the training take did not cover); spatially it then scores as a gap.
-        track = trackable[:, :, None]
-        within = track & (temporal >= at_gate[:, :, None])
-        spatial = np.where(allowed, ll, self._occluded_score)
-        temporal = np.maximum(temporal, (at_gate - self.jump_cost)[:, :, None])
-        reward = spatial[None] + np.where(track, temporal, 0.0)
-        occluded = self._occluded_score + np.where(trackable, at_gate, 0.0)  # (P, F)
-        ok = allowed[None] | within
-        cost = np.full((len(pred), n_free, k + n_free), np.inf)
-        cost[:, :, :k] = np.where(ok, -reward, np.inf)
-        rows = np.arange(n_free)
-        cost[:, rows, k + rows] = -occluded
-        out = np.full((len(pred), n_free), -1)
-        for n in range(len(pred)):
-            r, c = linear_sum_assignment(cost[n])
-            out[n, r] = np.where(c < k, c, -1)
+        track = trackable[:, None]
+        reward = np.where(allowed, ll, self._occluded_score) + track * np.maximum(temporal, at_gate[:, None]
+                                                                                    - self.jump_cost)
+        cost = np.full((n_free, k + n_free), np.inf)
+        cost[:, :k] = np.where(allowed | (track & (temporal >= at_gate[:, None])), -reward, np.inf)
+        cost[self._rows, k + self._rows] = -self._occluded_score - trackable * at_gate
+        r, c = linear_sum_assignment(cost)
+        out = np.full((1, n_free), -1)
+        out[0, r] = np.where(c < k, c, -1)
         return out
-
-    def _merge_hypotheses(self, hyps, emission, extra, world):
-        known = {tuple(h) for h in hyps}
-        new = [h for h in extra if tuple(h) not in known and not known.add(tuple(h))]
-        if new:
-            hyps = np.concatenate([hyps, np.array(new)])
-            emission = np.concatenate([emission, self._emission(np.array(new))])
-        obs = np.full(hyps.shape + (3,), np.nan)
-        seen = hyps >= 0
-        obs[seen] = world[hyps[seen]]
-        return hyps, emission, obs
 
     def _transitions(self, obs, pred, var, trackable) -> np.ndarray:
         """Eq. 3 for every (previous, new) hypothesis pair: (N_prev, N)."""
-        residual = obs[None, :, :, :] - pred[:, None, :, :]  # (P, N, F, 3)
-        ll = KalmanBatch.log_likelihood(residual, var[:, None, :])  # NaN where occluded
-        at_gate = -1.5 * np.log(2 * np.pi * var) - 0.5 * self.gate**2  # (P, F)
-        observed = ~np.isnan(obs[None, :, :, 0])
-        # A measurement beyond the gate (a marker that jumped: real reconstructions do) costs a fixed
-        # jump_cost more than a gap, so strong spatial evidence can still keep it.
-        ll = np.maximum(ll, (at_gate - self.jump_cost)[:, None, :])
-        terms = np.where(observed, ll, at_gate[:, None, :])
-        terms = np.where(trackable[:, None, :], terms, 0.0)
-        return terms.sum(axis=-1)
+        residual = obs[None, :, :, :] - pred[:, None, :, :]  # (P, N, F, 3), NaN where occluded
+        squared = np.einsum("pnfx,pnfx->pnf", residual, residual) / var[:, None, :]
+        # A gap scores as a measurement at the gate; a measurement beyond the gate (a marker that jumped:
+        # real reconstructions do) costs a fixed jump_cost more than a gap, so strong spatial evidence can
+        # still keep it.
+        squared = np.where(np.isnan(squared), self.gate**2, squared)
+        ll = np.maximum(self._log_norm_all[:, None, :] - 0.5 * squared,
+                        (self._at_gate_all - self.jump_cost)[:, None, :])
+        return (ll * trackable[:, None, :]).sum(axis=-1)
 
     def _advance_filters(self, back, obs) -> None:
         """Filters of the new hypotheses: their predecessors' filters stepped with their observations."""
-        n_new, n_free = obs.shape[:2]
-        prev = self._filters
+        n_free = obs.shape[1]
         index = (back[:, None] * n_free + np.arange(n_free)).ravel()
-        filters = KalmanBatch(prev.settings, 0)
-        filters.copy_from(prev, index)
-        measured = obs.reshape(-1, 3)
-        lost = filters.missed > self.max_coast  # a gap longer than the filters may coast through
-        has = ~np.isnan(measured[:, 0])
-        coast = np.where(lost & has, np.nan, 0.0)[:, None] + measured
-        filters.step(coast)
-        if (lost & has).any():
-            filters.restart(lost & has, measured)
-        self._filters = filters
+        self._filters = self._filters.successors(index, obs.reshape(-1, 3), self._predicted, self.max_coast)
 
     # -- decisions ------------------------------------------------------------------------
     def _decide_oldest(self) -> np.ndarray:

@@ -65,60 +65,90 @@ def k_best_assignments(cost, k: int) -> list[tuple[np.ndarray, float]]:
     if k == 1:  # the best alone: one assignment problem
         best = _solve(cost)
         return [] if best is None else [best]
-    finite = np.isfinite(cost)
-    if not finite.any(axis=1).all():
+    # Rows joined when they share a column (union-find over the finite entries). Labels are few, so
+    # plain Python over the finite entries costs less than array operations here.
+    rows_f, cols_f = np.nonzero(np.isfinite(cost))
+    options = [[] for _ in range(n_rows)]
+    parent = list(range(n_rows))
+    owner = {}
+
+    def root(r):
+        while parent[r] != r:
+            parent[r] = parent[parent[r]]
+            r = parent[r]
+        return r
+
+    for r, c, v in zip(rows_f.tolist(), cols_f.tolist(), cost[rows_f, cols_f].tolist()):
+        options[r].append((v, c))
+        if c in owner:
+            a, b = root(r), root(owner[c])
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+        else:
+            owner[c] = r
+    if not all(options):
         return []
-    # Rows joined when they share a column, closed transitively (R is small: a few boolean products).
-    f = finite.astype(np.float64)
-    reach = (f @ f.T) > 0
-    while True:
-        wider = (reach.astype(np.float64) @ reach) > 0
-        if (wider == reach).all():
-            break
-        reach = wider
-    component = np.argmax(reach, axis=1)  # the first row of each row's part names it
-    size = np.bincount(component, minlength=n_rows)[component]
-    single = np.flatnonzero(size == 1)  # rows that compete with no other: their options, best first
-    order = np.argsort(cost[single], axis=1, kind="stable")[:, :k]
-    ranked_costs = np.take_along_axis(cost[single], order, axis=1)
-    lists = [row[np.isfinite(row)] for row in ranked_costs]
-    groups = []
-    for label in np.unique(component[size > 1]):
-        rows = np.flatnonzero(component == label)
-        cols = np.flatnonzero(finite[rows].any(axis=0))
-        if len(cols) < len(rows):
-            return []
-        ranked = [(cols[a], t) for a, t in _murty(cost[np.ix_(rows, cols)], k)]
-        if not ranked:
-            return []
-        groups.append((rows, ranked))
-        lists.append(np.array([t for _, t in ranked]))
+    parts = {}
+    for r in range(n_rows):
+        parts.setdefault(root(r), []).append(r)
+    single, lists, choices, groups = [], [], [], []
+    for rows in parts.values():
+        if len(rows) == 1:  # a row that competes with no other: its options, best first
+            ranked = sorted(options[rows[0]])[:k]
+            single.append(rows[0])
+            lists.append([v for v, _ in ranked])
+            choices.append([c for _, c in ranked])
+    for rows in parts.values():
+        if len(rows) > 1:
+            cols = sorted({c for r in rows for _, c in options[r]})
+            if len(cols) < len(rows):
+                return []
+            ranked = _murty(cost[np.ix_(rows, cols)], k)
+            if not ranked:
+                return []
+            cols = np.array(cols)
+            groups.append(rows)
+            lists.append([t for _, t in ranked])
+            choices.append([cols[a] for a, _ in ranked])
     out = []
-    n_single = len(single)
-    for pick, total in _k_best_sums([lst.tolist() for lst in lists], k):
+    for pick, total in _k_best_sums(lists, k):
         columns = np.empty(n_rows, dtype=np.intp)
-        columns[single] = order[np.arange(n_single), pick[:n_single]]
-        for (rows, ranked), i in zip(groups, pick[n_single:]):
-            columns[rows] = ranked[i][0]
+        columns[single] = [choices[j][i] for j, i in enumerate(pick[:len(single)])]
+        for g, rows in enumerate(groups):
+            j = len(single) + g
+            columns[rows] = choices[j][pick[j]]
         out.append((columns, float(total)))
     return out
 
 
 def _k_best_sums(lists, k):
-    """The k smallest totals choosing one entry from each ranked list (ascending arrays): (indices, total)."""
-    start = (0,) * len(lists)
-    heap = [(sum(lst[0] for lst in lists), start)]
-    seen = {start}
+    """The k smallest totals choosing one entry from each ranked list (ascending): (indices, total).
+
+    Any k - 1 entries that are not first in their list give k - 1 distinct choices besides the all-first
+    one, so the k-th best total exceeds the all-first one by at most the (k - 1)-th smallest such step;
+    entries further than that from their list's first are never chosen, and a list left with one entry
+    is a constant. The lists left are merged one at a time, keeping the k best partial choices.
+    """
+    base = sum(lst[0] for lst in lists)
+    steps = sorted(v - lst[0] for lst in lists for v in lst[1:])
+    if not steps or k == 1:
+        return [((0,) * len(lists), base)]
+    bound = steps[k - 2] if k <= len(steps) + 1 else np.inf
+    best = [(0.0, ())]  # (extra over base, choice in each live list so far)
+    live = []
+    for j, lst in enumerate(lists):
+        first = lst[0]
+        extra = [v - first for v in lst if v - first <= bound]
+        if len(extra) < 2:
+            continue
+        live.append(j)
+        best = sorted((t + e, pick + (i,)) for t, pick in best for i, e in enumerate(extra) if t + e <= bound)[:k]
     out = []
-    while heap and len(out) < k:
-        total, pick = heapq.heappop(heap)
-        out.append((pick, total))
-        for j, lst in enumerate(lists):
-            if pick[j] + 1 < len(lst):
-                nxt = pick[:j] + (pick[j] + 1,) + pick[j + 1:]
-                if nxt not in seen:
-                    seen.add(nxt)
-                    heapq.heappush(heap, (total - lst[pick[j]] + lst[pick[j] + 1], nxt))
+    for t, pick in best:
+        full = [0] * len(lists)
+        for j, i in zip(live, pick):
+            full[j] = i
+        out.append((tuple(full), base + t))
     return out
 
 

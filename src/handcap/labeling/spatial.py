@@ -86,15 +86,21 @@ class SpatialModel:
             log_norm = np.log(weights) - 1.5 * np.log(2 * np.pi) + log_det
         return cls(tuple(names), weights, means, chols, log_norm)
 
+    def __post_init__(self):
+        # Whitening of every component as one matrix: y = (x - mu) P = x P - mu P for all of them at once.
+        m, n_comp = self.weights.shape
+        object.__setattr__(self, "_whiten", self.precision_chol.transpose(2, 0, 1, 3).reshape(3, m * n_comp * 3))
+        object.__setattr__(self, "_offset", np.einsum("mli,mlij->mlj", self.means, self.precision_chol).ravel())
+
     def log_likelihood(self, points) -> np.ndarray:
         """Log-likelihood (M, K) of every label for every point (K, 3) in the hand frame (Eq. 1)."""
         points = np.asarray(points, dtype=np.float64)
-        diff = points[None, None, :, :] - self.means[:, :, None, :]  # (M, L, K, 3)
-        y = diff @ self.precision_chol  # (M, L, K, 3): whitened offsets
-        terms = self.log_norm[:, :, None] - 0.5 * (y * y).sum(axis=-1)  # (M, L, K)
-        top = terms.max(axis=1, keepdims=True)
+        m, n_comp = self.weights.shape
+        y = (points @ self._whiten - self._offset).reshape(len(points), m, n_comp, 3)  # whitened offsets
+        terms = self.log_norm - 0.5 * np.einsum("kmlj,kmlj->kml", y, y)  # (K, M, L)
+        top = terms.max(axis=2, keepdims=True)
         top = np.where(np.isfinite(top), top, 0.0)
-        return (top + np.log(np.exp(terms - top).sum(axis=1, keepdims=True)))[:, 0]
+        return (top + np.log(np.exp(terms - top).sum(axis=2, keepdims=True)))[..., 0].T
 
     def to_arrays(self, prefix: str = "gmm_") -> dict:
         return {f"{prefix}names": np.array(self.names), f"{prefix}weights": self.weights,
