@@ -9,11 +9,11 @@ hypotheses, several hands, scoring and a corruption tool.
 from handcap.labeling.corrupt import corrupt
 from handcap.labeling.frame import HandFrameFinder, RigidSet
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
-from handcap.labeling.labeler import LabelingModel, LabelResult, OnlineLabeler, label_take
+from handcap.labeling.labeler import LabelingModel, LabelResult, MultiHandLabeler, OnlineLabeler, label_take
 from handcap.labeling.murty import k_best_assignments
 from handcap.labeling.score import LabelScore, score_labels
 from handcap.labeling.spatial import SpatialModel
 
 __all__ = ["HandFrameFinder", "KalmanBatch", "KalmanSettings", "LabelResult", "LabelScore", "LabelingModel",
-           "OnlineLabeler", "RigidSet", "SpatialModel", "corrupt", "k_best_assignments", "label_take",
+           "MultiHandLabeler", "OnlineLabeler", "RigidSet", "SpatialModel", "corrupt", "k_best_assignments", "label_take",
            "score_labels"]

@@ -138,20 +138,25 @@ class HandFrameFinder:
         A candidate whose markers moved this far (mean, metres) since the
         previous frame pays as much as one at the distance tolerance. Soft: a
         wrong previous frame must not lock the right one out.
+    max_jump : float
+        While the previous pose is known (or held), a set found further
+        than this per frame (mean, metres) is refused.
 
     Attributes
     ----------
     suspect : bool
         Set by the caller when the last frame fitted poorly: the next frame is
-        searched afresh even when every marker is where it was.
+        searched afresh even when every marker is where it was, and the
+        candidates are ranked without regard to the previous pose.
     """
 
     def __init__(self, rigid: RigidSet, *, max_hold: int = 10, search_radius: float = 0.02,
-                 jump_scale: float = 0.02):
+                 jump_scale: float = 0.02, max_jump: float = 0.1):
         self.rigid = rigid
         self.max_hold = max_hold
         self.search_radius = search_radius
         self.jump_scale = jump_scale
+        self.max_jump = max_jump
         self.full_set_bonus = 3.0  # log-likelihood a full set found by distances is preferred by
         self.previous: HandPose | None = None
         self.held = 0
@@ -206,8 +211,11 @@ class HandFrameFinder:
                 # marker for a missing one): keep whichever explains more markers, or, for a hand, the
                 # other points better.
                 if fit is not None:
-                    if fit(tracked.rotation, tracked.translation, tracked.points) > \
-                            fit(pose.rotation, pose.translation, pose.points) + self.full_set_bonus:
+                    # The search's own ranking: a tenth of the fit against the squared jump.
+                    def cost(p):
+                        jump = 0.0 if self.suspect else (self._moved(p) / self.jump_scale) ** 2
+                        return -0.1 * fit(p.rotation, p.translation, p.points) + jump
+                    if cost(tracked) < cost(pose) - 0.1 * self.full_set_bonus:
                         pose = tracked
                 elif (tracked.points >= 0).sum() >= (pose.points >= 0).sum() or \
                         self._moved(pose) > self.search_radius:
@@ -257,10 +265,13 @@ class HandFrameFinder:
         support = (near < tol).sum(axis=1)
         score[support < min(self.min_found, len(c))] = np.inf
         score -= 2.0 * support
-        if self.previous is not None and self.held == 0:
+        if self.previous is not None and not self.suspect:  # held frames since: it may have gone further
             moved = np.linalg.norm(placed - (c @ self.previous.rotation.T + self.previous.translation),
-                                   axis=-1).mean(axis=1)
+                                   axis=-1).mean(axis=1) / (1 + self.held)
             score += (moved / self.jump_scale) ** 2
+            # Further than max_jump per frame is another set of the same shape (the other hand's, or a
+            # look-alike), never this one: it is lost rather than taken for that.
+            score[moved > self.max_jump] = np.inf
         if fit is not None:
             for n in np.flatnonzero(np.isfinite(score)):
                 used = np.full(len(c), -1)

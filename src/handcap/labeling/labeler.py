@@ -268,14 +268,12 @@ class OnlineLabeler:
             -1 for a point that is no marker. None while the first ``lag``
             frames are still open.
         """
-        points = np.asarray(points, dtype=np.float64)
-        if points.size == 0:
-            points = np.zeros((0, 3))
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise HandcapError(f"points must have shape (K, 3), got {points.shape}")
-        valid = ~np.isnan(points).any(axis=1)
-        frame = self._step(points[valid], transform)
-        frame.n_points = len(points)
+        points, valid = _frame_points(points)
+        return self._push(self._step(points[valid], transform), valid)
+
+    def _push(self, frame: "_Frame", valid) -> np.ndarray | None:
+        """Keep a stepped frame open; return the labels of the frame decided now, if any."""
+        frame.n_points = len(valid)
         frame.valid = valid
         self._pending.append(frame)
         self.frame_index += 1
@@ -295,23 +293,18 @@ class OnlineLabeler:
 
     # -- one frame ------------------------------------------------------------------------
     def _step(self, points, transform) -> _Frame:
-        n_rigid, n_free = self.n_rigid, self.n_free
         # Each object's markers first (a rigid object with many markers is the surest find), then the
         # hand's frame among the points left (given, or from its back markers, ranked by the spatial
         # fit); the fingers are labelled among what remains.
-        rest = np.arange(len(points))
-        object_points = np.full(self._n_object_markers, -1)
-        at = 0
-        for finder in self._object_finders:
-            found = finder.find(points[rest])
-            n = len(finder.rigid.names)
-            if found is not None and found.found:
-                got = found.points >= 0
-                object_points[at:at + n][got] = rest[found.points[got]]
-                rest = np.delete(rest, found.points[got])
-            at += n
-        self._points = points[rest] if self.objects else points
-        rigid_points = np.full(n_rigid, -1)
+        rest, object_points = _find_objects(self._object_finders, points, self._n_object_markers)
+        pose, rigid_points, rest = self._find_hand(points, rest, transform)
+        return self._label(points, rest, pose, rigid_points, object_points)
+
+    def _find_hand(self, points, rest, transform=None):
+        """The hand frame among ``points[rest]``: (pose (R, t) or None, (R_rigid,) point per rigid label,
+        the indices of rest without the rigid markers)."""
+        self._points = points[rest]
+        rigid_points = np.full(self.n_rigid, -1)
         pose = None
         if transform is not None:
             rot, trans = (np.asarray(a, dtype=np.float64) for a in transform)
@@ -327,6 +320,12 @@ class OnlineLabeler:
                 rest = np.delete(rest, found.points[got])
         else:
             raise HandcapError("this labeling model has no rigid markers: pass transform=(R, t) every frame")
+        return pose, rigid_points, rest
+
+    def _label(self, points, rest, pose, rigid_points, object_points, ll=None) -> _Frame:
+        """Hypotheses, transitions and filters of a frame whose candidate points are ``points[rest]``
+        (``ll``: their spatial log-likelihoods (F, len(rest)) when the caller has them)."""
+        n_free = self.n_free
         filters = self._filters
         n_prev = len(self._scores)
         state_pred, cov_pred = self._predicted = filters.predicted()
@@ -342,7 +341,7 @@ class OnlineLabeler:
             emission = np.zeros(1)
         else:
             world = points[rest]
-            hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0])
+            hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0], ll)
             self._watch_frame()
             if self.tracking and len(world):
                 best = int(np.argmax(self._scores))
@@ -386,10 +385,11 @@ class OnlineLabeler:
         if not self.finder.suspect:
             self._fit_level += 0.05 * (fit - self._fit_level)
 
-    def _spatial_hypotheses(self, local):
+    def _spatial_hypotheses(self, local, ll=None):
         """The N best assignments (N, F) of candidate indices (-1: occluded) and their scores (N,)."""
         n_free = self.n_free
-        ll = self.model.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
+        if ll is None:
+            ll = self.model.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
         cost = np.full((n_free, len(local) + n_free), np.inf)
         cost[:, :len(local)] = np.where(ll >= self.theta_min, -ll, np.inf)
         cost[self._rows, len(local) + self._rows] = -self._occluded_score
@@ -473,6 +473,134 @@ class OnlineLabeler:
         return labels
 
 
+def _frame_points(points):
+    """A frame's points as (K, 3) floats and which of them are not NaN."""
+    points = np.asarray(points, dtype=np.float64)
+    if points.size == 0:
+        points = np.zeros((0, 3))
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise HandcapError(f"points must have shape (K, 3), got {points.shape}")
+    return points, ~np.isnan(points).any(axis=1)
+
+
+def _find_objects(finders, points, n_markers):
+    """Each rigid object's markers among the points: (indices of the points left, (O,) point per object
+    label or -1)."""
+    rest = np.arange(len(points))
+    object_points = np.full(n_markers, -1)
+    at = 0
+    for finder in finders:
+        found = finder.find(points[rest])
+        n = len(finder.rigid.names)
+        if found is not None and found.found:
+            got = found.points >= 0
+            object_points[at:at + n][got] = rest[found.points[got]]
+            rest = np.delete(rest, found.points[got])
+        at += n
+    return rest, object_points
+
+
+class MultiHandLabeler:
+    """Several hands in one stream, each found by its own rigid back markers: ``update(points) -> labels``.
+
+    Every frame, the objects' markers are found first, then each hand's back
+    markers among the points left (in the order of ``models``); every other
+    point goes to the hand whose spatial model explains it best, and each hand
+    labels its points with its own hypotheses, filters and Viterbi trellis
+    (:class:`OnlineLabeler`).
+
+    Parameters
+    ----------
+    models : sequence of LabelingModel
+        One per hand (each with rigid markers); the same model may serve
+        both hands of a pair of identical gloves.
+    prefixes : sequence of str, optional
+        Put before each hand's labels (needed when the models share names).
+    objects : sequence of RigidSet
+    options
+        :class:`OnlineLabeler` settings, shared by the hands.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Every hand's labels (prefixed), then the objects'.
+    """
+
+    def __init__(self, models, *, prefixes=None, objects=(), **options):
+        models = list(models)
+        if not models:
+            raise HandcapError("give at least one hand's labeling model")
+        if any(m.rigid is None for m in models):
+            raise HandcapError("each hand needs rigid back markers to be told apart in one stream")
+        prefixes = [""] * len(models) if prefixes is None else [str(p) for p in prefixes]
+        if len(prefixes) != len(models):
+            raise HandcapError(f"{len(prefixes)} prefixes for {len(models)} hands")
+        self.hands = [OnlineLabeler(m, **options) for m in models]
+        self.objects = tuple(objects)
+        self._object_finders = [HandFrameFinder(o, max_hold=0) for o in self.objects]
+        self._n_object_markers = sum(len(o.names) for o in self.objects)
+        hand_names = [p + n for p, m in zip(prefixes, models) for n in m.names]
+        self.names = tuple(hand_names) + tuple(n for o in self.objects for n in o.names)
+        if len(set(self.names)) != len(self.names):
+            raise HandcapError("the hands share label names: give prefixes (e.g. prefixes=('left_', 'right_'))")
+        self._offsets = np.cumsum([0] + [len(m.names) for m in models])
+        self._object_pending: deque = deque()
+        self.lag = self.hands[0].lag
+
+    @property
+    def lost_frames(self) -> list:
+        """Frames where some hand's frame could not be found."""
+        return sorted(set().union(*(h.lost_frames for h in self.hands)))
+
+    def update(self, points, transform=None):
+        """Label one frame: as :meth:`OnlineLabeler.update`, with indices into :attr:`names`."""
+        if transform is not None:
+            raise HandcapError("several hands are found by their rigid markers; a transform cannot be given")
+        points, valid = _frame_points(points)
+        pts = points[valid]
+        rest, object_points = _find_objects(self._object_finders, pts, self._n_object_markers)
+        found = []
+        for hand in self.hands:
+            pose, rigid_points, rest = hand._find_hand(pts, rest)
+            found.append((pose, rigid_points))
+        # Each remaining point to the hand whose spatial model explains it best, in that hand's frame.
+        lls = []
+        for hand, (pose, _) in zip(self.hands, found):
+            if pose is None or not len(rest):
+                lls.append(np.full((hand.n_free, len(rest)), -np.inf))
+            else:
+                lls.append(hand.model.spatial.log_likelihood((pts[rest] - pose[1]) @ pose[0]))
+        owner = np.argmax(np.stack([ll.max(axis=0) if len(rest) else np.zeros(0) for ll in lls]), axis=0)
+        decided = []
+        for h, (hand, (pose, rigid_points)) in enumerate(zip(self.hands, found)):
+            mine = owner == h
+            frame = hand._label(pts, rest[mine], pose, rigid_points, np.zeros(0, int),
+                                None if pose is None else lls[h][:, mine])
+            decided.append(hand._push(frame, valid))
+        self._object_pending.append((object_points, valid))
+        if decided[0] is None:
+            return None
+        return self._combine(decided, self._object_pending.popleft())
+
+    def flush(self) -> list[np.ndarray]:
+        """Decide every frame still open (end of a take); returns their labels, oldest first."""
+        per_hand = [hand.flush() for hand in self.hands]
+        out = [self._combine(list(labels), self._object_pending.popleft()) for labels in zip(*per_hand)]
+        self._object_pending.clear()
+        return out
+
+    def _combine(self, decided, objects) -> np.ndarray:
+        object_points, valid = objects
+        labels = np.full(len(valid), -1)
+        for lab, offset in zip(decided, self._offsets):
+            hit = lab >= 0
+            labels[hit] = lab[hit] + offset
+        valid_index = np.flatnonzero(valid)
+        got = object_points >= 0
+        labels[valid_index[object_points[got]]] = self._offsets[-1] + np.flatnonzero(got)
+        return labels
+
+
 @dataclass(frozen=True)
 class LabelResult:
     """A labeled take.
@@ -500,7 +628,9 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
     ----------
     points : PointCloudSequence or MarkerSequence
         Unlabeled points; a MarkerSequence's names and columns are ignored.
-    model : LabelingModel
+    model : LabelingModel or sequence of LabelingModel
+        Several: one per hand in the stream (:class:`MultiHandLabeler`; give
+        ``prefixes`` when they share names).
     transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
         Hand frame per frame (for models without rigid markers).
     offline : bool
@@ -519,11 +649,16 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         points = PointCloudSequence.from_markers(points)
     if method == "nearest":
         from handcap.labeling.baseline import NearestNeighbourLabeler
+        if not isinstance(model, LabelingModel):
+            raise HandcapError("the nearest-neighbour baseline labels one hand")
         labeler = NearestNeighbourLabeler(model, **options)
     elif method == "viterbi":
         if offline:
             options["lag"] = points.n_frames
-        labeler = OnlineLabeler(model, **options)
+        if isinstance(model, LabelingModel):
+            labeler = OnlineLabeler(model, **options)
+        else:
+            labeler = MultiHandLabeler(model, **options)
     else:
         raise HandcapError(f"unknown labeling method {method!r}; choose viterbi or nearest")
     labels = []
