@@ -3,25 +3,10 @@
 import numpy as np
 import pytest
 
-from handcap import MarkerSequence
 from handcap.core.points import PointCloudSequence
 from handcap.labeling import LabelingModel, RigidSet, label_take, score_labels
 from handcap.layouts import load_layout
 from handcap.synth.scene import SynthConfig, synthesize
-
-
-def labeled_truth(capture, names) -> MarkerSequence:
-    """Each label's point in every frame of the capture's unlabeled points (the noisy one), NaN where unseen."""
-    true = capture.truth["positions"][:, :len(names)]
-    seen = capture.truth["visible"][:, :len(names)] & ~capture.truth["dropped"][:, :len(names)]
-    out = np.full(true.shape, np.nan)
-    for t, pts in enumerate(capture.points.frames):
-        if len(pts):
-            d = np.linalg.norm(true[t][:, None] - pts[None], axis=-1)
-            j = np.argmin(d, axis=1)
-            ok = seen[t] & (d[np.arange(len(names)), j] < 0.003)
-            out[t, ok] = pts[j[ok]]
-    return MarkerSequence(out, names, capture.markers.rate)
 
 
 @pytest.fixture(scope="module")
@@ -29,8 +14,8 @@ def grasp():
     layout = load_layout("glove-13")
     rom = synthesize(SynthConfig(layout="glove-13", motion="random", frames=1200, seed=11, subject_seed=5, cameras=8))
     take = synthesize(SynthConfig(layout="glove-13", motion="grasp", frames=600, seed=12, subject_seed=5, cameras=8))
-    model = LabelingModel.train(labeled_truth(rom, layout.names), layout.names, layout.rigid)
-    return layout, model, take, labeled_truth(take, layout.names)
+    model = LabelingModel.train(rom.labeled_points(layout.names), layout.names, layout.rigid)
+    return layout, model, take, take.labeled_points(layout.names)
 
 
 def test_glove_grasp_with_the_object_known(grasp):

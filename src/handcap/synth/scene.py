@@ -174,6 +174,35 @@ class SynthCapture:
                                 self.hand_motion.model, self.hand_motion.side)
 
 
+    def labeled_points(self, names=None, *, radius: float = 0.003) -> MarkerSequence:
+        """The true labels of the unlabeled points: each marker's point in every frame, NaN where it was
+        not reconstructed (hidden, dropped, or no point within ``radius`` metres of its true place).
+
+        A labeler's output on :attr:`points` is scored against this (``handcap.labeling.score_labels``).
+
+        Parameters
+        ----------
+        names : sequence of str, optional
+            The markers (default: the hand's layout markers).
+        radius : float
+            Metres; the reconstruction noise is well below it.
+        """
+        names = list(self.hand_motion.marker_names if names is None else names)
+        all_names = [str(n) for n in self.truth["names"]]
+        index = [all_names.index(n) for n in names]
+        true = self.truth["positions"][:, index]
+        seen = self.truth["visible"][:, index] & ~self.truth["dropped"][:, index]
+        out = np.full(true.shape, np.nan)
+        rows = np.arange(len(names))
+        for t, pts in enumerate(self.points.frames):
+            if len(pts):
+                d = np.linalg.norm(true[t][:, None] - pts[None], axis=-1)
+                j = np.argmin(d, axis=1)
+                ok = seen[t] & (d[rows, j] < radius)
+                out[t, ok] = pts[j[ok]]
+        return MarkerSequence(out, tuple(names), self.markers.rate)
+
+
 def misplaced(layout, hand, sigma: float, rng):
     """The layout with its markers stuck on a little off their nominal spots (see ``placement_mm``).
 
