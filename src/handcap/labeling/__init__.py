@@ -15,5 +15,5 @@ from handcap.labeling.score import LabelScore, score_labels
 from handcap.labeling.spatial import SpatialModel
 
 __all__ = ["HandFrameFinder", "KalmanBatch", "KalmanSettings", "LabelResult", "LabelScore", "LabelingModel",
-           "MultiHandLabeler", "OnlineLabeler", "RigidSet", "SpatialModel", "corrupt", "k_best_assignments", "label_take",
-           "score_labels"]
+           "MultiHandLabeler", "OnlineLabeler", "RigidSet", "SpatialModel", "corrupt", "k_best_assignments",
+           "label_take", "score_labels"]
