@@ -204,28 +204,56 @@ def _scan_points(path):
 
 
 def _cmd_label(args) -> None:
-    from pathlib import Path
-
     from handcap.io import check_not_input, read_markers, read_points, write_markers
     from handcap.labeling import LabelingModel, label_take
     from handcap.layouts import load_layout
     check_not_input(args.out, args.input, args.train)
     layout = load_layout(args.layout)
     points = read_points(args.input)
-    if args.model and Path(args.train).suffix.lower() == ".npz" and _is_labeling_model(args.train):
+    if _is_model_file(args):
         model = LabelingModel.load(args.train)
     else:
         train = read_markers(args.train)
         model = LabelingModel.train(train, layout.names, layout.rigid, seed=args.seed)
     options = {} if args.method == "nearest" else dict(hypotheses=args.hypotheses, lag=args.lag)
+    if args.object:
+        if args.method == "nearest":
+            raise HandcapError("--object works with the viterbi labeler")
+        options["objects"] = _label_objects(args.train if not _is_model_file(args) else None, args.object)
     result = label_take(points, model, offline=args.offline, method=args.method, **options)
     write_markers(result.markers, args.out)
     if args.model:
         model.save(args.model)
     seen = (result.markers.positions[..., 0] == result.markers.positions[..., 0]).mean()
     lost = result.lost_frames
-    print(f"{args.out}: {points.n_frames} frames, {len(model.names)} labels, {100 * seen:.1f} % of label-frames "
+    print(f"{args.out}: {points.n_frames} frames, {len(result.markers.names)} labels, {100 * seen:.1f} % of label-frames "
           f"filled; hand frame not found in {len(lost)} frames" + (f" (first: {lost[0]})" if len(lost) else ""))
+
+
+def _is_model_file(args) -> bool:
+    from pathlib import Path
+    return bool(args.model) and Path(args.train).suffix.lower() == ".npz" and _is_labeling_model(args.train)
+
+
+def _label_objects(train_path, prefixes):
+    """Rigid objects for the labeler: per prefix, the training take's markers whose names start with it."""
+    import numpy as np
+
+    from handcap.io import read_markers
+    from handcap.labeling import RigidSet
+    if train_path is None:
+        raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
+    train = read_markers(train_path)
+    objects = []
+    for prefix in prefixes:
+        names = [n for n in train.names if n.startswith(prefix)]
+        if len(names) < 3:
+            raise HandcapError(f"--object {prefix}: {len(names)} markers of {train_path} start with it; a rigid "
+                               f"object needs 3 or more")
+        positions = np.stack([train.positions[:, train.index(n)] for n in names], axis=1)
+        # As rigid as the training take shows it (a soft object varies more than the 1.5 mm default).
+        objects.append(RigidSet.from_training(names, positions, min_tolerance=0.0015))
+    return objects
 
 
 def _is_labeling_model(path) -> bool:
@@ -286,6 +314,10 @@ def _add_label(verbs) -> None:
                    help="the labeler, or the nearest-neighbour baseline")
     p.add_argument("--model", help="also save the trained model here (.npz); if --train is such a model, use it")
     p.add_argument("--seed", type=int, default=0, help="seed of the mixture fits")
+    p.add_argument("--object", action="append", metavar="PREFIX",
+                   help="a rigid object in the stream: the markers of ROM whose names start with PREFIX (its "
+                        "shape is learned there); it is found by that shape, labelled, and kept from the fingers "
+                        "(repeat for several)")
     p.add_argument("--out", required=True, help="labeled markers (.c3d .trc .npz)")
     p.set_defaults(run=_cmd_label)
 

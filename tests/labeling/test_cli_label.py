@@ -15,6 +15,7 @@ def takes(shared_data, tmp_path_factory):
     take = read_markers(shared_data / "markers" / "hand_embodiment_glove" / "recording.tsv")
     write_markers(take[:2000], root / "rom.c3d")
     write_markers(take[2000:2600], root / "test.c3d")
+    write_markers(take[:2000], root / "rom_all.c3d")
     return root
 
 
@@ -57,3 +58,26 @@ def test_bad_input_exits_2_with_one_line(takes, capsys, argv, message):
     assert main([a.format(r=takes) for a in argv]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
+
+
+def test_a_held_object_from_the_training_take(takes, capsys):
+    # Every marker of the recording in the stream (arm, back and the pillow's triad too); the pillow's
+    # shape comes from the training take, and its markers get their own labels.
+    r = takes
+    assert main(["corrupt", str(r / "test.c3d"), "--ghost-rate", "2", "--dropout", "0.05", "--seed", "3",
+                 "--out", str(r / "all.c3d")]) == 0
+    assert main(["label", str(r / "all.c3d"), "--train", str(r / "rom_all.c3d"), "--layout", "glove-13",
+                 "--object", "pillow_", "--out", str(r / "all_labeled.c3d")]) == 0
+    labeled, truth = read_markers(r / "all_labeled.c3d"), read_markers(r / "all.truth.c3d")
+    assert labeled.names[-3:] == ("pillow_top", "pillow_left", "pillow_right")
+    got = labeled.positions[:, -3:]
+    true = np.stack([truth.positions[:, truth.index(n)] for n in labeled.names[-3:]], axis=1)
+    same = np.isclose(got, true).all(axis=-1) | (np.isnan(got[..., 0]) & np.isnan(true[..., 0]))
+    # Measured: 98 % of the pillow's label-frames right, the rest gaps (it cannot be found with two of its three
+    # markers before it was ever seen, and a soft pillow strays from its shape); never another point.
+    assert same.mean() > 0.97
+    assert (np.isnan(got[..., 0]) | same).all()
+    capsys.readouterr()
+    assert main(["label", str(r / "all.c3d"), "--train", str(r / "rom_all.c3d"), "--layout", "glove-13",
+                 "--object", "nothing_", "--out", str(r / "x.c3d")]) == 2
+    assert "--object nothing_: 0 markers" in capsys.readouterr().err
