@@ -235,8 +235,9 @@ def _is_model_file(args) -> bool:
     return bool(args.model) and Path(args.train).suffix.lower() == ".npz" and _is_labeling_model(args.train)
 
 
-def _label_objects(train_path, prefixes):
-    """Rigid objects for the labeler: per prefix, the training take's markers whose names start with it."""
+def _label_objects(train_path, specs):
+    """Rigid objects for the labeler: per spec (names or patterns, as ``track-object``), those markers of the
+    training take, whose shape and rigidity are learned there."""
     import numpy as np
 
     from handcap.io import read_markers
@@ -245,11 +246,10 @@ def _label_objects(train_path, prefixes):
         raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
     train = read_markers(train_path)
     objects = []
-    for prefix in prefixes:
-        names = [n for n in train.names if n.startswith(prefix)]
+    for spec in specs:
+        names = _expand_names(train, spec)
         if len(names) < 3:
-            raise HandcapError(f"--object {prefix}: {len(names)} markers of {train_path} start with it; a rigid "
-                               f"object needs 3 or more")
+            raise HandcapError(f"--object {spec}: a rigid object needs 3 or more markers, got {len(names)}")
         positions = np.stack([train.positions[:, train.index(n)] for n in names], axis=1)
         # As rigid as the training take shows it (a soft object varies more than the 1.5 mm default).
         objects.append(RigidSet.from_training(names, positions, min_tolerance=0.0015))
@@ -314,10 +314,10 @@ def _add_label(verbs) -> None:
                    help="the labeler, or the nearest-neighbour baseline")
     p.add_argument("--model", help="also save the trained model here (.npz); if --train is such a model, use it")
     p.add_argument("--seed", type=int, default=0, help="seed of the mixture fits")
-    p.add_argument("--object", action="append", metavar="PREFIX",
-                   help="a rigid object in the stream: the markers of ROM whose names start with PREFIX (its "
-                        "shape is learned there); it is found by that shape, labelled, and kept from the fingers "
-                        "(repeat for several)")
+    p.add_argument("--object", action="append", metavar="NAMES",
+                   help="a rigid object in the stream: comma-separated names of its markers in ROM, or a pattern "
+                        "such as 'pillow_*' (its shape is learned there); it is found by that shape, labelled, and "
+                        "kept from the fingers (repeat for several)")
     p.add_argument("--out", required=True, help="labeled markers (.c3d .trc .npz)")
     p.set_defaults(run=_cmd_label)
 

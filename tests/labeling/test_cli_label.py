@@ -67,7 +67,7 @@ def test_a_held_object_from_the_training_take(takes, capsys):
     assert main(["corrupt", str(r / "test.c3d"), "--ghost-rate", "2", "--dropout", "0.05", "--seed", "3",
                  "--out", str(r / "all.c3d")]) == 0
     assert main(["label", str(r / "all.c3d"), "--train", str(r / "rom_all.c3d"), "--layout", "glove-13",
-                 "--object", "pillow_", "--out", str(r / "all_labeled.c3d")]) == 0
+                 "--object", "pillow_*", "--out", str(r / "all_labeled.c3d")]) == 0
     labeled, truth = read_markers(r / "all_labeled.c3d"), read_markers(r / "all.truth.c3d")
     assert labeled.names[-3:] == ("pillow_top", "pillow_left", "pillow_right")
     got = labeled.positions[:, -3:]
@@ -79,5 +79,8 @@ def test_a_held_object_from_the_training_take(takes, capsys):
     assert (np.isnan(got[..., 0]) | same).all()
     capsys.readouterr()
     assert main(["label", str(r / "all.c3d"), "--train", str(r / "rom_all.c3d"), "--layout", "glove-13",
-                 "--object", "nothing_", "--out", str(r / "x.c3d")]) == 2
-    assert "--object nothing_: 0 markers" in capsys.readouterr().err
+                 "--object", "nothing_*", "--out", str(r / "x.c3d")]) == 2
+    assert "no marker matches 'nothing_*'" in capsys.readouterr().err
+    assert main(["label", str(r / "all.c3d"), "--train", str(r / "rom_all.c3d"), "--layout", "glove-13",
+                 "--object", "pillow_top,pillow_left", "--out", str(r / "x.c3d")]) == 2
+    assert "3 or more markers, got 2" in capsys.readouterr().err
