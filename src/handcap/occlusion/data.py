@@ -1,0 +1,134 @@
+"""Training and test material: synthetic hands with known poses, and a user's takes.
+
+:func:`synthetic_hand_takes` moves the OpenHand through the synthetic motions
+of :mod:`handcap.synth.motions` for several subjects (hand shape and marker
+placement drawn as ``handcap synth`` draws them) and returns the markers with
+their true poses. No cameras are simulated: the networks are trained on
+complete frames and the occlusions are made during training, as in the paper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+
+TRAIN_MOTIONS = ("random", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist",
+                 "calibration")
+
+
+@dataclass(frozen=True)
+class PosedTake:
+    """Markers with the hand pose that made them.
+
+    Attributes
+    ----------
+    positions : ndarray (T, M, 3)
+        Metres, NaN where missing.
+    names : tuple of str (M,)
+    rate : float
+    phi, global_orient, transl : ndarray (T, 27), (T, 3), (T, 3) or None
+        The pose (radians, axis-angle, metres); None when unknown.
+    betas : ndarray (10,) or None
+    joints : ndarray (T, 21, 3) or None
+        Metres.
+    side : str
+    """
+
+    positions: np.ndarray
+    names: tuple
+    rate: float
+    phi: np.ndarray | None = None
+    global_orient: np.ndarray | None = None
+    transl: np.ndarray | None = None
+    betas: np.ndarray | None = None
+    joints: np.ndarray | None = None
+    side: str = "right"
+
+    @property
+    def has_poses(self) -> bool:
+        return self.phi is not None
+
+
+def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, side: str = "right",
+                  noise_mm: float = 0.3, placement_mm: float = 3.0, betas=None) -> PosedTake:
+    """One synthetic take of a hand's markers with its true pose (no cameras, no occlusion).
+
+    Parameters
+    ----------
+    layout : str or MarkerLayout
+        Shipped layout name, TOML path, or a loaded layout (its hand markers are used).
+    motion : str
+        One of :data:`handcap.synth.motions.MOTIONS`.
+    frames : int
+    rate : float
+    seed : int
+        Draws the subject (shape, marker placement), the motion and the noise.
+    side : {"right", "left"}
+    noise_mm : float
+        Standard deviation of the marker jitter, millimetres.
+    placement_mm : float
+        Marker placement error, millimetres (see ``SynthConfig``).
+    betas : ndarray (10,), optional
+        Subject shape; drawn from the seed (standard deviation 0.5) when omitted.
+    """
+    from handcap.hand import OpenHand
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.layouts import MarkerLayout, load_layout
+    from handcap.synth.motions import make_motion
+    from handcap.synth.objects import make_object
+    from handcap.synth.scene import DEFAULT_OBJECT, misplaced
+
+    rng_shape, rng_place, rng_motion, rng_noise = (np.random.default_rng(s)
+                                                   for s in np.random.SeedSequence(seed).spawn(4))
+    hand = OpenHand(side)
+    layout = layout.for_side(side) if isinstance(layout, MarkerLayout) else load_layout(layout, side=side)
+    hand_only = type(layout)(layout.name, layout.side, layout.hand_markers, layout.rigid, layout.marker_radius,
+                             layout.marker_kind, layout.description)
+    betas = rng_shape.normal(0, 0.5, 10) if betas is None else np.asarray(betas, dtype=np.float64)
+    attachment = MarkerAttachment.from_layout(misplaced(hand_only, hand, placement_mm / 1000, rng_place),
+                                              hand, betas)
+    kind = DEFAULT_OBJECT.get(motion)
+    obj = make_object(kind, seed=seed) if kind else None
+    m = make_motion(motion, hand, frames, rate, rng_motion, obj)
+    out = hand.forward(betas, m.global_orient, hand.hand_pose_from_phi(m.phi), m.transl)
+    markers = attachment.positions(out.vertices, hand.faces)
+    markers = markers + rng_noise.normal(0, noise_mm / 1000, markers.shape)
+    return PosedTake(markers, attachment.marker_names, float(rate), m.phi, m.global_orient, m.transl, betas,
+                     out.joints, side)
+
+
+def synthetic_hand_takes(layout, *, subjects: int = 8, seconds_per_motion: float = 6.0, rate: float = 100.0,
+                         motions=TRAIN_MOTIONS, seed: int = 0, side: str = "right", progress=None) -> list:
+    """Synthetic takes of several subjects doing every motion: a training set for a layout.
+
+    Parameters
+    ----------
+    layout : str or MarkerLayout
+    subjects : int
+        Subjects (shape and marker placement) per motion.
+    seconds_per_motion : float
+    rate : float
+    motions : sequence of str
+    seed : int
+        Take ``i`` uses seed ``seed * 100003 + i``.
+    side : str
+    progress : callable (done, total), optional
+
+    Returns
+    -------
+    list of PosedTake
+    """
+    if subjects < 1 or seconds_per_motion <= 0:
+        raise HandcapError("need at least one subject and a positive duration")
+    frames = max(int(round(seconds_per_motion * rate)), 2)
+    takes, total = [], subjects * len(motions)
+    for s in range(subjects):
+        for j, motion in enumerate(motions):
+            take_seed = seed * 100003 + s * len(motions) + j
+            takes.append(simulate_take(layout, motion, frames, rate, take_seed, side=side))
+            if progress is not None:
+                progress(len(takes), total)
+    return takes

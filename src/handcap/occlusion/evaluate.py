@@ -1,0 +1,168 @@
+"""The paper's evaluation protocol (section 6.2, Tables 3 and 4).
+
+Occlude k = 1..4 random markers at a random time of the test set for d =
+0.1, 0.2, 0.5, 1.0 or 2.0 s, and measure the error of the occluded markers on
+the last frame before they come back; average over many such windows and 5
+seeds. Windows are drawn where every marker is really seen from a third of a
+second before the occlusion (the moving average's history) to its last frame,
+so the ground truth is known and exactly k markers are hidden.
+
+Each method's prediction on the last frame is computed in closed form for all
+windows at once; the streaming filler gives the same numbers frame by frame
+(tested), since it keeps its state (velocities, affine weights, offsets) from
+the frame before the occlusion.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
+from handcap.occlusion.register import apply_registration, undo_registration
+
+DURATIONS = (0.1, 0.2, 0.5, 1.0, 2.0)
+COUNTS = (1, 2, 3, 4)
+METHODS = ("lk", "ma", "ac", "nn")
+
+
+def occlusion_windows(visible, rate: float, duration: float, k: int, n: int, rng):
+    """Random occlusion windows on frames where every marker is seen.
+
+    Parameters
+    ----------
+    visible : ndarray (T, M) bool
+    rate : float
+        Frames per second.
+    duration : float
+        Seconds the markers stay hidden.
+    k : int
+        Markers hidden at once.
+    n : int
+        Windows to draw (with replacement among the valid start frames).
+    rng : numpy Generator
+
+    Returns
+    -------
+    starts : ndarray (n,) int
+        First hidden frame of each window.
+    frames : int
+        Frames hidden (the last one, ``starts + frames - 1``, is scored).
+    hidden : ndarray (n, M) bool
+    """
+    t, m = visible.shape
+    if not 1 <= k < m - 2:
+        raise HandcapError(f"cannot hide {k} of {m} markers and keep 3 to register the hand")
+    frames = max(1, int(round(duration * rate)))
+    history = int(round(MA_WINDOW_S * rate)) + 1
+    full = visible.all(axis=1).astype(np.int64)
+    span = history + frames
+    if t < span:
+        raise HandcapError(f"the test take ({t} frames) is shorter than one {duration:g} s window")
+    counts = np.convolve(full, np.ones(span, dtype=np.int64), mode="valid")  # counts[i]: frames i..i+span-1
+    valid = np.flatnonzero(counts == span) + history
+    if not len(valid):
+        raise HandcapError(f"no {duration:g} s stretch of the test take has every marker seen")
+    starts = rng.choice(valid, size=n)
+    keys = rng.random((n, m))
+    hidden = np.argsort(np.argsort(keys, axis=1), axis=1) < k
+    return starts, frames, hidden
+
+
+def predict_windows(method: str, positions, rate: float, starts, frames: int, hidden, predictor=None,
+                    *, offset: bool = True) -> np.ndarray:
+    """Each method's positions of every marker on the last hidden frame of each window.
+
+    Parameters
+    ----------
+    method : {"lk", "ma", "ac", "nn"}
+    positions : ndarray (T, M, 3)
+        The complete take, metres.
+    rate : float
+    starts : ndarray (n,) int
+    frames : int
+    hidden : ndarray (n, M) bool
+        Same count in every row.
+    predictor : MarkerPredictor, for ``nn``
+    offset : bool
+        ``nn`` only: cancel the discontinuity at the start of the occlusion (section 3.2.2).
+
+    Returns
+    -------
+    predicted : ndarray (n, M, 3)
+        Metres; the hidden markers are predicted, the others are the truth.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    before = positions[starts - 1]
+    last = positions[starts + frames - 1]
+    shown = ~hidden
+    out = last.copy()
+    if method == "lk":
+        out[hidden] = before[hidden]
+    elif method == "ma":
+        k = int(round(MA_WINDOW_S * rate))
+        history = positions[(starts - 1)[:, None] + np.arange(-k, 1)[None]]
+        moved = before + ma_velocity(history, rate) * frames
+        out[hidden] = moved[hidden]
+    elif method == "ac":
+        n, m = hidden.shape
+        order = np.argsort(hidden, axis=1, kind="stable")  # shown markers first
+        n_hidden = int(hidden[0].sum())
+        known_i, hidden_i = order[:, : m - n_hidden], order[:, m - n_hidden:]
+        pick = lambda a, i: np.take_along_axis(a, i[..., None], axis=1)  # noqa: E731
+        w = ac_weights(pick(before, known_i), pick(before, hidden_i))
+        np.put_along_axis(out, hidden_i[..., None], ac_apply(w, pick(last, known_i)), axis=1)
+    elif method == "nn":
+        if predictor is None:
+            raise HandcapError("the nn method needs a trained marker predictor")
+        pose_before = predictor.register(before, shown)
+        local_before = apply_registration(before, *pose_before)
+        correction = local_before - predictor.predict_local(local_before, shown) if offset else 0.0
+        pose = predictor.register(last, shown)
+        local = predictor.predict_local(apply_registration(last, *pose), shown) + correction
+        world = undo_registration(local, *pose)
+        out[hidden] = world[hidden]
+    else:
+        raise HandcapError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    return out
+
+
+def marker_error_table(positions, rate: float, predictor=None, *, methods=METHODS, counts=COUNTS,
+                       durations=DURATIONS, seeds=range(5), windows: int = 500) -> dict:
+    """Table 3: mean error of the occluded markers on the last frame before re-entry.
+
+    Parameters
+    ----------
+    positions : ndarray (T, M, 3)
+        The test take, metres, NaN where missing.
+    rate : float
+    predictor : MarkerPredictor, optional
+        Needed for ``nn``.
+    methods, counts, durations : sequences
+    seeds : iterable of int
+    windows : int
+        Windows per seed and cell.
+
+    Returns
+    -------
+    table : dict
+        ``{method: ndarray (len(counts), len(durations))}`` of mean errors, metres.
+        Also ``"nn-raw"`` (no discontinuity offset) when ``nn`` is asked for.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    visible = ~np.isnan(positions).any(axis=-1)
+    names = list(methods) + (["nn-raw"] if "nn" in methods else [])
+    table = {name: np.zeros((len(counts), len(durations))) for name in names}
+    seeds = list(seeds)
+    for seed in seeds:
+        for i, k in enumerate(counts):
+            for j, d in enumerate(durations):
+                rng = np.random.default_rng([seed, k, j])
+                starts, frames, hidden = occlusion_windows(visible, rate, d, k, windows, rng)
+                truth = positions[starts + frames - 1][hidden]
+                for name in names:
+                    method = "nn" if name == "nn-raw" else name
+                    predicted = predict_windows(method, positions, rate, starts, frames, hidden, predictor,
+                                                offset=name != "nn-raw")
+                    table[name][i, j] += np.linalg.norm(predicted[hidden] - truth, axis=-1).mean() / len(seeds)
+    return table
