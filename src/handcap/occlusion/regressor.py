@@ -167,6 +167,10 @@ def train_joint_regressor(positions, phi, global_orient, transl, names, *, templ
     mean, scale = local.mean(axis=0), np.maximum(local.std(axis=0), 0.005)
     targets = targets_in_frame(phi, global_orient, transl, *pose)
     out_mean, out_scale = targets.mean(axis=0), np.maximum(targets.std(axis=0), 1e-3)
+    # Weigh each output by how far it moves the joints (phi of a knuckle moves three joints, of a
+    # fingertip one; the wrist moves all 21), so the loss approximates the joint position error.
+    output_weights = joint_sensitivity(targets, pick=np.random.default_rng(seed)) * out_scale ** 2
+    output_weights = torch.from_numpy((output_weights / output_weights.mean()).astype(np.float32))
     torch.manual_seed(seed)
     module = torch_mlp((3 * m,) + tuple(hidden) + (N_OUT,), dropout)
 
@@ -179,7 +183,7 @@ def train_joint_regressor(positions, phi, global_orient, transl, names, *, templ
         x = ((apply_registration(frames, *sample_pose) - mean) / scale).reshape(len(order), -1)
         y = (targets_in_frame(phi[order], global_orient[order], transl[order], *sample_pose) - out_mean) / out_scale
         x, y = (torch.from_numpy(a.astype(np.float32)) for a in (x, y))
-        w = torch.ones_like(y)
+        w = output_weights.expand_as(y)
         for start in range(0, len(order), batch_size):
             s = slice(start, start + batch_size)
             yield x[s], y[s], w[s]
@@ -187,3 +191,24 @@ def train_joint_regressor(positions, phi, global_orient, transl, names, *, templ
     train_network(module, make_batches, epochs=epochs, seed=seed, progress=progress)
     return JointRegressor(tuple(names), np.asarray(template, float), np.asarray(weights, float), mean, scale,
                           out_mean, out_scale, mlp_from_torch(module))
+
+
+def joint_sensitivity(targets, *, pick, frames: int = 16, step: float = 1e-4) -> np.ndarray:
+    """Mean squared displacement of the 21 joints per unit change of each raw output (36,), metres squared.
+
+    Finite differences of the OpenHand (average shape) at ``frames`` training poses drawn by ``pick``.
+    """
+    from handcap.hand import OpenHand
+
+    hand = OpenHand("right")
+    rows = targets[pick.choice(len(targets), size=min(frames, len(targets)), replace=False)]
+
+    def joints(out):
+        local_rot = matrix_from_6d(out[..., N_PHI:N_PHI + 6])
+        posed = hand.forward(phi=out[..., :N_PHI], vertices=False).joints
+        return np.einsum("...ij,...kj->...ki", local_rot, posed) + out[..., None, N_PHI + 6:]
+
+    base = joints(rows)
+    moved = rows[:, None, :] + step * np.eye(N_OUT)[None]  # (F, 36, 36)
+    shift = (joints(moved) - base[:, None]) / step  # (F, 36, 21, 3)
+    return (shift ** 2).sum(axis=-1).mean(axis=(0, 2))

@@ -1,0 +1,208 @@
+"""Batch gap filling of a recorded take: ``handcap fill``.
+
+    filled, report = fill_gaps(markers, "nn", model="glove-13", max_gap=0.5)
+
+Methods:
+
+``linear``, ``spline``
+    Interpolation in time (straight line, or a cubic spline through every
+    sample of the marker); interior gaps only.
+``lk``, ``ma``, ``ac``, ``nn``
+    The paper's predictors (last known position, moving average, affine
+    combination, the autoencoder of an :class:`OcclusionModel`). A recorded
+    take has a future, so each is run forwards and backwards in time and the
+    two are blended linearly across the gap: the fill meets the measurement at
+    both ends, with no re-entry jump. Gaps at the start (end) of the take get
+    the backward (forward) pass only.
+
+No gap longer than ``max_gap`` seconds is touched: beyond it the data stays
+missing rather than invented. Markers the method cannot use (not in the model)
+pass through unchanged. The input is never modified.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence, positive_number, runs
+from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
+
+FILL_METHODS = ("linear", "spline", "lk", "ma", "ac", "nn")
+MAX_GAP_S = 0.5
+
+
+@dataclass(frozen=True)
+class FillReport:
+    """What :func:`fill_gaps` did.
+
+    Attributes
+    ----------
+    method : str
+    max_gap_frames : int
+    filled_gaps, filled_samples : int
+    left_gaps, left_samples : int
+        Gaps (samples) left missing: too long, or not fillable by the method.
+    untouched : tuple of str
+        Markers the method does not handle (not in the model).
+    """
+
+    method: str
+    max_gap_frames: int
+    filled_gaps: int
+    filled_samples: int
+    left_gaps: int
+    left_samples: int
+    untouched: tuple = ()
+
+
+def _gaps(missing: np.ndarray):
+    """(marker, start, length) of every run of missing samples."""
+    out = []
+    for m in range(missing.shape[1]):
+        starts, lengths = runs(missing[:, m])
+        out += [(m, int(s), int(n)) for s, n in zip(starts, lengths)]
+    return out
+
+
+def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_S, model=None,
+              progress=None) -> tuple[MarkerSequence, FillReport]:
+    """Fill the gaps of a labeled take, up to ``max_gap`` seconds long.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+        Metres, NaN where missing.
+    method : {"linear", "spline", "lk", "ma", "ac", "nn"}
+    max_gap : float
+        Longest gap filled, seconds.
+    model : OcclusionModel, str or path, optional
+        Needed by ``nn`` (a shipped layout name or a model file).
+    progress : bool, optional
+        Progress bar for ``nn`` (default: on a terminal only).
+
+    Returns
+    -------
+    filled : MarkerSequence
+    report : FillReport
+
+    Raises
+    ------
+    HandcapError
+        Unknown method, bad ``max_gap``, ``nn`` without a model or with a take lacking the model's markers.
+    """
+    if method not in FILL_METHODS:
+        raise HandcapError(f"unknown fill method {method!r}; choose one of {', '.join(FILL_METHODS)}")
+    max_gap = positive_number(max_gap, "max_gap (seconds)")
+    limit = int(np.floor(max_gap * markers.rate + 1e-9))
+    positions = markers.positions
+    t_count = markers.n_frames
+    missing = np.isnan(positions).any(axis=-1)
+    columns = np.arange(markers.n_markers)
+    untouched = ()
+    if method == "nn":
+        if model is None:
+            raise HandcapError("the nn method needs a trained model (--model, or a shipped layout name)")
+        from handcap.occlusion.model import OcclusionModel
+        model = OcclusionModel.resolve(model)
+        short = markers.short_names
+        absent = [n for n in model.names if n not in short]
+        if absent:
+            raise HandcapError(f"the take lacks marker(s) {', '.join(absent)} of the occlusion model "
+                               f"({model.layout or 'model'}); its markers are {', '.join(short)}")
+        columns = np.array([short.index(n) for n in model.names])
+        untouched = tuple(n for n in markers.names if n.split(":")[-1] not in model.names)
+    out = positions.copy()
+    gaps = [(m, s, n) for (m, s, n) in _gaps(missing[:, columns])]
+    fillable = [(m, s, n) for (m, s, n) in gaps if n <= limit and n < t_count]
+    if method in ("linear", "spline"):
+        fillable = [(m, s, n) for (m, s, n) in fillable if s > 0 and s + n < t_count]
+    if fillable:
+        sub = positions[:, columns]
+        if method in ("linear", "spline"):
+            values = _interpolate(sub, fillable, method)
+        else:
+            forward = _causal(sub, method, markers.rate, model, progress)
+            backward = _causal(sub[::-1], method, markers.rate, model, progress)[::-1]
+            values = {}
+            for m, s, n in fillable:
+                frames = np.arange(s, s + n)
+                if s == 0:
+                    values[m, s] = backward[frames, m]
+                elif s + n == t_count:
+                    values[m, s] = forward[frames, m]
+                else:
+                    w = ((frames - s + 1) / (n + 1))[:, None]
+                    values[m, s] = (1 - w) * forward[frames, m] + w * backward[frames, m]
+        done = []
+        for m, s, n in fillable:
+            v = values[m, s]
+            if np.isfinite(v).all():
+                out[s:s + n, columns[m]] = v
+                done.append(n)
+    else:
+        done = []
+    report = FillReport(method, limit, len(done), int(sum(done)), len(gaps) - len(done),
+                        int(sum(n for _, _, n in gaps) - sum(done)), untouched)
+    return MarkerSequence(out, markers.names, markers.rate), report
+
+
+def _interpolate(positions, gaps, method):
+    from scipy.interpolate import CubicSpline
+    values, splines = {}, {}
+    t = np.arange(len(positions))
+    for m, s, n in gaps:
+        frames = np.arange(s, s + n)
+        seen = ~np.isnan(positions[:, m, 0])
+        if method == "linear":
+            values[m, s] = np.stack([np.interp(frames, t[seen], positions[seen, m, i]) for i in range(3)], axis=1)
+        else:
+            if m not in splines:
+                splines[m] = CubicSpline(t[seen], positions[seen, m]) if seen.sum() >= 4 else None
+            if splines[m] is None:  # too few samples for a cubic: a straight line
+                values[m, s] = np.stack([np.interp(frames, t[seen], positions[seen, m, i]) for i in range(3)], 1)
+            else:
+                values[m, s] = splines[m](frames)
+    return values
+
+
+def _causal(positions, method, rate, model, progress):
+    """The forward (causal) prediction of every missing sample, (T, M, 3), NaN where none."""
+    if method == "nn":
+        from tqdm import tqdm
+
+        from handcap.occlusion.filler import OcclusionFiller
+        filler = OcclusionFiller(model, rate=rate, method="nn", reentry_speed=np.inf, regress=False)
+        out = np.full(positions.shape, np.nan)
+        hidden = None if progress is None else not progress
+        for t in tqdm(range(len(positions)), desc="fill", unit="frame", disable=hidden, leave=False):
+            result = filler.update(positions[t])
+            if not result.lost:
+                out[t] = result.markers
+        return out
+    t_count, m_count = positions.shape[:2]
+    missing = np.isnan(positions).any(axis=-1)
+    out = positions.copy()
+    k = int(round(MA_WINDOW_S * rate))
+    for m, s, n in _gaps(missing):
+        if s == 0:
+            continue
+        frames = np.arange(s, s + n)
+        last = positions[s - 1, m]
+        if method == "lk":
+            out[frames, m] = last
+        elif method == "ma":
+            history = positions[max(0, s - 1 - k):s, m][:, None]
+            out[frames, m] = last + ma_velocity(history, rate)[0] * (frames - s + 1)[:, None]
+        else:  # ac: weights on the last frame the marker was seen, over the markers seen then and now
+            before = positions[s - 1]
+            for t in frames:
+                known = ~missing[s - 1] & ~missing[t]
+                known[m] = False
+                if known.sum() < 1:
+                    continue
+                w = ac_weights(before[known], before[m][None])
+                out[t, m] = ac_apply(w, positions[t, known])[0]
+    return out
