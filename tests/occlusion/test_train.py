@@ -101,3 +101,25 @@ def test_table3_on_real_data(glove_split, glove_model):
     assert (table["nn"] < table["ac"]).all() and (table["nn"] < table["lk"]).all(), table
     assert (table["nn"] < table["nn-raw"]).all()  # the discontinuity offset helps
     assert (table["lk"] > 0.01).all()  # the fingers really move in these windows
+
+
+def test_cli_trains_the_joint_regressor_from_poses(tmp_path, small_take):
+    """``train-occlusion --poses``: a hand motion per take (as ``handcap solve`` writes) trains the regressor."""
+    import subprocess
+    import sys
+
+    from handcap.core.markers import MarkerSequence
+    from handcap.core.motion import HandMotion
+    from handcap.hand import OpenHand
+    from handcap.io import write_hand_motion, write_markers
+
+    take, poses, out = tmp_path / "take.c3d", tmp_path / "motion.npz", tmp_path / "model.npz"
+    write_markers(MarkerSequence(small_take.positions, small_take.names, 100.0), take)
+    hand_pose = OpenHand().hand_pose_from_phi(small_take.phi)
+    write_hand_motion(HandMotion(small_take.betas, small_take.global_orient, hand_pose, small_take.transl, 100.0,
+                                 phi=small_take.phi), poses)
+    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", str(take), "--poses", str(poses),
+                        "--layout", "active-9", "--epochs", "1", "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "joint regressor on 400 posed frames" in r.stdout
+    assert OcclusionModel.load(out).regressor is not None

@@ -35,6 +35,8 @@ class PosedTake:
     joints : ndarray (T, 21, 3) or None
         Metres.
     side : str
+    attachment : MarkerAttachment or None
+        Where the markers truly sit (synthetic takes).
     """
 
     positions: np.ndarray
@@ -46,6 +48,7 @@ class PosedTake:
     betas: np.ndarray | None = None
     joints: np.ndarray | None = None
     side: str = "right"
+    attachment: object = None
 
     @property
     def has_poses(self) -> bool:
@@ -97,7 +100,7 @@ def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, s
     markers = attachment.positions(out.vertices, hand.faces)
     markers = markers + rng_noise.normal(0, noise_mm / 1000, markers.shape)
     return PosedTake(markers, attachment.marker_names, float(rate), m.phi, m.global_orient, m.transl, betas,
-                     out.joints, side)
+                     out.joints, side, attachment)
 
 
 def synthetic_hand_takes(layout, *, subjects: int = 8, seconds_per_motion: float = 6.0, rate: float = 100.0,

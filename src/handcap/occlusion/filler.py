@@ -36,7 +36,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.markers import check_rate
 from handcap.core.motion import check_side
-from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights
+from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
 from handcap.occlusion.model import OcclusionModel
 
 METHODS = ("nn", "ac", "lk", "ma")
@@ -238,10 +238,11 @@ class OcclusionFiller:
             self.columns = np.array([names.index(n) if n in names else -1 for n in self.names])
             self.input_names = names
         self.regress = regress and self.model.regressor is not None
+        self._absent = bool((self.columns < 0).any())
+        self._reorder = self.input_names != self.names
         self._history = int(round(MA_WINDOW_S * self.rate)) + 1
         self._states = [_HandState(len(self.names), self._history) for _ in self.hands]
         # Cached arrays of the networks, for the one-frame path.
-        self._mean, self._scale = p.mean, p.scale
         self._register = _Registrar(p.template, p.weights)
         self._mean, self._scale, self._inv_scale = p.mean, p.scale, 1.0 / p.scale
         jr = self.model.regressor
@@ -299,11 +300,11 @@ class OcclusionFiller:
     def _update_hand(self, i: int, raw: np.ndarray) -> FillResult:
         state = self._states[i]
         mirrored = self.hands[i] != self.model.side
-        if (self.columns < 0).any():
+        if self._absent:
             x = np.full((self.n_markers, 3), np.nan)
             x[self.columns >= 0] = raw[self.columns[self.columns >= 0]]
         else:
-            x = raw[self.columns] if self.input_names is not self.names else raw
+            x = raw[self.columns] if self._reorder else raw
         if mirrored:
             x = x * MIRROR
         visible = ~np.isnan(x).any(axis=1)
@@ -437,6 +438,5 @@ class OcclusionFiller:
 
     def _velocity(self, state):
         """Mean velocity (M, 3) per frame over the recorded history (oldest first)."""
-        from handcap.occlusion.baselines import ma_velocity
         order = (np.arange(self._history) + state.head) % self._history
         return ma_velocity(state.history[order], self.rate)

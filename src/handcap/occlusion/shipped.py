@@ -20,9 +20,9 @@ from handcap.occlusion.data import synthetic_hand_takes
 from handcap.occlusion.model import SHIPPED_MODELS
 from handcap.occlusion.train import train_occlusion_model
 
-SUBJECTS = 10
+SUBJECTS = 6
 SECONDS_PER_MOTION = 6.0
-EPOCHS = 60
+EPOCHS = 40
 SEED = 0
 WEIGHTS = Path(__file__).parent / "weights"
 

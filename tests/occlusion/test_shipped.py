@@ -1,0 +1,38 @@
+"""The shipped models: they load without torch and solve unseen synthetic subjects within the target."""
+
+import numpy as np
+import pytest
+
+from handcap.layouts import load_layout
+from handcap.occlusion import SHIPPED_MODELS, OcclusionFiller, OcclusionModel, joint_error_table
+from handcap.occlusion.data import simulate_take
+from handcap.occlusion.evaluate import joints_from_pose
+
+
+@pytest.mark.parametrize("layout", SHIPPED_MODELS)
+def test_shipped_model_meets_the_joint_error_target(layout):
+    model = OcclusionModel.shipped(layout)
+    assert model.names == tuple(m.name for m in load_layout(layout).hand_markers)
+    assert model.regressor is not None and model.side == "right"
+    assert "handcap.occlusion.shipped" in model.info.get("source", "")
+    # Subjects (shape, marker placement) and motions the model never saw.
+    takes = [simulate_take(layout, motion, 600, 100.0, 424_242 + i) for i, motion in enumerate(("random", "grasp"))]
+    table = joint_error_table(takes, model, counts=(1, 3), durations=(0.2, 1.0), seeds=range(1), windows=60)
+    assert table["none_all"] <= 0.005, table["none_all"]  # the issue's target: 5 mm with no occlusion
+    assert (table["all"] < 0.012).all(), table["all"]  # occluded markers predicted, pose still close
+    assert (table["all"] >= table["none_all"] * 0.8).all()
+
+
+def test_streaming_pose_matches_the_batch_regressor():
+    model = OcclusionModel.shipped("active-9")
+    take = simulate_take("active-9", "open-close", 200, 100.0, 99)
+    filler = OcclusionFiller(model, rate=100.0, hands=("right", "left"))
+    left = take.positions * np.array([-1.0, 1.0, 1.0])  # the same hand mirrored: a left hand
+    for t in range(0, 200, 7):
+        out = filler.update(np.stack([take.positions[t], left[t]]))
+        phi, orient, transl = model.regressor.predict(take.positions[t])
+        assert np.allclose(out.phi[0], phi, atol=1e-5) and np.allclose(out.phi[1], phi, atol=1e-5)
+        right_joints = joints_from_pose(out.phi[0], out.global_orient[0], out.transl[0], take.betas, "right")
+        left_joints = joints_from_pose(out.phi[1], out.global_orient[1], out.transl[1], take.betas, "left")
+        assert np.allclose(left_joints, right_joints * np.array([-1.0, 1.0, 1.0]), atol=1e-6)
+        assert np.linalg.norm(right_joints - take.joints[t], axis=-1).mean() < 0.01
