@@ -56,7 +56,8 @@ class PosedTake:
 
 
 def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, side: str = "right",
-                  noise_mm: float = 0.3, placement_mm: float = 3.0, betas=None) -> PosedTake:
+                  noise_mm: float = 0.3, placement_mm: float = 3.0, betas=None,
+                  subject_seed: int | None = None) -> PosedTake:
     """One synthetic take of a hand's markers with its true pose (no cameras, no occlusion).
 
     Parameters
@@ -68,7 +69,7 @@ def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, s
     frames : int
     rate : float
     seed : int
-        Draws the subject (shape, marker placement), the motion and the noise.
+        Draws the motion and the noise (and the subject, unless ``subject_seed`` is given).
     side : {"right", "left"}
     noise_mm : float
         Standard deviation of the marker jitter, millimetres.
@@ -76,6 +77,9 @@ def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, s
         Marker placement error, millimetres (see ``SynthConfig``).
     betas : ndarray (10,), optional
         Subject shape; drawn from the seed (standard deviation 0.5) when omitted.
+    subject_seed : int, optional
+        Draws the subject (shape, marker placement): takes with the same subject seed
+        share them, like the takes of one session.
     """
     from handcap.hand import OpenHand
     from handcap.hand.attachment import MarkerAttachment
@@ -86,6 +90,8 @@ def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, s
 
     rng_shape, rng_place, rng_motion, rng_noise = (np.random.default_rng(s)
                                                    for s in np.random.SeedSequence(seed).spawn(4))
+    if subject_seed is not None:
+        rng_shape, rng_place = (np.random.default_rng(s) for s in np.random.SeedSequence([subject_seed, 1]).spawn(2))
     hand = OpenHand(side)
     layout = layout.for_side(side) if isinstance(layout, MarkerLayout) else load_layout(layout, side=side)
     hand_only = type(layout)(layout.name, layout.side, layout.hand_markers, layout.rigid, layout.marker_radius,
