@@ -179,8 +179,8 @@ def joints_from_pose(phi, global_orient, transl, betas, side: str) -> np.ndarray
     return OpenHand(side).forward(betas, global_orient, transl=transl, phi=phi, vertices=False).joints
 
 
-def _joint_errors(model, markers, take, frames):
-    phi, orient, transl = model.regressor.predict(markers)
+def _joint_errors(model, markers, take, frames, visible=None):
+    phi, orient, transl = model.regressor.predict(markers, visible)
     joints = joints_from_pose(phi, orient, transl, take.betas, take.side)
     error = np.linalg.norm(joints - take.joints[frames], axis=-1)
     return error[..., list(FINGER_JOINTS)].mean(), error.mean()
@@ -224,7 +224,7 @@ def joint_error_table(takes, model, *, counts=COUNTS, durations=DURATIONS, seeds
                     rng = np.random.default_rng([seed, k, j])
                     starts, frames, hidden = occlusion_windows(visible, take.rate, d, k, windows, rng)
                     filled = predict_windows("nn", positions, take.rate, starts, frames, hidden, model.predictor)
-                    f, a = _joint_errors(model, filled, take, starts + frames - 1)
+                    f, a = _joint_errors(model, filled, take, starts + frames - 1, ~hidden)
                     out["fingers"][i, j] += f / (len(seeds) * len(takes))
                     out["all"][i, j] += a / (len(seeds) * len(takes))
     out["none_fingers"], out["none_all"] = float(np.mean(none_f)), float(np.mean(none_a))

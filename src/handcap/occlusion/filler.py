@@ -248,7 +248,6 @@ class OcclusionFiller:
         jr = self.model.regressor
         same = jr is None or (np.array_equal(jr.template, p.template) and np.array_equal(jr.weights, p.weights))
         self._regress_register = None if same else _Registrar(jr.template, jr.weights)
-        self._all = np.ones(len(self.names), bool)
 
     @classmethod
     def load(cls, model="glove-13", **options) -> "OcclusionFiller":
@@ -359,7 +358,7 @@ class OcclusionFiller:
         # 3. Hand pose from the completed markers.
         phi = orient = transl = None
         if self.regress:
-            phi, rot, transl = self._regress(world, pose, any_hidden)
+            phi, rot, transl = self._regress(world, visible, pose)
             if mirrored:
                 rot = MIRROR[:, None] * rot @ MODEL_MIRROR
                 transl = transl * MIRROR
@@ -421,12 +420,10 @@ class OcclusionFiller:
         out = out.reshape(-1, 3)[~visible]
         return out * self._scale[~visible] + self._mean[~visible]
 
-    def _regress(self, world, pose, any_hidden):
+    def _regress(self, world, visible, pose):
         jr = self.model.regressor
-        if any_hidden or self._regress_register is not None:
-            # The regressor was trained on frames registered with every marker.
-            register = self._regress_register or self._register
-            pose = register.fit(world, self._all)
+        if self._regress_register is not None:  # a regressor with a template of its own
+            pose = self._regress_register.fit(world, visible)
         r, c, tc = pose
         z = (((world - c) @ r + tc - jr.mean) / jr.scale).ravel()
         out = jr.net(z) * jr.out_scale + jr.out_mean

@@ -1,7 +1,9 @@
 """The joint regressor (section 3.2.3): complete markers -> hand pose, no solver.
 
 The markers (all of them, the occluded ones already predicted) are registered
-to the template, and an MLP ``3M -> 200 -> 200 -> 200 -> 36`` (ReLU, dropout
+to the template (on the measured ones, as the marker predictor registers them:
+the regressor is trained on such registrations, so the filler needs no second
+fit), and an MLP ``3M -> 200 -> 200 -> 200 -> 36`` (ReLU, dropout
 0.1) predicts the hand model's 27 anatomical angles (``phi``, radians, the
 hand pose of :mod:`handcap.hand.anatomy`) and the wrist's pose in the template
 frame: its rotation as the first two columns of the matrix (6 numbers, which
@@ -19,6 +21,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.rotations import axis_angle_from_matrix, matrix_from_axis_angle
 from handcap.occlusion.network import Mlp, mlp_from_torch, torch_mlp, train_network
+from handcap.occlusion.predictor import knock_out
 from handcap.occlusion.register import apply_registration, fit_registration
 
 HIDDEN = (200, 200, 200)
@@ -68,13 +71,16 @@ class JointRegressor:
         x = ((local - self.mean) / self.scale).reshape(local.shape[:-2] + (-1,))
         return self.net(x) * self.out_scale + self.out_mean
 
-    def predict(self, positions):
+    def predict(self, positions, visible=None):
         """Hand pose from complete markers.
 
         Parameters
         ----------
         positions : ndarray (..., M, 3)
             Every marker, metres (no NaN).
+        visible : ndarray (..., M) bool, optional
+            The markers really measured (the others were predicted): only they
+            place the hand's frame, as in the streaming filler. Default: all.
 
         Returns
         -------
@@ -86,7 +92,7 @@ class JointRegressor:
             Wrist position in the world, metres.
         """
         positions = np.asarray(positions, dtype=np.float64)
-        visible = np.ones(positions.shape[:-1], bool)
+        visible = np.ones(positions.shape[:-1], bool) if visible is None else np.asarray(visible, bool)
         rotation, centre, template_centre = fit_registration(positions, visible, self.template, self.weights)
         out = self.predict_local(apply_registration(positions, rotation, centre, template_centre))
         return outputs_to_world(out, rotation, centre, template_centre)
@@ -179,7 +185,10 @@ def train_joint_regressor(positions, phi, global_orient, transl, names, *, templ
         frames = positions[order]
         if jitter > 0:
             frames = frames + rng.normal(0.0, jitter, frames.shape)
-        sample_pose = fit_registration(frames, visible[order], template, weights)
+        # At run time the hand's frame comes from the measured markers only (the predicted ones do
+        # not place it): half the samples are registered on a random subset, as the filler would.
+        shown = visible[order] & ~(knock_out(visible[order], rng) & (rng.random(len(order)) < 0.5)[:, None])
+        sample_pose = fit_registration(frames, shown, template, weights)
         x = ((apply_registration(frames, *sample_pose) - mean) / scale).reshape(len(order), -1)
         y = (targets_in_frame(phi[order], global_orient[order], transl[order], *sample_pose) - out_mean) / out_scale
         x, y = (torch.from_numpy(a.astype(np.float32)) for a in (x, y))
