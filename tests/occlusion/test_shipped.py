@@ -45,3 +45,24 @@ def test_streaming_pose_matches_the_batch_regressor():
         left_joints = joints_from_pose(out.phi[1], out.global_orient[1], out.transl[1], take.betas, "left")
         assert np.allclose(left_joints, right_joints * np.array([-1.0, 1.0, 1.0]), atol=1e-6)
         assert np.linalg.norm(right_joints - take.joints[t], axis=-1).mean() < 0.01
+
+
+def test_streaming_on_a_synthetic_capture():
+    """End to end on a ``handcap synth`` capture: its gaps come from ray casting against hand and object."""
+    from handcap.synth.scene import SynthConfig, synthesize
+
+    model = OcclusionModel.shipped("glove-13")
+    capture = synthesize(SynthConfig(layout="glove-13", motion="grasp", frames=300, seed=9002, cameras=8,
+                                     ghost_rate=0.0, swap_rate=0.0), progress=False)
+    markers = capture.markers.select(model.names).positions
+    filler = OcclusionFiller(model, rate=capture.markers.rate)
+    errors, filled = [], 0
+    for t, frame in enumerate(markers):
+        out = filler.update(frame)
+        assert not out.lost
+        filled += out.filled.sum()
+        joints = joints_from_pose(out.phi, out.global_orient, out.transl, capture.hand_motion.betas, "right")
+        errors.append(np.linalg.norm(joints - capture.hand_motion.joints[t], axis=-1).mean())
+        assert np.isfinite(out.markers).all()
+    assert filled > 0  # the capture did hide markers
+    assert np.mean(errors) < 0.005, np.mean(errors)
