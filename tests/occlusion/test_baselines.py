@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from handcap.occlusion.baselines import ac_apply, ac_weights, ma_velocity
-from handcap.occlusion.register import apply_registration, fit_registration, procrustes_mean, undo_registration
+from handcap.objects.rigid import canonical_from_markers
+from handcap.occlusion.register import apply_registration, fit_registration, undo_registration
 
 
 def test_ac_weights_match_equation_8():
@@ -60,13 +61,13 @@ def test_registration_recovers_a_rigid_motion():
     assert np.isnan(fit_registration(world, few, template, np.ones(9))[0]).all()
 
 
-def test_procrustes_mean_recovers_the_shape():
+def test_template_recovers_the_shape():
     rng = np.random.default_rng(5)
     shape = rng.normal(0, 0.04, (6, 3))
     frames = np.stack([shape @ Rotation.random(random_state=i).as_matrix().T + rng.normal(0, 1, 3)
                        for i in range(20)])
     frames[3, 2] = np.nan  # incomplete frames are skipped
-    mean = procrustes_mean(frames)
+    mean = canonical_from_markers(frames)
     d = lambda a: np.linalg.norm(a[:, None] - a[None], axis=-1)  # noqa: E731
     assert np.allclose(d(mean), d(shape), atol=1e-9)
 

@@ -21,7 +21,8 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.occlusion.network import Mlp, mlp_from_torch, torch_mlp, train_network
-from handcap.occlusion.register import apply_registration, fit_registration, procrustes_mean, undo_registration
+from handcap.objects.rigid import canonical_from_markers
+from handcap.occlusion.register import apply_registration, fit_registration, undo_registration
 
 HIDDEN = (200, 150, 200)
 # How many markers a training sample loses (1-4), after the paper's Fig. 13: most occlusions are single.
@@ -149,7 +150,8 @@ def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60,
     weights : ndarray (M,), optional
         Registration weight of each marker (default 1).
     template : ndarray (M, 3), optional
-        Registration target (default: the Procrustes mean of the training frames).
+        Registration target (default: the mean shape of the training frames,
+        :func:`handcap.objects.rigid.canonical_from_markers`).
     mask_input : bool
         Give the network the visibility of each marker as well.
     jitter : float
@@ -170,8 +172,11 @@ def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60,
         raise HandcapError(f"only {usable.sum()} training frames have {MIN_VISIBLE + 1} or more markers; "
                            "a marker predictor needs at least 10")
     positions, visible = positions[usable], visible[usable]
+    never = [str(names[i]) for i in np.flatnonzero(~visible.any(axis=0))]
+    if never:
+        raise HandcapError(f"marker(s) {', '.join(never)} never seen in the training frames")
     weights = np.ones(m) if weights is None else np.asarray(weights, dtype=np.float64)
-    template = procrustes_mean(positions) if template is None else np.asarray(template, dtype=np.float64)
+    template = canonical_from_markers(positions) if template is None else np.asarray(template, dtype=np.float64)
     pose = fit_registration(positions, visible, template, weights)
     local = apply_registration(positions, *pose)
     mean = np.nanmean(local, axis=0)

@@ -21,50 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
-
-
-def procrustes_mean(positions, *, iterations: int = 10) -> np.ndarray:
-    """The mean marker shape of a take, up to a rigid motion (generalised Procrustes).
-
-    Parameters
-    ----------
-    positions : ndarray (T, M, 3)
-        Metres, NaN where missing; frames with missing markers are skipped.
-
-    Returns
-    -------
-    template : ndarray (M, 3)
-        Metres, centred on the origin, in the frame of the first complete frame.
-
-    Raises
-    ------
-    HandcapError
-        If no frame has every marker.
-    """
-    positions = np.asarray(positions, dtype=np.float64)
-    full = positions[~np.isnan(positions).any(axis=(1, 2))]
-    if not len(full):
-        raise HandcapError("no frame has every marker: cannot build a template of the hand")
-    template = full[0] - full[0].mean(axis=0)
-    weights = np.ones(positions.shape[1])
-    for _ in range(iterations):
-        visible = np.ones(full.shape[:2], bool)
-        rotation, centre, template_centre = fit_registration(full, visible, template, weights)
-        local = apply_registration(full, rotation, centre, template_centre)
-        new = local.mean(axis=0)
-        new -= new.mean(axis=0)
-        if np.abs(new - template).max() < 1e-9:
-            template = new
-            break
-        template = new
-    return template
+from handcap.objects.rigid import kabsch
 
 
 def fit_registration(positions, visible, template, weights):
     """Rigid motions that carry the visible markers of each frame onto the template.
 
-    Weighted Kabsch, vectorised over frames.
+    Weighted Kabsch (:func:`handcap.objects.rigid.kabsch`), vectorised over frames.
 
     Parameters
     ----------
@@ -91,17 +54,12 @@ def fit_registration(positions, visible, template, weights):
     w = np.where(visible, weights, 0.0)
     total = w.sum(axis=-1, keepdims=True)
     ok = (np.count_nonzero(visible, axis=-1) >= 3) & (total[..., 0] > 0)
-    total = np.where(total > 0, total, 1.0)
     x = np.where(visible[..., None], positions, 0.0)
+    rotation, _ = kabsch(x, np.broadcast_to(template, x.shape), w)  # template ~ rotation @ x + t
+    total = np.where(total > 0, total, 1.0)
     centre = np.einsum("...m,...mi->...i", w, x) / total
     template_centre = (w @ template) / total
-    a = (x - centre[..., None, :]) * w[..., None]
-    b = template - template_centre[..., None, :]
-    h = np.einsum("...mi,...mj->...ij", a, b)
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(u @ vt))
-    u[..., :, 2] *= d[..., None]
-    rotation = u @ vt
+    rotation = np.swapaxes(rotation, -1, -2)  # row vectors: local = (x - centre) @ rotation + template_centre
     rotation[~ok] = np.nan
     centre[~ok] = np.nan
     return rotation, centre, template_centre
