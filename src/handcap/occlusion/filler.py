@@ -165,12 +165,10 @@ class _HandState:
         self.reset()
 
     def reset(self):
-        self.previous = None  # last output (M, 3), world (mirrored frame for a mirrored hand)
-        self.clean = None  # the same without re-entry residuals
+        self.clean = None  # last output (M, 3) without re-entry residuals, world (mirrored for a mirrored hand)
         self.local = None  # ``clean`` in the hand's registered frame
         self.step = np.zeros((self.n, 3))  # last frame-to-frame change of ``local``
         self.visible = None  # (M,) bool
-        self.pose = None  # registration of the last frame
         self.offset = np.zeros((self.n, 3))
         self.reentry = np.zeros((self.n, 3))
         self.reentering = False
@@ -245,6 +243,9 @@ class OcclusionFiller:
         # Cached arrays of the networks, for the one-frame path.
         self._register = _Registrar(p.template, p.weights)
         self._mean, self._scale, self._inv_scale = p.mean, p.scale, 1.0 / p.scale
+        self._mask_input, self._ae = p.mask_input, p.net
+        self._jr = None if self.model.regressor is None else self.model.regressor.net
+        self._jr_inv_scale = None if self.model.regressor is None else 1.0 / self.model.regressor.scale
         jr = self.model.regressor
         same = jr is None or (np.array_equal(jr.template, p.template) and np.array_equal(jr.weights, p.weights))
         self._regress_register = None if same else _Registrar(jr.template, jr.weights)
@@ -353,7 +354,7 @@ class OcclusionFiller:
             state.reentering = bool(shrink.any())
         if state.local is not None:
             np.subtract(local, state.local, out=state.step)
-        state.previous, state.clean, state.local, state.visible, state.pose = world, clean, local, visible, pose
+        state.clean, state.local, state.visible = clean, local, visible
 
         # 3. Hand pose from the completed markers.
         phi = orient = transl = None
@@ -374,7 +375,9 @@ class OcclusionFiller:
         if method == "nn":
             if changed:
                 # Section 3.2.2: the offset that makes the prediction on the previous frame, with
-                # today's visible set, land on what was output there.
+                # today's visible set, land on what was output there. The previous frame is registered
+                # anew on today's set: reusing its own registration, or today's, saves a fit but breaks
+                # continuity (jumps of 3-9 mm on the real glove; test_no_jump catches both).
                 pr, pc, ptc = self._register.fit(state.clean, visible)
                 before = (state.clean - pc) @ pr + ptc
                 state.offset[hidden] = before[hidden] - self._predict(before, visible)
@@ -411,22 +414,19 @@ class OcclusionFiller:
 
         ``MarkerPredictor.predict_local`` for one frame (two single rows are faster than one pair).
         """
-        p = self.model.predictor
-        z = np.where(visible[:, None], (local - self._mean) * self._inv_scale, 0.0)
-        z = z.ravel()
-        if p.mask_input:
+        z = np.where(visible[:, None], (local - self._mean) * self._inv_scale, 0.0).ravel()
+        if self._mask_input:
             z = np.concatenate([z, visible])
-        out = p.net(z)
-        out = out.reshape(-1, 3)[~visible]
-        return out * self._scale[~visible] + self._mean[~visible]
+        out = self._ae(z).reshape(-1, 3) * self._scale + self._mean
+        return out[~visible]
 
     def _regress(self, world, visible, pose):
         jr = self.model.regressor
         if self._regress_register is not None:  # a regressor with a template of its own
             pose = self._regress_register.fit(world, visible)
         r, c, tc = pose
-        z = (((world - c) @ r + tc - jr.mean) / jr.scale).ravel()
-        out = jr.net(z) * jr.out_scale + jr.out_mean
+        z = (((world - c) @ r + (tc - jr.mean)) * self._jr_inv_scale).ravel()
+        out = self._jr(z) * jr.out_scale + jr.out_mean
         return _pose_from_outputs(out, r, c, tc)
 
     def _record_history(self, state, x):

@@ -39,6 +39,7 @@ class Mlp:
                                    f"{self.weights[i - 1].shape[1]}")
             if not (np.isfinite(w).all() and np.isfinite(b).all()):
                 raise HandcapError(f"network layer {i} holds NaN or infinite weights")
+        object.__setattr__(self, "_hidden", tuple(zip(self.weights[:-1], self.biases[:-1])))
 
     @property
     def sizes(self) -> tuple[int, ...]:
@@ -46,13 +47,12 @@ class Mlp:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Outputs (..., n_out) for inputs (..., n_in)."""
-        last = len(self.weights) - 1
         x = np.asarray(x, dtype=self.weights[0].dtype)  # float32 weights: float32 arithmetic
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            x = x @ w + b
-            if i < last:
-                np.maximum(x, 0.0, out=x)
-        return x
+        for w, b in self._hidden:
+            x = x @ w
+            x += b
+            np.maximum(x, 0.0, out=x)
+        return x @ self.weights[-1] + self.biases[-1]
 
     def arrays(self, prefix: str) -> dict:
         """The layers as ``{prefix}w0, {prefix}b0, ...`` (for ``np.savez``)."""
