@@ -519,6 +519,53 @@ def _add_occlusion(verbs) -> None:
     p.set_defaults(run=_cmd_fill)
 
 
+def _cmd_triangulate(args) -> None:
+    import time
+
+    from handcap.io import check_not_input, write_markers
+    from handcap.io.camera_formats import read_rig
+    from handcap.multiview import merge_detections, read_detections, triangulate_detections, write_quality
+
+    check_not_input(args.out, args.cameras, *args.detections)
+    detections = merge_detections([read_detections(path) for path in args.detections])
+    rig = read_rig(args.cameras)
+    start = time.perf_counter()
+    result = triangulate_detections(detections, rig, min_views=args.min_views, threshold_px=args.threshold_px,
+                                    chunk_frames=args.chunk_frames, scheduler=args.scheduler, workers=args.workers)
+    seconds = time.perf_counter() - start
+    write_markers(result.to_markers(), args.out)
+    quality = write_quality(result, args.out)
+    s = result.summary()
+    print(f"{args.out}: {s['frames']} frames, {s['markers']} markers, {s['points']} points from {s['detections']} "
+          f"detections ({s['rejected']} rejected), mean reprojection error {s['mean_error_px']:.2f} px over "
+          f"{s['mean_views']:.1f} views, {s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} marker-frames/s; "
+          f"per-marker errors and view counts in {quality}")
+
+
+def _add_multiview(verbs) -> None:
+    p = verbs.add_parser("triangulate", help="3D markers from 2D detections of calibrated cameras (robust)",
+                         description="Undistorts the detections, triangulates every marker in every frame from the "
+                                     "best inlier set of views (RANSAC over pairs of views, then a non-linear "
+                                     "refinement) and writes the markers with their metric residuals. Per marker "
+                                     "and frame, the reprojection error (px) and inlier view count go to "
+                                     "OUT_STEM.triangulation.npz, with a used/rejected flag per detection. Blocks of "
+                                     "frames run on local processes, or on a Dask cluster with --scheduler.")
+    p.add_argument("detections", nargs="+", metavar="DETECTIONS",
+                   help="2D detections .npz (handcap synth's detections.npz; several files, say one per camera, "
+                        "are merged)")
+    p.add_argument("--cameras", required=True, help="calibrated rig (.toml anipose or caliscope, .yml/.xml OpenCV, "
+                                                    ".qca.txt Qualisys)")
+    p.add_argument("--min-views", type=int, default=3, help="inlier views a marker needs (default %(default)s)")
+    p.add_argument("--threshold-px", type=float, default=5.0,
+                   help="reprojection error of an inlier view, pixels (default %(default)s)")
+    p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler, e.g. tcp://HOST:8786 (default: local "
+                                                        "processes)")
+    p.add_argument("--workers", type=int, help="local processes (default: one per core)")
+    p.add_argument("--chunk-frames", type=int, help="frames per block of work (default: split evenly)")
+    p.add_argument("--out", required=True, help="markers (.c3d .trc .npz)")
+    p.set_defaults(run=_cmd_triangulate)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="handcap", description=__doc__)
     parser.add_argument("--version", action="version", version=_version())
@@ -539,6 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_solve(verbs)
     _add_label(verbs)
     _add_occlusion(verbs)
+    _add_multiview(verbs)
     return parser
 
 
