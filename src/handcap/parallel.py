@@ -27,6 +27,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 from handcap.core.errors import HandcapError
 
+# How long to try reaching a Dask scheduler before giving up.
+_CONNECT_TIMEOUT = "5s"
+
 
 def default_workers() -> int:
     """Cores this process may use."""
@@ -103,7 +106,7 @@ def _map_dask(func, chunks, scheduler, show, desc) -> list:
         if not isinstance(scheduler, str) or not scheduler.strip():
             raise HandcapError(f"scheduler must be an address such as tcp://HOST:8786, got {scheduler!r}")
         try:
-            client = Client(scheduler, timeout="10s", set_as_default=False)
+            client = Client(scheduler, timeout=_CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:
             raise HandcapError(f"cannot reach the Dask scheduler at {scheduler} ({err})") from None
     else:
