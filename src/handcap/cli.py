@@ -339,6 +339,33 @@ def _cmd_fill(args) -> None:
           + (f"; not in the model, left as they were: {', '.join(report.untouched)}" if report.untouched else ""))
 
 
+def _cmd_clean(args) -> None:
+    from pathlib import Path
+
+    from handcap.io import MARKER_WRITERS, check_not_input, read_markers, write_markers
+    from handcap.layouts import load_layout
+    from handcap.multiview.clean import clean_markers
+    check_not_input(args.out, args.input)
+    suffix = Path(args.out).suffix.lower()
+    if suffix not in MARKER_WRITERS:
+        raise HandcapError(f"{args.out}: cannot write '{suffix or 'no extension'}' marker files; "
+                           f"use one of {', '.join(sorted(MARKER_WRITERS))}")
+    for name in ("max_linear", "max_rigid", "max_spline"):
+        if getattr(args, name) < 0:
+            raise HandcapError(f"--{name.replace('_', '-')} must be 0 or more frames, got {getattr(args, name)}")
+    layout = None if args.layout is None else load_layout(args.layout)
+    markers = read_markers(args.input)
+    cleaned, report = clean_markers(
+        markers, layout, radius=None if args.radius_mm is None else args.radius_mm / 1000, window=args.window,
+        z=args.z, floor=args.floor_mm / 1000, max_linear=args.max_linear, max_rigid=args.max_rigid,
+        max_spline=args.max_spline, rigid_tolerance=args.rigid_tolerance_mm / 1000)
+    write_markers(cleaned, args.out)
+    n = report.summary()
+    print(f"{args.out}: removed {n['cluster_removed']} samples away from their patch and {n['outlier_removed']} "
+          f"spikes; filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, {n['spline_filled']} spline; "
+          f"{n['missing']} of {report.missing.size} samples missing")
+
+
 def _add_label(verbs) -> None:
     from handcap.layouts import SHIPPED
     p = verbs.add_parser("label", help="label unlabeled finger markers online (GMM + N-best + Kalman + Viterbi)",
@@ -566,6 +593,38 @@ def _add_multiview(verbs) -> None:
     p.set_defaults(run=_cmd_triangulate)
 
 
+def _add_clean(verbs) -> None:
+    from handcap.layouts import SHIPPED
+    from handcap.multiview import clean
+    p = verbs.add_parser("clean", help="remove mislabelled points and spikes from 3D markers, fill short gaps",
+                         description="DexterCap section 3.3: in every frame keep the largest cluster of each "
+                                     "patch (or segment) of --layout, remove samples far from a local fit in a "
+                                     "sliding window, then fill interior gaps by the rigid motion of the patch, "
+                                     "linear and spline interpolation, each up to its own gap length. Nothing is "
+                                     "extrapolated past the ends of a marker's data; longer gaps stay missing.")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("--layout", help=f"marker layout for clustering and the rigid fill: {', '.join(SHIPPED)} or a "
+                                    ".toml file (default: none, those steps are skipped)")
+    p.add_argument("--radius-mm", type=float, help="cluster radius for every patch, millimetres (default: from "
+                                                   "the layout's template)")
+    p.add_argument("--window", type=int, default=clean.WINDOW, help="frames in the outlier window, odd "
+                                                                    "(default %(default)s)")
+    p.add_argument("--z", type=float, default=clean.Z, help="outlier threshold, robust standard deviations "
+                                                            "(default %(default)s)")
+    p.add_argument("--floor-mm", type=float, default=1000 * clean.FLOOR,
+                   help="smaller deviations are never outliers, millimetres (default %(default)s)")
+    p.add_argument("--max-rigid", type=int, default=clean.MAX_RIGID, metavar="FRAMES",
+                   help="longest gap filled by the rigid motion of the patch (default %(default)s; 0: off)")
+    p.add_argument("--max-linear", type=int, default=clean.MAX_LINEAR, metavar="FRAMES",
+                   help="longest gap filled by linear interpolation (default %(default)s; 0: off)")
+    p.add_argument("--max-spline", type=int, default=clean.MAX_SPLINE, metavar="FRAMES",
+                   help="longest gap filled by a cubic spline (default %(default)s; 0: off)")
+    p.add_argument("--rigid-tolerance-mm", type=float, default=1000 * clean.RIGID_TOLERANCE,
+                   help="largest RMS residual of a rigid fill's fit, millimetres (default %(default)s)")
+    p.add_argument("--out", required=True, help="cleaned markers (.c3d .trc .npz)")
+    p.set_defaults(run=_cmd_clean)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="handcap", description=__doc__)
     parser.add_argument("--version", action="version", version=_version())
@@ -587,6 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_label(verbs)
     _add_occlusion(verbs)
     _add_multiview(verbs)
+    _add_clean(verbs)
     return parser
 
 
