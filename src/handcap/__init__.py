@@ -6,6 +6,7 @@ Units inside handcap are metres, seconds and radians; marker arrays have shape
 
 from handcap.core import (
     HandcapError,
+    HandcapWarning,
     HandMotion,
     MarkerSequence,
     ObjectMotion,
@@ -16,6 +17,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "HandcapError",
+    "HandcapWarning",
     "HandMotion",
     "MarkerSequence",
     "ObjectMotion",

@@ -1,12 +1,13 @@
 """Data model: marker, point-cloud and motion containers, errors, rotations."""
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, HandcapWarning, warn
 from handcap.core.markers import MarkerGaps, MarkerSequence, as_positions, marker_gaps
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
 
 __all__ = [
     "HandcapError",
+    "HandcapWarning",
     "HandMotion",
     "MarkerGaps",
     "MarkerSequence",
@@ -14,6 +15,7 @@ __all__ = [
     "PointCloudSequence",
     "as_positions",
     "marker_gaps",
+    "warn",
 ]
 
 from handcap.core.cameras import Camera, CameraRig  # noqa: E402

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, merge_warnings
 
 
 def as_positions(positions) -> np.ndarray:
@@ -116,6 +116,9 @@ class MarkerSequence:
         Frames per second.
     residuals : ndarray of shape (T, M), optional
         Per-marker residual of the capture system (metres), NaN where missing.
+    warnings : tuple of str
+        One-line warnings about the data (units guessed, implausible values),
+        kept by every method that derives a new sequence and stored in files.
 
     Notes
     -----
@@ -128,6 +131,7 @@ class MarkerSequence:
     names: tuple[str, ...]
     rate: float
     residuals: np.ndarray | None = field(default=None)
+    warnings: tuple[str, ...] = field(default=())
 
     def __post_init__(self):
         positions = as_positions(self.positions).copy()
@@ -150,6 +154,12 @@ class MarkerSequence:
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "rate", check_rate(self.rate))
         object.__setattr__(self, "residuals", residuals)
+        object.__setattr__(self, "warnings", merge_warnings(self.warnings))
+
+    def with_warnings(self, *messages) -> "MarkerSequence":
+        """The same sequence with ``messages`` (one-line strings) added to its warnings."""
+        return MarkerSequence(self.positions, self.names, self.rate, self.residuals,
+                              merge_warnings(self.warnings, messages))
 
     # -- sizes -------------------------------------------------------------
     @property
@@ -212,11 +222,11 @@ class MarkerSequence:
             names = [names]
         idx = [self.index(n) for n in names]
         return MarkerSequence(self.positions[:, idx], [self.names[i] for i in idx], self.rate,
-                              None if self.residuals is None else self.residuals[:, idx])
+                              None if self.residuals is None else self.residuals[:, idx], self.warnings)
 
     def renamed(self, names) -> "MarkerSequence":
         """Same trajectories under new names (e.g. ``short_names``)."""
-        return MarkerSequence(self.positions, names, self.rate, self.residuals)
+        return MarkerSequence(self.positions, names, self.rate, self.residuals, self.warnings)
 
     # -- frames ------------------------------------------------------------
     def frames(self, start: int = 0, stop: int | None = None, step: int = 1) -> "MarkerSequence":
@@ -225,7 +235,7 @@ class MarkerSequence:
             raise HandcapError(f"frame step must be a positive integer, got {step}")
         sl = slice(start, stop, step)
         return MarkerSequence(self.positions[sl], self.names, self.rate / step,
-                              None if self.residuals is None else self.residuals[sl])
+                              None if self.residuals is None else self.residuals[sl], self.warnings)
 
     def __getitem__(self, item) -> "MarkerSequence":
         if isinstance(item, slice):

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.markers import check_rate
 
 SIDES = ("right", "left")
@@ -58,6 +58,9 @@ class HandMotion:
         Model-predicted marker positions in metres.
     marker_residuals : ndarray of shape (T, M), optional
         Distance between fitted and observed markers, metres (NaN where unobserved).
+    warnings : tuple of str
+        One-line warnings about the result (large residuals, shape at its bounds, ...),
+        stored in the motion file.
     """
 
     betas: np.ndarray
@@ -72,6 +75,7 @@ class HandMotion:
     marker_names: tuple[str, ...] = field(default=())
     marker_fit: np.ndarray | None = None
     marker_residuals: np.ndarray | None = None
+    warnings: tuple[str, ...] = field(default=())
 
     def __post_init__(self):
         betas = np.asarray(self.betas, dtype=np.float64).copy()
@@ -96,6 +100,11 @@ class HandMotion:
             set_("marker_fit", _frames_array(self.marker_fit, "marker_fit", (len(names), 3), n))
         if self.marker_residuals is not None:
             set_("marker_residuals", _frames_array(self.marker_residuals, "marker_residuals", (len(names),), n))
+        set_("warnings", merge_warnings(self.warnings))
+
+    def with_warnings(self, *messages) -> "HandMotion":
+        """The same motion with ``messages`` (one-line strings) added to its warnings."""
+        return replace(self, warnings=merge_warnings(self.warnings, messages))
 
     @property
     def n_frames(self) -> int:
@@ -113,7 +122,7 @@ class HandMotion:
         pick = lambda a: None if a is None else a[sl]  # noqa: E731
         return HandMotion(self.betas, self.global_orient[sl], self.hand_pose[sl], self.transl[sl],
                           self.rate, self.side, pick(self.phi), self.model, pick(self.joints),
-                          self.marker_names, pick(self.marker_fit), pick(self.marker_residuals))
+                          self.marker_names, pick(self.marker_fit), pick(self.marker_residuals), self.warnings)
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,6 +143,8 @@ class ObjectMotion:
     state : dict of str to ndarray, optional
         Articulation state per frame for articulated objects (e.g. a 2x2x2 cube's
         layer angles), each array with T rows.
+    warnings : tuple of str
+        One-line warnings about the result, stored in the object file.
     """
 
     rotation: np.ndarray
@@ -143,6 +154,7 @@ class ObjectMotion:
     marker_names: tuple[str, ...] = field(default=())
     canonical: np.ndarray | None = None
     state: dict = field(default_factory=dict)
+    warnings: tuple[str, ...] = field(default=())
 
     def __post_init__(self):
         rotation = _frames_array(self.rotation, "rotation", (3,), None)
@@ -164,6 +176,11 @@ class ObjectMotion:
                 raise HandcapError(f"object state {key!r} must have {n} rows, got shape {value.shape}")
             state[str(key)] = value
         object.__setattr__(self, "state", state)
+        object.__setattr__(self, "warnings", merge_warnings(self.warnings))
+
+    def with_warnings(self, *messages) -> "ObjectMotion":
+        """The same motion with ``messages`` (one-line strings) added to its warnings."""
+        return replace(self, warnings=merge_warnings(self.warnings, messages))
 
     @property
     def n_frames(self) -> int:

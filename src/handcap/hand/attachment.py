@@ -11,14 +11,14 @@ so it follows the skin through any pose and shape of the hand model.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from array_api_compat import array_namespace
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.geometry import closest_points_on_mesh
-from handcap.io._files import load_npz, save_npz
+from handcap.io._files import load_npz, read_warnings, save_npz, warnings_entry
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +38,8 @@ class MarkerAttachment:
     model : str
         ``"openhand"`` or ``"mano"``.
     side : str
+    warnings : tuple of str
+        One-line warnings from the calibration that made it (residuals, shape at its bounds).
     """
 
     marker_names: tuple[str, ...]
@@ -47,6 +49,7 @@ class MarkerAttachment:
     betas: np.ndarray
     model: str = "openhand"
     side: str = "right"
+    warnings: tuple[str, ...] = field(default=())
 
     def __post_init__(self):
         m = len(self.marker_names)
@@ -62,6 +65,11 @@ class MarkerAttachment:
         object.__setattr__(self, "barycentric", bary)
         object.__setattr__(self, "offset", offset)
         object.__setattr__(self, "betas", betas)
+        object.__setattr__(self, "warnings", merge_warnings(self.warnings))
+
+    def with_warnings(self, *messages) -> "MarkerAttachment":
+        """The same attachment with ``messages`` (one-line strings) added to its warnings."""
+        return replace(self, warnings=merge_warnings(self.warnings, messages))
 
     def __len__(self) -> int:
         return len(self.marker_names)
@@ -143,16 +151,19 @@ class MarkerAttachment:
     def subset(self, names) -> "MarkerAttachment":
         idx = [self.marker_names.index(n) for n in names]
         return MarkerAttachment(tuple(names), self.triangles[idx], self.barycentric[idx], self.offset[idx],
-                                self.betas, self.model, self.side)
+                                self.betas, self.model, self.side, self.warnings)
 
     def save(self, path) -> None:
         """Write ``attachment.npz`` (File contract of DESIGN.md)."""
         save_npz(path, {"kind": np.array("attachment"), "marker_names": np.array(self.marker_names, dtype=str),
                         "triangles": self.triangles, "barycentric": self.barycentric, "offset": self.offset,
-                        "betas": self.betas, "model": np.array(self.model), "side": np.array(self.side)})
+                        "betas": self.betas, "model": np.array(self.model), "side": np.array(self.side),
+                        **warnings_entry(self.warnings)})
 
     @classmethod
     def load(cls, path) -> "MarkerAttachment":
         arrays = load_npz(path, ("marker_names", "triangles", "barycentric", "offset", "betas"), "attachment .npz")
         return cls(tuple(arrays["marker_names"]), arrays["triangles"], arrays["barycentric"], arrays["offset"],
-                   arrays["betas"], str(arrays.get("model", "openhand")), str(arrays.get("side", "right")))
+                   arrays["betas"], str(arrays.get("model", "openhand")), str(arrays.get("side", "right")),
+                   read_warnings(arrays))
+

@@ -94,6 +94,17 @@ def save_npz(path, arrays: dict) -> None:
             zf.writestr(info, buf.getvalue())
 
 
+def warnings_entry(warnings) -> dict:
+    """``{"warnings": array of str}`` for a result's warnings, or ``{}`` when it has none (File contract)."""
+    return {"warnings": np.array(list(warnings), dtype=str)} if len(warnings) else {}
+
+
+def read_warnings(arrays: dict) -> tuple[str, ...]:
+    """The ``warnings`` entry of a loaded ``.npz`` as a tuple of one-line strings (empty when absent)."""
+    value = arrays.get("warnings")
+    return () if value is None else tuple(str(w) for w in np.atleast_1d(value))
+
+
 def load_npz(path, required=(), what: str = "handcap .npz file") -> dict:
     """Read a ``.npz`` into a dict of arrays, refusing pickled objects.
 

@@ -13,7 +13,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
-from handcap.io._files import load_npz, save_npz
+from handcap.io._files import load_npz, read_warnings, save_npz, warnings_entry
 
 
 def _names(values) -> np.ndarray:
@@ -49,7 +49,7 @@ def write_markers_npz(markers: MarkerSequence, path) -> None:
               "names": _names(markers.names), "rate": np.array(markers.rate)}
     if markers.residuals is not None:
         arrays["residuals"] = markers.residuals
-    save_npz(path, arrays)
+    save_npz(path, {**arrays, **warnings_entry(markers.warnings)})
 
 
 def read_markers_npz(path) -> MarkerSequence:
@@ -57,7 +57,7 @@ def read_markers_npz(path) -> MarkerSequence:
     _check_kind(arrays, path, "markers")
     try:
         return MarkerSequence(arrays["positions"], list(arrays["names"]), _scalar(arrays, "rate", path),
-                              arrays.get("residuals"))
+                              arrays.get("residuals"), read_warnings(arrays))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
 
@@ -83,7 +83,7 @@ def write_hand_motion(motion: HandMotion, path) -> None:
     for key in ("phi", "joints", "marker_fit", "marker_residuals"):
         if getattr(motion, key) is not None:
             arrays[key] = getattr(motion, key)
-    save_npz(path, arrays)
+    save_npz(path, {**arrays, **warnings_entry(motion.warnings)})
 
 
 def read_hand_motion(path) -> HandMotion:
@@ -94,7 +94,8 @@ def read_hand_motion(path) -> HandMotion:
             arrays["betas"], arrays["global_orient"], arrays["hand_pose"], arrays["transl"],
             _scalar(arrays, "rate", path), str(arrays.get("side", "right")), arrays.get("phi"),
             str(arrays.get("model", "openhand")), arrays.get("joints"),
-            tuple(arrays.get("marker_names", ())), arrays.get("marker_fit"), arrays.get("marker_residuals"))
+            tuple(arrays.get("marker_names", ())), arrays.get("marker_fit"), arrays.get("marker_residuals"),
+            read_warnings(arrays))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
 
@@ -107,7 +108,7 @@ def write_object_motion(motion: ObjectMotion, path) -> None:
         arrays["canonical"] = motion.canonical
     for key, value in motion.state.items():
         arrays[f"state_{key}"] = value
-    save_npz(path, arrays)
+    save_npz(path, {**arrays, **warnings_entry(motion.warnings)})
 
 
 def read_object_motion(path) -> ObjectMotion:
@@ -117,6 +118,6 @@ def read_object_motion(path) -> ObjectMotion:
     try:
         return ObjectMotion(arrays["rotation"], arrays["translation"], _scalar(arrays, "rate", path),
                             str(arrays.get("name", "object")), tuple(arrays.get("marker_names", ())),
-                            arrays.get("canonical"), state)
+                            arrays.get("canonical"), state, read_warnings(arrays))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
