@@ -42,8 +42,9 @@ def test_marker_warnings_survive_derivation_and_files(tmp_path):
     assert markers.renamed(["x", "y"]).warnings == markers.warnings
     assert markers.with_warnings("units guessed: millimetres", "second").warnings == (
         "units guessed: millimetres", "second")
-    write_markers(markers, tmp_path / "m.npz")
-    assert read_markers(tmp_path / "m.npz").warnings == markers.warnings
+    for name in ("m.npz", "m.c3d"):
+        write_markers(markers, tmp_path / name)
+        assert read_markers(tmp_path / name).warnings == markers.warnings
     write_markers(_markers(), tmp_path / "clean.npz")
     assert read_markers(tmp_path / "clean.npz").warnings == ()
     assert "warnings" not in np.load(tmp_path / "clean.npz").files

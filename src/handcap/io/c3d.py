@@ -506,8 +506,9 @@ def read_c3d(path, *, partial: bool = False) -> MarkerSequence:
         t, m = np.argwhere(np.isinf(positions) | (np.abs(positions) > _IMPLAUSIBLE))[0][:2]
         raise HandcapError(f"{path}: corrupt C3D data (coordinate beyond {_IMPLAUSIBLE:g} m at frame {t}, "
                            f"point {m}); export the file again")
+    warnings = _strings(layout.params[("HANDCAP", "WARNINGS")]) if ("HANDCAP", "WARNINGS") in layout.params else []
     try:
-        return MarkerSequence(positions, _labels(layout), layout.rate, residuals)
+        return MarkerSequence(positions, _labels(layout), layout.rate, residuals, tuple(w for w in warnings if w))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
 
@@ -569,6 +570,8 @@ def write_c3d(markers: MarkerSequence, path) -> None:
     c3d["parameters"]["POINT"]["LABELS"]["value"] = list(markers.names)
     c3d.add_parameter("POINT", "UNITS", "mm")
     c3d.add_parameter("POINT", "SCALE", -step)
+    if markers.warnings:  # handcap's warnings about the data travel with it (File contracts)
+        c3d.add_parameter("HANDCAP", "WARNINGS", list(markers.warnings))
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"] = {"residuals": residual_mm.T[np.newaxis]}
     with atomic_output(path, mode=None) as tmp:
