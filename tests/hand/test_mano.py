@@ -8,6 +8,7 @@ MANO's 778 vertices, so joints and frames make anatomical sense.
 """
 
 import copyreg
+import re
 import os
 import pickle
 import struct
@@ -477,3 +478,103 @@ def test_missing_files_and_wrong_side(tmp_path, mano_dir):
         ManoHand.load(mano_dir / "MANO_LEFT.pkl")
     with pytest.raises(HandcapError, match="left hand only"):
         ManoHand.load(mano_dir, fix_left_shapedirs=True)
+
+
+# -- from the command line (--hand-model, --mano-dir, HANDCAP_MANO_DIR) ---------------------------------------------
+@pytest.fixture(scope="module")
+def glove_takes(tmp_path_factory):
+    """A calibration take and a take of one synthetic subject with the glove-13 layout, as .npz files."""
+    from handcap.io import write_markers
+    from handcap.synth.scene import SynthConfig, synthesize
+    folder = tmp_path_factory.mktemp("takes")
+    for name, motion, seed, frames in (("cal", "calibration", 31, 40), ("take", "open-close", 32, 20)):
+        capture = synthesize(SynthConfig(layout="glove-13", motion=motion, frames=frames, seed=seed, subject_seed=4,
+                                         ghost_rate=0), progress=False)
+        write_markers(capture.markers, folder / f"{name}.npz")
+    return folder
+
+
+def run_cli(*argv):
+    from handcap.cli import main
+    return main([str(a) for a in argv])
+
+
+def test_cli_calibrates_and_solves_with_mano(glove_takes, mano_dir, model, monkeypatch, capsys):
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.io import read_hand_motion
+    monkeypatch.delenv("HANDCAP_MANO_DIR", raising=False)
+    attachment, motion = glove_takes / "att.npz", glove_takes / "motion.npz"
+    assert run_cli("calibrate-markers", glove_takes / "cal.npz", "--layout", "glove-13", "--hand-model", "mano",
+                   "--mano-dir", mano_dir, "--out", attachment) == 0
+    att = MarkerAttachment.load(attachment)
+    assert att.model == "mano" and att.triangles.max() < len(model["f"])
+    # Solving reads the model from the attachment, and its files from HANDCAP_MANO_DIR.
+    assert run_cli("solve", glove_takes / "take.npz", "--attachment", attachment, "--out", motion) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--mano-dir DIR or set HANDCAP_MANO_DIR" in err[0]
+    monkeypatch.setenv("HANDCAP_MANO_DIR", str(mano_dir))
+    assert run_cli("solve", glove_takes / "take.npz", "--attachment", attachment, "--out", motion) == 0
+    solved = read_hand_motion(motion)
+    assert solved.model == "mano"
+    # The written joints and markers are MANO's (an independent forward) at the written parameters.
+    for t in (0, solved.n_frames - 1):
+        verts, joints = mano_reference(model, solved.betas, solved.global_orient[t], solved.hand_pose[t],
+                                       solved.transl[t])
+        np.testing.assert_allclose(solved.joints[t], joints, atol=1e-6)
+        np.testing.assert_allclose(solved.marker_fit[t], att.positions(verts, model["f"].astype(np.int64)),
+                                   atol=1e-6)
+
+
+def test_cli_refuses_a_model_other_than_the_attachments(glove_takes, mano_dir, monkeypatch, capsys):
+    monkeypatch.delenv("HANDCAP_MANO_DIR", raising=False)
+    openhand = glove_takes / "att_openhand.npz"
+    assert run_cli("calibrate-markers", glove_takes / "cal.npz", "--layout", "glove-13", "--out", openhand) == 0
+    out = glove_takes / "m.npz"
+    assert run_cli("solve", glove_takes / "take.npz", "--attachment", openhand, "--mano-dir", mano_dir,
+                   "--out", out) == 2
+    assert "made with the openhand hand model, not mano" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--hand-model", "mano", "--mano-dir", "{tmp}/nowhere"], r"MANO folder .*nowhere does not exist"),
+    (["--mano-dir", "{tmp}"], "no MANO_RIGHT.pkl in"),
+    (["--hand-model", "mano:{tmp}/nowhere"], "does not exist"),
+    (["--hand-model", "mano"], "needs its files: give --mano-dir DIR or set HANDCAP_MANO_DIR"),
+    (["--hand-model", "openhand", "--mano-dir", "{tmp}"], "--mano-dir goes with --hand-model mano"),
+    (["--hand-model", "smplx"], "unknown hand model 'smplx'"),
+])
+def test_cli_missing_mano_files_are_one_line_errors(tmp_path, monkeypatch, capsys, options, message):
+    monkeypatch.delenv("HANDCAP_MANO_DIR", raising=False)
+    out = tmp_path / "betas.npz"
+    argv = ["shape", "--lengths", "hand_length=190", "--out", out] + [o.format(tmp=tmp_path) for o in options]
+    assert run_cli(*argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("handcap shape: error:")
+    assert re.search(message, err[0]) and not out.exists()
+
+
+def test_cli_shape_fits_the_chosen_model(tmp_path, mano_dir, monkeypatch):
+    from handcap.solve import hand_measurements
+    monkeypatch.delenv("HANDCAP_MANO_DIR", raising=False)
+    for options, hand in ((["--hand-model", f"mano:{mano_dir}"], ManoHand.load(mano_dir)), ([], OpenHand())):
+        out = tmp_path / f"betas{len(options)}.npz"
+        assert run_cli("shape", "--lengths", "hand_length=195", "--out", out, *options) == 0
+        betas = np.load(out)["betas"]
+        # The length is met on the model that was asked for (MANO's shape space differs from OpenHand's).
+        assert hand_measurements(hand, betas)["hand_length"] == pytest.approx(0.195, abs=0.001)
+
+
+def test_cli_metrics_needs_the_motions_model_for_the_mesh(glove_takes, mano_dir, monkeypatch, capsys):
+    monkeypatch.setenv("HANDCAP_MANO_DIR", str(mano_dir))
+    attachment, motion = glove_takes / "att2.npz", glove_takes / "motion2.npz"
+    assert run_cli("calibrate-markers", glove_takes / "cal.npz", "--layout", "glove-13", "--hand-model", "mano",
+                   "--out", attachment) == 0
+    assert run_cli("solve", glove_takes / "take.npz", "--attachment", attachment, "--out", motion) == 0
+    capsys.readouterr()
+    leave_one_out = ["metrics", motion, "--markers", glove_takes / "take.npz", "--attachment", attachment,
+                     "--leave-one-out"]
+    assert run_cli(*leave_one_out, "--hand-model", "openhand") == 2
+    assert "made with the mano hand model" in capsys.readouterr().err
+    assert run_cli(*leave_one_out) == 0
+    assert "leave" in capsys.readouterr().out.lower()

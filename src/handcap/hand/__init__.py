@@ -18,7 +18,7 @@ from handcap.hand.anatomy import (
 from handcap.hand.mano import ManoHand
 from handcap.hand.model import HandModel, HandOutput
 from handcap.hand.openhand import OpenHand
-from handcap.hand.select import load_hand_model
+from handcap.hand.select import hand_model_from_options, load_hand_model
 
 __all__ = [
     "JOINT_NAMES",
@@ -32,6 +32,7 @@ __all__ = [
     "OpenHand",
     "hand_pose_from_phi",
     "joint_frames",
+    "hand_model_from_options",
     "load_hand_model",
     "phi_from_hand_pose",
 ]

@@ -8,7 +8,7 @@ from handcap.core.errors import HandcapError
 
 
 def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_mesh=None, attachment=None,
-                   leave_one_out: bool = False) -> dict:
+                   leave_one_out: bool = False, hand=None) -> dict:
     """Every metric that the given files allow, as plain numbers (millimetres, m/s^3, dB).
 
     Parameters
@@ -24,8 +24,10 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         Object motion ``.npz`` and the object's mesh in its own frame: penetration.
     attachment : path, optional
         Needed with ``leave_one_out`` (re-solves the take once per marker).
+    hand : HandModel, optional
+        The model the motion was solved with (for the mesh and ``leave_one_out``);
+        OpenHand of the motion's side by default, which only an ``openhand`` motion accepts.
     """
-    from handcap.hand import OpenHand
     from handcap.io import read_hand_motion, read_markers, read_object_motion
     from handcap.quality import metrics as q
     from handcap.solve.motion import observed_markers
@@ -59,7 +61,7 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     if object_motion is not None and object_mesh is not None:
         import trimesh
         mesh = trimesh.load(object_mesh, force="mesh", process=False)
-        hand = OpenHand(motion.side)
+        hand = _hand_for(motion, hand)
         verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
         world = object_motion.transform_points(np.asarray(mesh.vertices))
         s = q.penetration(verts, world, np.asarray(mesh.faces))
@@ -68,9 +70,21 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         if attachment is None or markers is None:
             raise HandcapError("--leave-one-out needs --markers and --attachment")
         from handcap.hand.attachment import MarkerAttachment
-        loo = q.leave_one_marker_out(read_markers(markers), MarkerAttachment.load(attachment))
+        loo = q.leave_one_marker_out(read_markers(markers), MarkerAttachment.load(attachment),
+                                     _hand_for(motion, hand))
         out["leave_one_out_mm"] = {k: 1000 * v.mean for k, v in loo.items()}
     return out
+
+
+def _hand_for(motion, hand):
+    """``hand``, or the OpenHand when the motion was solved with it."""
+    if hand is not None:
+        return hand
+    if motion.model != "openhand":
+        raise HandcapError(f"the motion was solved with the {motion.model} hand model: give --hand-model "
+                           f"{motion.model} (and --mano-dir DIR or HANDCAP_MANO_DIR)")
+    from handcap.hand import OpenHand
+    return OpenHand(motion.side)
 
 
 def metrics_table(metrics: dict) -> str:
