@@ -271,3 +271,58 @@ class MarkerSequence:
             "mean_segment_frames": float(segments.mean()) if len(segments) else 0.0,
             "never_seen": [s.name for s in stats if len(s.segment_lengths) == 0],
         }
+
+
+def expand_names(available, request) -> list[str]:
+    """Marker names picked by names or shell-style patterns; ``Subject:`` prefixes are understood.
+
+    Every verb that takes marker names (``track-object --markers``, ``label
+    --object``, the layouts of ``fill`` and ``train-occlusion``) resolves them
+    here, so ``index_tip`` finds ``Hand:index_tip`` everywhere.
+
+    Parameters
+    ----------
+    available : sequence of str or MarkerSequence
+        The names in a file, possibly prefixed (``Subject:name``).
+    request : str or sequence of str
+        Comma-separated names and patterns (``"boite:*"``, ``"index_*"``), or a
+        sequence of them. A name matches itself, else the one available name
+        whose part after the last ``:`` equals it. A pattern (``*``, ``?``,
+        ``[...]``, :func:`fnmatch.fnmatchcase`) matches whole names or the part
+        after the prefix.
+
+    Returns
+    -------
+    list of str
+        The available names picked, spelled as in ``available``, in the order
+        asked, each once.
+
+    Raises
+    ------
+    HandcapError
+        An empty request, a name that is not available or matches several
+        prefixed names, or a pattern that matches nothing.
+    """
+    from fnmatch import fnmatchcase
+    names = [str(n) for n in (available.names if isinstance(available, MarkerSequence) else available)]
+    short = [n.rsplit(":", 1)[-1] for n in names]
+    items = request.split(",") if isinstance(request, str) else [str(r) for r in request]
+    items = [item.strip() for item in items if item.strip()]
+    if not items:
+        raise HandcapError(f"no marker names given in {request!r}; give names or patterns such as 'boite:*'")
+    picked: list[str] = []
+    for item in items:
+        if any(c in item for c in "*?["):
+            found = [n for n, s in zip(names, short) if fnmatchcase(n, item) or fnmatchcase(s, item)]
+            if not found:
+                raise HandcapError(f"no marker matches {item!r}; markers are: {', '.join(names)}")
+        elif item in names:
+            found = [item]
+        else:
+            found = [n for n, s in zip(names, short) if s == item]
+            if len(found) > 1:
+                raise HandcapError(f"marker name {item!r} is ambiguous: {', '.join(found)}; give the prefix")
+            if not found:
+                raise HandcapError(f"no marker named {item!r}; markers are: {', '.join(names)}")
+        picked += [n for n in found if n not in picked]
+    return picked
