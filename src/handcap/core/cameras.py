@@ -27,7 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.rotations import matrix_from_axis_angle
 
 # OpenCV's iterative undistortion stops when the point re-distorts to within
@@ -371,6 +371,9 @@ class CameraRig:
     ----------
     cameras : iterable of Camera
         At least one; names unique.
+    warnings : tuple of str
+        One-line warnings about the rig as read (a unit guessed from the camera
+        positions); empty for a rig nobody doubted.
 
     Raises
     ------
@@ -385,6 +388,7 @@ class CameraRig:
     """
 
     cameras: tuple[Camera, ...]
+    warnings: tuple[str, ...] = ()
 
     def __post_init__(self):
         try:
@@ -401,6 +405,22 @@ class CameraRig:
         if duplicates:
             raise HandcapError(f"camera names must be unique, repeated: {', '.join(duplicates)}")
         object.__setattr__(self, "cameras", cameras)
+        object.__setattr__(self, "warnings", merge_warnings(self.warnings))
+
+    def with_warnings(self, *messages) -> CameraRig:
+        """The same rig with ``messages`` (one-line strings) added to its warnings."""
+        return CameraRig(self.cameras, merge_warnings(self.warnings, messages))
+
+    def scaled(self, factor: float) -> CameraRig:
+        """The rig in a world scaled by ``factor`` (translations times ``factor``, e.g. 0.001 for mm to m).
+
+        Rotations and intrinsics are unchanged; camera centres scale with the world.
+        """
+        factor = float(factor)
+        if not np.isfinite(factor) or factor <= 0:
+            raise HandcapError(f"a rig is scaled by a positive finite factor, got {factor}")
+        return CameraRig([Camera(c.name, c.size, c.matrix, c.distortions, c.rotation, c.translation * factor)
+                          for c in self.cameras], self.warnings)
 
     def __eq__(self, other) -> bool:
         if not isinstance(other, CameraRig):

@@ -14,6 +14,11 @@ suffix    format                             read / write
 
 The UCI hand-postures table (static, unlabeled records, no frame rate) is not a
 marker file: read it with :func:`read_uci_postures`.
+
+Units are settled at this boundary (:mod:`handcap.io._units`): ``units=``
+(``--units``) overrides what a file says; a file whose own unit makes its data
+implausible (a hand 200 m wide) is read in the one unit that fits, with a
+warning, or refused with one line when no unit or several fit.
 """
 
 from __future__ import annotations
@@ -23,7 +28,16 @@ from pathlib import Path
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.points import PointCloudSequence
-from handcap.io._files import atomic_output, check_not_input, existing_file, load_npz, save_npz
+from handcap.io._files import (
+    atomic_output,
+    check_not_input,
+    check_output,
+    check_output_folder,
+    existing_file,
+    load_npz,
+    save_npz,
+)
+from handcap.io._units import UNITS
 from handcap.io.c3d import read_c3d, write_c3d
 from handcap.io.camera_formats import read_rig, write_rig
 from handcap.io.motive import read_motive_csv
@@ -55,7 +69,7 @@ def _suffix(path, table, verb: str) -> str:
     return suffix
 
 
-def read_markers(path, *, partial: bool = False) -> MarkerSequence:
+def read_markers(path, *, partial: bool = False, units: str | None = None, hand=None) -> MarkerSequence:
     """Read labeled markers from any supported file (format from the extension).
 
     Parameters
@@ -64,24 +78,32 @@ def read_markers(path, *, partial: bool = False) -> MarkerSequence:
     partial : bool
         C3D only: keep the complete frames of a file shorter than its header
         promises (see :func:`read_c3d`) instead of refusing it.
+    units : {"mm", "cm", "m"}, optional
+        The unit of the file's coordinates, overriding what the file says (or
+        its format's usual unit).
+    hand : sequence of str, optional
+        Names of one hand's markers (a layout's); their spread, 3-35 cm for a
+        hand, tells the unit when the file's own is implausible.
 
     Returns
     -------
     MarkerSequence
-        Positions in metres, NaN where missing.
+        Positions in metres, NaN where missing; ``warnings`` say if the unit
+        was not the file's.
 
     Raises
     ------
     HandcapError
-        Unknown extension, unreadable, truncated or inconsistent file.
+        Unknown extension, unreadable, truncated or inconsistent file, or
+        coordinates that fit no unit (or several, when the file's does not).
     """
     suffix = _suffix(path, MARKER_READERS, "read")
     existing_file(path)
     if partial:
         if suffix != ".c3d":
             raise HandcapError(f"{path}: reading part of a file is possible for C3D files only")
-        return read_c3d(path, partial=True)
-    return MARKER_READERS[suffix](path)
+        return read_c3d(path, partial=True, units=units, hand=hand)
+    return MARKER_READERS[suffix](path, units=units, hand=hand)
 
 
 def write_markers(markers: MarkerSequence, path) -> None:
@@ -90,11 +112,14 @@ def write_markers(markers: MarkerSequence, path) -> None:
     writer(markers, path)
 
 
-def read_points(path) -> PointCloudSequence:
-    """Read unlabeled points: a points ``.npz``, or any marker file with its labels ignored."""
+def read_points(path, *, units: str | None = None) -> PointCloudSequence:
+    """Read unlabeled points: a points ``.npz``, or any marker file with its labels ignored.
+
+    ``units`` as for :func:`read_markers`.
+    """
     if Path(path).suffix.lower() == ".npz" and npz_kind(path) == "points":
-        return read_points_npz(path)
-    return PointCloudSequence.from_markers(read_markers(path))
+        return read_points_npz(path, units=units)
+    return PointCloudSequence.from_markers(read_markers(path, units=units))
 
 
 def write_points(points: PointCloudSequence, path) -> None:
@@ -104,16 +129,20 @@ def write_points(points: PointCloudSequence, path) -> None:
     write_points_npz(points, path)
 
 
-def convert(source, target, *, partial: bool = False) -> MarkerSequence:
-    """Convert a marker file to another format; never writes over ``source``."""
-    check_not_input(target, source)
-    markers = read_markers(source, partial=partial)
+def convert(source, target, *, partial: bool = False, units: str | None = None) -> MarkerSequence:
+    """Convert a marker file to another format; never writes over ``source``.
+
+    ``units`` overrides the unit of ``source`` (see :func:`read_markers`); the
+    markers written, with their warnings, are returned.
+    """
+    check_output(target, source)
+    markers = read_markers(source, partial=partial, units=units)
     write_markers(markers, target)
     return markers
 
 
 __all__ = [
-    "UciPostures", "atomic_output", "check_not_input", "convert", "existing_file", "load_npz", "npz_kind",
+    "UNITS", "UciPostures", "atomic_output", "check_not_input", "check_output", "check_output_folder", "convert", "existing_file", "load_npz", "npz_kind",
     "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_motive_csv",
     "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig", "read_trc",
     "read_uci_postures", "save_npz", "write_c3d", "write_hand_motion", "write_markers", "write_markers_npz",

@@ -1,9 +1,13 @@
-"""File plumbing shared by every writer: atomic outputs, deterministic archives.
+"""File plumbing shared by every writer: checked and atomic outputs, deterministic archives.
 
-Writers never leave a half-written file behind: they write to a temporary name
-in the target folder and rename it when complete, so an interrupted run keeps
-whatever was there before. Archives are written with fixed timestamps so the
-same data gives the same bytes (``numpy.savez`` stamps the current time).
+No input is ever overwritten. Every command checks its output paths with
+:func:`check_output` before any work (not an input, not a folder, in a folder
+that exists and can be written), and every writer goes through
+:func:`atomic_output`: it writes to a temporary name in the target folder and
+renames it when complete, so an interrupted run keeps whatever was there
+before, and a failure to write is one :class:`~handcap.HandcapError` line.
+Archives are written with fixed timestamps so the same data gives the same
+bytes (``numpy.savez`` stamps the current time).
 """
 
 from __future__ import annotations
@@ -34,15 +38,116 @@ def existing_file(path) -> Path:
     return path
 
 
-def check_not_input(output, *inputs) -> None:
-    """Refuse to write ``output`` over any of ``inputs``."""
+def _same(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists() and os.path.samefile(a, b):
+            return True
+        return a.resolve() == b.resolve()
+    except (OSError, RuntimeError):  # a loop of links, a name the system refuses
+        return False
+
+
+def _folder(path: Path) -> Path:
+    return path.parent if str(path.parent) else Path(".")
+
+
+def _check_target(path: Path) -> Path:
+    """The folder ``path`` will be written in, checked: ``path`` no folder or device, its folder a writable one."""
+    if not str(path) or path.name in ("", ".", ".."):
+        raise HandcapError(f"{str(path) or 'an empty name'}: not a file name; give the output a file name")
+    if path.is_dir():
+        raise HandcapError(f"{path}: is a folder; give the output a file name inside it")
+    if path.exists() and not path.is_file():
+        raise HandcapError(f"{path}: exists and is not a regular file; choose another output name")
+    folder = _folder(path)
+    if folder.exists() and not folder.is_dir():
+        raise HandcapError(f"{path}: {folder} is a file, not a folder")
+    if not folder.is_dir():
+        raise HandcapError(f"{path}: folder {folder} does not exist; create it first")
+    return folder
+
+
+def _probe(folder: Path, path) -> None:
+    """Refuse a folder in which no file can be created (permissions, read-only file system)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        raise HandcapError(f"{path}: cannot write in folder {folder} ({err.strerror or err}); "
+                           "choose a folder you can write in") from None
+
+
+def check_output(output, *inputs) -> Path:
+    """Check an output path before any work is done; the one check every writing command uses.
+
+    Parameters
+    ----------
+    output : str or Path
+        The file a command will write.
+    *inputs : str or Path or None
+        Files the command reads (None entries are skipped).
+
+    Returns
+    -------
+    Path
+        ``output`` as a Path.
+
+    Raises
+    ------
+    HandcapError
+        If ``output`` is one of ``inputs`` (also through a link), a folder or
+        a device, or its folder is missing or cannot be written in.
+    """
     out = Path(output)
     for inp in inputs:
-        inp = Path(inp)
-        if out.exists() and inp.exists() and os.path.samefile(out, inp):
-            raise HandcapError(f"{out}: output would overwrite the input file; choose another name")
-        if out.resolve() == inp.resolve():
-            raise HandcapError(f"{out}: output would overwrite the input file; choose another name")
+        if inp is not None and _same(out, Path(inp)):
+            raise HandcapError(f"{out}: output would overwrite the input file {inp}; choose another name")
+    _probe(_check_target(out), out)
+    return out
+
+
+def check_not_input(output, *inputs) -> None:
+    """Refuse to write ``output`` over any of ``inputs``, or where it cannot be written (:func:`check_output`)."""
+    check_output(output, *inputs)
+
+
+def check_output_folder(folder, *inputs, force: bool = False) -> Path:
+    """Check a folder a command fills with files: new, or empty, or ``force``; never holding an input.
+
+    Parameters
+    ----------
+    folder : str or Path
+    *inputs : str or Path or None
+        Files the command reads; none may lie in ``folder`` when it is written over.
+    force : bool
+        Allow writing into a folder that already holds files.
+
+    Raises
+    ------
+    HandcapError
+        If ``folder`` is a file, holds files and ``force`` is not given, holds
+        one of ``inputs``, or it (or the folder it would be made in) cannot
+        be written in.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise HandcapError(f"{folder}: is a file, not a folder; give a folder for the output")
+    if folder.is_dir():
+        held = [Path(inp) for inp in inputs if inp is not None and _same(_folder(Path(inp)), folder)]
+        if held:
+            raise HandcapError(f"{folder}: holds the input {held[0]}; write the output to another folder")
+        if any(folder.iterdir()) and not force:
+            raise HandcapError(f"{folder}: folder is not empty; give a new or empty folder, or --force to write "
+                               "over its files")
+        _probe(folder, folder)
+        return folder
+    parent = folder.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise HandcapError(f"{folder}: {parent} is a file, not a folder")
+    _probe(parent, folder)
+    return folder
 
 
 @contextlib.contextmanager
@@ -53,10 +158,12 @@ def atomic_output(path, mode: str = "wb"):
     ``mode=None``, the temporary path for libraries that write by file name.
     """
     path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise HandcapError(f"{path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=folder)
+    folder = _check_target(path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=folder)
+    except OSError as err:
+        raise HandcapError(f"{path}: cannot write in folder {folder} ({err.strerror or err}); "
+                           "choose a folder you can write in") from None
     try:
         if mode is None:
             os.close(fd)
@@ -67,6 +174,10 @@ def atomic_output(path, mode: str = "wb"):
         # mkstemp makes the file private; give it the mode a plain open() would.
         os.chmod(tmp, path.stat().st_mode & 0o777 if path.exists() else 0o666 & ~_umask())
         os.replace(tmp, path)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise HandcapError(f"{path}: could not be written ({err.strerror or err}); nothing was changed") from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)

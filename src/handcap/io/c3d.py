@@ -62,7 +62,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.io._files import atomic_output, existing_file
-from handcap.io._units import metres_per_unit
+from handcap.io._units import check_units, metres_per_unit, settle_marker_units, unit_name
 
 _BLOCK = 512
 _SIGNATURE = 0x50
@@ -459,7 +459,7 @@ def _labels(layout: _Layout) -> list[str]:
     return names
 
 
-def read_c3d(path, *, partial: bool = False) -> MarkerSequence:
+def read_c3d(path, *, partial: bool = False, units: str | None = None, hand=None) -> MarkerSequence:
     """Read the 3D points of a C3D file.
 
     Parameters
@@ -471,6 +471,11 @@ def read_c3d(path, *, partial: bool = False) -> MarkerSequence:
         POINT:FRAMES promise, instead of refusing it. Off by default, because
         such a file is almost always a cut copy. (``ezc3d/Optotrak.c3d`` is one:
         its header promises 1149 frames, it holds 29.)
+    units : {"mm", "cm", "m"}, optional
+        The unit of the coordinates, overriding POINT:UNITS.
+    hand : sequence of str, optional
+        Names of one hand's markers, whose spread tells the unit when the
+        file's is implausible (see :mod:`handcap.io._units`).
 
     Returns
     -------
@@ -484,7 +489,7 @@ def read_c3d(path, *, partial: bool = False) -> MarkerSequence:
     ------
     HandcapError
         If the file is not a C3D file, is truncated or corrupt, names an
-        unknown unit, or holds no points.
+        unknown unit, holds no points, or its coordinates fit no length unit.
 
     Notes
     -----
@@ -492,12 +497,14 @@ def read_c3d(path, *, partial: bool = False) -> MarkerSequence:
     millimetres. Empty labels become ``point<i>`` (1-based) and repeated labels
     get a ``~2``, ``~3`` suffix, so that names stay unique.
     """
+    units = check_units(units)
     path = existing_file(path)
     layout = _inspect(path, partial)
     points, residuals = _read_points(layout)
-    units = _strings(layout.params[("POINT", "UNITS")]) if ("POINT", "UNITS") in layout.params else []
-    unit = units[0] if units and units[0] else "mm"
-    scale = metres_per_unit(unit, f"{path}: POINT:UNITS")
+    said = _strings(layout.params[("POINT", "UNITS")]) if ("POINT", "UNITS") in layout.params else []
+    unit = said[0] if said and said[0] else "mm"
+    metres_per_unit(unit, f"{path}: POINT:UNITS")
+    scale = metres_per_unit(units or unit, "units")
     positions = points[:3].transpose(2, 1, 0) * scale
     residuals = residuals[0].T * scale
     zero = (positions == 0).all(axis=2) & (residuals == 0)
@@ -508,9 +515,10 @@ def read_c3d(path, *, partial: bool = False) -> MarkerSequence:
                            f"point {m}); export the file again")
     warnings = _strings(layout.params[("HANDCAP", "WARNINGS")]) if ("HANDCAP", "WARNINGS") in layout.params else []
     try:
-        return MarkerSequence(positions, _labels(layout), layout.rate, residuals, tuple(w for w in warnings if w))
+        markers = MarkerSequence(positions, _labels(layout), layout.rate, residuals, tuple(w for w in warnings if w))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+    return settle_marker_units(markers, declared=unit_name(unit), units=units, where=path, hand=hand)
 
 
 # -- writing -----------------------------------------------------------------------------

@@ -124,7 +124,7 @@ from handcap.core.cameras import Camera, CameraRig
 from handcap.core.errors import HandcapError
 from handcap.core.rotations import axis_angle_from_matrix
 from handcap.io._files import atomic_output, existing_file
-from handcap.io._units import metres_per_unit
+from handcap.io._units import check_units, metres_per_unit, settle_rig_units
 from handcap.io.cameras import _all_numbers, read_cameras_toml, write_cameras_toml
 
 OPENCV_SUFFIXES = (".yml", ".yaml", ".xml")
@@ -683,12 +683,18 @@ READERS = {"anipose": read_cameras_toml, "caliscope": read_cameras_caliscope,
            "opencv": read_cameras_opencv, "qca": read_cameras_qca}
 
 
-def read_rig(path, **options) -> CameraRig:
+def read_rig(path, *, units: str | None = None, **options) -> CameraRig:
     """Read a camera rig from any supported file (format from extension and content).
 
     Parameters
     ----------
     path : str or Path
+    units : {"mm", "cm", "m"}, optional
+        The unit of the file's camera positions, overriding the format's
+        (metres for TOML and OpenCV files, millimetres for QCA, ``unit=`` for an
+        OpenCV stereo pair). Without it, a rig whose cameras lie implausibly
+        far apart in the format's unit (2000 "m") is read in the one unit that
+        fits, with a warning in ``warnings`` (see :mod:`handcap.io._units`).
     **options
         Options of the format's reader: ``size``, ``extrinsics``, ``unit``,
         ``intrinsics_only`` for OpenCV (:func:`read_cameras_opencv`);
@@ -697,17 +703,20 @@ def read_rig(path, **options) -> CameraRig:
     Returns
     -------
     CameraRig
+        Translations in metres.
 
     Raises
     ------
     HandcapError
-        Unknown format, an option the format does not take, or anything its
-        reader refuses.
+        Unknown format, an option the format does not take, anything its
+        reader refuses, or camera positions that fit no unit (or several,
+        when the format's does not).
 
     See Also
     --------
     camera_format : how the format is chosen.
     """
+    units = check_units(units)
     fmt = camera_format(path)
     reader = READERS[fmt]
     accepted = [name for name, p in inspect.signature(reader).parameters.items() if p.kind is p.KEYWORD_ONLY]
@@ -715,7 +724,11 @@ def read_rig(path, **options) -> CameraRig:
     if unknown:
         raise HandcapError(f"{path}: {fmt} camera files take no option {', '.join(unknown)}; "
                            f"they take {', '.join(accepted) or 'none'}")
-    return reader(path, **options)
+    rig = reader(path, **options)
+    declared = "mm" if fmt == "qca" else options.get("unit", "m")
+    if units is not None:
+        rig = rig.scaled(metres_per_unit(units, "units") / metres_per_unit(declared, f"{path}: unit="))
+    return settle_rig_units(rig, declared=declared, units=units, where=path)
 
 
 def write_rig(rig: CameraRig, path) -> None:

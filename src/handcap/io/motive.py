@@ -37,7 +37,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.io._text import check_complete, data_rows, floats, read_text, uniform_rows
-from handcap.io._units import metres_per_unit
+from handcap.io._units import check_units, metres_per_unit, settle_marker_units, unit_name
 
 _WHAT = "an OptiTrack Motive CSV export"
 _LABELS = ("Type", "Name", "ID")
@@ -87,13 +87,18 @@ def _header_rows(rows: list[list[str]], path) -> tuple[list[str], list[str], lis
     return rows[0], rows[1], rows[3]
 
 
-def read_motive_csv(path) -> MarkerSequence:
+def read_motive_csv(path, *, units: str | None = None, hand=None) -> MarkerSequence:
     """Read the marker trajectories of an OptiTrack Motive CSV export (format 1.2x).
 
     Parameters
     ----------
     path : str or Path
         A ``.csv`` exported by Motive with markers included.
+    units : {"mm", "cm", "m"}, optional
+        The unit of the coordinates, overriding the file's ``Length Units``.
+    hand : sequence of str, optional
+        Names of one hand's markers, whose spread tells the unit when the
+        file's is implausible (see :mod:`handcap.io._units`).
 
     Returns
     -------
@@ -106,15 +111,19 @@ def read_motive_csv(path) -> MarkerSequence:
     HandcapError
         If the file is not a Motive export (the UCI hand-postures CSV included),
         lacks header rows, has no Marker columns, or its rows disagree with the
-        header or with ``Total Exported Frames``.
+        header or with ``Total Exported Frames``, or the coordinates fit no
+        length unit.
     """
+    units = check_units(units)
     path, text = read_text(path, _WHAT)
     lines = text.splitlines()
     meta = _metadata(next(csv.reader(lines[:1]), []), path)
     rate = _rate(meta, path)
     if "Length Units" not in meta:
         raise HandcapError(f"{path}: first line has no Length Units; export again with units included")
-    scale = metres_per_unit(meta["Length Units"], f"{path}: Length Units")
+    metres_per_unit(meta["Length Units"], f"{path}: Length Units")
+    declared = unit_name(meta["Length Units"])
+    scale = metres_per_unit(units or declared, "units")
     start = 1
     while start < len(lines) and not lines[start].strip():
         start += 1
@@ -165,6 +174,7 @@ def read_motive_csv(path) -> MarkerSequence:
         raise HandcapError(f"{path}: the Frame column is not strictly increasing; the file is damaged")
     positions = values[:, :-1].reshape(len(rows), len(names_out), 3) * scale
     try:
-        return MarkerSequence(positions, names_out, rate)
+        markers = MarkerSequence(positions, names_out, rate)
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+    return settle_marker_units(markers, declared=declared, units=units, where=path, hand=hand)

@@ -10,10 +10,11 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.markers import MarkerSequence
+from handcap.core.markers import MarkerSequence, as_positions
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
 from handcap.io._files import load_npz, read_warnings, save_npz, warnings_entry
+from handcap.io._units import check_units, metres_per_unit, settle_marker_units
 
 
 def _names(values) -> np.ndarray:
@@ -25,6 +26,23 @@ def _scalar(arrays, key, path, cast=float):
         return cast(np.asarray(arrays[key]).reshape(()))
     except (ValueError, TypeError):
         raise HandcapError(f"{path}: entry {key!r} must be a single value") from None
+
+
+def _numeric(arrays, key, path):
+    """Entry ``key`` as float64 (None when absent), refusing text, dates and the like."""
+    if arrays.get(key) is None:
+        return None
+    value = np.asarray(arrays[key])
+    if value.dtype.kind not in "biuf":
+        raise HandcapError(f"{path}: entry {key!r} must hold numbers, got {value.dtype} values")
+    return value.astype(np.float64)
+
+
+def _name_list(arrays, key, path) -> list[str]:
+    value = np.asarray(arrays[key])
+    if value.ndim != 1:
+        raise HandcapError(f"{path}: entry {key!r} must be a list of names, got shape {value.shape}")
+    return [str(v) for v in value]
 
 
 def _check_kind(arrays, path, kind):
@@ -52,27 +70,60 @@ def write_markers_npz(markers: MarkerSequence, path) -> None:
     save_npz(path, {**arrays, **warnings_entry(markers.warnings)})
 
 
-def read_markers_npz(path) -> MarkerSequence:
+def read_markers_npz(path, *, units: str | None = None, hand=None) -> MarkerSequence:
+    """Read a markers ``.npz`` (``positions`` (T, M, 3) metres, ``names``, ``rate``).
+
+    Parameters
+    ----------
+    path : str or Path
+    units : {"mm", "cm", "m"}, optional
+        The unit of ``positions`` when a tool other than handcap wrote them in
+        another unit than the contract's metres.
+    hand : sequence of str, optional
+        Names of one hand's markers, whose spread tells the unit when metres
+        are implausible (see :mod:`handcap.io._units`).
+
+    Raises
+    ------
+    HandcapError
+        Not a markers ``.npz``, entries of the wrong shape or type, or
+        positions that fit no length unit.
+    """
+    units = check_units(units)
     arrays = load_npz(path, ("positions", "names", "rate"), "marker .npz file")
     _check_kind(arrays, path, "markers")
     try:
-        return MarkerSequence(arrays["positions"], list(arrays["names"]), _scalar(arrays, "rate", path),
-                              arrays.get("residuals"), read_warnings(arrays))
+        markers = MarkerSequence(_numeric(arrays, "positions", path) * metres_per_unit(units or "m", "units"),
+                                 _name_list(arrays, "names", path), _scalar(arrays, "rate", path),
+                                 _numeric(arrays, "residuals", path), read_warnings(arrays))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+    return settle_marker_units(markers, declared="m", units=units, where=path, hand=hand)
 
 
 def write_points_npz(points: PointCloudSequence, path) -> None:
     save_npz(path, {"kind": np.array("points"), "points": points.padded(), "rate": np.array(points.rate)})
 
 
-def read_points_npz(path) -> PointCloudSequence:
+def read_points_npz(path, *, units: str | None = None) -> PointCloudSequence:
+    """Read an unlabeled points ``.npz`` (``points`` (T, K, 3) metres NaN-padded, ``rate``).
+
+    ``units`` gives the unit of ``points`` when it is not the contract's
+    metres; the units are checked as for markers (:mod:`handcap.io._units`).
+    """
+    units = check_units(units)
     arrays = load_npz(path, ("points", "rate"), "point-cloud .npz file")
     _check_kind(arrays, path, "points")
     try:
-        return PointCloudSequence.from_padded(arrays["points"], _scalar(arrays, "rate", path))
+        padded = as_positions(_numeric(arrays, "points", path))
+        rate = _scalar(arrays, "rate", path)
+        points = PointCloudSequence.from_padded(padded * metres_per_unit(units or "m", "units"), rate)
+        padded = points.padded()
+        as_markers = MarkerSequence(padded, [f"p{k}" for k in range(padded.shape[1])], rate)
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+    settled = settle_marker_units(as_markers, declared="m", units=units, where=path)
+    return points if settled is as_markers else PointCloudSequence.from_markers(settled)
 
 
 def write_hand_motion(motion: HandMotion, path) -> None:

@@ -30,6 +30,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.io._text import check_complete, data_rows, floats, read_text, uniform_rows
+from handcap.io._units import check_units, metres_per_unit, settle_marker_units
 
 _WHAT = "a Qualisys TSV export"
 _REQUIRED = ("NO_OF_FRAMES", "NO_OF_MARKERS", "FREQUENCY", "MARKER_NAMES")
@@ -50,13 +51,18 @@ def _count(header, key, path) -> int:
     return value
 
 
-def read_qualisys_tsv(path) -> MarkerSequence:
+def read_qualisys_tsv(path, *, units: str | None = None, hand=None) -> MarkerSequence:
     """Read a Qualisys QTM TSV export of 3D marker trajectories.
 
     Parameters
     ----------
     path : str or Path
         A ``.tsv`` file exported by QTM (3D data).
+    units : {"mm", "cm", "m"}, optional
+        The unit of the coordinates (QTM writes millimetres, the default).
+    hand : sequence of str, optional
+        Names of one hand's markers, whose spread tells the unit when
+        millimetres are implausible (see :mod:`handcap.io._units`).
 
     Returns
     -------
@@ -68,8 +74,10 @@ def read_qualisys_tsv(path) -> MarkerSequence:
     ------
     HandcapError
         If a header key is missing, the marker or frame counts disagree with
-        the data (a cut file), a column is missing, or a cell is not a number.
+        the data (a cut file), a column is missing, a cell is not a number, or
+        the coordinates fit no length unit.
     """
+    units = check_units(units)
     path, text = read_text(path, _WHAT)
     lines = text.splitlines()
     header, i = {}, 0
@@ -141,9 +149,10 @@ def read_qualisys_tsv(path) -> MarkerSequence:
         r = int(np.flatnonzero(np.diff(values[:, -1]) != 1)[0])
         raise HandcapError(f"{path}: frame numbers jump from {values[r, -1]:g} to {values[r + 1, -1]:g} at "
                            f"line {i + r + 2}; the file is damaged")
-    positions = values[:, :3 * n_markers].reshape(len(rows), n_markers, 3) * 1e-3
+    positions = values[:, :3 * n_markers].reshape(len(rows), n_markers, 3) * metres_per_unit(units or "mm", "units")
     positions[(positions == 0).all(axis=2)] = np.nan
     try:
-        return MarkerSequence(positions, names, rate)
+        markers = MarkerSequence(positions, names, rate)
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+    return settle_marker_units(markers, declared="mm", units=units, where=path, hand=hand)

@@ -25,7 +25,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.io._files import atomic_output
 from handcap.io._text import check_complete, data_rows, floats, read_text, uniform_rows
-from handcap.io._units import metres_per_unit
+from handcap.io._units import check_units, metres_per_unit, settle_marker_units, unit_name
 
 _WHAT = "a TRC file"
 _FIELDS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units",
@@ -44,13 +44,19 @@ def _field(info: dict, key: str, path, cast):
     return value
 
 
-def read_trc(path) -> MarkerSequence:
+def read_trc(path, *, units: str | None = None, hand=None) -> MarkerSequence:
     """Read a TRC marker file (``PathFileType 4``).
 
     Parameters
     ----------
     path : str or Path
         A ``.trc`` file.
+    units : {"mm", "cm", "m"}, optional
+        The unit of the coordinates, overriding the file's ``Units`` (for a
+        file that declares the wrong one).
+    hand : sequence of str, optional
+        Names of one hand's markers, whose spread tells the unit when the
+        file's is implausible (see :mod:`handcap.io._units`).
 
     Returns
     -------
@@ -62,8 +68,10 @@ def read_trc(path) -> MarkerSequence:
     ------
     HandcapError
         If the header is incomplete, NumMarkers or NumFrames disagree with the
-        names or the data, or a field is not a number.
+        names or the data, a field is not a number, or the coordinates fit no
+        length unit.
     """
+    units = check_units(units)
     path, text = read_text(path, _WHAT)
     lines = text.splitlines()
     if not lines[0].startswith("PathFileType"):
@@ -78,7 +86,9 @@ def read_trc(path) -> MarkerSequence:
     n_markers = _field(info, "NumMarkers", path, int)
     if "Units" not in info:
         raise HandcapError(f"{path}: TRC header lacks Units (mm, cm or m)")
-    scale = metres_per_unit(info["Units"], f"{path}: TRC Units")
+    metres_per_unit(info["Units"], f"{path}: TRC Units")
+    declared = unit_name(info["Units"])
+    scale = metres_per_unit(units or declared, "units")
     label_row = lines[3].split("\t")
     if [c.strip() for c in label_row[:2]] != ["Frame#", "Time"]:
         raise HandcapError(f"{path}: TRC marker row should start with 'Frame#' and 'Time'")
@@ -108,9 +118,10 @@ def read_trc(path) -> MarkerSequence:
         raise HandcapError(f"{path}: the Frame# column is not strictly increasing; the file is damaged")
     positions = values[:, 2:].reshape(len(rows), n_markers, 3) * scale
     try:
-        return MarkerSequence(positions, names, rate)
+        markers = MarkerSequence(positions, names, rate)
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+    return settle_marker_units(markers, declared=declared, units=units, where=path, hand=hand)
 
 
 def write_trc(markers: MarkerSequence, path) -> None:
