@@ -21,7 +21,10 @@ uses the unit of the calibration board, which may be millimetres.
 
 Writing emits exactly the six keys above per camera, with floats in their
 shortest round-trip form, so reading gives back the same numbers bit for bit
-and identical rigs give identical bytes.
+and identical rigs give identical bytes. The warnings of the calibration that
+made the rig (one-line strings, File contract) go to ``[metadata]`` as
+``warnings = [...]``, where anipose keeps its own notes; read them back with
+:func:`read_cameras_warnings`.
 """
 
 from __future__ import annotations
@@ -106,7 +109,7 @@ def _all_numbers(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def write_cameras_toml(rig: CameraRig, path) -> None:
+def write_cameras_toml(rig: CameraRig, path, *, warnings=()) -> None:
     """Write a camera rig as an anipose-style TOML file, atomically.
 
     Parameters
@@ -114,6 +117,8 @@ def write_cameras_toml(rig: CameraRig, path) -> None:
     rig : CameraRig
     path : str or Path
         Written through a temporary file renamed into place.
+    warnings : sequence of str
+        One-line warnings of the calibration, stored in ``[metadata]`` (none: no metadata table).
 
     Raises
     ------
@@ -123,9 +128,29 @@ def write_cameras_toml(rig: CameraRig, path) -> None:
     if not isinstance(rig, CameraRig):
         raise HandcapError(f"write_cameras_toml needs a CameraRig, got {type(rig).__name__}")
     document = {f"cam_{i}": _table_from_camera(camera) for i, camera in enumerate(rig)}
+    if len(warnings):
+        document[_METADATA] = {"warnings": [str(w) for w in warnings]}
     text = tomli_w.dumps(document)
     with atomic_output(path, "wb") as fh:
         fh.write(text.encode("utf-8"))
+
+
+def read_cameras_warnings(path) -> tuple[str, ...]:
+    """The warnings stored in an anipose-style TOML file's ``[metadata]`` (empty when there are none).
+
+    Raises
+    ------
+    HandcapError
+        Missing, unreadable or invalid TOML file.
+    """
+    path = existing_file(path)
+    try:
+        with open(path, "rb") as fh:
+            metadata = tomllib.load(fh).get(_METADATA, {})
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise HandcapError(f"{path}: not valid TOML ({err})") from None
+    found = metadata.get("warnings", []) if isinstance(metadata, dict) else []
+    return tuple(str(w) for w in found) if isinstance(found, list) else ()
 
 
 def _table_from_camera(camera: Camera) -> dict:

@@ -180,8 +180,9 @@ def shape_warnings(betas, *, bound: float = SHAPE_BOUND) -> list[str]:
     if not len(at):
         return []
     listed = ", ".join(f"betas[{i}] = {betas[i]:.2f}" for i in at)
-    return [f"shape value(s) at the bound of +-{bound:g} standard deviations: {listed} (plausible: |betas| < "
-            f"{bound:g}); the hand model cannot take this hand's proportions, or the markers are mislabelled"]
+    return [f"shape value(s) at or beyond +-{bound:g} standard deviations of adult hands: {listed} (plausible: "
+            f"|betas| < {bound:g}); a fit that ends there could not take the hand's proportions (check the labels "
+            f"and the layout)"]
 
 
 # -- labels ---------------------------------------------------------------------------------------
@@ -538,6 +539,33 @@ def marker_warnings(markers, *, hand=None) -> list[str]:
     return out
 
 
+def clean_warnings(report, missing_before, *, limit: float = 0.1) -> list[str]:
+    """Cleaning that removed more than ``limit`` of the observed samples.
+
+    Spikes and points away from their patch are the exception in a capture; when cleaning removes a tenth
+    of what was observed, the layout, the cluster radius or the outlier threshold does not fit the take.
+
+    Parameters
+    ----------
+    report : CleanReport
+        From :func:`handcap.multiview.clean.clean_markers` (``cluster_removed``, ``outlier_removed``: (T, M)).
+    missing_before : ndarray of shape (T, M) bool
+        The input's missing samples.
+    limit : float
+        Largest plausible fraction removed.
+
+    Returns
+    -------
+    list of str
+    """
+    observed = int((~np.asarray(missing_before, dtype=bool)).sum())
+    removed = int(np.sum(report.cluster_removed) + np.sum(report.outlier_removed))
+    if not observed or removed <= limit * observed:
+        return []
+    return [f"cleaning removed {100 * removed / observed:.1f} % of the observed samples (plausible: <= "
+            f"{100 * limit:g} %); the layout, --radius-mm or --z may not fit this take"]
+
+
 def motion_warnings(motion, *, what: str = "solve MRE") -> list[str]:
     """Checks of a :class:`~handcap.core.motion.HandMotion`: MRE, shape at bounds, bones, jerk spikes.
 
@@ -658,6 +686,64 @@ def camera_warnings(rms, *, names=None, limit: float = REPROJECTION_PX) -> list[
     return [f"reprojection RMS above {limit:g} px (plausible: <= {limit:g} px) for "
             f"{_listed([labels[i] for i in bad], np.nan_to_num(rms[bad], nan=np.inf), 'px', 1.0)}; "
             f"check the board's size and the detections"]
+
+
+# -- the figures the checks look at, for summaries ------------------------------------------------------
+
+
+def marker_figures(markers, *, hand=None) -> dict:
+    """The figures :func:`marker_warnings` judges, for a summary (label -> value).
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+    hand : sequence of str, optional
+        Names of one hand's markers.
+
+    Returns
+    -------
+    dict
+        ``missing (%)``, ``extent (m)`` (median bounding-box diagonal of all markers), ``hand extent (m)``
+        (with ``hand``), ``speed p99 (m/s)`` (99th percentile over every sample).
+    """
+    positions = markers.positions
+    out = {"missing (%)": round(100 * float(np.isnan(positions[..., 0]).mean()), 2) if positions.size else None}
+    with np.errstate(all="ignore"):
+        extent = spread(positions)
+        out["extent (m)"] = float(np.nanmedian(extent)) if np.isfinite(extent).any() else None
+        if hand is not None:
+            wanted = {str(n).split(":")[-1] for n in hand}
+            idx = [i for i, n in enumerate(markers.short_names) if n in wanted]
+            if len(idx) >= 2:
+                extent = spread(positions[:, idx])
+                out["hand extent (m)"] = float(np.nanmedian(extent)) if np.isfinite(extent).any() else None
+        v = speeds(positions, markers.rate)
+        out["speed p99 (m/s)"] = float(np.percentile(v[np.isfinite(v)], 99)) if np.isfinite(v).any() else None
+    return out
+
+
+def motion_figures(motion) -> dict:
+    """The figures :func:`motion_warnings` judges, for a summary (label -> value).
+
+    Parameters
+    ----------
+    motion : HandMotion
+
+    Returns
+    -------
+    dict
+        ``MRE (mm)``, ``largest |betas|``, ``hand length (mm)`` (from the bones), ``jerk spike frames``.
+    """
+    out = {}
+    if motion.marker_residuals is not None and np.isfinite(motion.marker_residuals).any():
+        out["MRE (mm)"] = _MM * float(np.nanmean(motion.marker_residuals))
+    out["largest |betas|"] = float(np.abs(motion.betas).max())
+    if motion.joints is not None and np.isfinite(motion.joints).any():
+        with np.errstate(all="ignore"):
+            measured = np.nanmedian(bone_lengths(motion.joints), axis=0)
+        out["hand length (mm)"] = _MM * AVERAGE_HAND_LENGTH * float(np.median(measured / anthropometric_bone_lengths()))
+        out["jerk spike frames"] = int(len(jerk_spikes(motion.joints, motion.rate)))
+    return out
 
 
 # -- attaching and summarising ------------------------------------------------------------------------
