@@ -18,11 +18,17 @@ detection noise and 2 % of the detections given a wrong marker id.
    on) on a longer take (the capture repeated): one process, the local process
    pool on every core, and a Dask LocalCluster with one worker per core (target
    50,000 on 2 cores); the three outputs must be identical.
+4. Break-even of the local process pool: takes of growing size (the capture
+   repeated), one process against the pool on every core (its start included)
+   and against the default, which times the first frames and chooses
+   (``handcap.multiview.reconstruct.pool_workers``). ``--break-even`` runs only
+   this part.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from itertools import combinations
 
@@ -72,7 +78,11 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=600, help="frames synthesised (default %(default)s)")
     parser.add_argument("--repeat", type=int, default=4, help="copies of the take for throughput (default %(default)s)")
     parser.add_argument("--research-points", type=int, default=2000)
+    parser.add_argument("--break-even", action="store_true", help="run only part 4")
     args = parser.parse_args()
+    if args.break_even:
+        break_even(args.frames)
+        return
 
     start = time.perf_counter()
     config = SynthConfig(layout="dense-patches", motion="grasp", frames=args.frames, cameras=12, pixel_noise=0.5,
@@ -159,6 +169,39 @@ def main() -> None:
         print(f"   {name:18s} {seconds:6.2f} s  {marker_frames / seconds:9,.0f} marker-frames/s  "
               f"{'identical' if same else 'DIFFERENT'} output")
     print("   target: 50,000 marker-frames/s on 2 cores (pool and cluster times include starting their processes)")
+
+    break_even(args.frames)
+
+
+def break_even(frames: int, repeats=(1, 2, 4, 8, 16)) -> None:
+    """Part 4: one process, the pool on every core, and the default choice, on takes of growing size."""
+    from handcap.multiview import reconstruct
+    config = SynthConfig(layout="dense-patches", motion="grasp", frames=frames, rate=20.0, cameras=12,
+                         pixel_noise=0.5, outlier_rate=0.02, seed=7)
+    capture = synthesize(config, progress=False)
+    cores = default_workers()
+    from handcap.parallel import idle_workers
+    print(f"\n4. break-even of the process pool ({cores} cores, {idle_workers()} idle by the load average "
+          f"{os.getloadavg()[0]:.1f}; pool start counted); the default pools on the idle cores W above "
+          f"{reconstruct.POOL_START_SECONDS:g} s x W/(W-1) of one-process work")
+    print("   frames  detections   one process   pool    pool/one   default (chose)")
+    chosen = []
+    real = reconstruct.pool_workers
+    reconstruct.pool_workers = lambda *a, **k: chosen.append(real(*a, **k)) or chosen[-1]
+    try:
+        for repeat in repeats:
+            detections = _detections(capture.detections, repeat, frames)
+            times = {}
+            for key, options in (("one", {"workers": 1}), ("pool", {"workers": cores}), ("default", {})):
+                t0 = time.perf_counter()
+                triangulate_detections(detections, capture.rig, progress=False, **options)
+                times[key] = time.perf_counter() - t0
+            pick = f"{chosen[-1]} worker(s)" if chosen else "1, all timed"
+            chosen.clear()
+            print(f"   {detections.n_frames:6d}  {len(detections):10,d}   {times['one']:8.2f} s  {times['pool']:6.2f} s"
+                  f"   {times['pool'] / times['one']:6.2f}   {times['default']:6.2f} s ({pick})")
+    finally:
+        reconstruct.pool_workers = real
 
 
 if __name__ == "__main__":

@@ -42,3 +42,19 @@ def test_bad_settings():
         map_chunks(math.factorial, NUMBERS, scheduler=5)
     with pytest.raises(HandcapError, match="cannot reach the Dask scheduler at tcp://127.0.0.1:9"):
         map_chunks(math.factorial, NUMBERS, scheduler="tcp://127.0.0.1:9")
+
+
+@pytest.mark.parametrize("cpus, load, cores, expected", [
+    (2, 0.3, 2, 2),     # idle machine: every core
+    (2, 7.8, 2, 1),     # busy machine: stay in this process
+    (64, 30.0, 2, 2),   # a container's 2 cores on a half-busy host
+    (16, 9.0, 16, 8),
+])
+def test_idle_workers_from_the_load_average(monkeypatch, cpus, load, cores, expected):
+    import os
+
+    import handcap.parallel as parallel
+    monkeypatch.setattr(os, "getloadavg", lambda: (load, load, load))
+    monkeypatch.setattr(os, "cpu_count", lambda: cpus)
+    monkeypatch.setattr(parallel, "default_workers", lambda: cores)
+    assert parallel.idle_workers() == expected

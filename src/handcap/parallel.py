@@ -15,15 +15,31 @@ the order of the chunks, whichever way it runs:
 The function and its chunks must be picklable (a module-level function and
 plain data), and the result of each chunk depends only on the chunk, so every
 way gives the same results, bit for bit.
+
+Scripts without a ``if __name__ == "__main__":`` guard
+--------------------------------------------------------
+Local workers start as fresh interpreters ("spawn"), and Python's
+multiprocessing makes each of them import the main script again so that
+functions defined there can be found. A plain script that calls handcap at its
+top level would then run again in every worker, try to start workers of its
+own there, and the pool would break (``BrokenProcessPool``). When ``func``
+lives in a module of its own (every handcap function does), the workers need
+nothing from the main script, so :func:`map_chunks` starts them without it;
+only a function defined in the main script still needs the guard.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import multiprocessing
 import os
 import sys
+import types
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
 
 from handcap.core.errors import HandcapError
 
@@ -37,6 +53,21 @@ def default_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # macOS, Windows
         return max(1, os.cpu_count() or 1)
+
+
+def idle_workers() -> int:
+    """Cores this process may use that other work is not already using (at least 1).
+
+    The one-minute load average counts the runnable processes of the whole machine (this one
+    included), so ``os.cpu_count() - load + 1`` cores are idle, at most :func:`default_workers`.
+    Without a load average (Windows), every core available counts as idle.
+    """
+    cores = default_workers()
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return cores
+    return int(max(1, min(cores, np.floor((os.cpu_count() or cores) - load + 1))))
 
 
 def map_chunks(func: Callable, chunks: Sequence, *, scheduler=None, workers: int | None = None,
@@ -88,12 +119,36 @@ def map_chunks(func: Callable, chunks: Sequence, *, scheduler=None, workers: int
         # spawn: a clean interpreter per worker, safe whatever threads this process runs.
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = [pool.submit(func, chunk) for chunk in chunks]
+            with _main_script_hidden(func):  # the workers start while the chunks are submitted
+                futures = [pool.submit(func, chunk) for chunk in chunks]
             for future in futures:
                 future.add_done_callback(lambda _: bar.update())
             return [future.result() for future in futures]
     finally:
         bar.close()
+
+
+@contextlib.contextmanager
+def _main_script_hidden(func):
+    """Start spawned workers without re-running the main script, when ``func`` does not come from it.
+
+    multiprocessing's spawn tells each new worker to import ``sys.modules["__main__"]`` (by its
+    ``__spec__`` name or its ``__file__``) before it unpickles the work; an unguarded script would
+    run again there (see the module docstring). While the workers start, an empty stand-in takes
+    the main module's place in ``sys.modules`` only; the script's own code keeps its globals.
+    """
+    while isinstance(func, functools.partial):
+        func = func.func
+    main = sys.modules.get("__main__")
+    if main is None or getattr(func, "__module__", "__main__") == "__main__" or (
+            getattr(main, "__spec__", None) is None and getattr(main, "__file__", None) is None):
+        yield
+        return
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        sys.modules["__main__"] = main
 
 
 def _map_dask(func, chunks, scheduler, show, desc) -> list:
@@ -140,4 +195,4 @@ def _bar(total: int, show: bool, desc: str):
     return tqdm(total=total, desc=desc, unit="chunk", leave=False)
 
 
-__all__ = ["default_workers", "map_chunks"]
+__all__ = ["default_workers", "idle_workers", "map_chunks"]

@@ -18,6 +18,7 @@ Dask cluster, same results either way). In a block:
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +30,7 @@ from handcap.core.markers import MarkerSequence
 from handcap.io._files import save_npz
 from handcap.multiview.detections import Detections
 from handcap.multiview.triangulation import _project, triangulate_ransac
-from handcap.parallel import default_workers, map_chunks
+from handcap.parallel import default_workers, idle_workers, map_chunks
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,7 +97,11 @@ def triangulate_detections(detections: Detections, rig: CameraRig, *, min_views:
     scheduler : None, str or distributed.Client
         See :func:`handcap.parallel.map_chunks`.
     workers : int, optional
-        Local processes (default: the cores available).
+        Local processes. Default: chosen by size: the first frames (about
+        :data:`PROBE_DETECTIONS` detections) are triangulated in this process
+        and timed, and the rest goes to a pool only when :func:`pool_workers`
+        expects it to be faster (a small take stays in this process). Results
+        are the same whichever is chosen.
     progress : bool, optional
         Progress bar over blocks; default when standard error is a terminal.
 
@@ -124,36 +129,98 @@ def triangulate_detections(detections: Detections, rig: CameraRig, *, min_views:
     if not (np.isfinite(threshold_px) and threshold_px > 0):
         raise HandcapError(f"threshold_px must be a positive number of pixels, got {threshold_px}")
     n_frames, n_markers = detections.n_frames, len(detections.marker_names)
-    if chunk_frames is None:
-        per_worker = -(-n_frames // (workers or default_workers())) if scheduler is None else 500
-        chunk_frames = int(np.clip(per_worker, 1, 2000))
-    if isinstance(chunk_frames, bool) or not isinstance(chunk_frames, (int, np.integer)) or chunk_frames < 1:
+    if chunk_frames is not None and (isinstance(chunk_frames, bool) or not isinstance(chunk_frames, (int, np.integer))
+                                     or chunk_frames < 1):
         raise HandcapError(f"chunk_frames must be a whole number of at least 1, got {chunk_frames!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise HandcapError(f"workers must be a whole number of at least 1, got {workers!r}")
 
     order = np.argsort(detections.frame, kind="stable")
     frames = detections.frame[order]
-    starts = np.arange(0, max(n_frames, 1), chunk_frames)
-    bounds = np.searchsorted(frames, np.append(starts, n_frames))
     cameras = tuple(rig[int(i)] for i in to_rig)
-    tasks = []
-    for k, start in enumerate(starts):
-        rows = order[bounds[k]:bounds[k + 1]]
-        tasks.append(_Block(cameras, int(start), int(min(start + chunk_frames, n_frames)) - int(start), n_markers,
-                            detections.frame[rows] - start, detections.camera[rows], detections.marker[rows],
-                            detections.xy[rows], min_views, threshold_px))
-    results = map_chunks(_triangulate_block, tasks, scheduler=scheduler, workers=workers, progress=progress,
-                         desc="triangulate")
+
+    def blocks(first: int, size: int) -> list:
+        """Blocks of ``size`` frames from ``first`` to the end, with the rows (into detections) of each."""
+        starts = np.arange(first, max(n_frames, first + 1), size)
+        bounds = np.searchsorted(frames, np.append(starts, n_frames))
+        out = []
+        for k, start in enumerate(starts):
+            rows = order[bounds[k]:bounds[k + 1]]
+            out.append((_Block(cameras, int(start), int(min(start + size, n_frames)) - int(start), n_markers,
+                               detections.frame[rows] - start, detections.camera[rows], detections.marker[rows],
+                               detections.xy[rows], min_views, threshold_px), rows))
+        return out
+
+    done, first = [], 0
+    if workers is None and scheduler is None and chunk_frames is None:
+        # Size decides (issue 14): time a first block here, and start a pool for the rest only if the rest
+        # would take longer in this process than starting the workers costs.
+        first = _probe_frames(frames, n_frames)
+        (task, rows), = blocks(0, max(first, 1))[:1]
+        start = time.perf_counter()
+        done.append((task, rows, _triangulate_block(task)))
+        seconds = time.perf_counter() - start
+        workers = pool_workers(seconds * (len(detections) - len(rows)) / max(len(rows), 1))
+    if first < n_frames:
+        if chunk_frames is None:
+            per_worker = -(-(n_frames - first) // (workers or default_workers())) if scheduler is None else 500
+            chunk_frames = int(np.clip(per_worker, 1, 2000))
+        tasks = blocks(first, chunk_frames)
+        results = map_chunks(_triangulate_block, [task for task, _ in tasks], scheduler=scheduler, workers=workers,
+                             progress=progress, desc="triangulate")
+        done += [(task, rows, result) for (task, rows), result in zip(tasks, results)]
 
     positions = np.full((n_frames, n_markers, 3), np.nan)
     error = np.full((n_frames, n_markers), np.nan)
     views = np.zeros((n_frames, n_markers), np.int64)
     residual = np.full((n_frames, n_markers), np.nan)
     used = np.zeros(len(detections), bool)
-    for k, (task, result) in enumerate(zip(tasks, results)):
+    for task, rows, result in done:
         span = slice(task.start, task.start + task.n_frames)
         positions[span], error[span], views[span], residual[span] = result[:4]
-        used[order[bounds[k]:bounds[k + 1]]] = result[4]
+        used[rows] = result[4]
     return TriangulatedMarkers(positions, detections.marker_names, detections.rate, error, views, residual, used)
+
+
+#: Detections triangulated in this process to time the work before choosing workers (about 0.3 s).
+PROBE_DETECTIONS = 50_000
+#: Seconds until a pool of local workers is ready: fresh interpreters importing numpy, scipy and handcap,
+#: started side by side. Measured at 3.9-4.4 s for 2 workers on 2 busy cores (``benchmarks/triangulate.py``,
+#: part 4); on an idle machine it is less, so the pool is chosen a little late, never too early.
+POOL_START_SECONDS = 4.0
+
+
+def pool_workers(serial_seconds: float, cores: int | None = None) -> int:
+    """Local processes worth using for work that takes ``serial_seconds`` in this process.
+
+    With W workers the work takes about ``serial / W + POOL_START_SECONDS``; the
+    pool pays when that is shorter than ``serial``, i.e. above
+    ``POOL_START_SECONDS * W / (W - 1)`` seconds of work (8 s on 2 cores).
+
+    Parameters
+    ----------
+    serial_seconds : float
+        Estimated time of the work in this process.
+    cores : int, optional
+        Cores free for the work (default :func:`handcap.parallel.idle_workers`: on a
+        busy machine a pool only adds its start to the time).
+
+    Returns
+    -------
+    int
+        1 (stay in this process) or ``cores``.
+    """
+    cores = idle_workers() if cores is None else cores
+    if cores > 1 and serial_seconds / cores + POOL_START_SECONDS < serial_seconds:
+        return cores
+    return 1
+
+
+def _probe_frames(frames: np.ndarray, n_frames: int) -> int:
+    """Leading frames holding about :data:`PROBE_DETECTIONS` detections (``frames`` sorted); all if fewer."""
+    if len(frames) <= PROBE_DETECTIONS:
+        return n_frames
+    return int(min(n_frames, frames[PROBE_DETECTIONS] + 1))
 
 
 @dataclass(frozen=True)
@@ -266,4 +333,5 @@ def write_quality(result: TriangulatedMarkers, markers_path) -> Path:
     return path
 
 
-__all__ = ["TriangulatedMarkers", "quality_path", "triangulate_detections", "write_quality"]
+__all__ = ["PROBE_DETECTIONS", "POOL_START_SECONDS", "TriangulatedMarkers", "pool_workers", "quality_path",
+           "triangulate_detections", "write_quality"]
