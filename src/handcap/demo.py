@@ -13,7 +13,8 @@
 
 Writes the capture folder, ``attachment.npz``, ``motion.npz``,
 ``metrics.json``/``metrics.txt``, ``summary.json``/``summary.txt`` and a
-picture ``hand.png`` into the output folder.
+picture ``hand.png`` (the truth and, beside it, the solved hand) into the
+output folder; the summary's ``files`` lists every file written.
 """
 
 from __future__ import annotations
@@ -65,26 +66,45 @@ def summarize(capture) -> dict:
     }
 
 
-def picture(capture, frame: int | None = None) -> np.ndarray:
-    """RGB image of the hand, the object and the markers (green: reconstructed, red: lost)."""
+def picture(capture, motion=None, frame: int | None = None) -> np.ndarray:
+    """RGB image of the truth and, beside it, the solved hand, in the same frame from the same view.
+
+    Left, "truth": the synthetic hand and object with the true marker positions (green: reconstructed,
+    red: lost). Right, "solved" (when ``motion`` is given): the hand of the solved motion with its
+    fitted markers (blue) and the object, titled with that frame's mean joint error against the truth.
+
+    Parameters
+    ----------
+    capture : SynthCapture
+    motion : HandMotion, optional
+        The solved motion of the same take (OpenHand).
+    frame : int, optional
+        Default: the middle of the grasp (or of the take).
+
+    Returns
+    -------
+    image : ndarray of uint8, shape (720, 960, 3), or (720, 1920, 3) with ``motion``
+    """
+    import cv2
     from scipy.spatial.transform import Rotation
 
     from handcap.hand import OpenHand
     from handcap.synth.objects import make_object
     from handcap.synth.render import View, render
 
-    motion = capture.hand_motion
+    truth_motion = capture.hand_motion
     holding = capture.object_motion.state["holding"] if capture.object_motion is not None else None
     if frame is None:
         frame = int(np.flatnonzero(holding)[len(np.flatnonzero(holding)) // 2]) if holding is not None \
-            and holding.any() else motion.n_frames // 2
-    hand = OpenHand(motion.side)
-    out = hand.forward(motion.betas, motion.global_orient[frame], motion.hand_pose[frame], motion.transl[frame])
-    meshes = [(out.vertices, hand.faces, (232, 190, 160))]
+            and holding.any() else truth_motion.n_frames // 2
+    hand = OpenHand(truth_motion.side)
+    out = hand.forward(truth_motion.betas, truth_motion.global_orient[frame], truth_motion.hand_pose[frame],
+                       truth_motion.transl[frame])
+    objects = []
     if capture.object_motion is not None:
         obj = make_object(capture.config.object_kind, seed=capture.config.seed)
         rot = Rotation.from_rotvec(capture.object_motion.rotation[frame]).as_matrix()
-        meshes.append((obj.vertices @ rot.T + capture.object_motion.translation[frame], obj.faces, (110, 150, 220)))
+        objects.append((obj.vertices @ rot.T + capture.object_motion.translation[frame], obj.faces, (110, 150, 220)))
     truth = capture.truth["positions"][frame]
     seen = capture.truth["visible"][frame]
     centre = out.vertices.mean(axis=0)
@@ -93,7 +113,23 @@ def picture(capture, frame: int | None = None) -> np.ndarray:
     eye = centre + (camera.center - centre) / np.linalg.norm(camera.center - centre) * 0.42
     view = View.looking_at(centre, eye, up=(0.0, 0.0, 1.0), size=(960, 720), fov_deg=36)
     points = [(truth[seen], (40, 200, 60), 3), (truth[~seen], (230, 40, 40), 3)]
-    return render(view, meshes, points)
+    panels = [(render(view, [(out.vertices, hand.faces, (232, 190, 160))] + objects, points), "truth")]
+    if motion is not None:
+        solved = OpenHand(motion.side).forward(motion.betas, motion.global_orient[frame], motion.hand_pose[frame],
+                                               motion.transl[frame])
+        title = "solved"
+        if motion.joints is not None and truth_motion.joints is not None:
+            error = np.linalg.norm(motion.joints[frame] - truth_motion.joints[frame], axis=-1).mean()
+            title += f", joint error {1000 * error:.1f} mm"
+        fitted = [(motion.marker_fit[frame], (50, 110, 230), 3)] if motion.marker_fit is not None else []
+        panels.append((render(view, [(solved.vertices, hand.faces, (200, 200, 215))] + objects, fitted), title))
+    images = []
+    for image, title in panels:
+        image = np.ascontiguousarray(image)
+        cv2.putText(image, f"{title} (frame {frame})", (20, 40), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (20, 20, 20), 2,
+                    cv2.LINE_AA)
+        images.append(image)
+    return np.concatenate(images, axis=1)
 
 
 def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
@@ -104,17 +140,20 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
     from handcap.io._files import atomic_output
     from handcap.layouts import load_layout
     from handcap.multiview import clean_markers, read_detections, triangulate_detections, write_quality
+    from handcap.quality import plausibility as q
     from handcap.quality.report import metrics_table, motion_metrics
     from handcap.solve import calibrate_attachment, solve_hand
     from handcap.synth.objects import make_object
     from handcap.synth.render import save_png
 
     out = Path(out)
+    before = file_stamps(out)
     calibration = synthesize(CALIBRATION_CONFIG, progress=progress)
     capture = synthesize(DEMO_CONFIG, progress=progress)
     paths = write_capture(capture, out)
     write_capture(calibration, out / "calibration")
     summary = summarize(capture)
+    warnings = []  # every stage's plausibility warnings, stored in its file and listed in the summary
 
     layout = load_layout(DEMO_CONFIG.layout)
     cleaned = {}
@@ -123,10 +162,14 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
         triangulated = triangulate_detections(read_detections(folder / "detections.npz"), take.rig,
                                               progress=progress)
         seconds = time.perf_counter() - start
-        write_markers(triangulated.to_markers(), folder / "triangulated.c3d")
+        found = q.triangulation_warnings(triangulated.error_px, triangulated.views, threshold_px=5.0,
+                                         used=triangulated.used)
+        write_markers(q.attach(triangulated.to_markers(), found), folder / "triangulated.c3d")
         write_quality(triangulated, folder / "triangulated.c3d")
         cleaned[key], report = clean_markers(triangulated.to_markers(), layout)
+        cleaned[key] = q.attach(cleaned[key], q.marker_warnings(cleaned[key], hand=layout.names))
         write_markers(cleaned[key], folder / "cleaned.c3d")
+        warnings += found + list(cleaned[key].warnings)
         if key == "take":
             truth = take.truth["positions"]
             error = np.linalg.norm(triangulated.positions - truth, axis=-1) * 1000
@@ -145,14 +188,20 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
 
     start = time.perf_counter()
     calibrated = calibrate_attachment(cleaned["calibration"], layout)
-    calibrated.attachment.save(out / "attachment.npz")
+    found = q.residual_warnings(calibrated.residuals, names=calibrated.attachment.marker_names,
+                                what="calibration MRE") + q.shape_warnings(calibrated.attachment.betas)
+    attachment = q.attach(calibrated.attachment, found)
+    attachment.save(out / "attachment.npz")
+    warnings += list(attachment.warnings)
     summary["calibration_seconds"] = round(time.perf_counter() - start, 2)
     summary["calibration_mre_mm"] = round(1000 * calibrated.mre, 3)
     start = time.perf_counter()
     motion = solve_hand(cleaned["take"], calibrated.attachment, filter_cutoff=5.0, progress=progress)
     seconds = time.perf_counter() - start
     summary["solve_frames_per_second"] = round(motion.n_frames / seconds, 1)
+    motion = q.attach(motion, q.motion_warnings(motion))
     write_hand_motion(motion, out / "motion.npz")
+    warnings += list(motion.warnings)
 
     mesh_path = out / "object.ply"
     obj = make_object(DEMO_CONFIG.object_kind, seed=DEMO_CONFIG.seed)
@@ -169,14 +218,29 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
     with atomic_output(out / "metrics.txt", "w") as fh:
         fh.write(table + "\n")
 
+    summary["warnings"] = list(dict.fromkeys(warnings))
     text = "\n".join(f"{k:28s} {v}" for k, v in summary.items() if k != "seen_per_camera_fraction")
     with atomic_output(out / "summary.json", "w") as fh:
         json.dump(summary, fh, indent=2)
     with atomic_output(out / "summary.txt", "w") as fh:
         fh.write(text + "\n")
-    save_png(out / "hand.png", picture(capture))
+    save_png(out / "hand.png", picture(capture, motion))
     summary["metrics"] = table
-    summary["files"] = sorted(str(p) for p in list(paths.values()) + [out / "triangulated.c3d", out / "cleaned.c3d",
-                                                                      out / "attachment.npz", out / "motion.npz",
-                                                                      out / "metrics.json", out / "hand.png"])
+    summary["files"] = written_since(out, before)
     return summary
+
+
+def file_stamps(folder) -> dict:
+    """Path -> (inode, modification time in ns) of every file under ``folder`` (empty if it does not exist)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return {}
+    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.rglob("*") if p.is_file()}
+
+
+def written_since(folder, before: dict) -> list[str]:
+    """Files under ``folder`` that are new or rewritten since ``before`` (:func:`file_stamps`), sorted.
+
+    Every handcap write renames a new file into place, so a rewritten file has a new inode or time.
+    """
+    return sorted(str(p) for p, stamp in file_stamps(folder).items() if before.get(p) != stamp)
