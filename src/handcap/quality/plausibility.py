@@ -767,7 +767,7 @@ def attach(result, warnings: Iterable[str], *, issue: bool = True):
     lines = merge_warnings(list(warnings))
     if issue:
         for line in lines:
-            warn(line, stacklevel=3)
+            warn(line, stacklevel=2)  # points at the caller of attach
     return result.with_warnings(*lines) if lines else result
 
 
