@@ -275,3 +275,28 @@ def test_reprojection_errors_crowding_the_threshold_are_reported():
     (line,) = p.triangulation_warnings(error, np.where(np.isnan(error), 0, 3), threshold_px=5.0)
     assert "mean reprojection error 3.20 px" in line and "<= 2.5 px" in line
     assert p.triangulation_warnings(error / 4, np.full((20, 5), 3), threshold_px=5.0) == []
+
+
+def test_cleaning_that_removes_a_fifth_of_the_take_is_reported(capture):
+    from handcap.multiview.clean import clean_markers
+    m = capture.markers.select(list(capture.hand_motion.marker_names))
+    assert p.clean_warnings(clean_markers(m, "glove-13")[1], m.missing) == []
+    rng = np.random.default_rng(4)
+    positions = m.positions.copy()
+    bad = rng.random(positions.shape[:2]) < 0.2
+    positions[bad] += rng.normal(0, 0.1, (int(bad.sum()), 3))  # a fifth of the samples thrown ~17 cm off
+    corrupted = MarkerSequence(positions, m.names, m.rate)
+    cleaned, report = clean_markers(corrupted, "glove-13")
+    (line,) = p.clean_warnings(report, corrupted.missing)
+    removed = (report.cluster_removed.sum() + report.outlier_removed.sum()) / (~corrupted.missing).sum()
+    assert f"cleaning removed {100 * removed:.1f} %" in line and removed > 0.1
+
+
+def test_the_real_glove_recording_is_plausible_and_not_in_millimetres(shared_data):
+    markers = read_markers(shared_data / "markers" / "hand_embodiment_glove" / "recording.tsv")
+    assert p.marker_warnings(markers) == []
+    figures = p.marker_figures(markers)
+    assert 0.1 < figures["extent (m)"] < 3 and figures["speed p99 (m/s)"] < 2
+    wrong = MarkerSequence(markers.positions * 1000, markers.names, markers.rate)
+    (line,) = p.marker_warnings(wrong)
+    assert "millimetres read as metres" in line
