@@ -152,3 +152,11 @@ def test_camera_files_keep_their_warnings(capture, tmp_path):
     assert read_cameras_toml(tmp_path / "rig.toml") == capture.rig
     capture.rig.save(tmp_path / "plain.toml")
     assert read_cameras_warnings(tmp_path / "plain.toml") == ()
+
+
+def test_a_rig_keeps_its_warnings_through_its_file(capture, tmp_path):
+    from handcap.io.cameras import read_cameras_toml, read_cameras_warnings
+    rig = capture.rig.with_warnings("reprojection RMS above 1 px (plausible: <= 1 px) for cam_2 (1.8 px)")
+    rig.save(tmp_path / "rig.toml")
+    assert read_cameras_toml(tmp_path / "rig.toml").warnings == rig.warnings
+    assert read_cameras_warnings(tmp_path / "rig.toml") == rig.warnings

@@ -22,9 +22,9 @@ uses the unit of the calibration board, which may be millimetres.
 Writing emits exactly the six keys above per camera, with floats in their
 shortest round-trip form, so reading gives back the same numbers bit for bit
 and identical rigs give identical bytes. The warnings of the calibration that
-made the rig (one-line strings, File contract) go to ``[metadata]`` as
-``warnings = [...]``, where anipose keeps its own notes; read them back with
-:func:`read_cameras_warnings`.
+made the rig (``CameraRig.warnings``, one-line strings, File contract) go to
+``[metadata]`` as ``warnings = [...]``, where anipose keeps its own notes, and
+come back on the rig read (or alone with :func:`read_cameras_warnings`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import tomllib
 import tomli_w
 
 from handcap.core.cameras import Camera, CameraRig
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, merge_warnings
 from handcap.io._files import atomic_output, existing_file
 
 CAMERA_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation")
@@ -80,9 +80,15 @@ def read_cameras_toml(path) -> CameraRig:
         raise HandcapError(f"{path}: no camera tables; expected [cam_0], [cam_1], ... "
                            f"with keys {', '.join(CAMERA_KEYS)}")
     try:
-        return CameraRig(cameras)
+        return CameraRig(cameras, _stored_warnings(document.get(_METADATA)))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+
+
+def _stored_warnings(metadata) -> tuple[str, ...]:
+    """The ``warnings`` list of a ``[metadata]`` table (anything else there is anipose's and ignored)."""
+    found = metadata.get("warnings", []) if isinstance(metadata, dict) else []
+    return tuple(str(w) for w in found) if isinstance(found, list) else ()
 
 
 def _camera_from_table(table: dict, where: str) -> Camera:
@@ -118,7 +124,8 @@ def write_cameras_toml(rig: CameraRig, path, *, warnings=()) -> None:
     path : str or Path
         Written through a temporary file renamed into place.
     warnings : sequence of str
-        One-line warnings of the calibration, stored in ``[metadata]`` (none: no metadata table).
+        One-line warnings of the calibration, stored in ``[metadata]`` after the rig's own
+        (``rig.warnings``); with none at all, no metadata table is written.
 
     Raises
     ------
@@ -128,8 +135,9 @@ def write_cameras_toml(rig: CameraRig, path, *, warnings=()) -> None:
     if not isinstance(rig, CameraRig):
         raise HandcapError(f"write_cameras_toml needs a CameraRig, got {type(rig).__name__}")
     document = {f"cam_{i}": _table_from_camera(camera) for i, camera in enumerate(rig)}
-    if len(warnings):
-        document[_METADATA] = {"warnings": [str(w) for w in warnings]}
+    warnings = merge_warnings(rig.warnings, warnings)
+    if warnings:
+        document[_METADATA] = {"warnings": list(warnings)}
     text = tomli_w.dumps(document)
     with atomic_output(path, "wb") as fh:
         fh.write(text.encode("utf-8"))
@@ -146,11 +154,9 @@ def read_cameras_warnings(path) -> tuple[str, ...]:
     path = existing_file(path)
     try:
         with open(path, "rb") as fh:
-            metadata = tomllib.load(fh).get(_METADATA, {})
+            return _stored_warnings(tomllib.load(fh).get(_METADATA))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise HandcapError(f"{path}: not valid TOML ({err})") from None
-    found = metadata.get("warnings", []) if isinstance(metadata, dict) else []
-    return tuple(str(w) for w in found) if isinstance(found, list) else ()
 
 
 def _table_from_camera(camera: Camera) -> dict:
