@@ -17,6 +17,7 @@ import io
 import os
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -228,8 +229,12 @@ def load_npz(path, required=(), what: str = "handcap .npz file") -> dict:
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError, KeyError) as err:
-        raise HandcapError(f"{path}: not a readable {what} ({err})") from None
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError, KeyError, zlib.error, NotImplementedError,
+            RuntimeError, OverflowError, MemoryError) as err:
+        # zlib.error: a damaged deflate stream; NotImplementedError: an unknown compression; RuntimeError:
+        # an encrypted member; OverflowError, MemoryError: an array header promising an impossible size.
+        reason = " ".join(str(err).split())[:160]
+        raise HandcapError(f"{path}: not a readable {what} ({type(err).__name__}: {reason})") from None
     missing = [key for key in required if key not in arrays]
     if missing:
         raise HandcapError(f"{path}: not a {what}, missing {', '.join(missing)}")

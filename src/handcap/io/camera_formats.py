@@ -153,13 +153,17 @@ def _rig(path, cameras: list[Camera], what: str) -> CameraRig:
 
 def _rotation_vector(matrix, where: str) -> np.ndarray:
     """Rodrigues vector of a 3x3 rotation matrix, checked to be one."""
-    matrix = np.asarray(matrix, dtype=np.float64)
+    try:
+        matrix = np.asarray(matrix, dtype=np.float64)
+    except (TypeError, ValueError):  # ragged rows
+        raise HandcapError(f"{where} must be a 3x3 rotation matrix of numbers") from None
     if matrix.shape != (3, 3):
         raise HandcapError(f"{where} must be a 3x3 rotation matrix, got shape {matrix.shape}")
     if not np.isfinite(matrix).all():
         raise HandcapError(f"{where} must be finite, got {matrix.ravel().tolist()}")
-    error = np.abs(matrix @ matrix.T - np.eye(3)).max()
-    if error > _ROTATION_TOLERANCE or np.linalg.det(matrix) <= 0:
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: refused just below, no warning
+        error = np.abs(matrix @ matrix.T - np.eye(3)).max()
+    if not error <= _ROTATION_TOLERANCE or np.linalg.det(matrix) <= 0:
         raise HandcapError(f"{where} is not a rotation matrix (|R R^T - I| = {error:.2g}, "
                            f"det = {np.linalg.det(matrix):.6g})")
     return axis_angle_from_matrix(matrix)
@@ -272,18 +276,9 @@ def _has(parent: cv2.FileNode, *names: str) -> bool:
 def _array(node: cv2.FileNode, where: str) -> np.ndarray:
     """Numbers of an ``!!opencv-matrix``, a sequence or a single number, float64."""
     if node.isMap():
-        try:
-            matrix = node.mat()
-        except cv2.error:
-            matrix = None
-        if matrix is None:
-            raise HandcapError(f"{where} must be an opencv-matrix (rows, cols, dt, data)")
-        array = np.asarray(matrix, dtype=np.float64)
+        array = _opencv_matrix(node, where)
     elif node.isSeq():
-        items = [node.at(i) for i in range(node.size())]
-        if not all(item.isInt() or item.isReal() for item in items):
-            raise HandcapError(f"{where} must be numbers")
-        array = np.array([item.real() for item in items])
+        array = _numbers_of(node, where)
     elif node.isInt() or node.isReal():
         array = np.array([node.real()])
     else:
@@ -291,6 +286,35 @@ def _array(node: cv2.FileNode, where: str) -> np.ndarray:
     if not np.isfinite(array).all():
         raise HandcapError(f"{where} must be finite, got {array.ravel().tolist()}")
     return array
+
+
+def _numbers_of(node: cv2.FileNode, where: str) -> np.ndarray:
+    items = [node.at(i) for i in range(node.size())]
+    if not all(item.isInt() or item.isReal() for item in items):
+        raise HandcapError(f"{where} must be numbers")
+    return np.array([item.real() for item in items], dtype=np.float64)
+
+
+def _opencv_matrix(node: cv2.FileNode, where: str) -> np.ndarray:
+    """The values of an ``!!opencv-matrix`` map (rows, cols, dt, data), read here rather than by
+    ``FileNode.mat()``: OpenCV 5 writes past its buffer when ``rows``/``cols`` are missing or disagree with
+    ``data`` (found by tests/io/test_fuzz_readers.py), which corrupts the heap of the whole process."""
+    keys = {key.lower(): key for key in node.keys()}
+    missing = [key for key in ("rows", "cols", "dt", "data") if key not in keys]
+    if missing:
+        raise HandcapError(f"{where} must be an opencv-matrix (rows, cols, dt, data); it lacks {', '.join(missing)}")
+    rows, cols = (node.getNode(keys[key]) for key in ("rows", "cols"))
+    if not (rows.isInt() and cols.isInt()) or not (0 < rows.real() <= 64 and 0 < cols.real() <= 64):
+        raise HandcapError(f"{where} rows and cols must be whole numbers from 1 to 64")
+    dt = node.getNode(keys["dt"])
+    if not dt.isString() or dt.string() not in ("d", "f", "i", "u", "s", "w", "c", "1d", "1f", "1i"):
+        raise HandcapError(f"{where} dt must name a one-channel number type (d, f, i, ...)")
+    data = node.getNode(keys["data"])
+    values = _numbers_of(data, f"{where} data") if data.isSeq() else None
+    shape = (int(rows.real()), int(cols.real()))
+    if values is None or values.size != shape[0] * shape[1]:
+        raise HandcapError(f"{where} data must hold rows x cols = {shape[0] * shape[1]} numbers")
+    return values.reshape(shape)
 
 
 def _distortions(node: cv2.FileNode, where: str) -> np.ndarray:

@@ -39,15 +39,30 @@ def _numeric(arrays, key, path):
 
 
 def _name_list(arrays, key, path) -> list[str]:
+    """Entry ``key`` as a list of names ([] when absent)."""
+    if arrays.get(key) is None:
+        return []
     value = np.asarray(arrays[key])
-    if value.ndim != 1:
-        raise HandcapError(f"{path}: entry {key!r} must be a list of names, got shape {value.shape}")
+    if value.ndim == 1 and value.size == 0:
+        return []
+    if value.ndim != 1 or value.dtype.kind not in "US":
+        raise HandcapError(f"{path}: entry {key!r} must be a list of names, got {value.dtype} of shape {value.shape}")
     return [str(v) for v in value]
 
 
+def _text(arrays, key, path, default: str) -> str:
+    """Entry ``key`` as one string (``default`` when absent)."""
+    if arrays.get(key) is None:
+        return default
+    value = np.asarray(arrays[key])
+    if value.shape != () or value.dtype.kind not in "US":
+        raise HandcapError(f"{path}: entry {key!r} must be one text value, got {value.dtype} of shape {value.shape}")
+    return str(value)
+
+
 def _check_kind(arrays, path, kind):
-    if "kind" in arrays and str(arrays["kind"]) != kind:
-        raise HandcapError(f"{path}: holds {arrays['kind']}, not {kind}")
+    if "kind" in arrays and _text(arrays, "kind", path, kind) != kind:
+        raise HandcapError(f"{path}: holds {_text(arrays, 'kind', path, kind)[:40]!r}, not {kind}")
 
 
 def npz_kind(path) -> str:
@@ -95,7 +110,7 @@ def read_markers_npz(path, *, units: str | None = None, hand=None) -> MarkerSequ
     try:
         markers = MarkerSequence(_numeric(arrays, "positions", path) * metres_per_unit(units or "m", "units"),
                                  _name_list(arrays, "names", path), _scalar(arrays, "rate", path),
-                                 _numeric(arrays, "residuals", path), read_warnings(arrays))
+                                 _numeric(arrays, "residuals", path), _warnings(arrays, path))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
     return settle_marker_units(markers, declared="m", units=units, where=path, hand=hand)
@@ -141,12 +156,14 @@ def read_hand_motion(path) -> HandMotion:
     arrays = load_npz(path, ("betas", "global_orient", "hand_pose", "transl", "rate"), "hand-motion .npz file")
     _check_kind(arrays, path, "hand_motion")
     try:
+        def number(key):
+            return _numeric(arrays, key, path)
         return HandMotion(
-            arrays["betas"], arrays["global_orient"], arrays["hand_pose"], arrays["transl"],
-            _scalar(arrays, "rate", path), str(arrays.get("side", "right")), arrays.get("phi"),
-            str(arrays.get("model", "openhand")), arrays.get("joints"),
-            tuple(arrays.get("marker_names", ())), arrays.get("marker_fit"), arrays.get("marker_residuals"),
-            read_warnings(arrays))
+            number("betas"), number("global_orient"), number("hand_pose"), number("transl"),
+            _scalar(arrays, "rate", path), _text(arrays, "side", path, "right"), number("phi"),
+            _text(arrays, "model", path, "openhand"), number("joints"),
+            tuple(_name_list(arrays, "marker_names", path)), number("marker_fit"), number("marker_residuals"),
+            _warnings(arrays, path))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
 
@@ -165,10 +182,18 @@ def write_object_motion(motion: ObjectMotion, path) -> None:
 def read_object_motion(path) -> ObjectMotion:
     arrays = load_npz(path, ("rotation", "translation", "rate"), "object-motion .npz file")
     _check_kind(arrays, path, "object_motion")
-    state = {k[len("state_"):]: v for k, v in arrays.items() if k.startswith("state_")}
     try:
-        return ObjectMotion(arrays["rotation"], arrays["translation"], _scalar(arrays, "rate", path),
-                            str(arrays.get("name", "object")), tuple(arrays.get("marker_names", ())),
-                            arrays.get("canonical"), state, read_warnings(arrays))
+        state = {k[len("state_"):]: _numeric(arrays, k, path) for k in arrays if k.startswith("state_")}
+        return ObjectMotion(_numeric(arrays, "rotation", path), _numeric(arrays, "translation", path),
+                            _scalar(arrays, "rate", path), _text(arrays, "name", path, "object"),
+                            tuple(_name_list(arrays, "marker_names", path)), _numeric(arrays, "canonical", path),
+                            state, _warnings(arrays, path))
     except HandcapError as err:
         raise HandcapError(f"{path}: {err}") from None
+
+
+def _warnings(arrays, path) -> tuple[str, ...]:
+    """The ``warnings`` entry (one-line strings), checked to be text."""
+    if arrays.get("warnings") is not None and np.asarray(arrays["warnings"]).dtype.kind not in "US":
+        raise HandcapError(f"{path}: entry 'warnings' must be text, got {np.asarray(arrays['warnings']).dtype}")
+    return read_warnings(arrays)

@@ -167,8 +167,10 @@ def read_detections(path) -> Detections:
         return Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
                           arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"],
                           None if n_frames is None else int(n_frames), source=str(path))
-    except (TypeError, ValueError) as err:
-        raise HandcapError(f"{path}: not a valid detections file ({err})") from None
+    except (TypeError, ValueError, OverflowError, HandcapError) as err:
+        # One line, whatever the entry held (a message may quote an array).
+        reason = " ".join(str(err).split())[:160]
+        raise HandcapError(f"{path}: not a valid detections file ({reason})") from None
 
 
 def write_detections(detections: Detections, path) -> None:

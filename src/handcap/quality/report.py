@@ -35,6 +35,9 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     motion = read_hand_motion(motion_path)
     if motion.joints is None:
         raise HandcapError(f"{motion_path}: has no joints; solve it with handcap solve")
+    if object_mesh is not None:
+        from handcap.io import existing_file
+        existing_file(object_mesh)  # before any work: a missing mesh is one line, not a traceback at the end
     out = {"frames": motion.n_frames, "rate_hz": motion.rate}
     if motion.marker_residuals is not None:
         s = q.Stat.of(motion.marker_residuals)
@@ -55,12 +58,20 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     s = q.jerk(motion.joints, motion.rate)
     out["jerk_m_s3"] = [s.mean, s.std]
     object_motion = read_object_motion(obj) if obj is not None else None
+    if object_motion is not None and object_motion.n_frames != motion.n_frames:
+        raise HandcapError(f"{obj}: the object moves for {object_motion.n_frames} frames, the hand motion "
+                           f"{motion_path} for {motion.n_frames}; give the object motion of the same take")
     diversity, coherence = q.diversity_coherence(
         q.pose_features(motion.joints, None if object_motion is None else object_motion.translation))
     out["diversity"], out["coherence"] = diversity, coherence
     if object_motion is not None and object_mesh is not None:
         import trimesh
-        mesh = trimesh.load(object_mesh, force="mesh", process=False)
+        try:
+            mesh = trimesh.load(object_mesh, force="mesh", process=False)
+        except (ValueError, OSError, KeyError, IndexError, TypeError) as err:  # what trimesh raises on bad files
+            raise HandcapError(f"{object_mesh}: not a readable mesh ({' '.join(str(err).split())[:120]})") from None
+        if len(getattr(mesh, "faces", ())) == 0:
+            raise HandcapError(f"{object_mesh}: holds no mesh faces; give the object's surface mesh")
         hand = _hand_for(motion, hand)
         verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
         world = object_motion.transform_points(np.asarray(mesh.vertices))
