@@ -73,3 +73,33 @@ def test_bad_input_exits_2_with_one_line(session, tmp_path, capsys, monkeypatch,
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
     assert (session / "take" / "markers.c3d").read_bytes() == before
+
+
+def test_shape_default_nan_attachment_and_strict_warnings(session, tmp_path, capsys):
+    att = tmp_path / "att.npz"
+    assert main(["calibrate-markers", str(session / "cal" / "markers.c3d"), "--layout", "tips-5",
+                 "--out", str(att)]) == 0
+    assert "shape not fitted" in capsys.readouterr().out  # tips-5: one marker per digit (shape_is_constrained)
+    # A NaN in the attachment is one line and exit 2 (it was a LinAlgError from the solver).
+    with np.load(att) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["barycentric"][2, 0] = np.nan
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **arrays)
+    assert main(["solve", str(session / "take" / "markers.c3d"), "--attachment", str(bad),
+                 "--out", str(tmp_path / "m.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "NaN" in err and len(err.splitlines()) == 1
+    # Markers the attachment does not fit (two labels swapped): a warning, stored, and exit 2 with --strict.
+    from handcap import MarkerSequence
+    from handcap.io import read_markers, write_markers_npz
+    take = read_markers(session / "take" / "markers.c3d")
+    names = list(take.names)
+    i, j = names.index("thumb_tip"), names.index("pinky_tip")
+    names[i], names[j] = names[j], names[i]
+    swapped = tmp_path / "swapped.npz"
+    write_markers_npz(MarkerSequence(take.positions, names, take.rate), swapped)
+    out = tmp_path / "motion.npz"
+    assert main(["--strict", "solve", str(swapped), "--attachment", str(att), "--out", str(out)]) == 2
+    assert "warning: solve MRE" in capsys.readouterr().err
+    assert any("solve MRE" in w for w in read_hand_motion(out).warnings)

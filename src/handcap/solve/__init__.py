@@ -4,10 +4,11 @@
     motion = solve_hand(markers, attachment)          # HandMotion, metres and radians
 """
 
-from handcap.solve.calibration import Calibration, calibrate_attachment
+from handcap.solve.calibration import Calibration, calibrate_attachment, offsets_measurable, shape_is_constrained
 from handcap.solve.lm import Priors
-from handcap.solve.motion import METHODS, solve_hand
+from handcap.solve.motion import METHODS, MRE_WARNING, solve_hand
 from handcap.solve.shape import MEASUREMENTS, betas_from_measurements, betas_from_scan, hand_measurements
 
-__all__ = ["Calibration", "MEASUREMENTS", "METHODS", "Priors", "betas_from_measurements", "betas_from_scan",
-           "calibrate_attachment", "hand_measurements", "solve_hand"]
+__all__ = ["Calibration", "MEASUREMENTS", "METHODS", "MRE_WARNING", "Priors", "betas_from_measurements",
+           "betas_from_scan", "calibrate_attachment", "hand_measurements", "offsets_measurable", "shape_is_constrained",
+           "solve_hand"]

@@ -5,20 +5,28 @@ so every marker is seen) and a layout, find for every marker the triangle and
 barycentric coordinates on its own segment's submesh (and, optionally, its
 height off the skin), together with the pose of every calibration frame:
 
-1. Start from the layout's nominal spots (or, for markers without one, the
-   middle of the back of their segment).
+1. Start from the layout's nominal spots; markers without one start at the
+   middle of the back of their segment, only to get the first poses.
 2. Solve the pose of every calibration frame with the current attachment
    (the motion solver; fingers drawn towards an open hand, as the subject was
    asked to hold one).
 3. Move each observed marker into its segment's rest frame (undo that
    segment's skinning transform) and take the median over frames: a robust
    version of recomputing the closest triangle frame by frame.
-4. Move each marker towards that estimate (see :func:`relaxation`; at most
-   2 cm from its nominal spot) and put it at the closest point of its
-   segment's submesh (segment-restricted closest point), with the normal
-   distance as its offset when offsets are estimated.
+4. Move each marker towards that estimate and put it at the closest point of
+   its segment's submesh (segment-restricted closest point), with the normal
+   distance as its offset when offsets are estimated. A marker the layout
+   placed moves by :func:`relaxation` and ends at most ``MAX_SHIFT`` from its
+   nominal spot; a marker without a layout position goes all the way, in the
+   first round too: it starts where it was measured (issue 14: starting every
+   such marker of a segment at one spot and capping its move kept a
+   19-marker set at 13 mm MRE).
 5. Repeat 2-4 until no marker moves by more than 0.1 mm; with ``fit_shape``,
    also refit the 10 shape values to all frames between rounds.
+
+Shape values that end at their bounds, and a calibration MRE above
+:data:`handcap.solve.motion.MRE_WARNING`, are reported as warnings stored on
+the attachment.
 """
 
 from __future__ import annotations
@@ -28,18 +36,20 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
 from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
 from handcap.hand.attachment import MarkerAttachment
 from handcap.solve.lm import Poses, Priors
 from handcap.solve.markers import MarkerModel
-from handcap.solve.motion import _solve_lm, observed_markers
+from handcap.solve.motion import MRE_WARNING, _solve_lm, observed_markers
 
 #: How strongly calibration frames are drawn to the open hand, metres per radian.
 OPEN_HAND_WEIGHT = 0.02
-#: Furthest a marker may end from its nominal spot, metres.
+#: Furthest a marker may end from the nominal spot its layout gives, metres (markers without one move freely).
 MAX_SHIFT = 0.02
+#: Shape values stay within this many standard deviations of the average hand.
+SHAPE_BOUND = 3.0
 
 
 @dataclass(frozen=True)
@@ -49,6 +59,7 @@ class Calibration:
     Attributes
     ----------
     attachment : MarkerAttachment
+        Carries the warnings too.
     poses : Poses
         Poses of the calibration frames used.
     frames : ndarray (F,) int
@@ -56,6 +67,10 @@ class Calibration:
     residuals : ndarray (F, M)
         Marker errors of the final fit, metres (NaN where unobserved).
     rounds : int
+    fit_shape : bool
+        Whether the shape values were estimated (see :func:`shape_is_constrained`).
+    warnings : tuple of str
+        One-line warnings about the result (also on ``attachment``).
     """
 
     attachment: MarkerAttachment
@@ -63,6 +78,8 @@ class Calibration:
     frames: np.ndarray
     residuals: np.ndarray
     rounds: int
+    fit_shape: bool = False
+    warnings: tuple[str, ...] = ()
 
     @property
     def mre(self) -> float:
@@ -70,8 +87,59 @@ class Calibration:
         return float(np.nanmean(self.residuals))
 
 
+def shape_is_constrained(layout) -> bool:
+    """Whether a layout's markers say enough about the hand's proportions to fit its shape by default.
+
+    The rule: at least three markers on the palm (its pose, hence where the
+    fingers leave it, is seen from its own markers) and, on at least three of
+    the five digits, markers on two or more of the digit's segments (the
+    distances between them, through the joints, carry the bone lengths and,
+    with the palm markers, the breadth of the palm). ``glove-13``,
+    ``joints-19`` and ``dense-patches`` qualify; ``tips-5`` and ``active-9``
+    (one marker per digit: a finger's length and its flexion trade off) do
+    not. Whether the layout gives positions does not matter.
+
+    Parameters
+    ----------
+    layout : MarkerLayout
+
+    Returns
+    -------
+    bool
+    """
+    segments = [m.segment for m in layout.hand_markers]
+    on_palm = sum(s == "palm" for s in segments)
+    digits = {}
+    for s in set(segments) - {"palm"}:
+        digits.setdefault(s.split("_")[0], set()).add(s)
+    return on_palm >= 3 and sum(len(v) >= 2 for v in digits.values()) >= 3
+
+
+def offsets_measurable(layout) -> np.ndarray:
+    """Whose heights off the skin a calibration measures by default (M,) bool, in ``layout.hand_markers`` order.
+
+    Sphere markers (patches are printed on the skin: their height is the
+    layout's radius) that the layout places (``position``) on a segment
+    carrying three or more markers: the segment's pose is then fixed by its own
+    markers and the marker's spot along the skin by the layout, so its height
+    (a ball on a base or a plate, 7-20 mm on the real glove) shows in every
+    frame. A lone marker's height trades off with its joint's angle, and a
+    marker without a position with its spot; measured on synthetic takes,
+    estimating those made the joint error worse (by 1-2 mm), so they keep the
+    layout's radius.
+    """
+    markers = layout.hand_markers
+    segments = [m.segment for m in markers]
+    return np.array([layout.marker_kind == "sphere" and m.position is not None and segments.count(m.segment) >= 3
+                     for m in markers], dtype=bool)
+
+
 def initial_attachment(layout, hand, betas) -> MarkerAttachment:
-    """The layout's nominal spots; markers without one go to the middle of the back of their segment."""
+    """The layout's nominal spots; markers without one go to the middle of the back of their segment.
+
+    The latter are only a start for the first poses: :func:`calibrate_attachment`
+    then puts each where it was measured.
+    """
     from handcap.layouts import LayoutMarker, MarkerLayout
     layout = layout.for_side(hand.side)
     template = hand.forward().vertices
@@ -92,7 +160,7 @@ def initial_attachment(layout, hand, betas) -> MarkerAttachment:
 
 
 def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=None, frames=None,
-                         max_frames: int = 120, fit_shape: bool = False, estimate_offset: bool = False,
+                         max_frames: int = 120, fit_shape: bool | None = None, estimate_offset: bool | None = None,
                          rounds: int = 30, tolerance: float = 1e-4, priors: Priors | None = None) -> Calibration:
     """Calibrate where the markers of a layout sit on the hand.
 
@@ -101,7 +169,8 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
     markers : MarkerSequence
         The calibration take, metres.
     layout : MarkerLayout
-        The markers to calibrate (a user's own layout works like a shipped one).
+        The markers to calibrate (a user's own layout works like a shipped one;
+        markers without a ``position`` are placed where they are measured).
     hand : HandModel, optional
         OpenHand of the layout's side by default.
     betas : ndarray (10,), optional
@@ -110,10 +179,13 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         Frames of ``markers`` to use (default all).
     max_frames : int
         At most this many frames, evenly spread, are used.
-    fit_shape : bool
-        Estimate the shape values jointly with the attachment.
-    estimate_offset : bool
-        Estimate each marker's height off the skin instead of the layout's radius.
+    fit_shape : bool, optional
+        Estimate the shape values jointly with the attachment. None (default):
+        when the layout constrains them (:func:`shape_is_constrained`) and no
+        ``betas`` are given.
+    estimate_offset : bool, optional
+        Estimate each marker's height off the skin instead of the layout's
+        radius; None: for the markers :func:`offsets_measurable` names.
     rounds : int
     tolerance : float
         Stop when no marker moves more than this, metres.
@@ -123,6 +195,9 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
     Returns
     -------
     Calibration
+        With warnings (also on its attachment, and issued as
+        :class:`handcap.HandcapWarning`) when shape values end at their bounds
+        or the calibration MRE exceeds :data:`handcap.solve.motion.MRE_WARNING`.
 
     Raises
     ------
@@ -133,28 +208,18 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         from handcap.hand import OpenHand
         hand = OpenHand(layout.side)
     layout = layout.for_side(hand.side)
+    if fit_shape is None:
+        fit_shape = betas is None and shape_is_constrained(layout)
     betas = np.zeros(10) if betas is None else np.asarray(betas, dtype=np.float64)
-    chosen = np.arange(markers.n_frames)[frames] if isinstance(frames, slice) else \
-        (np.arange(markers.n_frames) if frames is None else np.asarray(frames, dtype=int))
-    if len(chosen) > max_frames:
-        chosen = chosen[np.linspace(0, len(chosen) - 1, max_frames).round().astype(int)]
-    names = [m.name for m in layout.hand_markers]
-    target, absent = observed_markers(markers, names)
-    if absent:
-        raise HandcapError(f"layout markers absent from the calibration take: {', '.join(absent)}")
-    target = target[chosen]
-    observed = ~np.isnan(target[..., 0])
-    usable = observed.sum(axis=1) >= 3
-    if usable.sum() < 3:
-        raise HandcapError(f"only {usable.sum()} calibration frames show 3 or more markers; need at least 3")
-    target, observed, chosen = target[usable], observed[usable], chosen[usable]
-    never = [n for n, seen in zip(names, observed.any(axis=0)) if not seen]
-    if never:
-        raise HandcapError(f"markers never seen in the calibration frames: {', '.join(never)}; "
-                           f"use frames where the hand shows every marker")
+    if betas.shape != (10,) or not np.isfinite(betas).all():
+        raise HandcapError(f"betas must be 10 finite numbers, got shape {betas.shape}")
+    target, observed, chosen = _calibration_frames(markers, layout, frames, max_frames)
     if priors is None:
         priors = Priors(rest=np.zeros(27), rest_weight=OPEN_HAND_WEIGHT)
     attachment = initial_attachment(layout, hand, betas)
+    given = np.array([m.position is not None for m in layout.hand_markers])
+    free_offset = offsets_measurable(layout) if estimate_offset is None else \
+        np.full(len(given), bool(estimate_offset))
     radius = layout.marker_radius
     nominal = MarkerModel(hand, attachment).rest_markers
     step = relaxation(attachment, hand)
@@ -173,12 +238,15 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         if step == 1.0 and error > 0.98 * previous_error:
             break  # sparse layout: the fit no longer improves (see relaxation)
         previous_error = error
-        goal = rest_frame_medians(model, poses, target, observed)
-        goal = model.rest_markers + step * (goal - model.rest_markers)
+        measured = rest_frame_medians(model, poses, target, observed)
+        # Placed markers move part of the way (relaxation) and no further than MAX_SHIFT from their nominal
+        # spots; markers without a layout position go where they were measured.
+        goal = model.rest_markers + step * (measured - model.rest_markers)
         away = goal - nominal
         far = np.linalg.norm(away, axis=1, keepdims=True)
-        goal = nominal + away * np.minimum(1.0, MAX_SHIFT / np.maximum(far, 1e-12))
-        updated = _reattach(model, hand, attachment, goal, radius, estimate_offset)
+        capped = nominal + away * np.minimum(1.0, MAX_SHIFT / np.maximum(far, 1e-12))
+        goal = np.where(given[:, None], capped, measured if done == 1 else goal)
+        updated = _reattach(model, hand, attachment, goal, radius, free_offset)
         moved = np.linalg.norm(MarkerModel(hand, updated).rest_markers - model.rest_markers, axis=1).max()
         attachment = updated
         if moved < tolerance:
@@ -187,7 +255,62 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
     poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
     fit = model.positions(poses.transl, poses.rot, poses.phi)
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), np.nan)
-    return Calibration(attachment, poses, chosen, residuals, done)
+    messages = calibration_warnings(attachment.betas if fit_shape else None, residuals)
+    return Calibration(attachment.with_warnings(*messages), poses, chosen, residuals, done, bool(fit_shape),
+                       messages)
+
+
+def calibration_warnings(betas, residuals) -> tuple[str, ...]:
+    """Warnings about a calibration: fitted shape values at their bounds, a large MRE.
+
+    Parameters
+    ----------
+    betas : ndarray (10,) or None
+        Fitted shape values (None when the shape was not fitted).
+    residuals : ndarray (F, M)
+        Marker errors of the calibration fit, metres, NaN where unobserved.
+
+    Returns
+    -------
+    tuple of str
+        Each also issued through :func:`handcap.core.errors.warn`.
+    """
+    out = []
+    if betas is not None:
+        stuck = np.flatnonzero(np.abs(betas) > SHAPE_BOUND - 0.02)
+        if len(stuck):
+            values = ", ".join(f"beta{i} = {betas[i]:+.2f}" for i in stuck)
+            out.append(warn(f"shape values at their bounds (+-{SHAPE_BOUND:g}): {values}; the hand model cannot take "
+                            f"this subject's proportions (or the markers' segments in the layout are wrong): check "
+                            f"the layout, or give measured lengths (handcap shape) and --betas"))
+    mre = float(np.nanmean(residuals))
+    if mre > MRE_WARNING:
+        out.append(warn(f"calibration MRE {1000 * mre:.1f} mm is above {1000 * MRE_WARNING:.0f} mm: markers on the "
+                        f"wrong segments, mislabeled markers, or a hand far from open in the calibration frames"))
+    return tuple(out)
+
+
+def _calibration_frames(markers, layout, frames, max_frames):
+    """Observed layout markers (F, M, 3), their mask (F, M) and frame numbers (F,) of the usable frames."""
+    chosen = np.arange(markers.n_frames)[frames] if isinstance(frames, slice) else \
+        (np.arange(markers.n_frames) if frames is None else np.asarray(frames, dtype=int))
+    if len(chosen) > max_frames:
+        chosen = chosen[np.linspace(0, len(chosen) - 1, max_frames).round().astype(int)]
+    names = [m.name for m in layout.hand_markers]
+    target, absent = observed_markers(markers, names)
+    if absent:
+        raise HandcapError(f"layout markers absent from the calibration take: {', '.join(absent)}")
+    target = target[chosen]
+    observed = ~np.isnan(target[..., 0])
+    usable = observed.sum(axis=1) >= 3
+    if usable.sum() < 3:
+        raise HandcapError(f"only {usable.sum()} calibration frames show 3 or more markers; need at least 3")
+    target, observed, chosen = target[usable], observed[usable], chosen[usable]
+    never = [n for n, seen in zip(names, observed.any(axis=0)) if not seen]
+    if never:
+        raise HandcapError(f"markers never seen in the calibration frames: {', '.join(never)}; "
+                           f"use frames where the hand shows every marker")
+    return target, observed, chosen
 
 
 def rest_frame_medians(model, poses, target, observed) -> np.ndarray:
@@ -221,7 +344,10 @@ def relaxation(attachment, hand) -> float:
 
 
 def _reattach(model, hand, attachment, goal, radius, estimate_offset) -> MarkerAttachment:
-    """New triangles, barycentric coordinates (and offsets) for markers placed at ``goal`` (rest pose)."""
+    """New triangles, barycentric coordinates (and offsets) for markers placed at ``goal`` (rest pose).
+
+    ``estimate_offset`` (M,) bool: whose offsets are measured; the others get ``radius``.
+    """
     segment = np.argmax(model.marker_weights, axis=1)  # each marker's own segment
     median = goal
     rest_vertices, _, _ = hand.rest(attachment.betas)
@@ -236,13 +362,11 @@ def _reattach(model, hand, attachment, goal, radius, estimate_offset) -> MarkerA
         closest, face, b = closest_points_on_mesh(median[members], rest_vertices, faces[own], candidates=32)
         triangles[members] = own[face]
         bary[members] = b
-        if estimate_offset:
-            tri = rest_vertices[faces[own[face]]]
-            normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-            offset[members] = np.clip(((median[members] - closest) * normal).sum(axis=1), 0.0, 0.03)
-        else:
-            offset[members] = radius
+        tri = rest_vertices[faces[own[face]]]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        height = np.clip(((median[members] - closest) * normal).sum(axis=1), 0.0, 0.03)
+        offset[members] = np.where(estimate_offset[members], height, radius)
     return MarkerAttachment(attachment.marker_names, triangles, bary, offset, attachment.betas,
                             attachment.model, attachment.side)
 
@@ -257,7 +381,7 @@ def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
     A Gaussian prior on the shape values (zero mean, unit deviation) keeps the
     hand average where the markers say little: moving a value by one unit must
     lower the mean square marker error by ``SHAPE_PRIOR**2``. Values stay
-    within three deviations.
+    within ``SHAPE_BOUND`` deviations.
     """
     rows = observed
     weight = SHAPE_PRIOR * np.sqrt(observed.sum())
@@ -267,5 +391,5 @@ def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
         fit = model.positions(poses.transl, poses.rot, poses.phi)
         return np.concatenate([(fit - np.nan_to_num(target))[rows].ravel(), weight * betas])
 
-    result = least_squares(residual, attachment.betas, bounds=(-3.0, 3.0), diff_step=1e-3, max_nfev=40)
+    result = least_squares(residual, attachment.betas, bounds=(-SHAPE_BOUND, SHAPE_BOUND), diff_step=1e-3, max_nfev=40)
     return result.x

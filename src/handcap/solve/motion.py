@@ -22,6 +22,9 @@ Per frame, the pose that brings the attached markers onto the observed ones
 
 Methods: ``lm`` (the above, default) and ``adam`` (the paper's optimiser,
 :mod:`handcap.solve.adam`), kept as the baseline.
+
+A motion whose MRE exceeds :data:`MRE_WARNING` carries a warning (issue 14:
+never a silent wrong result), as do the attachment's own warnings.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from tqdm import tqdm
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
 from handcap.core.rotations import axis_angle_from_matrix
@@ -38,6 +41,8 @@ from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_
 from handcap.solve.markers import MarkerModel
 
 METHODS = ("lm", "adam")
+#: A fit whose mean marker error exceeds this (metres) is implausible for a calibrated attachment: warned.
+MRE_WARNING = 0.005
 
 
 def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[str]]:
@@ -117,15 +122,21 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         ``phi``, ``hand_pose``, ``global_orient``, ``transl``, ``joints`` (T, 21, 3),
         ``marker_fit`` (T, M, 3) for every attached marker (also those missing
         in the input) and ``marker_residuals`` (T, M) metres (NaN where missing).
+        ``warnings``: the attachment's, and one when the MRE exceeds
+        :data:`MRE_WARNING` (also issued as :class:`handcap.HandcapWarning`).
 
     Raises
     ------
     HandcapError
-        Unknown method, or no marker of the attachment in ``markers``.
+        Unknown method, no marker of the attachment in ``markers``, or an
+        attachment made for another mesh (triangle numbers beyond its faces).
     """
     if method not in METHODS:
         raise HandcapError(f"unknown solve method {method!r}; choose one of {', '.join(METHODS)}")
     hand = _hand_for(attachment) if hand is None else hand
+    if len(attachment) and (attachment.triangles.min() < 0 or attachment.triangles.max() >= len(hand.faces)):
+        raise HandcapError(f"the attachment's triangle numbers run to {attachment.triangles.max()}, but the "
+                           f"{hand.name} mesh has {len(hand.faces)} faces: calibrate the attachment for this model")
     priors = Priors() if priors is None else priors
     names = list(attachment.marker_names)
     target, absent = observed_markers(markers, names)
@@ -144,7 +155,28 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
                           first_iterations, progress)
     if filter_cutoff is not None:
         poses = _smoothed(poses, markers.rate, filter_cutoff, filter_order)
-    return _motion(hand, model, poses, target, observed, markers.rate, names)
+    motion = _motion(hand, model, poses, target, observed, markers.rate, names)
+    return motion.with_warnings(*attachment.warnings, *solve_warnings(motion.marker_residuals))
+
+
+def solve_warnings(residuals) -> tuple[str, ...]:
+    """Warnings about a solved motion: an MRE above :data:`MRE_WARNING`.
+
+    Parameters
+    ----------
+    residuals : ndarray (T, M)
+        Marker errors, metres, NaN where unobserved.
+
+    Returns
+    -------
+    tuple of str
+        Each also issued through :func:`handcap.core.errors.warn`.
+    """
+    mre = float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan")
+    if mre > MRE_WARNING:
+        return (warn(f"solve MRE {1000 * mre:.1f} mm is above {1000 * MRE_WARNING:.0f} mm: the attachment does not "
+                     f"fit these markers (another subject or session, mislabeled markers, or a poor calibration)"),)
+    return ()
 
 
 def _smoothed(poses: Poses, rate, cutoff, order) -> Poses:
