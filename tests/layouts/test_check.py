@@ -260,7 +260,7 @@ def test_cli_check_unusable_layout_is_one_line(tmp_path, glove_take, capsys):
 def test_synthetic_subjects_raise_no_false_warning(layout_name):
     """Different hand shapes and marker placements (synth's subject seeds) are all plausible."""
     for subject in range(3):
-        capture = synthesize(SynthConfig(layout=layout_name, motion="calibration", frames=10, ghost_rate=0,
+        capture = synthesize(SynthConfig(layout=layout_name, motion="calibration", frames=20, ghost_rate=0,
                                          seed=subject, subject_seed=100 + subject), progress=False)
         result = quiet_check(load_layout(layout_name), capture.markers)
         assert result.warnings == (), (subject, result.warnings)
