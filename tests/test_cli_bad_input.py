@@ -172,8 +172,10 @@ def test_synth_refuses_to_write_over_its_own_scene(take, capsys):
     _run_bad(["synth", "--scene", s / "scene.toml", "--force", "--out", s], take, capsys, "synth", "holds the input")
 
 
-def test_synth_refuses_a_file_as_folder(take, capsys):
-    _run_bad(["synth", "--frames", "40", "--out", take / "att.npz"], take, capsys, "synth", "not a folder")
+@pytest.mark.parametrize("verb", ["synth", "demo"])
+def test_folder_writers_refuse_a_file_as_folder(take, capsys, verb):
+    argv = ["synth", "--frames", "40"] if verb == "synth" else ["demo"]
+    _run_bad(argv + ["--out", take / "att.npz"], take, capsys, verb, "not a folder")
 
 
 @pytest.mark.parametrize("option", ["layout", "cameras"])
