@@ -578,3 +578,22 @@ def test_cli_metrics_needs_the_motions_model_for_the_mesh(glove_takes, mano_dir,
     assert "made with the mano hand model" in capsys.readouterr().err
     assert run_cli(*leave_one_out) == 0
     assert "leave" in capsys.readouterr().out.lower()
+
+
+def test_hand_model_from_options_precedence(mano_dir, tmp_path, monkeypatch):
+    from handcap.hand import hand_model_from_options
+    monkeypatch.setenv("HANDCAP_MANO_DIR", str(tmp_path / "elsewhere"))
+    assert isinstance(hand_model_from_options(), OpenHand)
+    # --mano-dir wins over the environment and implies the MANO model; the side is passed on.
+    hand = hand_model_from_options(None, mano_dir, side="left")
+    assert isinstance(hand, ManoHand) and hand.side == "left"
+    # A recorded model is the default, and another choice is refused.
+    assert isinstance(hand_model_from_options(recorded="openhand"), OpenHand)
+    with pytest.raises(HandcapError, match="attachment.npz was made with the mano hand model, not openhand"):
+        hand_model_from_options("openhand", recorded="mano", what="attachment.npz")
+    with pytest.raises(HandcapError, match="not a folder"):
+        hand_model_from_options(recorded="mano")  # HANDCAP_MANO_DIR points nowhere
+    monkeypatch.setenv("HANDCAP_MANO_DIR", str(mano_dir))
+    assert isinstance(hand_model_from_options(recorded="mano"), ManoHand)
+    with pytest.raises(HandcapError, match="unknown hand model 'smplx'"):
+        hand_model_from_options(recorded="smplx")

@@ -119,9 +119,9 @@ class LayoutCheck:
                      + (f"; no marker on {_listed(empty)} (held by the pose priors)" if empty else ""))
         if self.distance:
             worst = max(self.distance, key=self.distance.get)
-            text = (f"positions : {len(self.distance)} given, median {1000 * np.median(list(self.distance.values())):.1f}"
-                    f" mm from their segment's skin on the template hand, farthest {worst} "
-                    f"{1000 * self.distance[worst]:.1f} mm")
+            median = 1000 * np.median(list(self.distance.values()))
+            text = (f"positions : {len(self.distance)} given, median {median:.1f} mm from their segment's skin on the "
+                    f"template hand, farthest {worst} {1000 * self.distance[worst]:.1f} mm")
         else:
             text = "positions : none given"
         if self.estimated:
@@ -373,7 +373,8 @@ def _rigid_distances(layout: MarkerLayout, markers: MarkerSequence, matched) -> 
                            "layout's positions")]
     relative, absolute = RIGID_TOLERANCE
     wrong = [f"{a}-{b} {1000 * measured:.1f} mm in the take, {1000 * nominal:.1f} mm in the layout"
-             for a, b, measured, nominal in rows if abs(measured - scale * nominal) > relative * scale * nominal + absolute]
+             for a, b, measured, nominal in rows
+             if abs(measured - scale * nominal) > relative * scale * nominal + absolute]
     if wrong:
         return rows, [warn(f"rigid markers apart by other distances than their layout positions (scaled by "
                            f"{scale:.2f} to the subject): {'; '.join(wrong)}; check the names (swapped?) and the "
