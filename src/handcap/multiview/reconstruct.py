@@ -185,8 +185,9 @@ def triangulate_detections(detections: Detections, rig: CameraRig, *, min_views:
 #: Detections triangulated in this process to time the work before choosing workers (about 0.3 s).
 PROBE_DETECTIONS = 50_000
 #: Seconds until a pool of local workers is ready: fresh interpreters importing numpy, scipy and handcap,
-#: started side by side. Measured at 3.9-4.4 s for 2 workers on 2 busy cores (``benchmarks/triangulate.py``,
-#: part 4); on an idle machine it is less, so the pool is chosen a little late, never too early.
+#: started side by side. Measured at 3.9-4.4 s for 2 workers (``map_chunks`` of a function that imports
+#: this module, 2 cores at load average 7); on an idle machine it is less, so the pool is chosen a little
+#: late, never too early. ``benchmarks/triangulate.py --break-even`` shows the choice against both ways.
 POOL_START_SECONDS = 4.0
 
 
