@@ -8,13 +8,27 @@ import sys
 from handcap.core.errors import HandcapError
 
 
-def _cmd_convert(args) -> None:
-    from handcap.io import convert
-    markers = convert(args.input, args.output, partial=args.partial)
-    print(f"{args.output}: {markers.n_frames} frames, {markers.n_markers} markers at {markers.rate:g} Hz")
+def _cmd_convert(args) -> tuple[str, ...]:
+    from handcap.io import check_output, read_markers, write_markers
+    from handcap.quality import plausibility as q
+    check_output(args.output, args.input)
+    markers = read_markers(args.input, partial=args.partial, units=args.units)
+    markers = q.attach(markers, q.marker_warnings(markers))  # stored in the output (.npz, .c3d) as well
+    write_markers(markers, args.output)
+    print(q.summary(f"{args.output}: {markers.n_frames} frames, {markers.n_markers} markers at {markers.rate:g} Hz",
+                    q.marker_figures(markers), markers.warnings))
+    return markers.warnings
 
 
-def _cmd_synth(args) -> None:
+def _add_units(parser, what: str = "the input's coordinates") -> None:
+    """``--units mm|cm|m``: the unit of a file that says the wrong one (see handcap.io._units)."""
+    from handcap.io import UNITS
+    parser.add_argument("--units", choices=UNITS, default=None,
+                        help=f"unit of {what}, overriding what the file says (default: the file's; an implausible "
+                             f"one is replaced by the only unit that fits, with a warning)")
+
+
+def _cmd_synth(args) -> tuple[str, ...]:
     from handcap.synth.scene import SynthConfig, config_from_scene, synthesize, write_capture
     if args.scene:
         config = config_from_scene(args.scene)
@@ -26,22 +40,50 @@ def _cmd_synth(args) -> None:
                              dropout=args.dropout, ghost_rate=args.ghost_rate, swap_rate=args.swap_rate,
                              outlier_rate=args.outlier_rate, max_view_angle_deg=args.max_view_angle,
                              placement_mm=args.placement_mm, subject_seed=args.subject_seed)
+    from handcap.io import check_output_folder
+    check_output_folder(args.out, args.scene, force=args.force)
     capture = synthesize(config)
+    capture, warnings = _checked_capture(capture)
     write_capture(capture, args.out)
     m = capture.markers
-    print(f"{args.out}: {m.n_frames} frames, {len(capture.hand_motion.marker_names)} hand markers, "
-          f"{m.n_markers} trajectories, {100 * capture.truth['visible'].mean():.1f}% reconstructed")
+    from handcap.quality import plausibility as q
+    print(q.summary(f"{args.out}: {m.n_frames} frames, {len(capture.hand_motion.marker_names)} hand markers, "
+                    f"{m.n_markers} trajectories, {100 * capture.truth['visible'].mean():.1f}% reconstructed",
+                    {**q.marker_figures(m, hand=capture.hand_motion.marker_names),
+                     **q.motion_figures(capture.hand_motion)}, warnings))
+    return warnings
 
 
-def _cmd_demo(args) -> None:
+def _checked_capture(capture):
+    """The capture with the warnings of its markers and true motion stored on both (markers and truth files)."""
+    from dataclasses import replace
+
+    from handcap.quality import plausibility as q
+    warnings = q.marker_warnings(capture.markers, hand=capture.hand_motion.marker_names) + \
+        q.motion_warnings(capture.hand_motion)
+    capture = replace(capture, markers=q.attach(capture.markers, warnings),
+                      hand_motion=capture.hand_motion.with_warnings(*warnings))
+    return capture, capture.markers.warnings
+
+
+def _cmd_demo(args) -> tuple[str, ...]:
     from handcap.demo import run_demo
+    from handcap.io import check_output_folder
+    check_output_folder(args.out, force=True)  # demo-output/ is rewritten on every run
     summary = run_demo(args.out)
     for key, value in summary.items():
-        if key not in ("files", "seen_per_camera_fraction", "metrics"):
+        if key not in ("files", "seen_per_camera_fraction", "metrics", "warnings"):
             print(f"{key:28s} {value}")
     print("\nsolved motion against the ground truth:")
     print(summary["metrics"])
-    print(f"\nwrote {len(summary['files'])} files to {args.out}/ (picture: {args.out}/hand.png)")
+    warnings = tuple(summary["warnings"])
+    from pathlib import Path
+    files = [Path(f) for f in summary["files"]]
+    print(f"\nwrote {len(files)} files to {args.out}/ (picture of the truth beside the solve: {args.out}/hand.png); "
+          + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
+    for path in files:
+        print(f"  {path.relative_to(args.out) if path.is_relative_to(args.out) else path}")
+    return warnings
 
 
 
@@ -73,21 +115,40 @@ def _betas_arg(text: str | None):
     return np.array(values)
 
 
-def _cmd_calibrate_markers(args) -> None:
+def _add_hand_model(p, default: str = "openhand") -> None:
+    """``--hand-model`` and ``--mano-dir`` for a verb that uses the hand model."""
+    p.add_argument("--hand-model", metavar="MODEL",
+                   help=f"openhand (built in), mano (your MANO files: --mano-dir or HANDCAP_MANO_DIR) or mano:DIR "
+                        f"(default: {default})")
+    p.add_argument("--mano-dir", metavar="DIR", help="folder holding MANO_RIGHT.pkl/MANO_LEFT.pkl (implies "
+                                                     "--hand-model mano; default: $HANDCAP_MANO_DIR)")
+
+
+def _hand_model(args, side: str, *, recorded: str | None = None, what: str = "the input"):
+    """The hand model of ``--hand-model``/``--mano-dir`` (checked against the model ``what`` was made with)."""
+    from handcap.hand import hand_model_from_options
+    return hand_model_from_options(args.hand_model, args.mano_dir, side=side, recorded=recorded, what=what)
+
+
+def _cmd_calibrate_markers(args) -> tuple[str, ...]:
     from handcap.io import check_not_input, read_markers
     from handcap.layouts import load_layout
     from handcap.solve import calibrate_attachment
     check_not_input(args.out, args.input)
-    markers = read_markers(args.input)
     layout = load_layout(args.layout, side=args.side)
-    result = calibrate_attachment(markers, layout, betas=_betas_arg(args.betas), frames=_frames_arg(args.frames),
+    markers = read_markers(args.input, units=args.units, hand=[m.name for m in layout.hand_markers])
+    hand = _hand_model(args, layout.side)
+    result = calibrate_attachment(markers, layout, hand, betas=_betas_arg(args.betas), frames=_frames_arg(args.frames),
                                   fit_shape=args.fit_shape, estimate_offset=args.estimate_offset)
     result.attachment.save(args.out)
+    shape = ("shape fitted: " + " ".join(f"{b:+.2f}" for b in result.attachment.betas)) if result.fit_shape \
+        else "shape not fitted (use --fit-shape)"
     print(f"{args.out}: {len(result.attachment)} markers from {len(result.frames)} frames, {result.rounds} rounds, "
-          f"calibration MRE {1000 * result.mre:.2f} mm")
+          f"calibration MRE {1000 * result.mre:.2f} mm; {shape}")
+    return result.warnings
 
 
-def _cmd_solve(args) -> None:
+def _cmd_solve(args) -> tuple[str, ...]:
     import time
 
     import numpy as np
@@ -96,10 +157,11 @@ def _cmd_solve(args) -> None:
     from handcap.io import check_not_input, read_markers, write_hand_motion
     from handcap.solve import solve_hand
     check_not_input(args.out, args.input, args.attachment)
-    markers = read_markers(args.input)
     attachment = MarkerAttachment.load(args.attachment)
+    markers = read_markers(args.input, units=args.units, hand=attachment.marker_names)
+    hand = _hand_model(args, attachment.side, recorded=attachment.model, what=args.attachment)
     start = time.perf_counter()
-    motion = solve_hand(markers, attachment, method=args.method, filter_cutoff=args.filter_cutoff,
+    motion = solve_hand(markers, attachment, hand, method=args.method, filter_cutoff=args.filter_cutoff,
                         filter_order=args.filter_order)
     seconds = time.perf_counter() - start
     write_hand_motion(motion, args.out)
@@ -107,64 +169,92 @@ def _cmd_solve(args) -> None:
     print(f"{args.out}: {motion.n_frames} frames in {seconds:.1f} s ({motion.n_frames / seconds:.0f} frames/s, "
           f"{args.method}), MRE {1000 * np.nanmean(residuals):.2f} ± {1000 * np.nanstd(residuals):.2f} mm"
           + (f", low-passed at {args.filter_cutoff:g} Hz" if args.filter_cutoff else ""))
+    return motion.warnings
 
 
-def _cmd_track_object(args) -> None:
+def _cmd_track_object(args) -> tuple[str, ...]:
     import numpy as np
 
     from handcap.io import check_not_input, load_npz, read_markers, write_object_motion
     from handcap.objects import track_rigid
-    check_not_input(args.out, args.input)
-    markers = read_markers(args.input)
+    check_not_input(args.out, args.input, args.canonical)
+    markers = read_markers(args.input, units=args.units)
     names = _expand_names(markers, args.markers)
     canonical = None if args.canonical is None else load_npz(args.canonical, ("canonical",), "object file")["canonical"]
     track = track_rigid(markers, names, canonical, name=args.name, threshold=args.threshold_mm / 1000)
-    write_object_motion(track.motion, args.out)
+    from handcap.quality import plausibility as q
+    motion = q.attach(track.motion, [*markers.warnings, *q.object_warnings(track, threshold=args.threshold_mm / 1000)])
+    write_object_motion(motion, args.out)
     unsolved = track.unsolved
     listed = ", ".join(map(str, unsolved[:10])) + (" ..." if len(unsolved) > 10 else "")
     print(f"{args.out}: {track.motion.n_frames} frames, mean residual {1000 * track.mean_residual:.2f} mm, "
           f"{int(np.sum(~track.inliers & ~np.isnan(markers.select(names).positions[..., 0])))} outlier samples, "
           f"{len(unsolved)} frames with fewer than 3 markers" + (f": {listed}" if len(unsolved) else ""))
+    print("  quality: " + (f"{len(motion.warnings)} warning(s), see below" if motion.warnings else "no warnings"))
+    return motion.warnings
 
 
 def _expand_names(markers, text: str) -> list[str]:
-    """Comma-separated marker names; shell-style patterns (``boite:*``) pick every match."""
-    from fnmatch import fnmatchcase
-    names = []
-    for item in (n.strip() for n in text.split(",") if n.strip()):
-        if any(c in item for c in "*?["):
-            found = [n for n in markers.names if fnmatchcase(n, item)]
-            if not found:
-                raise HandcapError(f"no marker matches {item!r}")
-            names += [n for n in found if n not in names]
-        else:
-            names.append(item)
-    return names
+    """Comma-separated marker names or shell-style patterns (``boite:*``); see ``handcap.core.markers.expand_names``."""
+    from handcap.core.markers import expand_names
+    return expand_names(markers, text)
 
 
-def _cmd_metrics(args) -> None:
+def _cmd_metrics(args) -> tuple[str, ...]:
     import json
 
     from handcap.quality.report import metrics_table, motion_metrics
+    if args.out:
+        from handcap.io import check_output
+        check_output(args.out, args.motion, args.truth, args.markers, args.attachment, args.object, args.object_mesh)
+    hand = None
+    if args.hand_model or args.mano_dir or (args.object_mesh and args.object) or args.leave_one_out:
+        from handcap.io import read_hand_motion
+        motion = read_hand_motion(args.motion)  # the model is needed for the mesh: the one it was solved with
+        hand = _hand_model(args, motion.side, recorded=motion.model, what=args.motion)
     metrics = motion_metrics(args.motion, truth=args.truth, markers=args.markers, obj=args.object,
                              object_mesh=args.object_mesh, attachment=args.attachment,
-                             leave_one_out=args.leave_one_out)
+                             leave_one_out=args.leave_one_out, hand=hand)
+    stored, warnings = _motion_file_warnings(args.motion, args.markers)
+    metrics["warnings"] = list(warnings)
     print(metrics_table(metrics))
+    print(f"{'quality':22s} " + (f"{len(warnings)} warning(s), {len(stored)} of them stored in {args.motion}; see below"
+                                 if warnings else "no warnings"))
     if args.out:
         from handcap.io import atomic_output
         with atomic_output(args.out, "w") as fh:
             json.dump(metrics, fh, indent=2)
+    return warnings
 
 
-def _cmd_shape(args) -> None:
+def _motion_file_warnings(motion_path, markers_path=None):
+    """The warnings stored in a hand motion file, and those plus the checks of the motion (and of its fit to the
+    markers it was solved from, when given), without repeats."""
     import numpy as np
 
-    from handcap.hand import OpenHand
+    from handcap.core.errors import merge_warnings
+    from handcap.io import read_hand_motion, read_markers
+    from handcap.quality import plausibility as q
+    motion = read_hand_motion(motion_path)
+    found = q.motion_warnings(motion)
+    if markers_path is not None and motion.marker_fit is not None:
+        from handcap.solve.motion import observed_markers
+        observed, _ = observed_markers(read_markers(markers_path), list(motion.marker_names))
+        found += q.residual_warnings(np.linalg.norm(motion.marker_fit - observed, axis=-1), names=motion.marker_names,
+                                     what=f"MRE against {markers_path}")
+    return motion.warnings, merge_warnings(motion.warnings, found)
+
+
+def _cmd_shape(args) -> tuple[str, ...]:
+    import numpy as np
+
     from handcap.io import save_npz
     from handcap.solve import MEASUREMENTS, betas_from_measurements, betas_from_scan, hand_measurements
-    hand = OpenHand(args.side)
+    hand = _hand_model(args, args.side)
     if (args.scan is None) == (args.lengths is None):
         raise HandcapError("give either --scan or --lengths")
+    from handcap.io import check_output
+    check_output(args.out, args.scan)
     if args.scan:
         betas, chamfer = betas_from_scan(hand, _scan_points(args.scan))
         note = f"Chamfer distance {1000 * chamfer:.2f} mm"
@@ -179,10 +269,15 @@ def _cmd_shape(args) -> None:
                                    f"got {item!r}") from None
         betas = betas_from_measurements(hand, **lengths)
         note = "from " + ", ".join(lengths)
-    save_npz(args.out, {"betas": betas})
+    from handcap.io._files import warnings_entry
+    from handcap.quality import plausibility as q
+    warnings = tuple(q.shape_warnings(betas))
+    save_npz(args.out, {"betas": betas, **warnings_entry(warnings)})
     m = hand_measurements(hand, betas)
     print(f"{args.out}: betas {np.round(betas, 2).tolist()} ({note}); hand length {1000 * m['hand_length']:.1f} mm, "
-          f"breadth {1000 * m['hand_breadth']:.1f} mm")
+          f"breadth {1000 * m['hand_breadth']:.1f} mm; " + (f"{len(warnings)} warning(s), see below" if warnings
+                                                             else "no warnings"))
+    return warnings
 
 
 def _scan_points(path):
@@ -208,12 +303,15 @@ def _cmd_label(args) -> None:
     from handcap.labeling import LabelingModel, label_take
     from handcap.layouts import load_layout
     check_not_input(args.out, args.input, args.train)
+    reuse = _is_model_file(args)  # --train is a saved model: it is used, and not written again
+    if args.model and not reuse:
+        check_not_input(args.model, args.input, args.train, args.out)
     layout = load_layout(args.layout)
-    points = read_points(args.input)
-    if _is_model_file(args):
+    points = read_points(args.input, units=args.units)
+    if reuse:
         model = LabelingModel.load(args.train)
     else:
-        train = read_markers(args.train)
+        train = read_markers(args.train, units=args.units, hand=[m.name for m in layout.hand_markers])
         model = LabelingModel.train(train, layout.names, layout.rigid, seed=args.seed)
     options = {} if args.method == "nearest" else dict(hypotheses=args.hypotheses, lag=args.lag)
     if args.object:
@@ -222,7 +320,7 @@ def _cmd_label(args) -> None:
         options["objects"] = _label_objects(args.train if not _is_model_file(args) else None, args.object)
     result = label_take(points, model, offline=args.offline, method=args.method, **options)
     write_markers(result.markers, args.out)
-    if args.model:
+    if args.model and not reuse:
         model.save(args.model)
     seen = (result.markers.positions[..., 0] == result.markers.positions[..., 0]).mean()
     lost = result.lost_frames
@@ -266,7 +364,10 @@ def _cmd_score_labels(args) -> None:
 
     from handcap.io import read_markers
     from handcap.labeling import score_labels
-    score = score_labels(read_markers(args.labeled), read_markers(args.truth))
+    if args.json:
+        from handcap.io import check_output
+        check_output(args.json, args.labeled, args.truth)
+    score = score_labels(read_markers(args.labeled, units=args.units), read_markers(args.truth, units=args.units))
     print(score.table(f"{args.labeled} against {args.truth}"))
     if args.json:
         from handcap.io import atomic_output
@@ -283,7 +384,7 @@ def _cmd_corrupt(args) -> None:
     truth_path = out.with_name(out.stem + ".truth" + out.suffix)
     check_not_input(args.out, args.input)
     check_not_input(truth_path, args.input)
-    markers = read_markers(args.input)
+    markers = read_markers(args.input, units=args.units)
     names = None
     if args.layout:
         from handcap.layouts import load_layout
@@ -305,21 +406,39 @@ def _cmd_train_occlusion(args) -> None:
     check_not_input(args.out, *args.takes, *(args.poses or []))
     if args.poses and len(args.poses) != len(args.takes):
         raise HandcapError(f"--poses needs one hand motion per take: {len(args.takes)} takes, {len(args.poses)} poses")
+    from dataclasses import replace
+
+    from handcap.occlusion.augment import NO_AUGMENTATION, SUBJECT_AUGMENTATION
+    from handcap.occlusion.data import synthetic_hand_takes
+    if args.synthetic < 0 or args.speed_copies < 0:
+        raise HandcapError("--synthetic and --speed-copies take a number >= 0")
+    if not args.takes and not args.synthetic:
+        raise HandcapError("give takes to train on, or --synthetic SUBJECTS, or both")
+    augmentation = replace(SUBJECT_AUGMENTATION if args.augment else NO_AUGMENTATION, copies=args.speed_copies)
     poses = args.poses or [None] * len(args.takes)
     takes = [read_take(path, poses=pose) for path, pose in zip(args.takes, poses)]
     start = time.perf_counter()
+    if args.synthetic:
+        from handcap.layouts import load_layout
+        takes += synthetic_hand_takes(args.layout, subjects=args.synthetic, seed=args.seed,
+                                      side=load_layout(args.layout).side)
 
     def progress(stage, epoch, loss):
         if epoch % 10 == 9 or epoch == 0:
             print(f"  {stage}: epoch {epoch + 1}, loss {loss:.4f}", file=sys.stderr, flush=True)
 
     model = train_occlusion_model(takes, args.layout, seed=args.seed, epochs=args.epochs,
-                                  regressor_epochs=args.epochs, progress=progress)
+                                  regressor_epochs=args.epochs, progress=progress, augmentation=augmentation)
     model.save(args.out)
-    posed = int(model.info["posed_frames"])
-    print(f"{args.out}: {model!r} from {model.info['frames']} frames of {len(takes)} take(s)"
-          + (f", joint regressor on {posed} posed frames" if posed else ", no poses: markers only")
-          + f", {time.perf_counter() - start:.0f} s")
+    info = model.info
+    posed = int(info["posed_frames"])
+    print(f"{args.out}: {model!r}, {time.perf_counter() - start:.0f} s\n"
+          f"  saw {info['takes']} take(s) ({info['recorded_takes']} recorded, {info['synthetic_takes']} synthetic) "
+          f"of {info['subjects']} subject(s), {info['frames']} frames; {info['augmented_copies']} augmented "
+          f"copies ({info['augmented_frames']} frames); {info['samples']} training samples\n"
+          f"  augmentation: {info['augmentation']}\n"
+          + (f"  joint regressor on {posed} posed frames" if posed else "  no poses: markers only"))
+    return model.warnings
 
 
 def _cmd_fill(args) -> None:
@@ -328,7 +447,7 @@ def _cmd_fill(args) -> None:
     from handcap.io import check_not_input, read_markers, write_markers
     from handcap.occlusion import fill_gaps
     check_not_input(args.out, args.input, *([args.model] if args.model else []))
-    markers = read_markers(args.input)
+    markers = read_markers(args.input, units=args.units)
     start = time.perf_counter()
     filled, report = fill_gaps(markers, args.method, max_gap=args.max_gap, model=args.model)
     seconds = time.perf_counter() - start
@@ -339,7 +458,7 @@ def _cmd_fill(args) -> None:
           + (f"; not in the model, left as they were: {', '.join(report.untouched)}" if report.untouched else ""))
 
 
-def _cmd_clean(args) -> None:
+def _cmd_clean(args) -> tuple[str, ...]:
     from pathlib import Path
 
     from handcap.io import MARKER_WRITERS, check_not_input, read_markers, write_markers
@@ -354,16 +473,22 @@ def _cmd_clean(args) -> None:
         if getattr(args, name) < 0:
             raise HandcapError(f"--{name.replace('_', '-')} must be 0 or more frames, got {getattr(args, name)}")
     layout = None if args.layout is None else load_layout(args.layout)
-    markers = read_markers(args.input)
+    markers = read_markers(args.input, units=args.units,
+                           hand=None if layout is None else [m.name for m in layout.hand_markers])
     cleaned, report = clean_markers(
         markers, layout, radius=None if args.radius_mm is None else args.radius_mm / 1000, window=args.window,
         z=args.z, floor=args.floor_mm / 1000, max_linear=args.max_linear, max_rigid=args.max_rigid,
         max_spline=args.max_spline, rigid_tolerance=args.rigid_tolerance_mm / 1000)
+    from handcap.quality import plausibility as q
+    cleaned = q.attach(cleaned, [*markers.warnings, *q.clean_warnings(report, markers.missing),
+                                 *q.marker_warnings(cleaned, hand=None if layout is None else layout.names)])
     write_markers(cleaned, args.out)
     n = report.summary()
-    print(f"{args.out}: removed {n['cluster_removed']} samples away from their patch and {n['outlier_removed']} "
-          f"spikes; filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, {n['spline_filled']} spline; "
-          f"{n['missing']} of {report.missing.size} samples missing")
+    print(q.summary(f"{args.out}: removed {n['cluster_removed']} samples away from their patch and "
+                    f"{n['outlier_removed']} spikes; filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, "
+                    f"{n['spline_filled']} spline; {n['missing']} of {report.missing.size} samples missing",
+                    q.marker_figures(cleaned, hand=None if layout is None else layout.names), cleaned.warnings))
+    return cleaned.warnings
 
 
 def _add_label(verbs) -> None:
@@ -388,6 +513,7 @@ def _add_label(verbs) -> None:
                         "such as 'pillow_*' (its shape is learned there); it is found by that shape, labelled, and "
                         "kept from the fingers (repeat for several)")
     p.add_argument("--out", required=True, help="labeled markers (.c3d .trc .npz)")
+    _add_units(p, "the input's and --train's coordinates")
     p.set_defaults(run=_cmd_label)
 
     p = verbs.add_parser("score-labels", help="score a labeling against the truth (Table 1 categories)",
@@ -396,6 +522,7 @@ def _add_label(verbs) -> None:
     p.add_argument("labeled", help="labeled markers written by handcap label")
     p.add_argument("--truth", required=True, help="the true labels (e.g. the .truth file of handcap corrupt)")
     p.add_argument("--json", help="also write the scores as JSON")
+    _add_units(p, "both files' coordinates")
     p.set_defaults(run=_cmd_score_labels)
 
     p = verbs.add_parser("corrupt", help="make a labeling test: strip labels, shuffle, add ghosts and dropouts",
@@ -407,6 +534,7 @@ def _add_label(verbs) -> None:
     p.add_argument("--dropout", type=float, default=0.05, help="extra fraction of samples dropped (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--layout", help="keep only this layout's markers")
+    _add_units(p)
     p.set_defaults(run=_cmd_corrupt)
 
 
@@ -421,9 +549,15 @@ def _add_solve(verbs) -> None:
     p.add_argument("--side", choices=("right", "left"), default=None, help="hand side (default: the layout's)")
     p.add_argument("--frames", help="frames to use, A:B (default all)")
     p.add_argument("--betas", help="known shape: 10 comma-separated values or a .npz with betas")
-    p.add_argument("--fit-shape", action="store_true", help="estimate the 10 shape values too")
-    p.add_argument("--estimate-offset", action="store_true", help="estimate each marker's height off the skin")
+    p.add_argument("--fit-shape", action=argparse.BooleanOptionalAction, default=None,
+                   help="estimate the 10 shape values too (default: when the layout has 3 or more palm markers and "
+                        "markers on two or more segments of 3 or more digits, and no --betas)")
+    p.add_argument("--estimate-offset", action=argparse.BooleanOptionalAction, default=None,
+                   help="estimate each marker's height off the skin (default: for sphere markers the layout places "
+                        "on a segment with 3 or more markers)")
     p.add_argument("--out", required=True, help="attachment .npz")
+    _add_units(p)
+    _add_hand_model(p)
     p.set_defaults(run=_cmd_calibrate_markers)
 
     p = verbs.add_parser("solve", help="solve hand motion from labeled markers",
@@ -434,6 +568,8 @@ def _add_solve(verbs) -> None:
     p.add_argument("--filter-cutoff", type=float, default=None, help="low-pass the motion at this frequency, Hz")
     p.add_argument("--filter-order", type=int, default=2, help="Butterworth order (default %(default)s)")
     p.add_argument("--out", required=True, help="hand motion .npz")
+    _add_units(p)
+    _add_hand_model(p, "the attachment's")
     p.set_defaults(run=_cmd_solve)
 
     p = verbs.add_parser("track-object", help="6-DoF motion of a rigid object from its markers",
@@ -447,6 +583,7 @@ def _add_solve(verbs) -> None:
     p.add_argument("--name", default="object")
     p.add_argument("--threshold-mm", type=float, default=5.0, help="RANSAC inlier distance (default %(default)s)")
     p.add_argument("--out", required=True, help="object motion .npz")
+    _add_units(p)
     p.set_defaults(run=_cmd_track_object)
 
     p = verbs.add_parser("metrics", help="quality metrics of a solved motion",
@@ -460,6 +597,7 @@ def _add_solve(verbs) -> None:
     p.add_argument("--object", help="object motion .npz (for penetration)")
     p.add_argument("--object-mesh", help="the object's mesh (any format trimesh reads), metres, object frame")
     p.add_argument("--out", help="also write the metrics as JSON")
+    _add_hand_model(p, "the motion's")
     p.set_defaults(run=_cmd_metrics)
 
     p = verbs.add_parser("shape", help="estimate the 10 shape values from a scan or measured lengths",
@@ -469,6 +607,7 @@ def _add_solve(verbs) -> None:
     p.add_argument("--lengths", help="e.g. hand_length=190,hand_breadth=87 (millimetres)")
     p.add_argument("--side", choices=("right", "left"), default="right")
     p.add_argument("--out", required=True, help=".npz with betas")
+    _add_hand_model(p)
     p.set_defaults(run=_cmd_shape)
 
 
@@ -506,7 +645,9 @@ def _add_synth(verbs) -> None:
     p.add_argument("--subject-seed", type=int, default=None,
                    help="seed of the subject (hand shape, marker placement); share it between the takes of a session")
     p.add_argument("--scene", help="take every setting from a scene.toml written by an earlier run")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, help="output folder (new or empty, unless --force)")
+    p.add_argument("--force", action="store_true", help="write into --out even if it holds files (those of the "
+                                                        "same names are replaced)")
     p.set_defaults(run=_cmd_synth)
 
     p = verbs.add_parser("demo", help="run the main job on built-in data into demo-output/",
@@ -524,12 +665,21 @@ def _add_occlusion(verbs) -> None:
                                      "marker format, or handcap synth folders); with poses (synth truth, or --poses "
                                      "hand motions from handcap solve) also the joint regressor. Deterministic for a "
                                      "seed. The model is a small .npz used by handcap fill and OcclusionFiller.")
-    p.add_argument("takes", nargs="+", metavar="TAKE", help="labeled takes holding the layout's markers")
+    p.add_argument("takes", nargs="*", metavar="TAKE", help="labeled takes holding the layout's markers "
+                                                             "(none: --synthetic only)")
     p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
     p.add_argument("--poses", nargs="+", metavar="MOTION", help="one hand motion .npz per take (phi, global_orient, "
                                                                  "transl) to train the joint regressor")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--epochs", type=int, default=60, help="training epochs of each network (default %(default)s)")
+    p.add_argument("--synthetic", type=int, default=0, metavar="SUBJECTS",
+                   help="also train on synthetic takes: SUBJECTS x every synthetic motion, each take a new subject "
+                        "(default %(default)s)")
+    p.add_argument("--augment", action="store_true",
+                   help="augment every sample as another subject (scale, back-of-hand and marker placement) for a "
+                        "model that must serve new subjects; it costs on the training subject itself")
+    p.add_argument("--speed-copies", type=int, default=0, metavar="N",
+                   help="also train on N time-warped copies of every take (0.6-1.6x speed; default %(default)s)")
     p.add_argument("--out", required=True, help="model .npz")
     p.set_defaults(run=_cmd_train_occlusion)
 
@@ -543,30 +693,39 @@ def _add_occlusion(verbs) -> None:
     p.add_argument("--max-gap", type=float, default=0.5, metavar="SECONDS",
                    help="longest gap to fill, seconds (default %(default)s)")
     p.add_argument("--out", required=True, help="filled markers (.c3d .trc .npz)")
+    _add_units(p)
     p.set_defaults(run=_cmd_fill)
 
 
-def _cmd_triangulate(args) -> None:
+def _cmd_triangulate(args) -> tuple[str, ...]:
     import time
 
     from handcap.io import check_not_input, write_markers
     from handcap.io.camera_formats import read_rig
     from handcap.multiview import merge_detections, read_detections, triangulate_detections, write_quality
 
+    from handcap.multiview import quality_path
     check_not_input(args.out, args.cameras, *args.detections)
+    check_not_input(quality_path(args.out), args.cameras, *args.detections)
     detections = merge_detections([read_detections(path) for path in args.detections])
-    rig = read_rig(args.cameras)
+    rig = read_rig(args.cameras, units=args.units)
     start = time.perf_counter()
     result = triangulate_detections(detections, rig, min_views=args.min_views, threshold_px=args.threshold_px,
                                     chunk_frames=args.chunk_frames, scheduler=args.scheduler, workers=args.workers)
     seconds = time.perf_counter() - start
-    write_markers(result.to_markers(), args.out)
+    from handcap.quality import plausibility as q
+    markers = result.to_markers()
+    markers = q.attach(markers, [*rig.warnings, *q.triangulation_warnings(
+        result.error_px, result.views, threshold_px=args.threshold_px, used=result.used), *q.marker_warnings(markers)])
+    write_markers(markers, args.out)
     quality = write_quality(result, args.out)
     s = result.summary()
-    print(f"{args.out}: {s['frames']} frames, {s['markers']} markers, {s['points']} points from {s['detections']} "
-          f"detections ({s['rejected']} rejected), mean reprojection error {s['mean_error_px']:.2f} px over "
-          f"{s['mean_views']:.1f} views, {s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} marker-frames/s; "
-          f"per-marker errors and view counts in {quality}")
+    print(q.summary(f"{args.out}: {s['frames']} frames, {s['markers']} markers, {s['points']} points from "
+                    f"{s['detections']} detections ({s['rejected']} rejected), mean reprojection error "
+                    f"{s['mean_error_px']:.2f} px over {s['mean_views']:.1f} views, "
+                    f"{s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} marker-frames/s; per-marker errors and "
+                    f"view counts in {quality}", q.marker_figures(markers), markers.warnings))
+    return markers.warnings
 
 
 def _add_multiview(verbs) -> None:
@@ -587,9 +746,11 @@ def _add_multiview(verbs) -> None:
                    help="reprojection error of an inlier view, pixels (default %(default)s)")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler, e.g. tcp://HOST:8786 (default: local "
                                                         "processes)")
-    p.add_argument("--workers", type=int, help="local processes (default: one per core)")
+    p.add_argument("--workers", type=int, help="local processes (default: chosen by the size of the take: a small "
+                                               "one stays in this process)")
     p.add_argument("--chunk-frames", type=int, help="frames per block of work (default: split evenly)")
     p.add_argument("--out", required=True, help="markers (.c3d .trc .npz)")
+    _add_units(p, "the camera file's positions (translations)")
     p.set_defaults(run=_cmd_triangulate)
 
 
@@ -622,6 +783,7 @@ def _add_clean(verbs) -> None:
     p.add_argument("--rigid-tolerance-mm", type=float, default=1000 * clean.RIGID_TOLERANCE,
                    help="largest RMS residual of a rigid fill's fit, millimetres (default %(default)s)")
     p.add_argument("--out", required=True, help="cleaned markers (.c3d .trc .npz)")
+    _add_units(p)
     p.set_defaults(run=_cmd_clean)
 
 
@@ -638,7 +800,7 @@ def _camera_toml_out(out: str, inputs) -> None:
     check_not_input(out, *inputs)
 
 
-def _cmd_calibrate_intrinsics(args) -> None:
+def _cmd_calibrate_intrinsics(args) -> tuple[str, ...]:
     from handcap.core.cameras import CameraRig
     from handcap.multiview.boards import detect_in_files, parse_board
     from handcap.multiview.calibration import calibrate_intrinsics
@@ -647,7 +809,10 @@ def _cmd_calibrate_intrinsics(args) -> None:
     detections = detect_in_files(args.inputs, board, every=args.every)
     result = calibrate_intrinsics(detections, name=args.name, fix_k3=args.fix_k3,
                                   reject_outliers=not args.keep_outliers)
-    CameraRig([result.camera]).save(args.out)
+    from handcap.quality import plausibility as q
+    rig = q.attach(CameraRig([result.camera]), q.camera_warnings(result.rms, names=[result.camera.name]))
+    rig.save(args.out)  # the warnings go to the file's [metadata]
+    warnings = rig.warnings
     camera = result.camera
     (fx, fy), (cx, cy) = camera.matrix[[0, 1], [0, 1]], camera.matrix[:2, 2]
     print(f"{args.out}: camera {camera.name}, {camera.size[0]}x{camera.size[1]} px, f = {fx:.2f}, {fy:.2f} px, "
@@ -658,9 +823,11 @@ def _cmd_calibrate_intrinsics(args) -> None:
           f"{result.labels[int(result.view_rms.argmax())]} {result.view_rms.max():.3f} px"
           + (f"; rejected as outliers: {', '.join(detections.labels[t] for t in result.rejected)}"
              if len(result.rejected) else ""))
+    print("quality: " + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
+    return warnings
 
 
-def _cmd_calibrate_rig(args) -> None:
+def _cmd_calibrate_rig(args) -> tuple[str, ...]:
     from handcap.io.camera_formats import read_rig
     from handcap.multiview.boards import detect_in_files, parse_board
     from handcap.multiview.calibration import calibrate_rig
@@ -676,9 +843,14 @@ def _cmd_calibrate_rig(args) -> None:
     result = calibrate_rig(detections, names=names, cameras=cameras, refine_intrinsics=args.refine_intrinsics,
                            fix_k3=args.fix_k3, origin=args.origin, origin_frame=args.origin_frame,
                            loss=args.loss, f_scale=args.f_scale)
-    result.rig.save(args.out)
+    from handcap.quality import plausibility as q
+    rig = q.attach(result.rig, q.camera_warnings(result.rms, names=result.names))
+    rig.save(args.out)  # the warnings go to the file's [metadata]
+    warnings = rig.warnings
     print(result.summary())
-    print(f"{args.out}: {len(result.rig)} cameras")
+    print(f"{args.out}: {len(result.rig)} cameras; " + (f"{len(warnings)} warning(s), see below" if warnings
+                                                        else "no warnings"))
+    return warnings
 
 
 def _add_calibrate(verbs) -> None:
@@ -740,6 +912,70 @@ def _add_calibrate(verbs) -> None:
     q.set_defaults(run=_cmd_calibrate_rig)
 
 
+def _cmd_layout_new(args) -> None:
+    from pathlib import Path
+
+    from handcap.io import atomic_output, check_not_input
+    from handcap.layouts import SHIPPED, layout_template, load_layout
+    out = Path(args.out)
+    if out.is_dir():
+        raise HandcapError(f"{out}: is a folder; give a file name such as {out / 'my-layout.toml'}")
+    if out.suffix.lower() != ".toml":
+        raise HandcapError(f"{out}: layouts are TOML files; name it NAME.toml")
+    if args.like not in SHIPPED:
+        check_not_input(out, args.like)
+    if out.exists() and not args.force:
+        raise HandcapError(f"{out}: exists; choose another name or add --force to replace it")
+    layout = load_layout(args.like, side=args.side)
+    with atomic_output(out, "w") as fh:
+        fh.write(layout_template(layout, like=args.like))
+    given = sum(m.position is not None for m in layout.markers)
+    print(f"{out}: {len(layout)} markers like {args.like} ({layout.side} hand, {given} with positions), every field "
+          f"explained in its comments; next: handcap layout check {out} YOUR_TAKE")
+
+
+def _cmd_layout_check(args):
+    from handcap.io import read_markers
+    from handcap.layouts import check_layout, load_layout
+    layout = load_layout(args.layout, side=args.side)
+    markers = None if args.take is None else read_markers(args.take, units=args.units,
+                                                          hand=[m.name for m in layout.hand_markers])
+    result = check_layout(layout, markers, take=args.take)
+    print(result.summary())
+    return result.warnings
+
+
+def _add_layout(verbs) -> None:
+    from handcap.layouts import SHIPPED
+    p = verbs.add_parser("layout", help="write a layout for your own marker set, and check it against a take",
+                         description="new: a commented copy of a shipped layout to edit (names, segments, rigid "
+                                     "set, positions). check: the layout's names in a take (a Subject: prefix is "
+                                     "ignored), its segments, its positions on the template hand, its rigid set, "
+                                     "and which positions calibrate-markers will estimate. An unusable layout "
+                                     "exits with code 2; other problems are warnings.")
+    what = p.add_subparsers(dest="what", metavar="WHAT")
+    what.required = True
+    q = what.add_parser("new", help="write a commented layout file to edit",
+                        description="Copy a layout with every field explained in comments.")
+    q.add_argument("--like", default="glove-13", help=f"layout to start from: {', '.join(SHIPPED)} or a .toml file "
+                                                      "(default %(default)s)")
+    q.add_argument("--side", choices=("right", "left"), default=None, help="write it for this hand (default: as "
+                                                                            "--like)")
+    q.add_argument("--force", action="store_true", help="replace --out if it exists")
+    q.add_argument("--out", required=True, help="layout file to write (.toml)")
+    q.set_defaults(run=_cmd_layout_new)
+    q = what.add_parser("check", help="check a layout, against a labeled take if given",
+                        description="Names matched / missing / only in the take, segments, positions against the "
+                                    "template hand (within 2 cm of their segment), the rigid set (3 or more markers "
+                                    "of one segment, not in a line, as far apart in the take as in the layout) and "
+                                    "what will be estimated.")
+    q.add_argument("layout", help=f"layout: {', '.join(SHIPPED)} or a .toml file")
+    q.add_argument("take", nargs="?", help="a labeled take of this marker set (.c3d .tsv .csv .trc .npz)")
+    q.add_argument("--side", choices=("right", "left"), default=None, help="hand side (default: the layout's)")
+    _add_units(q, "the take's coordinates")
+    q.set_defaults(run=_cmd_layout_check)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="handcap", description=__doc__)
     parser.add_argument("--version", action="version", version=_version())
@@ -757,6 +993,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("output")
     p.add_argument("--partial", action="store_true",
                    help="C3D: keep the complete frames of a file shorter than its header promises")
+    _add_units(p)
     p.set_defaults(run=_cmd_convert)
 
     _add_synth(verbs)
@@ -766,6 +1003,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_multiview(verbs)
     _add_clean(verbs)
     _add_calibrate(verbs)
+    _add_layout(verbs)
     return parser
 
 
