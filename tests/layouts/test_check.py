@@ -75,6 +75,17 @@ def test_template_marks_markers_without_positions(tmp_path):
     assert "position = " not in block and "estimated by calibrate-markers" in block
 
 
+def test_template_without_positions_leaves_every_hand_marker_to_calibration(tmp_path):
+    layout = load_layout("joints-19")
+    path = tmp_path / "mine.toml"
+    path.write_text(layout_template(layout, positions=False))
+    back = load_layout(path)
+    assert back.names == layout.names and back.rigid == layout.rigid
+    assert np.isnan(back.positions()).all()
+    result = quiet_check(back)
+    assert result.estimated == layout.names and result.distance == {}
+
+
 # -- checks without a take --------------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_layouts_pass_with_positions_on_their_segments(name):

@@ -10,7 +10,7 @@ position matters and when it is estimated from a take.
 from __future__ import annotations
 
 from handcap.hand.anatomy import SEGMENT_NAMES
-from handcap.layouts.file import MarkerLayout, toml_key, toml_value
+from handcap.layouts.file import LayoutMarker, MarkerLayout, toml_key, toml_value
 
 #: One line on each segment, in the order of :data:`handcap.hand.anatomy.SEGMENT_NAMES`.
 SEGMENT_HELP = {
@@ -61,7 +61,7 @@ _HEADER = """\
 """
 
 
-def layout_template(layout: MarkerLayout, *, like: str | None = None) -> str:
+def layout_template(layout: MarkerLayout, *, like: str | None = None, positions: bool = True) -> str:
     """The TOML text of ``layout`` with every field explained in comments.
 
     Parameters
@@ -70,12 +70,21 @@ def layout_template(layout: MarkerLayout, *, like: str | None = None) -> str:
         The layout to copy (usually a shipped one).
     like : str, optional
         How the user named it (for the header); ``layout.name`` by default.
+    positions : bool
+        Keep the positions of the hand markers; without them every hand marker is
+        estimated by ``calibrate-markers`` (for a marker set placed otherwise).
 
     Returns
     -------
     str
-        A layout file: :func:`handcap.layouts.load_layout` of it gives ``layout`` back.
+        A layout file: :func:`handcap.layouts.load_layout` of it gives ``layout``
+        back (without hand positions if ``positions`` is false).
     """
+    if not positions:
+        layout = MarkerLayout(layout.name, layout.side,
+                              tuple(m if m.on_object else LayoutMarker(m.name, m.segment, None, m.patch)
+                                    for m in layout.markers),
+                              layout.rigid, layout.marker_radius, layout.marker_kind, layout.description)
     width = max(len(s) for s in SEGMENT_NAMES)
     segments = "\n".join(f"#                {s:{width}s}  {SEGMENT_HELP[s]}" for s in SEGMENT_NAMES)
     z_side = "towards the little finger; the thumb is at negative z" if layout.side == "right" else \
