@@ -287,3 +287,12 @@ def test_real_glove_recording_passes(shared_data):
     # The layout's triad was measured on this recording (test_layouts): within 1 mm.
     for _, _, measured, nominal in result.rigid_distances:
         assert measured == pytest.approx(nominal, abs=0.001)
+
+
+def test_cli_new_without_positions(tmp_path, capsys):
+    out = tmp_path / "bare.toml"
+    assert main(["layout", "new", "--like", "tips-5", "--no-positions", "--out", str(out)]) == 0
+    assert "0 with positions" in capsys.readouterr().out
+    assert np.isnan(load_layout(out).positions()).all()
+    assert main(["layout", "new", "--like", "tips-5", "--out", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
