@@ -63,12 +63,22 @@ def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[s
 def rigid_start(model: MarkerModel, target, observed, rest_phi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-frame rotation and translation from the palm markers (Kabsch).
 
+    All markers are used where fewer than three palm markers are seen, or
+    where the palm markers do not span a plane on the model (2nd singular
+    value of their spread under 5 mm).
+
     Returns rotation (T, 3, 3), translation (T, 3) and a (T,) mask of frames
     where at least three markers made the alignment possible.
     """
     n = len(target)
     rest = model.positions(np.zeros((1, 3)), np.eye(3)[None], rest_phi[None])[0]
     palm = model.marker_weights[:, 0] > 0.9
+    if palm.sum() >= 3:
+        # Palm markers that (nearly) coincide on the model, as position-less markers do before a calibration
+        # has placed them, fix no rotation: align all markers then.
+        spread = np.linalg.svd(rest[palm] - rest[palm].mean(axis=0), compute_uv=False)
+        if spread[1] < 0.005:
+            palm = np.zeros_like(palm)
     use_palm = (observed & palm).sum(axis=1) >= 3
     weights = np.where(use_palm[:, None], observed & palm, observed).astype(float)
     ok = weights.sum(axis=1) >= 3
