@@ -218,3 +218,11 @@ def test_rig_units_relative_to_the_formats_own(shared_data):
     with pytest.warns(HandcapWarning, match="read in m as asked"):
         metres = read_rig(path, units="m")
     np.testing.assert_allclose(metres.centers, honest.centers * 1000.0)
+
+
+def test_intrinsics_only_rig_skips_the_unit_check(caliscope, tmp_path):
+    """Known intrinsics for a rig calibration: positions are not used, so a millimetre file is no error."""
+    write_cameras_toml(caliscope.scaled(1000.0), tmp_path / "mm.toml")
+    with _no_handcap_warning():
+        rig = read_rig(tmp_path / "mm.toml", positions=False)
+    np.testing.assert_array_equal(rig[0].matrix, caliscope[0].matrix)

@@ -707,7 +707,7 @@ READERS = {"anipose": read_cameras_toml, "caliscope": read_cameras_caliscope,
            "opencv": read_cameras_opencv, "qca": read_cameras_qca}
 
 
-def read_rig(path, *, units: str | None = None, **options) -> CameraRig:
+def read_rig(path, *, units: str | None = None, positions: bool = True, **options) -> CameraRig:
     """Read a camera rig from any supported file (format from extension and content).
 
     Parameters
@@ -719,6 +719,10 @@ def read_rig(path, *, units: str | None = None, **options) -> CameraRig:
         OpenCV stereo pair). Without it, a rig whose cameras lie implausibly
         far apart in the format's unit (2000 "m") is read in the one unit that
         fits, with a warning in ``warnings`` (see :mod:`handcap.io._units`).
+    positions : bool
+        False when only the intrinsics will be used (known intrinsics for a
+        rig calibration): the camera positions, and so their unit, are not
+        checked.
     **options
         Options of the format's reader: ``size``, ``extrinsics``, ``unit``,
         ``intrinsics_only`` for OpenCV (:func:`read_cameras_opencv`);
@@ -749,6 +753,8 @@ def read_rig(path, *, units: str | None = None, **options) -> CameraRig:
         raise HandcapError(f"{path}: {fmt} camera files take no option {', '.join(unknown)}; "
                            f"they take {', '.join(accepted) or 'none'}")
     rig = reader(path, **options)
+    if not positions:
+        return rig
     declared = "mm" if fmt == "qca" else options.get("unit", "m")
     if units is not None:
         rig = rig.scaled(metres_per_unit(units, "units") / metres_per_unit(declared, f"{path}: unit="))
