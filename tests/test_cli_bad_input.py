@@ -249,6 +249,7 @@ def test_trc_in_millimetres_declared_as_metres(take, capsys, tmp_path):
     from handcap.io import read_hand_motion
     solved, honest = read_hand_motion(tmp_path / "motion.npz"), read_hand_motion(take / "motion.npz")
     np.testing.assert_allclose(solved.joints, honest.joints, atol=1e-4)
+    assert any("read as millimetres" in w for w in solved.warnings)     # stored with the result
     assert main(["--strict", "solve", str(tmp_path / "m.trc"), "--attachment", str(take / "att.npz"),
                  "--out", str(tmp_path / "motion2.npz")]) == 2
 
