@@ -32,6 +32,7 @@ from handcap.io import (
     read_object_motion,
     read_points,
     read_rig,
+    read_uci_postures,
     write_c3d,
     write_hand_motion,
     write_markers_npz,
@@ -107,6 +108,18 @@ def _motive() -> bytes:
     return ("\r\n".join(lines) + "\r\n").encode()
 
 
+def _uci() -> bytes:
+    """Rows of the UCI hand-postures table: class, user, 12 points (X, Y, Z mm), '?' for absent points."""
+    rng = np.random.default_rng(2)
+    header = ",".join(["Class", "User"] + [f"{a}{k}" for k in range(12) for a in "XYZ"])
+    rows = []
+    for r in range(8):
+        present = 3 + r % 6
+        cells = [f"{v:.8f}" for v in rng.normal(0, 60, 3 * present)] + ["?"] * (3 * (12 - present))
+        rows.append(",".join([str(1 + r % 5), str(r % 3)] + cells))
+    return ("\n".join([header] + rows) + "\n").encode()
+
+
 def _detections() -> Detections:
     rng = np.random.default_rng(1)
     n = 30
@@ -157,6 +170,7 @@ READERS = {
                    "text"),
     "qualisys-qca": (_qca, "rig.qca.txt", read_rig, "text"),
     "layout-toml": (_layout, "layout.toml", load_layout, "text"),
+    "uci-postures-csv": (_uci, "Postures.csv", read_uci_postures, "text"),
 }
 
 
