@@ -142,7 +142,8 @@ def convert(source, target, *, partial: bool = False, units: str | None = None) 
 
 
 __all__ = [
-    "UNITS", "UciPostures", "atomic_output", "check_not_input", "check_output", "check_output_folder", "convert", "existing_file", "load_npz", "npz_kind",
+    "UNITS", "UciPostures", "atomic_output", "check_not_input", "check_output", "check_output_folder", "convert",
+    "existing_file", "load_npz", "npz_kind",
     "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_motive_csv",
     "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig", "read_trc",
     "read_uci_postures", "save_npz", "write_c3d", "write_hand_motion", "write_markers", "write_markers_npz",

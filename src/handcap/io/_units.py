@@ -41,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError, warn
+from handcap.core.markers import MarkerSequence
 
 UNITS = ("mm", "cm", "m")
 _METRES_PER_UNIT = {
@@ -237,8 +238,6 @@ def settle_marker_units(markers, *, declared: str, units: str | None, where, han
     HandcapError
         If no unit fits the data, or several do and the file's own does not.
     """
-    from handcap.core.markers import MarkerSequence
-
     positions = markers.positions
     columns = _hand_columns(markers.names, hand)
     raw = (_largest(positions), marker_spread(positions),
@@ -289,7 +288,8 @@ def _rig_problem(spread: float) -> str | None:
     if spread > RIG_SPREAD[1]:
         return f"cameras {spread:.3g} m apart (a rig that films hands is within {RIG_SPREAD[1]:g} m)"
     if spread < RIG_SPREAD[0]:
-        return f"cameras {1000 * spread:.3g} mm apart (cameras that are not at one spot are {100 * RIG_SPREAD[0]:g} cm or more apart)"
+        return (f"cameras {1000 * spread:.3g} mm apart (cameras that are not at one spot are "
+                f"{100 * RIG_SPREAD[0]:g} cm or more apart)")
     return None
 
 
