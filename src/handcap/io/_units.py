@@ -129,10 +129,25 @@ def marker_spread(positions: np.ndarray) -> float:
         return float("nan")
     keep = max(1, min(_SPREAD_FRAMES, _SPREAD_PAIRS // (M * M)))
     frames = frames[np.linspace(0, len(frames) - 1, min(keep, len(frames))).round().astype(int)]
-    p = positions[frames]
-    with np.errstate(invalid="ignore"):
-        d = np.linalg.norm(p[:, :, None] - p[:, None], axis=-1)
-    return float(np.median(np.nanmax(np.where(np.isnan(d), -np.inf, d), axis=(1, 2))))
+    return float(np.median(np.sqrt(_largest_squared_distances(positions[frames], positions[frames]))))
+
+
+def _largest_squared_distances(a: np.ndarray, b: np.ndarray, *, nearest: bool = False) -> np.ndarray:
+    """Per frame, the largest (or, per point of ``a``, the nearest) squared distance between seen points.
+
+    ``a`` (F, M, 3) and ``b`` (F, N, 3), NaN where missing; the squared distances come from one batched
+    matrix product (|x|^2 + |y|^2 - 2 x.y), without the (F, M, N, 3) array of differences.
+    """
+    seen_a, seen_b = ~np.isnan(a[..., 0]), ~np.isnan(b[..., 0])
+    a, b = np.nan_to_num(a), np.nan_to_num(b)
+    centre = a.sum(axis=1, keepdims=True) / np.maximum(seen_a.sum(axis=1), 1)[:, None, None]
+    a, b = np.where(seen_a[..., None], a - centre, 0.0), np.where(seen_b[..., None], b - centre, 0.0)
+    d2 = (a * a).sum(-1)[:, :, None] + (b * b).sum(-1)[:, None, :] - 2.0 * a @ b.transpose(0, 2, 1)
+    d2 = np.maximum(d2, 0.0)
+    both = seen_a[:, :, None] & seen_b[:, None, :]
+    if nearest:
+        return np.where(both, d2, np.inf).min(axis=2)
+    return np.where(both, d2, -np.inf).max(axis=(1, 2))
 
 
 def median_speed(positions: np.ndarray, rate: float) -> float:
@@ -163,10 +178,8 @@ def median_speed(positions: np.ndarray, rate: float) -> float:
         return float("nan")
     keep = max(1, min(_SPREAD_FRAMES, _SPREAD_PAIRS // (M * M)))
     pairs = pairs[np.linspace(0, len(pairs) - 1, min(keep, len(pairs))).round().astype(int)]
-    with np.errstate(invalid="ignore"):
-        d = np.linalg.norm(positions[pairs][:, :, None] - positions[pairs + 1][:, None], axis=-1)
-    nearest = np.nanmin(np.where(np.isnan(d), np.inf, d), axis=2)
-    nearest = nearest[np.isfinite(nearest)]
+    nearest = _largest_squared_distances(positions[pairs], positions[pairs + 1], nearest=True)
+    nearest = np.sqrt(nearest[np.isfinite(nearest)])
     return float(np.median(nearest) * rate) if nearest.size else float("nan")
 
 
