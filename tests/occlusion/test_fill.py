@@ -133,3 +133,27 @@ def test_cli_fill_and_train(tmp_path, glove):
         assert r.returncode == 2, (args, r.stderr)
         assert message in r.stderr and r.stderr.count("\n") == 1, r.stderr
     assert take.read_bytes() == before
+
+
+def test_gaps_whose_two_passes_part_are_flagged(glove_split):
+    """Issue 14: a fill between two inconsistent predictions is not silent. With ``lk`` the two passes
+    are the marker's last and next positions, so they part by exactly its displacement across the gap."""
+    from handcap.core.errors import HandcapWarning
+
+    _, test = glove_split
+    tip = test[:, 6].copy()  # index_tip, its own few gaps closed first
+    seen = ~np.isnan(tip[:, 0])
+    tip = np.stack([np.interp(np.arange(len(tip)), np.flatnonzero(seen), tip[seen, i]) for i in range(3)], axis=1)
+    n = 40
+    shift = np.linalg.norm(tip[n + 1:] - tip[:-n - 1], axis=-1)  # across a 40-frame gap from frame i + 1
+    far = int(np.flatnonzero(shift[10:] > 0.03)[0]) + 10
+    near = int(np.flatnonzero((shift < 0.005) & (np.arange(len(shift)) > far + 2 * n))[0])
+    holed = tip[:, None].copy()
+    holed[far + 1:far + 1 + n] = np.nan
+    holed[near + 1:near + 1 + n] = np.nan
+    markers = MarkerSequence(holed, ["Glove:index_tip"], 100.0)
+    with pytest.warns(HandcapWarning, match="1 of 2 gaps filled"):
+        filled, report = fill_gaps(markers, "lk", max_gap=0.5)
+    assert report.filled_gaps == 2 and len(report.warnings) == 1
+    assert f"up to {100 * shift[far]:.1f} cm, Glove:index_tip from frame {far + 1}" in report.warnings[0]
+    assert filled.warnings == report.warnings

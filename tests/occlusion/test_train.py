@@ -123,3 +123,63 @@ def test_cli_trains_the_joint_regressor_from_poses(tmp_path, small_take):
     assert r.returncode == 0, r.stderr
     assert "joint regressor on 400 posed frames" in r.stdout
     assert OcclusionModel.load(out).regressor is not None
+
+
+def test_info_says_how_much_data_it_saw(small_take):
+    """Issue 14: the model (and train-occlusion) says how much data it saw; too few frames get a warning."""
+    from handcap.core.errors import HandcapWarning
+    from handcap.occlusion.augment import Augmentation
+
+    other = simulate_take("active-9", "grasp", 300, 100.0, seed=6)
+    with pytest.warns(HandcapWarning, match="trained on 700 frames"):
+        model = train_occlusion_model([small_take, other], "active-9", epochs=1, regressor_epochs=1,
+                                      samples_per_epoch=1000, augmentation=Augmentation(copies=0))
+    assert model.warnings == ("the occlusion model was trained on 700 frames (fewer than 1000): expect poor fills; "
+                              "train on longer takes, or add synthetic ones (train-occlusion --synthetic)",)
+    model = train_occlusion_model([small_take, other], "active-9", epochs=1, regressor_epochs=1,
+                                  samples_per_epoch=1000, augmentation=Augmentation(copies=2))
+    info = model.info
+    assert (info["takes"], info["synthetic_takes"], info["recorded_takes"], info["subjects"]) == (2, 2, 0, 2)
+    assert info["frames"] == 700 and info["augmented_copies"] == 4 and info["samples"] == 1000
+    assert 700 * 2 / 1.6 <= info["augmented_frames"] <= 700 * 2 / 0.6  # copies at 0.6-1.6x speed
+    assert "scale 12 %" in info["augmentation"] and "2 time-warped copies" in info["augmentation"]
+    assert info["posed_frames"] == 700 + info["augmented_frames"]
+    assert model.warnings == ()  # 700 frames and two copies of them
+
+
+def test_prefixed_names_train_the_same_model(small_take):
+    """Issue 14: ``Subject:name`` columns are matched as fill matches them (MarkerSequence.index)."""
+    prefixed = PosedTake(small_take.positions[:, ::-1], tuple(f"Hand:{n}" for n in small_take.names[::-1]), 100.0)
+    plain = PosedTake(small_take.positions, small_take.names, 100.0)
+    a = train_occlusion_model([plain], "active-9", epochs=1, samples_per_epoch=1000)
+    b = train_occlusion_model([prefixed], "active-9", epochs=1, samples_per_epoch=1000)
+    assert all(np.array_equal(x, y) for x, y in zip(a.predictor.arrays().values(), b.predictor.arrays().values()))
+    twice = PosedTake(np.concatenate([small_take.positions] * 2, axis=1),
+                      tuple(f"A:{n}" for n in small_take.names) + tuple(f"B:{n}" for n in small_take.names), 100.0)
+    with pytest.raises(HandcapError, match="ambiguous"):
+        train_occlusion_model([twice], "active-9", epochs=1)
+
+
+def test_cli_train_and_fill_accept_the_same_prefixed_file(tmp_path, small_take):
+    import subprocess
+    import sys
+
+    from handcap.core.markers import MarkerSequence
+    from handcap.io import read_markers, write_markers
+
+    take, model, out = tmp_path / "take.npz", tmp_path / "model.npz", tmp_path / "filled.npz"
+    positions = small_take.positions.copy()
+    positions[100:120, 5] = np.nan
+    write_markers(MarkerSequence(positions, [f"Glove:{n}" for n in small_take.names], 100.0), take)
+    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", str(take), "--layout", "active-9",
+                        "--epochs", "1", "--out", str(model)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "saw 1 take(s) (1 recorded, 0 synthetic) of 1 subject(s), 400 frames" in r.stdout
+    assert "warning: the occlusion model was trained on 400 frames" in r.stderr
+    r = subprocess.run([sys.executable, "-m", "handcap.cli", "fill", str(take), "--model", str(model),
+                        "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    filled = read_markers(out)
+    assert filled.names == tuple(f"Glove:{n}" for n in small_take.names)
+    assert not np.isnan(filled.positions).any()
+    assert np.abs(filled.positions[100:120, 5] - small_take.positions[100:120, 5]).max() < 0.03

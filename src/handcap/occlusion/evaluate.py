@@ -92,36 +92,62 @@ def predict_windows(method: str, positions, rate: float, starts, frames: int, hi
     predicted : ndarray (n, M, 3)
         Metres; the hidden markers are predicted, the others are the truth.
     """
+    return predict_gap_frames(method, positions, rate, starts, frames, hidden, predictor, offset=offset,
+                              steps=[frames - 1])[:, 0]
+
+
+def predict_gap_frames(method: str, positions, rate: float, starts, frames: int, hidden, predictor=None,
+                       *, offset: bool = True, steps=None) -> np.ndarray:
+    """Each method's positions of every marker on hidden frames of each window.
+
+    Parameters
+    ----------
+    method, positions, rate, starts, frames, hidden, predictor, offset
+        As :func:`predict_windows`.
+    steps : sequence of int (F,), optional
+        Which hidden frames, counted from the first (0) to the last (``frames - 1``);
+        default all of them.
+
+    Returns
+    -------
+    predicted : ndarray (n, F, M, 3)
+        Metres; the hidden markers are predicted, the others are the truth.
+    """
     positions = np.asarray(positions, dtype=np.float64)
+    steps = np.arange(frames) if steps is None else np.asarray(steps, dtype=np.int64)
     before = positions[starts - 1]
-    last = positions[starts + frames - 1]
-    shown = ~hidden
-    out = last.copy()
+    at = positions[starts[:, None] + steps[None]]  # (n, F, M, 3)
+    hidden_f = np.broadcast_to(hidden[:, None], at.shape[:3])
+    out = at.copy()
     if method == "lk":
-        out[hidden] = before[hidden]
+        out[hidden_f] = np.broadcast_to(before[:, None], at.shape)[hidden_f]
     elif method == "ma":
         k = int(round(MA_WINDOW_S * rate))
         history = positions[(starts - 1)[:, None] + np.arange(-k, 1)[None]]
-        moved = before + ma_velocity(history, rate) * frames
-        out[hidden] = moved[hidden]
+        moved = before[:, None] + ma_velocity(history, rate)[:, None] * (steps + 1)[None, :, None, None]
+        out[hidden_f] = moved[hidden_f]
     elif method == "ac":
         n, m = hidden.shape
         order = np.argsort(hidden, axis=1, kind="stable")  # shown markers first
         n_hidden = int(hidden[0].sum())
         known_i, hidden_i = order[:, : m - n_hidden], order[:, m - n_hidden:]
-        pick = lambda a, i: np.take_along_axis(a, i[..., None], axis=1)  # noqa: E731
+        pick = lambda a, i: np.take_along_axis(a, i[..., None], axis=-2)  # noqa: E731
         w = ac_weights(pick(before, known_i), pick(before, hidden_i))
-        np.put_along_axis(out, hidden_i[..., None], ac_apply(w, pick(last, known_i)), axis=1)
+        known_at = pick(at, np.broadcast_to(known_i[:, None], at.shape[:2] + known_i.shape[1:]))
+        idx = np.broadcast_to(hidden_i[:, None, :, None], at.shape[:2] + hidden_i.shape[1:] + (3,))
+        np.put_along_axis(out, idx, ac_apply(w[:, None], known_at), axis=2)
     elif method == "nn":
         if predictor is None:
             raise HandcapError("the nn method needs a trained marker predictor")
+        shown = ~hidden
         pose_before = predictor.register(before, shown)
         local_before = apply_registration(before, *pose_before)
         correction = local_before - predictor.predict_local(local_before, shown) if offset else 0.0
-        pose = predictor.register(last, shown)
-        local = predictor.predict_local(apply_registration(last, *pose), shown) + correction
-        world = undo_registration(local, *pose)
-        out[hidden] = world[hidden]
+        shown_f = np.broadcast_to(shown[:, None], at.shape[:3])
+        pose = predictor.register(at, shown_f)
+        local = predictor.predict_local(apply_registration(at, *pose), shown_f)
+        world = undo_registration(local + (correction[:, None] if offset else 0.0), *pose)
+        out[hidden_f] = world[hidden_f]
     else:
         raise HandcapError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     return out
@@ -165,6 +191,51 @@ def marker_error_table(positions, rate: float, predictor=None, *, methods=METHOD
                     predicted = predict_windows(method, positions, rate, starts, frames, hidden, predictor,
                                                 offset=name != "nn-raw")
                     table[name][i, j] += np.linalg.norm(predicted[hidden] - truth, axis=-1).mean() / len(seeds)
+    return table
+
+
+def gap_error_table(positions, rate: float, predictor=None, *, methods=METHODS, counts=COUNTS,
+                    duration: float = 0.5, seeds=range(5), windows: int = 200) -> dict:
+    """Mean error over every hidden frame of whole gaps (issue 14's measure), not only the last one.
+
+    A gap filler must be right all the way through a gap: this scores each of the
+    ``duration * rate`` hidden frames of every window (the same windows as
+    :func:`marker_error_table` draws).
+
+    Parameters
+    ----------
+    positions : ndarray (T, M, 3)
+        The test take, metres, NaN where missing.
+    rate : float
+    predictor : MarkerPredictor, optional
+        Needed for ``nn``.
+    methods, counts : sequences
+    duration : float
+        Length of every gap, seconds.
+    seeds : iterable of int
+    windows : int
+        Windows per seed and count.
+
+    Returns
+    -------
+    table : dict
+        ``{method: ndarray (len(counts),)}`` of mean errors over every hidden marker of every hidden
+        frame, metres.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    visible = ~np.isnan(positions).any(axis=-1)
+    table = {name: np.zeros(len(counts)) for name in methods}
+    seeds = list(seeds)
+    for seed in seeds:
+        for i, k in enumerate(counts):
+            rng = np.random.default_rng([seed, k, 1000])
+            starts, frames, hidden = occlusion_windows(visible, rate, duration, k, windows, rng)
+            truth = positions[starts[:, None] + np.arange(frames)[None]]
+            hidden_f = np.broadcast_to(hidden[:, None], truth.shape[:3])
+            for name in methods:
+                predicted = predict_gap_frames(name, positions, rate, starts, frames, hidden, predictor)
+                error = np.linalg.norm(predicted[hidden_f] - truth[hidden_f], axis=-1).mean()
+                table[name][i] += error / len(seeds)
     return table
 
 

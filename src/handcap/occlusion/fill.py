@@ -18,6 +18,11 @@ Methods:
 No gap longer than ``max_gap`` seconds is touched: beyond it the data stays
 missing rather than invented. Markers the method cannot use (not in the model)
 pass through unchanged. The input is never modified.
+
+Never a silent wrong fill (issue 14): where the forward and backward passes of
+a gap part by more than :data:`DISAGREE_M`, the fill is a guess between two
+inconsistent predictions; such gaps are counted in a warning, stored on the
+filled sequence with the model's own warnings.
 """
 
 from __future__ import annotations
@@ -26,12 +31,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
 from handcap.core.markers import MarkerSequence, positive_number, runs
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
 
 FILL_METHODS = ("linear", "spline", "lk", "ma", "ac", "nn")
 MAX_GAP_S = 0.5
+#: Forward and backward predictions of a gap further apart than this (metres) make a warning; the
+#: predictors' own errors over 0.5 s gaps of the real glove are a few millimetres.
+DISAGREE_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -47,6 +55,8 @@ class FillReport:
         Gaps (samples) left missing: too long, or not fillable by the method.
     untouched : tuple of str
         Markers the method does not handle (not in the model).
+    warnings : tuple of str
+        Implausible fills (forward and backward passes far apart), and the model's warnings.
     """
 
     method: str
@@ -56,6 +66,7 @@ class FillReport:
     left_gaps: int
     left_samples: int
     untouched: tuple = ()
+    warnings: tuple = ()
 
 
 def _gaps(missing: np.ndarray):
@@ -107,14 +118,13 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_
             raise HandcapError("the nn method needs a trained model (--model, or a shipped layout name)")
         from handcap.occlusion.model import OcclusionModel
         model = OcclusionModel.resolve(model)
-        short = markers.short_names
-        absent = [n for n in model.names if n not in short]
-        if absent:
-            raise HandcapError(f"the take lacks marker(s) {', '.join(absent)} of the occlusion model "
-                               f"({model.layout or 'model'}); its markers are {', '.join(short)}")
-        columns = np.array([short.index(n) for n in model.names])
-        untouched = tuple(n for n in markers.names if n.split(":")[-1] not in model.names)
+        from handcap.occlusion.data import marker_columns
+        # The same name matching as train-occlusion (issue 14): exact, or without a Subject: prefix.
+        columns = np.array(marker_columns(markers.names, model.names,
+                                          f"the take (for the occlusion model {model.layout or 'model'})"))
+        untouched = tuple(n for i, n in enumerate(markers.names) if i not in set(columns.tolist()))
     out = positions.copy()
+    parted = []  # (distance, column, first frame) of gaps whose two passes disagree
     gaps = [(m, s, n) for (m, s, n) in _gaps(missing[:, columns])]
     fillable = [(m, s, n) for (m, s, n) in gaps if n <= limit and n < t_count]
     if method in ("linear", "spline"):
@@ -136,6 +146,9 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_
                 else:
                     w = ((frames - s + 1) / (n + 1))[:, None]
                     values[m, s] = (1 - w) * forward[frames, m] + w * backward[frames, m]
+                    apart = np.linalg.norm(forward[frames, m] - backward[frames, m], axis=-1).max()
+                    if apart > DISAGREE_M:
+                        parted.append((apart, columns[m], s))
         done = []
         for m, s, n in fillable:
             v = values[m, s]
@@ -144,9 +157,17 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_
                 done.append(n)
     else:
         done = []
+    found = list(model.warnings) if method == "nn" else []
+    if parted:
+        apart, column, start = max(parted)
+        found.append(warn(f"{len(parted)} of {len(done)} gaps filled ({method}) where the forward and backward "
+                          f"predictions part by more than {100 * DISAGREE_M:g} cm (up to {100 * apart:.1f} cm, "
+                          f"{markers.names[column]} from frame {start}): check them, or fill with a shorter "
+                          "--max-gap"))
     report = FillReport(method, limit, len(done), int(sum(done)), len(gaps) - len(done),
-                        int(sum(n for _, _, n in gaps) - sum(done)), untouched)
-    return MarkerSequence(out, markers.names, markers.rate), report
+                        int(sum(n for _, _, n in gaps) - sum(done)), untouched, tuple(found))
+    filled = MarkerSequence(out, markers.names, markers.rate, markers.residuals, markers.warnings)
+    return filled.with_warnings(*found), report
 
 
 def _interpolate(positions, gaps, method):

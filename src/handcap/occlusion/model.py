@@ -39,7 +39,10 @@ class OcclusionModel:
     layout : str
         Layout name it was trained for.
     info : dict of str
-        How it was trained (seed, frames, sources).
+        How it was trained: seed, epochs, and how much data it saw (takes, recorded and
+        synthetic, subjects, frames, augmented copies and frames, samples, augmentation).
+    warnings : tuple of str
+        One line each where its training data look too scarce.
     """
 
     predictor: MarkerPredictor
@@ -47,6 +50,7 @@ class OcclusionModel:
     side: str = "right"
     layout: str = ""
     info: dict = field(default_factory=dict)
+    warnings: tuple = ()
 
     def __post_init__(self):
         check_side(self.side)
@@ -66,6 +70,7 @@ class OcclusionModel:
         arrays = {"format": np.array(FORMAT), "side": np.array(self.side), "layout": np.array(self.layout),
                   "info_keys": np.array(list(self.info), dtype=str),
                   "info_values": np.array([str(v) for v in self.info.values()], dtype=str),
+                  "warnings": np.array(list(self.warnings), dtype=str),
                   **self.predictor.arrays()}
         if self.regressor is not None:
             arrays.update(self.regressor.arrays())
@@ -89,7 +94,8 @@ class OcclusionModel:
         except KeyError as err:
             raise HandcapError(f"{path}: occlusion model is missing {err.args[0]!r}") from None
         info = dict(zip((str(k) for k in arrays["info_keys"]), (str(v) for v in arrays["info_values"])))
-        return cls(predictor, regressor, str(arrays["side"]), str(arrays["layout"]), info)
+        warnings = tuple(str(w) for w in arrays["warnings"]) if "warnings" in arrays else ()
+        return cls(predictor, regressor, str(arrays["side"]), str(arrays["layout"]), info, warnings)
 
     @classmethod
     def shipped(cls, layout: str) -> "OcclusionModel":

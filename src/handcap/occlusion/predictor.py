@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.occlusion.augment import augment_frames
 from handcap.occlusion.network import Mlp, mlp_from_torch, torch_mlp, train_network
 from handcap.objects.rigid import canonical_from_markers
 from handcap.occlusion.register import apply_registration, fit_registration, undo_registration
@@ -133,7 +134,8 @@ def knock_out(visible, rng, probability=DROP_PROBABILITY) -> np.ndarray:
 
 def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60, samples_per_epoch: int = 50_000,
                            batch_size: int = 256, hidden=HIDDEN, weights=None, template=None,
-                           mask_input: bool = True, jitter: float = 0.0, progress=None) -> MarkerPredictor:
+                           mask_input: bool = True, jitter: float = 0.0, augmentation=None, rigid=None,
+                           progress=None) -> MarkerPredictor:
     """Train a marker predictor on labeled frames.
 
     Parameters
@@ -156,6 +158,11 @@ def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60,
         Give the network the visibility of each marker as well.
     jitter : float
         Standard deviation of noise added to the inputs during training, metres.
+    augmentation : Augmentation, optional
+        Per-sample augmentation (:func:`handcap.occlusion.augment.augment_frames`): each
+        training sample becomes another subject's hand with another marker placement.
+    rigid : ndarray (M,) bool, optional
+        The layout's rigid set (for the augmentation's rigid-set placement).
     progress : callable (epoch, loss), optional
 
     Returns
@@ -186,10 +193,17 @@ def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60,
     module = torch_mlp(sizes)
     predictor = MarkerPredictor(tuple(names), template, weights, mean, scale, mlp_from_torch(module), mask_input)
     clean = np.where(visible[..., None], positions, 0.0)
+    augment = augmentation is not None and augmentation.per_sample
+    if augment:  # augmented in the hand's frame, where scale and placement have a meaning
+        clean = np.where(visible[..., None], local, 0.0)
+        rigid = np.zeros(m, bool) if rigid is None else np.asarray(rigid, dtype=bool)
+        centre = template.mean(axis=0)
 
     def make_batches(epoch, rng):
         pick = rng.integers(0, len(clean), samples_per_epoch)
         frames, seen = clean[pick], visible[pick]
+        if augment:
+            frames = augment_frames(frames, centre, rigid, augmentation, rng)
         if jitter > 0:
             frames = frames + rng.normal(0.0, jitter, frames.shape)
         hidden_now = knock_out(seen, rng)

@@ -3,9 +3,12 @@
 For every layout of :data:`~handcap.occlusion.model.SHIPPED_MODELS`: synthetic
 takes of :data:`SUBJECTS` subjects doing every motion of
 :data:`~handcap.occlusion.data.TRAIN_MOTIONS` (6 s each, 100 Hz, right hand),
-then :func:`~handcap.occlusion.train.train_occlusion_model` with seed 0. Both
-steps are deterministic, so the files come out byte for byte the same; the
-SHA-256 of each is printed to compare with the shipped one.
+then :func:`~handcap.occlusion.train.train_occlusion_model` with seed 0 and
+:data:`~handcap.occlusion.augment.SUBJECT_AUGMENTATION` (every training sample
+another subject's scale and marker placement: the shipped models serve subjects
+they never saw, issue 14). Both steps are deterministic, so the files come out
+byte for byte the same; the SHA-256 of each is printed to compare with the
+shipped one.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import sys
 import time
 from pathlib import Path
 
+from handcap.occlusion.augment import SUBJECT_AUGMENTATION
 from handcap.occlusion.data import synthetic_hand_takes
 from handcap.occlusion.model import SHIPPED_MODELS
 from handcap.occlusion.train import train_occlusion_model
@@ -39,7 +43,7 @@ def build(layout: str, out: Path, *, subjects: int = SUBJECTS, epochs: int = EPO
             print(f"  {stage}: epoch {epoch + 1}, loss {loss:.4f}", flush=True)
 
     model = train_occlusion_model(takes, layout, seed=seed, epochs=epochs, regressor_epochs=epochs,
-                                  progress=progress)
+                                  augmentation=SUBJECT_AUGMENTATION, progress=progress)
     model.info["source"] = f"python -m handcap.occlusion.shipped (subjects={subjects}, seed={seed})"
     model.save(out)
     digest = hashlib.sha256(out.read_bytes()).hexdigest()

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
-from handcap.occlusion.data import PosedTake
+from handcap.core.errors import HandcapError, warn
+from handcap.occlusion.augment import NO_AUGMENTATION, Augmentation, warped_copies
+from handcap.occlusion.data import PosedTake, marker_columns
 from handcap.occlusion.model import OcclusionModel
 from handcap.occlusion.predictor import train_marker_predictor
 from handcap.occlusion.regressor import train_joint_regressor
@@ -75,20 +76,21 @@ def read_take(path, *, poses=None, rate=None) -> PosedTake:
 
 
 def _columns(take: PosedTake, names, source: str) -> np.ndarray:
-    missing = [n for n in names if n not in take.names]
-    if missing:
-        raise HandcapError(f"{source} lacks marker(s) {', '.join(missing)} of the layout")
-    return take.positions[:, [take.names.index(n) for n in names]]
+    return take.positions[:, marker_columns(take.names, names, source)]
 
 
 def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, regressor_epochs: int = 60,
-                          samples_per_epoch: int = 50_000, side: str | None = None, progress=None) -> OcclusionModel:
+                          samples_per_epoch: int = 50_000, side: str | None = None,
+                          augmentation: Augmentation | None = None,
+                          progress=None) -> OcclusionModel:
     """Train the marker predictor on every take and the joint regressor on the takes with poses.
 
     Parameters
     ----------
     takes : sequence of PosedTake
-        Labeled takes of one hand side; each must hold the layout's hand markers.
+        Labeled takes of one hand side (recorded, or synthetic from
+        :func:`~handcap.occlusion.data.synthetic_hand_takes`); each must hold the
+        layout's hand markers (a ``Subject:`` prefix is allowed).
     layout : str or MarkerLayout
         Which markers the model serves (its hand markers, in layout order).
     seed : int
@@ -96,11 +98,19 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
         Passes over ``samples_per_epoch`` knocked-out samples / over the posed frames.
     side : {"right", "left"}, optional
         The hand in the takes (default: the layout's side).
+    augmentation : Augmentation or None
+        Time-warped copies of the takes (both networks) and per-sample subject scale and
+        marker placement (the marker predictor); None for the paper's training. Use
+        :data:`~handcap.occlusion.augment.SUBJECT_AUGMENTATION` for a model that must serve
+        subjects it never saw (it costs where the subject is the training one).
     progress : callable (stage, epoch, loss), optional
 
     Returns
     -------
     OcclusionModel
+        Its ``info`` says how much data it saw: takes (recorded and synthetic), subjects,
+        frames, augmented copies and their frames, samples drawn, the augmentation.
+        Its ``warnings`` say when that is too little to trust.
     """
     import torch
 
@@ -112,15 +122,21 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
     takes = list(takes)
     if not takes:
         raise HandcapError("give at least one take to train on")
-    positions = np.concatenate([_columns(t, names, f"take {i}") for i, t in enumerate(takes)])
+    columns = [_columns(t, names, f"take {i}") for i, t in enumerate(takes)]
+    augmentation = augmentation or NO_AUGMENTATION
+    copies = warped_copies(takes, augmentation, seed=seed)
+    copy_columns = [_columns(t, names, "augmented take") for t in copies]
+    positions = np.concatenate(columns + copy_columns)
     weights = registration_weights(layout, names)
+    rigid = np.array([n in set(layout.rigid) for n in names])
     report = (lambda stage: (lambda e, loss: progress(stage, e, loss))) if progress else (lambda stage: None)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # determinism: one summation order
     try:
         predictor = train_marker_predictor(positions, names, seed=seed, epochs=epochs, weights=weights,
-                                           samples_per_epoch=samples_per_epoch, progress=report("markers"))
-        posed = [t for t in takes if t.has_poses]
+                                           samples_per_epoch=samples_per_epoch, augmentation=augmentation,
+                                           rigid=rigid, progress=report("markers"))
+        posed = [t for t in takes + copies if t.has_poses]
         regressor = None
         if posed:
             regressor = train_joint_regressor(
@@ -130,6 +146,35 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
                 weights=predictor.weights, seed=seed, epochs=regressor_epochs, progress=report("joints"))
     finally:
         torch.set_num_threads(threads)
-    info = {"seed": seed, "epochs": epochs, "regressor_epochs": regressor_epochs, "frames": len(positions),
-            "posed_frames": sum(len(t.positions) for t in posed), "takes": len(takes)}
-    return OcclusionModel(predictor, regressor, side, layout.name, info)
+    info = training_summary(takes, copies, augmentation)
+    info.update({"seed": seed, "epochs": epochs, "regressor_epochs": regressor_epochs,
+                 "samples": epochs * samples_per_epoch, "posed_frames": sum(len(t.positions) for t in posed)})
+    return OcclusionModel(predictor, regressor, side, layout.name, info, data_warnings(info))
+
+
+#: Fewer complete training frames than this (10 s at 100 Hz) and the network has too little to learn from.
+MIN_FRAMES = 1000
+
+
+def training_summary(takes, copies, augmentation: Augmentation) -> dict:
+    """How much data a model saw: takes, subjects, frames, augmented copies (for ``OcclusionModel.info``).
+
+    A take's subject is its ``subject`` label; takes without one count as a subject each.
+    """
+    labels = {t.subject if t.subject is not None else f"take {i}" for i, t in enumerate(takes)}
+    synthetic = sum(t.synthetic for t in takes)
+    return {"takes": len(takes), "recorded_takes": len(takes) - synthetic, "synthetic_takes": synthetic,
+            "subjects": len(labels), "frames": sum(len(t.positions) for t in takes),
+            "augmented_copies": len(copies), "augmented_frames": sum(len(t.positions) for t in copies),
+            "augmentation": augmentation.describe()}
+
+
+def data_warnings(info: dict) -> tuple[str, ...]:
+    """Warnings about training data too scarce to trust (stored on the model, printed by the CLI)."""
+    out = []
+    frames = int(info["frames"]) + int(info["augmented_frames"])
+    if frames < MIN_FRAMES:
+        out.append(warn(f"the occlusion model was trained on {frames} frames (fewer than {MIN_FRAMES}): expect "
+                        "poor fills; train on longer takes, or add synthetic ones (train-occlusion --synthetic)",
+                        stacklevel=3))
+    return tuple(out)

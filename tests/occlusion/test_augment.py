@@ -1,0 +1,110 @@
+"""Augmentation of training data: time warps keep the motion, per-sample changes have the stated sizes."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from handcap import HandcapError
+from handcap.occlusion.augment import Augmentation, augment_frames, time_warp, warped_copies
+from handcap.occlusion.data import PosedTake
+
+RATE = 100.0
+
+
+def _ramp_take(frames=300):
+    """Markers moving at constant velocity, phi growing linearly, a steady turn about one axis."""
+    t = np.arange(frames, dtype=np.float64)
+    velocity = np.array([0.001, -0.002, 0.0005])  # metres per frame
+    positions = np.stack([t[:, None] * velocity + 0.01 * m for m in range(4)], axis=1)
+    phi = np.outer(t, np.linspace(0.001, 0.002, 27))
+    orient = Rotation.from_rotvec(np.outer(t * 0.004, [0.0, 0.6, 0.8])).as_rotvec()
+    transl = np.outer(t, velocity)
+    return PosedTake(positions, ("a", "b", "c", "d"), RATE, phi, orient, transl, subject="s1")
+
+
+@pytest.mark.parametrize("speed", [0.5, 2.0])
+def test_time_warp_at_constant_speed_resamples_the_motion(speed):
+    take = _ramp_take()
+    warped = time_warp(take, np.random.default_rng(0), (speed, speed))
+    # Output frame k is input time k * speed: every quantity is linear in time, so exact.
+    u = np.arange(len(warped.positions)) * speed
+    assert len(warped.positions) == int(np.floor((len(take.positions) - 1) / speed)) + 1
+    np.testing.assert_allclose(warped.positions, np.interp(u, np.arange(300), np.arange(300))[:, None, None]
+                               * np.array([0.001, -0.002, 0.0005]) + take.positions[0], atol=1e-12)
+    np.testing.assert_allclose(warped.phi, np.outer(u, np.linspace(0.001, 0.002, 27)), atol=1e-12)
+    np.testing.assert_allclose(warped.global_orient, np.outer(u * 0.004, [0.0, 0.6, 0.8]), atol=1e-9)
+    assert warped.subject == "s1" and warped.rate == RATE
+
+
+def test_time_warp_speeds_stay_in_range_and_missing_stays_missing():
+    take = _ramp_take()
+    positions = take.positions.copy()
+    positions[100:110, 2] = np.nan
+    take = PosedTake(positions, take.names, RATE)
+    warped = time_warp(take, np.random.default_rng(3), (0.6, 1.6))
+    # The first marker moves 1 step per input frame along x: its steps are the speeds.
+    steps = np.diff(warped.positions[:, 0, 0]) / 0.001
+    assert steps.min() >= 0.6 - 1e-9 and steps.max() <= 1.6 + 1e-9 and steps.std() > 0.05
+    gap = np.isnan(warped.positions[:, 2, 0])
+    assert 4 <= gap.sum() <= 20  # the 10 missing frames, at 0.6-1.6x speed
+    assert not np.isnan(warped.positions[:, [0, 1, 3]]).any()
+
+
+def test_warped_copies_are_deterministic():
+    takes = [_ramp_take(), _ramp_take(200)]
+    a = warped_copies(takes, Augmentation(copies=2), seed=1)
+    b = warped_copies(takes, Augmentation(copies=2), seed=1)
+    c = warped_copies(takes, Augmentation(copies=2), seed=2)
+    assert len(a) == 4 and all(np.array_equal(x.positions, y.positions) for x, y in zip(a, b))
+    assert not np.array_equal(a[0].positions, c[0].positions)
+
+
+def _hand(n=4000):
+    rng = np.random.default_rng(0)
+    base = rng.normal(0, 0.04, (7, 3))  # four rigid markers, not in a plane, and three others
+    return np.broadcast_to(base, (n, 7, 3)).copy(), np.array([True, True, True, True, False, False, False])
+
+
+def test_scale_alone_scales_each_axis_about_the_centre():
+    local, rigid = _hand()
+    centre = np.array([0.01, 0.0, -0.01])
+    out = augment_frames(local, centre, rigid, Augmentation(scale=0.1, rigid_deg=0, rigid_mm=0, placement_mm=0),
+                         np.random.default_rng(1))
+    factor = (out - centre) / (local - centre)
+    assert np.allclose(factor, factor[:, :1])  # one factor per frame and axis
+    log = np.log(factor[:, 0])
+    assert abs(log.mean()) < 0.01
+    assert np.std(log, axis=0) == pytest.approx([0.1] * 3, rel=0.1)  # 10 % per axis
+
+
+def test_rigid_set_moves_as_a_body_by_the_stated_angle():
+    local, rigid = _hand()
+    a = Augmentation(scale=0, rigid_deg=10.0, rigid_mm=4.0, placement_mm=0)
+    out = augment_frames(local, np.zeros(3), rigid, a, np.random.default_rng(2))
+    assert np.array_equal(out[:, ~rigid], local[:, ~rigid])  # the fingers stay
+    d = lambda x: np.linalg.norm(x[:, :, None] - x[:, None], axis=-1)  # noqa: E731
+    assert np.allclose(d(out[:, rigid]), d(local[:, rigid]))  # rigid distances kept
+    # Recover each frame's rotation of the rigid set (Kabsch) and compare with the stated spread.
+    p, q = local[:, rigid] - local[:, rigid].mean(1, keepdims=True), out[:, rigid] - out[:, rigid].mean(1, keepdims=True)
+    u, _, vt = np.linalg.svd(np.swapaxes(p, 1, 2) @ q)
+    angles = Rotation.from_matrix(u @ vt).magnitude()
+    # A normal angle of 10 deg: its absolute value has mean 10 * sqrt(2 / pi) deg.
+    assert np.degrees(angles.mean()) == pytest.approx(10 * np.sqrt(2 / np.pi), rel=0.08)
+    shift = out[:, rigid].mean(1) - local[:, rigid].mean(1)
+    assert np.std(shift, axis=0) == pytest.approx([0.004] * 3, rel=0.1)
+
+
+def test_placement_jitter_has_the_stated_spread_and_keeps_missing():
+    local, rigid = _hand()
+    local[:10, 4] = np.nan
+    out = augment_frames(local, np.zeros(3), rigid, Augmentation(scale=0, rigid_deg=0, rigid_mm=0, placement_mm=3.0),
+                         np.random.default_rng(3))
+    assert np.isnan(out[:10, 4]).all()
+    assert np.nanstd(out - local) == pytest.approx(0.003, rel=0.05)
+
+
+@pytest.mark.parametrize("bad", [dict(scale=-0.1), dict(scale=0.6), dict(placement_mm=np.nan), dict(copies=1.5),
+                                 dict(copies=-1), dict(speed=(1.5, 1.0)), dict(speed=(0.0, 1.0))])
+def test_bad_augmentation_is_refused(bad):
+    with pytest.raises(HandcapError):
+        Augmentation(**bad)
