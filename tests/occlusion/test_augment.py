@@ -108,3 +108,22 @@ def test_placement_jitter_has_the_stated_spread_and_keeps_missing():
 def test_bad_augmentation_is_refused(bad):
     with pytest.raises(HandcapError):
         Augmentation(**bad)
+
+
+def test_a_motion_worn_by_other_subjects_keeps_the_pose_and_changes_the_hand():
+    from handcap.occlusion.data import simulate_take, synthetic_hand_takes, worn_by_another_subject
+
+    takes = synthetic_hand_takes("active-9", subjects=1, seconds_per_motion=0.5, motions=("random",), worn_by=2,
+                                 placement_mm=8.0)
+    assert len(takes) == 3 and len({t.subject for t in takes}) == 3 and all(t.synthetic for t in takes)
+    first, other = takes[0], takes[1]
+    assert np.array_equal(first.phi, other.phi) and np.array_equal(first.transl, other.transl)
+    assert not np.allclose(first.betas, other.betas)
+    # The markers follow the hand: the wrist triad is rigid in every take, but its size is the subject's.
+    triad = lambda t: np.linalg.norm(t.positions[:, 0] - t.positions[:, 1], axis=-1)  # noqa: E731
+    assert triad(other).std() < 0.002 and abs(triad(other).mean() - triad(first).mean()) > 0.0005
+    same = worn_by_another_subject(first, "active-9", 0, placement_mm=8.0, betas_sd=1.0)
+    assert np.array_equal(same.positions, other.positions)  # deterministic for its subject seed
+    with pytest.raises(HandcapError, match="with poses"):
+        worn_by_another_subject(PosedTake(first.positions, first.names, RATE), "active-9", 1)
+    assert simulate_take("active-9", "random", 20, RATE, 4).subject == "synthetic subject 4"
