@@ -33,6 +33,22 @@ def test_training_is_deterministic_for_a_seed(small_take):
     assert not np.array_equal(same["ae_w0"], _arrays(c)["ae_w0"])
 
 
+def test_augmented_training_is_deterministic_for_a_seed(small_take, tmp_path):
+    """As the shipped models are trained (per-sample augmentation) plus time-warped copies: same bytes."""
+    from dataclasses import replace
+
+    from handcap.occlusion.augment import SUBJECT_AUGMENTATION
+    augmentation = replace(SUBJECT_AUGMENTATION, copies=1)
+    for name in ("a", "b"):
+        train_occlusion_model([small_take], "active-9", seed=3, epochs=2, regressor_epochs=2, samples_per_epoch=2000,
+                              augmentation=augmentation).save(tmp_path / f"{name}.npz")
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    plain = train_occlusion_model([small_take], "active-9", seed=3, epochs=2, regressor_epochs=2,
+                                  samples_per_epoch=2000)
+    assert not np.array_equal(OcclusionModel.load(tmp_path / "a.npz").predictor.net.weights[0],
+                              plain.predictor.net.weights[0])
+
+
 def test_model_round_trip(small_take, tmp_path):
     model = _train(small_take, 0)
     path = tmp_path / "m.npz"
