@@ -84,7 +84,7 @@ def table3(args):
 
 def whole_gaps(args, model60=None):
     """Issue 14: every hidden frame of 0.5 s gaps; synthetic-only training against the take's own 60 %."""
-    from handcap.occlusion.augment import DEFAULT_AUGMENTATION
+    from handcap.occlusion.augment import SUBJECT_AUGMENTATION
     from handcap.occlusion.data import synthetic_hand_takes
 
     markers = read_markers(DATA).select(HAND)
@@ -97,7 +97,7 @@ def whole_gaps(args, model60=None):
     print(f"{len(synthetic)} synthetic takes ({sum(len(t.positions) for t in synthetic)} frames) in "
           f"{time.perf_counter() - start:.0f} s")
     models = {}
-    for label, augmentation in (("synthetic only, augmented", DEFAULT_AUGMENTATION),
+    for label, augmentation in (("synthetic only, augmented", SUBJECT_AUGMENTATION),
                                 ("synthetic only, not augmented", NO_AUGMENTATION)):
         start = time.perf_counter()
         models[label] = train_occlusion_model(synthetic, "glove-13", seed=0, epochs=args.gap_epochs,

@@ -199,3 +199,22 @@ def test_cli_train_and_fill_accept_the_same_prefixed_file(tmp_path, small_take):
     assert filled.names == tuple(f"Glove:{n}" for n in small_take.names)
     assert not np.isnan(filled.positions).any()
     assert np.abs(filled.positions[100:120, 5] - small_take.positions[100:120, 5]).max() < 0.03
+
+
+def test_cli_trains_on_synthetic_subjects_and_says_so(tmp_path):
+    """``train-occlusion --synthetic 1 --augment --speed-copies 1``: no recorded take at all."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "generic.npz"
+    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", "--synthetic", "1", "--augment",
+                        "--speed-copies", "1", "--layout", "active-9", "--epochs", "1", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "saw 9 take(s) (0 recorded, 9 synthetic) of 9 subject(s), 5400 frames; 9 augmented copies" in r.stdout
+    assert "augmentation: every sample: scale 12 %" in r.stdout and "1 time-warped copy per take" in r.stdout
+    info = OcclusionModel.load(out).info
+    assert info["synthetic_takes"] == "9" and info["augmented_copies"] == "9"
+    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", "--layout", "active-9",
+                        "--out", str(tmp_path / "none.npz")], capture_output=True, text=True)
+    assert r.returncode == 2 and "give takes to train on, or --synthetic" in r.stderr
