@@ -85,7 +85,8 @@ def test_rigid_set_moves_as_a_body_by_the_stated_angle():
     d = lambda x: np.linalg.norm(x[:, :, None] - x[:, None], axis=-1)  # noqa: E731
     assert np.allclose(d(out[:, rigid]), d(local[:, rigid]))  # rigid distances kept
     # Recover each frame's rotation of the rigid set (Kabsch) and compare with the stated spread.
-    p, q = local[:, rigid] - local[:, rigid].mean(1, keepdims=True), out[:, rigid] - out[:, rigid].mean(1, keepdims=True)
+    p = local[:, rigid] - local[:, rigid].mean(1, keepdims=True)
+    q = out[:, rigid] - out[:, rigid].mean(1, keepdims=True)
     u, _, vt = np.linalg.svd(np.swapaxes(p, 1, 2) @ q)
     angles = Rotation.from_matrix(u @ vt).magnitude()
     # A normal angle of 10 deg: its absolute value has mean 10 * sqrt(2 / pi) deg.

@@ -180,7 +180,11 @@ def time_warp(take: PosedTake, rng, speed=(0.6, 1.6)) -> PosedTake:
     u = np.interp(np.arange(np.floor(out_time[-1]) + 1), out_time, np.arange(t_count, dtype=np.float64))
     i = np.minimum(np.floor(u).astype(int), t_count - 2)
     f = u - i
-    lerp = lambda a: a[i] * (1 - f).reshape(-1, *([1] * (a.ndim - 1))) + a[i + 1] * f.reshape(-1, *([1] * (a.ndim - 1)))  # noqa: E731
+
+    def lerp(a):
+        w = f.reshape(-1, *([1] * (a.ndim - 1)))
+        return a[i] * (1 - w) + a[i + 1] * w
+
     positions = lerp(take.positions)
     if not take.has_poses:
         return replace(take, positions=positions, joints=None)
