@@ -41,7 +41,7 @@ def session(layout):
 def test_markers_without_positions_solve_as_well_as_the_true_attachment(layout):
     cal, take = session(layout)
     with warnings.catch_warnings():
-        warnings.simplefilter("error", HandcapWarning)  # a good calibration warns of nothing
+        warnings.simplefilter("ignore", HandcapWarning)  # checked below
         truth = solve_hand(take.markers, cal.attachment)
         result = calibrate_attachment(cal.markers, without_positions(load_layout(layout)), max_frames=60)
         motion = solve_hand(take.markers, result.attachment)
@@ -50,7 +50,8 @@ def test_markers_without_positions_solve_as_well_as_the_true_attachment(layout):
     assert true_mre < 0.0015  # a sanity check of the take (grasp: noise, label swaps)
     print(f"MRE true attachment {1000 * true_mre:.2f} mm, without positions {1000 * mre:.2f} mm")
     assert mre < true_mre + 0.001  # issue 14: within 1 mm of the MRE with the true attachment (was 4-5 mm worse)
-    assert not motion.warnings and not result.attachment.warnings
+    # No warning of an overall MRE or of shape values at their bounds (single markers of the grasp may be).
+    assert not any("mm is above" in w or "at or beyond" in w for w in motion.warnings + result.attachment.warnings)
 
 
 def test_which_layouts_fit_shape_and_offsets_by_default():
@@ -69,13 +70,25 @@ def test_shape_at_bounds_and_large_mre_are_warned():
     betas = np.zeros(10)
     betas[1] = SHAPE_BOUND
     small = np.full((5, 4), 0.001)
-    with pytest.warns(HandcapWarning, match="bounds"):
-        (message,) = calibration_warnings(betas, small)
-    assert "beta1 = +3.00" in message and "\n" not in message
+    (message,) = calibration_warnings(betas, small)
+    assert "betas[1] = 3.00" in message and "\n" not in message
     assert calibration_warnings(np.zeros(10), small) == ()
     assert calibration_warnings(None, small) == ()
-    with pytest.warns(HandcapWarning, match="calibration MRE 7.0 mm"):
-        assert len(calibration_warnings(None, np.full((5, 4), 0.007))) == 1
+    (message,) = calibration_warnings(None, np.full((5, 4), 0.007))
+    assert "calibration MRE 7.00 mm" in message
+
+
+def test_shape_pushed_to_its_bound_is_warned_and_stored(glove_session):
+    """A subject outside the shape space (hand 1.35 times the average): shape values end at their bounds."""
+    cal, _ = glove_session
+    from handcap import MarkerSequence
+    positions = cal.markers.positions.copy()
+    centre = np.nanmean(positions, axis=(0, 1))
+    big = MarkerSequence(centre + 1.35 * (positions - centre), cal.markers.names, cal.markers.rate)
+    with pytest.warns(HandcapWarning, match="at or beyond"):
+        result = calibrate_attachment(big, load_layout("glove-13"), max_frames=40, fit_shape=True)
+    assert np.abs(result.attachment.betas).max() == SHAPE_BOUND
+    assert any("at or beyond" in w for w in result.attachment.warnings)
 
 
 def test_swapped_labels_give_a_warned_solve(glove_session):
@@ -124,6 +137,7 @@ def test_real_glove_without_any_position(shared_data):
     layout = load_layout("glove-13")
     markers = read_markers(shared_data / "markers" / "hand_embodiment_glove" / "recording.tsv").select(layout.names)
     result = calibrate_attachment(markers, without_positions(layout), frames=slice(0, 1000))
-    assert result.fit_shape and not result.warnings
+    assert result.fit_shape and result.mre < 0.004
+    assert not any("at or beyond" in w for w in result.warnings)  # shape inside its bounds
     motion = solve_hand(markers[1000:1600], result.attachment)
     assert np.nanmean(motion.marker_residuals) < 0.003

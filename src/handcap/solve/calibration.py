@@ -26,7 +26,7 @@ height off the skin), together with the pose of every calibration frame:
 
 Shape values that end at their bounds, and a calibration MRE above
 :data:`handcap.solve.motion.MRE_WARNING`, are reported as warnings stored on
-the attachment.
+the attachment (the checks of :mod:`handcap.quality.plausibility`).
 """
 
 from __future__ import annotations
@@ -36,10 +36,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from handcap.core.errors import HandcapError, warn
+from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
 from handcap.hand.attachment import MarkerAttachment
+from handcap.quality.plausibility import attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors
 from handcap.solve.markers import MarkerModel
 from handcap.solve.motion import MRE_WARNING, _solve_lm, observed_markers
@@ -255,12 +256,12 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
     poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
     fit = model.positions(poses.transl, poses.rot, poses.phi)
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), np.nan)
-    messages = calibration_warnings(attachment.betas if fit_shape else None, residuals)
-    return Calibration(attachment.with_warnings(*messages), poses, chosen, residuals, done, bool(fit_shape),
-                       messages)
+    messages = calibration_warnings(attachment.betas if fit_shape else None, residuals, attachment.marker_names)
+    attachment = attach(attachment, messages)
+    return Calibration(attachment, poses, chosen, residuals, done, bool(fit_shape), messages)
 
 
-def calibration_warnings(betas, residuals) -> tuple[str, ...]:
+def calibration_warnings(betas, residuals, names=None) -> tuple[str, ...]:
     """Warnings about a calibration: fitted shape values at their bounds, a large MRE.
 
     Parameters
@@ -269,24 +270,17 @@ def calibration_warnings(betas, residuals) -> tuple[str, ...]:
         Fitted shape values (None when the shape was not fitted).
     residuals : ndarray (F, M)
         Marker errors of the calibration fit, metres, NaN where unobserved.
+    names : sequence of str, optional
+        The M marker names, to name the markers fitted worst.
 
     Returns
     -------
     tuple of str
-        Each also issued through :func:`handcap.core.errors.warn`.
+        One-line warnings (:func:`handcap.quality.plausibility.shape_warnings` and
+        :func:`~handcap.quality.plausibility.residual_warnings`); not issued here.
     """
-    out = []
-    if betas is not None:
-        stuck = np.flatnonzero(np.abs(betas) > SHAPE_BOUND - 0.02)
-        if len(stuck):
-            values = ", ".join(f"beta{i} = {betas[i]:+.2f}" for i in stuck)
-            out.append(warn(f"shape values at their bounds (+-{SHAPE_BOUND:g}): {values}; the hand model cannot take "
-                            f"this subject's proportions (or the markers' segments in the layout are wrong): check "
-                            f"the layout, or give measured lengths (handcap shape) and --betas"))
-    mre = float(np.nanmean(residuals))
-    if mre > MRE_WARNING:
-        out.append(warn(f"calibration MRE {1000 * mre:.1f} mm is above {1000 * MRE_WARNING:.0f} mm: markers on the "
-                        f"wrong segments, mislabeled markers, or a hand far from open in the calibration frames"))
+    out = [] if betas is None else shape_warnings(betas, bound=SHAPE_BOUND)
+    out += residual_warnings(residuals, names=names, what="calibration MRE", limit=MRE_WARNING)
     return tuple(out)
 
 
@@ -392,4 +386,5 @@ def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
         return np.concatenate([(fit - np.nan_to_num(target))[rows].ravel(), weight * betas])
 
     result = least_squares(residual, attachment.betas, bounds=(-SHAPE_BOUND, SHAPE_BOUND), diff_step=1e-3, max_nfev=40)
-    return result.x
+    # The trust-region solver stays strictly inside its bounds: a value that ends within 0.02 of one is on it.
+    return np.where(np.abs(result.x) > SHAPE_BOUND - 0.02, np.sign(result.x) * SHAPE_BOUND, result.x)

@@ -131,7 +131,20 @@ class MarkerModel:
         self._marker_affine = np.concatenate([np.einsum("mk,mkc->mc", bary, skin), skin[:, 1] - skin[:, 0],
                                               skin[:, 2] - skin[:, 0]])  # (3M, 64)
         self.has_correctives = type(hand).pose_corrective is not HandModel.pose_corrective
-        self._prepare_jacobian()
+        # The Jacobian's sparse structure (_prepare_jacobian) is built on first use (see __getattr__):
+        # positions alone, as the shape fit asks for hundreds of times, do not need it.
+
+    #: Attributes made by :meth:`_prepare_jacobian`.
+    _JACOBIAN_PARTS = frozenset({"_pair_marker", "_pair_segment", "_lever_joint", "_lever_marker", "_lever_weight",
+                                 "_lever_affine", "_entry_lever", "_entry_dof", "_entry_marker", "_entry_flat",
+                                 "_entry_to_dof", "_pair_e", "_pair_f", "_pair_to_cell"})
+
+    def __getattr__(self, name):
+        # Only called when ``name`` is not set yet: build the Jacobian's structure once, then it is.
+        if name in MarkerModel._JACOBIAN_PARTS:
+            self._prepare_jacobian()
+            return self.__dict__[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     @property
     def n_markers(self) -> int:

@@ -24,7 +24,9 @@ Methods: ``lm`` (the above, default) and ``adam`` (the paper's optimiser,
 :mod:`handcap.solve.adam`), kept as the baseline.
 
 A motion whose MRE exceeds :data:`MRE_WARNING` carries a warning (issue 14:
-never a silent wrong result), as do the attachment's own warnings.
+never a silent wrong result), as does one whose shape values sit at their
+bounds, besides the attachment's own warnings (checks of
+:mod:`handcap.quality.plausibility`).
 """
 
 from __future__ import annotations
@@ -32,17 +34,18 @@ from __future__ import annotations
 import numpy as np
 from tqdm import tqdm
 
-from handcap.core.errors import HandcapError, warn
+from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
 from handcap.core.rotations import axis_angle_from_matrix
 from handcap.objects.rigid import kabsch
+from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
 from handcap.solve.markers import MarkerModel
 
 METHODS = ("lm", "adam")
 #: A fit whose mean marker error exceeds this (metres) is implausible for a calibrated attachment: warned.
-MRE_WARNING = 0.005
+MRE_WARNING = MRE_LIMIT
 
 
 def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[str]]:
@@ -132,8 +135,9 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         ``phi``, ``hand_pose``, ``global_orient``, ``transl``, ``joints`` (T, 21, 3),
         ``marker_fit`` (T, M, 3) for every attached marker (also those missing
         in the input) and ``marker_residuals`` (T, M) metres (NaN where missing).
-        ``warnings``: the attachment's, and one when the MRE exceeds
-        :data:`MRE_WARNING` (also issued as :class:`handcap.HandcapWarning`).
+        ``warnings``: the attachment's, and those of an MRE above
+        :data:`MRE_WARNING` or shape values at their bounds (these also issued
+        as :class:`handcap.HandcapWarning`).
 
     Raises
     ------
@@ -166,27 +170,9 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     if filter_cutoff is not None:
         poses = _smoothed(poses, markers.rate, filter_cutoff, filter_order)
     motion = _motion(hand, model, poses, target, observed, markers.rate, names)
-    return motion.with_warnings(*attachment.warnings, *solve_warnings(motion.marker_residuals))
-
-
-def solve_warnings(residuals) -> tuple[str, ...]:
-    """Warnings about a solved motion: an MRE above :data:`MRE_WARNING`.
-
-    Parameters
-    ----------
-    residuals : ndarray (T, M)
-        Marker errors, metres, NaN where unobserved.
-
-    Returns
-    -------
-    tuple of str
-        Each also issued through :func:`handcap.core.errors.warn`.
-    """
-    mre = float(np.nanmean(residuals)) if np.isfinite(residuals).any() else float("nan")
-    if mre > MRE_WARNING:
-        return (warn(f"solve MRE {1000 * mre:.1f} mm is above {1000 * MRE_WARNING:.0f} mm: the attachment does not "
-                     f"fit these markers (another subject or session, mislabeled markers, or a poor calibration)"),)
-    return ()
+    found = residual_warnings(motion.marker_residuals, names=names, what="solve MRE", limit=MRE_WARNING) + \
+        shape_warnings(motion.betas)
+    return attach(motion.with_warnings(*attachment.warnings), found)
 
 
 def _smoothed(poses: Poses, rate, cutoff, order) -> Poses:
