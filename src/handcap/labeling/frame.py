@@ -90,6 +90,28 @@ class RigidSet:
         return cls(tuple(names), canonical, tolerance)
 
     @classmethod
+    def from_takes(cls, names, takes) -> "RigidSet":
+        """From the rigid markers of several labeled takes [(T_k, R, 3), ...], metres, NaN where missing.
+
+        The shape is the first take's; the tolerance is four standard
+        deviations of how each distance varies within a take (skin, glove,
+        noise), pooled over the takes and taken at the most variable pair,
+        but never under twice the rounding of a marker file (0.1 mm). A
+        triad put on again between takes changes the distances from take to
+        take: that is not noise, and :func:`handcap.labeling.adapt.rigid_from_take`
+        finds the new shape in the take being labelled.
+        """
+        takes = [np.asarray(p, dtype=np.float64) for p in takes]
+        first = cls.from_training(names, takes[0])
+        i, j = np.triu_indices(len(names), 1)
+        spread = []
+        for p in takes:
+            d = np.linalg.norm(p[:, i] - p[:, j], axis=-1)
+            spread.append(d - np.nanmedian(d, axis=0))
+        spread = np.nanstd(np.concatenate(spread), axis=0)
+        return cls(first.names, first.canonical, float(max(4 * np.nanmax(spread), 2e-4)))
+
+    @classmethod
     def for_object(cls, names, canonical, *, tolerance: float = 0.0015) -> "RigidSet":
         """A rigid object's markers from their positions in its frame (M, 3), metres.
 

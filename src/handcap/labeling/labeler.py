@@ -36,12 +36,13 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
+from handcap.labeling.adapt import StreamAdaptation
 from handcap.labeling.frame import HandFrameFinder, RigidSet
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
 from handcap.labeling.murty import k_best_assignments
 from handcap.labeling.spatial import SpatialModel
 from handcap.labeling.viterbi import backtrack, viterbi_step
-from handcap.objects.rigid import kabsch
+from handcap.objects.rigid import canonical_from_markers, kabsch
 
 
 @dataclass(frozen=True)
@@ -69,60 +70,90 @@ class LabelingModel:
         return self.spatial.names
 
     @classmethod
-    def train(cls, markers: MarkerSequence, names=None, rigid=None, *, transforms=None, components: int = 3,
+    def train(cls, markers, names=None, rigid=None, *, transforms=None, components: int = 3,
               seed: int = 0) -> "LabelingModel":
-        """Train on a labeled take.
+        """Train on one labeled take or several.
 
         Parameters
         ----------
-        markers : MarkerSequence
-            Labeled training take (a range of motion), metres.
+        markers : MarkerSequence or sequence of MarkerSequence
+            Labeled training takes (ranges of motion), metres, at one rate.
+            Several takes (other days, other subjects) are pooled: each take's
+            hand frame comes from its own rigid-marker shape turned onto the
+            first take's, so a triad put on again does not blur the mixtures,
+            and the rigid tolerance is learned from how much the distances
+            vary within each take.
         names : sequence of str, optional
-            The labels to learn (default: every marker of the take).
+            The labels to learn (default: every marker of the first take).
         rigid : sequence of str, optional
             Which of them are the rigid back-of-hand markers (3 or more).
         transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
             Hand frame per training frame (``world = R @ local + t``), when
-            there are no rigid markers.
+            there are no rigid markers (one take only).
         components : int
             Mixture components per label.
         seed : int
         """
-        names = list(markers.names if names is None else names)
+        takes = [markers] if isinstance(markers, MarkerSequence) else list(markers)
+        if not takes:
+            raise HandcapError("give at least one labeled training take")
+        if any(abs(t.rate - takes[0].rate) > 1e-9 for t in takes):
+            raise HandcapError(f"the training takes have different frame rates: "
+                               f"{', '.join(f'{t.rate:g}' for t in takes)} Hz; resample them to one rate")
+        if transforms is not None and len(takes) > 1:
+            raise HandcapError("transforms=... describe one take; give one take with them")
+        names = list(takes[0].names if names is None else names)
         rigid = list(rigid or [])
-        missing = [n for n in names if n not in markers.names and n not in markers.short_names]
-        if missing:
-            raise HandcapError(f"labels not in the training take: {', '.join(missing)}")
+        for k, take in enumerate(takes):
+            which = "the training take" if len(takes) == 1 else f"training take {k + 1}"
+            missing = [n for n in names if n not in take.names and n not in take.short_names]
+            if missing:
+                raise HandcapError(f"labels not in {which}: {', '.join(missing)}")
         unknown = [n for n in rigid if n not in names]
         if unknown:
             raise HandcapError(f"rigid markers not among the labels: {', '.join(unknown)}")
-        positions = np.stack([markers.positions[:, markers.index(n)] for n in names], axis=1)
-        for n, s in zip(names, ~np.isnan(positions[..., 0]).T):
-            if not s.any():
-                raise HandcapError(f"marker {n!r} never appears in the training take")
         free = [n for n in names if n not in rigid]
         if not free:
             raise HandcapError("every label is rigid: nothing left to label")
         ordered = rigid + free
-        positions = positions[:, [names.index(n) for n in ordered]]
+        per_take = [np.stack([t.positions[:, t.index(n)] for n in ordered], axis=1) for t in takes]
+        everything = np.concatenate(per_take)
+        for n, s in zip(ordered, ~np.isnan(everything[..., 0]).T):
+            if not s.any():
+                raise HandcapError(f"marker {n!r} never appears in the training take")
+        n_rigid = len(rigid)
+        locals_, known = [], 0
         if rigid:
-            rigid_set = RigidSet.from_training(rigid, positions[:, :len(rigid)])
-            rot, trans, ok = _rigid_transforms(rigid_set.canonical, positions[:, :len(rigid)])
+            rigid_set = RigidSet.from_takes(rigid, [p[:, :n_rigid] for p in per_take])
+            for p in per_take:
+                shape = canonical_from_markers(p[:, :n_rigid])
+                r0, t0 = kabsch(shape, rigid_set.canonical)  # this take's shape onto the reference
+                rot, trans, ok = _rigid_transforms(shape @ r0.T + t0, p[:, :n_rigid])
+                local = np.full((len(p), len(free), 3), np.nan)
+                local[ok] = np.einsum("tji,tmj->tmi", rot[ok], p[ok, n_rigid:] - trans[ok, None])
+                locals_.append(local)
+                known += int(ok.sum())
         elif transforms is not None:
             rot, trans = (np.asarray(a, dtype=np.float64) for a in transforms)
-            if rot.shape != (markers.n_frames, 3, 3) or trans.shape != (markers.n_frames, 3):
-                raise HandcapError(f"transforms must be ((T, 3, 3), (T, 3)) with T = {markers.n_frames}")
+            n_frames = takes[0].n_frames
+            if rot.shape != (n_frames, 3, 3) or trans.shape != (n_frames, 3):
+                raise HandcapError(f"transforms must be ((T, 3, 3), (T, 3)) with T = {n_frames}")
             ok = np.isfinite(rot).all(axis=(1, 2)) & np.isfinite(trans).all(axis=1)
             rigid_set = None
+            local = np.full((n_frames, len(free), 3), np.nan)
+            local[ok] = np.einsum("tji,tmj->tmi", rot[ok], per_take[0][ok] - trans[ok, None])
+            locals_.append(local)
+            known = int(ok.sum())
         else:
             raise HandcapError("give the rigid back-of-hand markers (rigid=...) or the hand frame per frame "
                                "(transforms=...)")
-        if ok.sum() < 10:
-            raise HandcapError(f"the hand frame is known in only {ok.sum()} training frames")
-        local = np.full((markers.n_frames, len(free), 3), np.nan)
-        local[ok] = np.einsum("tji,tmj->tmi", rot[ok], positions[ok, len(rigid):] - trans[ok, None])
-        spatial = SpatialModel.fit(free, local, components=components, seed=seed)
-        kalman = KalmanSettings.from_training(positions[:, len(rigid):], markers.rate)
+        if known < 10:
+            raise HandcapError(f"the hand frame is known in only {known} training frames")
+        spatial = SpatialModel.fit(free, np.concatenate(locals_), components=components, seed=seed)
+        # The filters see the takes one after the other, a gap longer than any coasting between them.
+        gap = np.full((12, len(free), 3), np.nan)
+        joined = np.concatenate([x for p in per_take for x in (p[:, n_rigid:], gap)][:-1])
+        kalman = KalmanSettings.from_training(joined, takes[0].rate)
         return cls(tuple(ordered), rigid_set, spatial, kalman)
 
     def save(self, path) -> None:
@@ -204,6 +235,23 @@ class OnlineLabeler:
         fingers' candidates. Without them, an object marker near a hidden
         fingertip is a plausible finger marker that moves smoothly with the
         hand.
+    adapt : bool
+        Re-align the spatial model to the take as it streams in
+        (:mod:`handcap.labeling.adapt`): after ``adapt_every`` frames, a
+        label-free registration of the points seen so far; then every
+        ``adapt_every`` frames, a registration of the labelled points of the
+        recent frames (weighted by ``forget`` per frame of age) and the
+        mixture means moved toward them. When the hand frame is lost in most
+        recent frames, the rigid markers' shape is re-learned from them.
+    adapt_every : int
+        Frames between re-estimations.
+    max_unlikely : int
+        Frames a track may carry a label on points the spatial model filters
+        out (the tracking hypothesis); after that the spatial model decides
+        again (two tracks swapped in a crossing would otherwise stay swapped).
+    forget : float
+        Weight kept per frame of age by a labelled point (0.999: a half-life
+        of about 700 frames; a short memory sees one pose only).
 
     Attributes
     ----------
@@ -216,7 +264,8 @@ class OnlineLabeler:
 
     def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
                  max_coast: int = 10, warmup: int = 2, gate: float = 6.0, jump_cost: float = 6.0,
-                 tracking: bool = True, max_hold: int = 10, objects=()):
+                 tracking: bool = True, max_hold: int = 10, objects=(), adapt: bool = True,
+                 adapt_every: int = 25, forget: float = 0.999, max_unlikely: int = 50):
         if not (isinstance(hypotheses, (int, np.integer)) and hypotheses >= 1):
             raise HandcapError(f"hypotheses must be a whole number >= 1, got {hypotheses}")
         if not (isinstance(lag, (int, np.integer)) and lag >= 0):
@@ -242,11 +291,20 @@ class OnlineLabeler:
         self.frame_index = 0
         self._filters = KalmanBatch(model.kalman, self.n_free)  # one hypothesis to start with
         self._scores = np.zeros(1)
+        self._unlikely = np.zeros((1, self.n_free), dtype=np.int64)  # (P, F) frames on spatially filtered points
         self._pending: deque[_Frame] = deque()
         self._occluded_score = np.log(1.0 / self.n_free)
         self.tracked_predecessors = 100
         self._fit_level = None  # running mean of the per-point spatial fit
         self.suspect_drop = 4.0  # a fit this far below it has the hand frame searched afresh
+        if not (isinstance(adapt_every, (int, np.integer)) and adapt_every >= 1):
+            raise HandcapError(f"adapt_every must be a whole number of frames >= 1, got {adapt_every}")
+        if not 0.0 < forget <= 1.0:
+            raise HandcapError(f"forget must be in (0, 1], got {forget}")
+        self.max_unlikely = int(max_unlikely)
+        self.spatial = model.spatial  # the spatial model in the take's hand frame (adapted when adapt)
+        self.adapt = bool(adapt)
+        self._adaptation = StreamAdaptation(self, int(adapt_every), float(forget)) if self.adapt else None
 
     # -- public ---------------------------------------------------------------------------
     def update(self, points, transform=None):
@@ -291,6 +349,13 @@ class OnlineLabeler:
         pending.clear()
         return out
 
+    def restart_tracks(self) -> None:
+        """Start the hypotheses and filters afresh from the next frame (the spatial model changed: tracks
+        begun under the old one, a swap of two fingertips say, must not be carried on by their continuity)."""
+        self._filters = KalmanBatch(self.model.kalman, self.n_free)
+        self._scores = np.zeros(1)
+        self._unlikely = np.zeros((1, self.n_free), dtype=np.int64)
+
     # -- one frame ------------------------------------------------------------------------
     def _step(self, points, transform) -> _Frame:
         # Each object's markers first (a rigid object with many markers is the surest find), then the
@@ -313,6 +378,8 @@ class OnlineLabeler:
             pose = (rot, trans)
         elif self.finder is not None:
             found = self.finder.find(self._points, self._frame_fit)
+            if self._adaptation is not None:
+                found = self._adaptation.watch_hand(self._points, found)
             if found is not None:
                 pose = (found.rotation, found.translation)
                 got = found.points >= 0
@@ -346,7 +413,8 @@ class OnlineLabeler:
             if self.tracking and len(world):
                 best = int(np.argmax(self._scores))
                 self._log_norm, self._at_gate = self._log_norm_all[best], self._at_gate_all[best]
-                extra = self._tracking_hypothesis(world, pred[best], var[best], trackable[best])
+                extra = self._tracking_hypothesis(world, pred[best], var[best], trackable[best],
+                                                  trackable[best] & (self._unlikely[best] < self.max_unlikely))
                 if not (hyps == extra).all(axis=1).any():
                     hyps = np.concatenate([hyps, extra])
                     emission = np.append(emission, self._emission(extra))
@@ -359,7 +427,15 @@ class OnlineLabeler:
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
         self._advance_filters(back, obs)
+        if pose is not None and len(world):
+            f = np.arange(n_free)
+            unlikely = seen & (self._last_ll[f, np.maximum(hyps, 0)] < self.theta_min)
+            self._unlikely = np.where(unlikely, self._unlikely[back] + 1, np.where(seen, 0, self._unlikely[back]))
+        else:
+            self._unlikely = self._unlikely[back]
         self._scores = scores
+        if self._adaptation is not None:
+            self._adaptation.record(world, pose, hyps[int(np.argmax(scores))])
         # Store point indices of the frame (rest maps hypothesis indices back to points).
         mapped = np.where(seen, rest[np.maximum(hyps, 0)] if len(rest) else -1, -1)
         return _Frame(len(points), rigid_points, mapped, back, scores, object_points=object_points)
@@ -369,7 +445,7 @@ class OnlineLabeler:
         others = np.setdiff1d(np.arange(len(self._points)), used[used >= 0])
         if not len(others):
             return 0.0
-        ll = self.model.spatial.log_likelihood((self._points[others] - trans) @ rot)
+        ll = self.spatial.log_likelihood((self._points[others] - trans) @ rot)
         return float(np.maximum(ll.max(axis=1), self.theta_min).sum())
 
     def _watch_frame(self) -> None:
@@ -389,7 +465,7 @@ class OnlineLabeler:
         """The N best assignments (N, F) of candidate indices (-1: occluded) and their scores (N,)."""
         n_free = self.n_free
         if ll is None:
-            ll = self.model.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
+            ll = self.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
         cost = np.full((n_free, len(local) + n_free), np.inf)
         cost[:, :len(local)] = np.where(ll >= self.theta_min, -ll, np.inf)
         cost[self._rows, len(local) + self._rows] = -self._occluded_score
@@ -409,9 +485,10 @@ class OnlineLabeler:
         values = np.where((hyps >= 0) & (values < self.theta_min), self._occluded_score, values)
         return values.sum(axis=1)
 
-    def _tracking_hypothesis(self, world, pred, var, trackable) -> np.ndarray:
+    def _tracking_hypothesis(self, world, pred, var, trackable, vouch) -> np.ndarray:
         """The assignment (1, F) best for spatial and temporal evidence together, given the best previous
-        hypothesis' filters: predictions ``pred`` (F, 3), variances ``var`` (F,), ``trackable`` (F,)."""
+        hypothesis' filters: predictions ``pred`` (F, 3), variances ``var`` (F,), ``trackable`` (F,), and
+        ``vouch`` (F,): the tracks that may still carry their label onto a spatially filtered point."""
         from scipy.optimize import linear_sum_assignment
         n_free, k = self.n_free, len(world)
         ll = self._last_ll
@@ -425,7 +502,7 @@ class OnlineLabeler:
         reward = np.where(allowed, ll, self._occluded_score) + track * np.maximum(temporal, at_gate[:, None]
                                                                                     - self.jump_cost)
         cost = np.full((n_free, k + n_free), np.inf)
-        cost[:, :k] = np.where(allowed | (track & (temporal >= at_gate[:, None])), -reward, np.inf)
+        cost[:, :k] = np.where(allowed | (vouch[:, None] & (temporal >= at_gate[:, None])), -reward, np.inf)
         cost[self._rows, k + self._rows] = -self._occluded_score - trackable * at_gate
         r, c = linear_sum_assignment(cost)
         out = np.full((1, n_free), -1)
@@ -569,7 +646,7 @@ class MultiHandLabeler:
             if pose is None or not len(rest):
                 lls.append(np.full((hand.n_free, len(rest)), -np.inf))
             else:
-                lls.append(hand.model.spatial.log_likelihood((pts[rest] - pose[1]) @ pose[0]))
+                lls.append(hand.spatial.log_likelihood((pts[rest] - pose[1]) @ pose[0]))
         owner = np.argmax(np.stack([ll.max(axis=0) if len(rest) else np.zeros(0) for ll in lls]), axis=0)
         decided = []
         for h, (hand, (pose, rigid_points)) in enumerate(zip(self.hands, found)):
@@ -601,6 +678,12 @@ class MultiHandLabeler:
         return labels
 
 
+#: Warn when the hand frame is lost in more than this share of the frames.
+LOST_WARNING = 0.05
+#: Warn when fewer than this share of the points in the stream get a label.
+LABELLED_WARNING = 0.95
+
+
 @dataclass(frozen=True)
 class LabelResult:
     """A labeled take.
@@ -608,20 +691,28 @@ class LabelResult:
     Attributes
     ----------
     markers : MarkerSequence
-        (T, M, 3) positions of every label, NaN where the labeler reports a gap.
+        (T, M, 3) positions of every label, NaN where the labeler reports a gap
+        (its ``warnings`` hold this result's warnings too).
     labels : list of ndarray
         Per frame, the label index (into ``markers.names``) of every input point, -1 for none.
     lost_frames : ndarray (L,) int
         Frames where the hand frame could not be found.
+    warnings : tuple of str
+        One line per implausible figure (hand frame lost in many frames, few
+        points labelled).
+    model : LabelingModel or None
+        The model as adapted to the take by the offline second pass (None otherwise).
     """
 
     markers: MarkerSequence
     labels: list
     lost_frames: np.ndarray
+    warnings: tuple = ()
+    model: LabelingModel | None = None
 
 
 def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False, method: str = "viterbi",
-               progress: bool | None = None, **options) -> LabelResult:
+               progress: bool | None = None, adapt: bool = True, **options) -> LabelResult:
     """Label a whole take, frame by frame as a live labeler would (or on the whole take with ``offline``).
 
     Parameters
@@ -634,33 +725,114 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
     transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
         Hand frame per frame (for models without rigid markers).
     offline : bool
-        Decide every frame on the whole take (Viterbi over everything) instead of online.
+        Decide every frame on the whole take (Viterbi over everything) instead
+        of online. With ``adapt`` and one hand, in two passes: the rigid
+        markers' shape re-learned from the take where it differs from
+        training, a first labeling (adapting as it goes), the spatial model
+        registered to that pass's labels and its means moved toward them
+        (:mod:`handcap.labeling.adapt`), and a second labeling with it.
     method : {"viterbi", "nearest"}
         The labeler, or the nearest-neighbour baseline
         (:class:`handcap.labeling.baseline.NearestNeighbourLabeler`).
     progress : bool, optional
+    adapt : bool
+        Re-align the spatial model to the take (see ``offline`` and
+        :class:`OnlineLabeler`).
     options
         :class:`OnlineLabeler` settings (``hypotheses``, ``lag``, ``theta_min``, ...).
-    """
-    from tqdm import tqdm
 
+    Returns
+    -------
+    LabelResult
+        With warnings (also issued as :class:`handcap.core.errors.HandcapWarning`)
+        when the hand frame is lost in more than 5 % of the frames or fewer
+        than 95 % of the points are labelled.
+    """
     from handcap.core.points import PointCloudSequence
     if isinstance(points, MarkerSequence):
         points = PointCloudSequence.from_markers(points)
+    if method not in ("viterbi", "nearest"):
+        raise HandcapError(f"unknown labeling method {method!r}; choose viterbi or nearest")
+    if method == "nearest" and not isinstance(model, LabelingModel):
+        raise HandcapError("the nearest-neighbour baseline labels one hand")
+    two_pass = (offline and adapt and method == "viterbi" and isinstance(model, LabelingModel)
+                and model.rigid is not None and transforms is None)
+    adapted = None
+    if two_pass:
+        model = _rigid_from_take(model, points.frames)
+        first = _run(points, model, None, True, method, progress, {**options, "adapt": True})
+        adapted = refit_to_labels(model, first.markers)
+        result = _run(points, adapted, None, True, method, progress, {**options, "adapt": False})
+    else:
+        if method == "viterbi":
+            options["adapt"] = adapt
+        result = _run(points, model, transforms, offline, method, progress, options)
+    return _with_warnings(result, points, adapted)
+
+
+def _rigid_from_take(model: LabelingModel, frames) -> LabelingModel:
+    """The model with its rigid set re-learned from the take when the take's shape differs from training."""
+    from dataclasses import replace
+
+    from handcap.labeling.adapt import _largest_change, rigid_from_take
+    rigid = model.rigid
+    new = rigid_from_take(rigid, frames, spatial=model.spatial, width=max(0.01, 3 * rigid.tolerance))
+    if new is None:
+        return model
+    if _largest_change(new, rigid) <= 0.5 * rigid.tolerance:
+        return model
+    return replace(model, rigid=new)
+
+
+def refit_to_labels(model: LabelingModel, labeled: MarkerSequence) -> LabelingModel:
+    """The model's spatial model registered to a labelled take and its means moved toward it.
+
+    Parameters
+    ----------
+    model : LabelingModel
+        With rigid markers.
+    labeled : MarkerSequence
+        A labeling of a take by this model (its names in ``model.names`` order).
+
+    Returns
+    -------
+    LabelingModel
+        The same rigid set and filters; the spatial model expressed in the
+        hand frame the take's rigid markers give (:mod:`handcap.labeling.adapt`).
+    """
+    from dataclasses import replace
+
+    from handcap.labeling.adapt import adapt_means, register_to_model
+    n_rigid = len(model.rigid.names)
+    positions = np.stack([labeled.positions[:, labeled.index(n)] for n in model.names], axis=1)
+    rot, trans, ok = _rigid_transforms(model.rigid.canonical, positions[:, :n_rigid])
+    local = np.einsum("tji,tmj->tmi", rot[ok], positions[ok, n_rigid:] - trans[ok, None])
+    labels = np.broadcast_to(np.arange(local.shape[1]), local.shape[:2])
+    seen = ~np.isnan(local[..., 0])
+    local, labels = local[seen], labels[seen]
+    if len(local) < 50:
+        return model
+    # From the label-free registration (the first pass's labels may be wrong where the take was most off).
+    start = register_to_model(model.spatial, local[np.linspace(0, len(local) - 1, min(len(local), 3000)).astype(int)])
+    r, t = register_to_model(model.spatial, local, labels, anneal=0.0, iterations=10, start=start)
+    spatial = adapt_means(model.spatial, local @ r.T + t, labels)
+    return replace(model, spatial=spatial.moved(r, t))
+
+
+def _run(points, model, transforms, offline, method, progress, options) -> LabelResult:
+    """One labeling pass over a take."""
+    from tqdm import tqdm
     if method == "nearest":
         from handcap.labeling.baseline import NearestNeighbourLabeler
-        if not isinstance(model, LabelingModel):
-            raise HandcapError("the nearest-neighbour baseline labels one hand")
+        options.pop("adapt", None)
         labeler = NearestNeighbourLabeler(model, **options)
-    elif method == "viterbi":
+    else:
         if offline:
             options["lag"] = points.n_frames
         if isinstance(model, LabelingModel):
             labeler = OnlineLabeler(model, **options)
         else:
             labeler = MultiHandLabeler(model, **options)
-    else:
-        raise HandcapError(f"unknown labeling method {method!r}; choose viterbi or nearest")
     labels = []
     hidden = None if progress is None else not progress
     for t, frame in enumerate(tqdm(points.frames, desc="label", unit="frame", disable=hidden, leave=False)):
@@ -676,3 +848,25 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         positions[t, lab[hit]] = frame[hit]
     return LabelResult(MarkerSequence(positions, names, points.rate), labels,
                        np.array(getattr(labeler, "lost_frames", []), dtype=int))
+
+
+def _with_warnings(result: LabelResult, points, model) -> LabelResult:
+    """The result with its warnings (issued and stored on it and on its markers)."""
+    from dataclasses import replace
+
+    from handcap.core.errors import warn
+    lines = []
+    n_frames = max(points.n_frames, 1)
+    lost = len(result.lost_frames)
+    if lost > LOST_WARNING * n_frames:
+        lines.append(warn(f"hand frame lost in {100 * lost / n_frames:.1f} % of the frames ({lost} of {n_frames}; "
+                          f"plausible <= {100 * LOST_WARNING:.0f} %): the rigid markers were not found at their "
+                          f"trained distances; check the layout's rigid markers or train on a take of this session",
+                          stacklevel=3))
+    total = sum(int(np.isfinite(f).all(axis=1).sum()) for f in points.frames)
+    labelled = sum(int((lab >= 0).sum()) for lab in result.labels)
+    if total and labelled < LABELLED_WARNING * total:
+        lines.append(warn(f"labels for {100 * labelled / total:.1f} % of the points in the stream (plausible >= "
+                          f"{100 * LABELLED_WARNING:.0f} %): many points fit no label; check the layout and the "
+                          f"training take", stacklevel=3))
+    return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)

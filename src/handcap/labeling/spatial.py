@@ -102,6 +102,28 @@ class SpatialModel:
         top = np.where(np.isfinite(top), top, 0.0)
         return (top + np.log(np.exp(terms - top).sum(axis=2, keepdims=True)))[..., 0].T
 
+    def moved(self, rotation, translation) -> "SpatialModel":
+        """The same mixtures expressed in another hand frame.
+
+        Parameters
+        ----------
+        rotation : ndarray (3, 3)
+        translation : ndarray (3,)
+            ``model_local = rotation @ other_local + translation`` (metres).
+
+        Returns
+        -------
+        SpatialModel
+            Evaluated on points of the other frame, it gives what this model
+            gives on the same points moved into its own frame.
+        """
+        rot = np.asarray(rotation, dtype=np.float64)
+        trans = np.asarray(translation, dtype=np.float64)
+        means = (self.means - trans) @ rot  # R^T (mu - t), row vectors
+        precision = self.precision_chol @ np.swapaxes(self.precision_chol, -1, -2)
+        chol = np.linalg.cholesky(rot.T @ precision @ rot)  # a rotation keeps the determinant
+        return SpatialModel(self.names, self.weights, means, chol, self.log_norm)
+
     def to_arrays(self, prefix: str = "gmm_") -> dict:
         return {f"{prefix}names": np.array(self.names), f"{prefix}weights": self.weights,
                 f"{prefix}means": self.means, f"{prefix}precision_chol": self.precision_chol}

@@ -1,0 +1,178 @@
+"""The labeler adapting to a take of another day (issue 14): synthetic joints-19 takes with known truth."""
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from handcap import MarkerSequence
+from handcap.core.errors import HandcapWarning
+from handcap.labeling import LabelingModel, corrupt, label_take, score_labels
+from handcap.labeling.adapt import register_to_model, rigid_from_take
+from handcap.labeling.labeler import _rigid_transforms
+from handcap.layouts import load_layout
+from handcap.objects.rigid import canonical_from_markers, kabsch
+from handcap.synth.scene import SynthConfig, synthesize
+
+RIGID = ["hand_top", "hand_left", "hand_right"]
+
+
+@pytest.fixture(scope="module")
+def takes():
+    layout = load_layout("joints-19")
+    rom = synthesize(SynthConfig(layout="joints-19", motion="random", object="none", frames=1200, seed=11,
+                                 subject_seed=5, cameras=8)).labeled_points(layout.names)
+    test = synthesize(SynthConfig(layout="joints-19", motion="random", object="none", frames=500, seed=21,
+                                  subject_seed=5, cameras=8)).labeled_points(layout.names)
+    model = LabelingModel.train(rom, layout.names, layout.rigid)
+    return layout, model, rom, test
+
+
+def triad_frames(take):
+    """Per frame the triad's rotation and translation (Kabsch onto its mean shape), and which frames have it."""
+    idx = [take.index(n) for n in RIGID]
+    tri = take.positions[:, idx]
+    canon = canonical_from_markers(tri)
+    seen = ~np.isnan(tri[..., 0])
+    ok = seen.all(axis=1)
+    rot, trans = kabsch(np.broadcast_to(canon, tri[ok].shape), tri[ok])
+    return idx, tri, canon, ok, rot, trans
+
+
+def moved_triad(take, rotation, shift, scale=1.0):
+    """The take with its back triad put elsewhere on the hand (turned by ``rotation`` about its centre, moved by
+    ``shift`` metres, both in its own frame, and scaled), as a glove put on again on another day; the finger
+    markers are where they were. Frames without the whole triad lose it."""
+    idx, tri, canon, ok, rot, trans = triad_frames(take)
+    local = np.einsum("tji,tmj->tmi", rot, tri[ok] - trans[:, None])  # noise kept
+    new = scale * canon @ rotation.T + shift
+    out = np.full(tri.shape, np.nan)
+    out[ok] = np.einsum("tij,tmj->tmi", rot, local - canon + new) + trans[:, None]
+    positions = take.positions.copy()
+    positions[:, idx] = out
+    return MarkerSequence(positions, take.names, take.rate)
+
+
+def test_moved_spatial_model_equals_moved_points(takes):
+    # Independent computation: the moved model on points x gives the trained model's value on R x + t.
+    _, model, _, _ = takes
+    rng = np.random.default_rng(0)
+    rot = Rotation.from_rotvec(rng.normal(0, 0.3, 3)).as_matrix()
+    trans = rng.normal(0, 0.01, 3)
+    points = model.spatial.means[:, 0] + rng.normal(0, 0.01, (len(model.spatial.names), 3))
+    np.testing.assert_allclose(model.spatial.moved(rot, trans).log_likelihood(points),
+                               model.spatial.log_likelihood(points @ rot.T + trans), rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("labelled", [False, True])
+def test_registration_recovers_a_known_misalignment(takes, labelled):
+    # The training take's own points, moved by a known 13 degree / 13 mm transform: registration finds it.
+    _, model, rom, _ = takes
+    n_rigid = len(model.rigid.names)
+    positions = np.stack([rom.positions[:, rom.index(n)] for n in model.names], axis=1)
+    rot, trans, ok = _rigid_transforms(model.rigid.canonical, positions[:, :n_rigid])
+    local = np.einsum("tji,tmj->tmi", rot[ok], positions[ok, n_rigid:] - trans[ok, None])[::4]
+    labels = np.broadcast_to(np.arange(local.shape[1]), local.shape[:2])
+    seen = ~np.isnan(local[..., 0])
+    local, labels = local[seen], labels[seen]
+    true_rot = Rotation.from_rotvec(np.deg2rad(13) * np.array([0.3, -0.8, 0.52]) / np.linalg.norm([0.3, -0.8, 0.52]))
+    true_rot = true_rot.as_matrix()
+    true_trans = np.array([0.008, -0.006, 0.0085])  # 13 mm
+    take_local = (local - true_trans) @ true_rot  # model = R take + t
+    r, t = register_to_model(model.spatial, take_local, labels if labelled else None)
+    angle = np.degrees(Rotation.from_matrix(r @ true_rot.T).magnitude())
+    assert angle < 0.5 and np.linalg.norm(t - true_trans) < 0.001
+
+
+def test_rigid_set_relearned_from_a_take_with_other_distances(takes):
+    # Issue 14: a take whose triad distances differ by 3.5 mm from training; the trained tolerance is tighter.
+    _, model, _, test = takes
+    stretched = moved_triad(test, np.eye(3), np.zeros(3), scale=1.08)
+    idx = [stretched.index(n) for n in RIGID]
+    truth = canonical_from_markers(stretched.positions[:, idx])
+    frames = [f[~np.isnan(f[:, 0])] for f in stretched.positions]
+    new = rigid_from_take(model.rigid, frames, width=0.01)
+    assert new is not None
+    i, j = np.triu_indices(3, 1)
+    got = np.linalg.norm(new.canonical[i] - new.canonical[j], axis=1)
+    want = np.linalg.norm(truth[i] - truth[j], axis=1)
+    trained = np.linalg.norm(model.rigid.canonical[i] - model.rigid.canonical[j], axis=1)
+    assert np.abs(want - trained).max() > 0.003  # the case of the issue
+    np.testing.assert_allclose(got, want, atol=0.0005)
+
+
+@pytest.fixture(scope="module")
+def triad_13(takes):
+    # The issue's other-day take: the back triad 13 degrees / 13 mm from where it sat in the training take.
+    _, model, _, test = takes
+    axis = np.array([0.48, 0.6, -0.64])
+    turn = Rotation.from_rotvec(np.deg2rad(13) * axis / np.linalg.norm(axis)).as_matrix()
+    moved = moved_triad(test, turn, np.array([0.0075, -0.0075, 0.0075]))
+    return corrupt(moved, ghost_rate=2.0, dropout=0.05, seed=0)
+
+
+def test_triad_moved_relative_to_the_fingers_before(takes, triad_13):
+    # Before: a spatial model trained on one take does not fit the other day's (measured: 25-50 % correct).
+    _, model, _, _ = takes
+    unlabeled, truth = triad_13
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        score = score_labels(label_take(unlabeled, model, adapt=False).markers, truth)
+    assert score.fraction("correct") < 0.9
+
+
+def test_triad_moved_relative_to_the_fingers_adapted(takes, triad_13):
+    _, model, _, _ = takes
+    unlabeled, truth = triad_13
+    online = score_labels(label_take(unlabeled, model).markers, truth)
+    offline = label_take(unlabeled, model, offline=True)
+    two_pass = score_labels(offline.markers, truth)
+    # Measured on this take: online 92 %, offline two passes 97 % correct (the issue's goal, 99 %, is not met).
+    assert online.fraction("correct") > 0.88
+    assert two_pass.fraction("correct") > 0.95 and two_pass.fraction("erroneous") < 0.03
+    assert offline.model is not None
+
+
+def test_adaptation_does_not_hurt_a_take_of_the_same_day(takes):
+    _, model, _, test = takes
+    unlabeled, truth = corrupt(test, ghost_rate=2.0, dropout=0.05, seed=1)
+    plain = score_labels(label_take(unlabeled, model, adapt=False).markers, truth)
+    online = score_labels(label_take(unlabeled, model).markers, truth)
+    offline = score_labels(label_take(unlabeled, model, offline=True).markers, truth)
+    assert online.fraction("correct") >= plain.fraction("correct") - 0.003
+    assert offline.fraction("correct") >= plain.fraction("correct") - 0.001
+    assert offline.fraction("erroneous") <= plain.fraction("erroneous") + 0.001
+
+
+def test_a_lost_hand_frame_is_a_warning_stored_with_the_result(takes):
+    # The back markers hidden in every frame (and the knuckle markers, rigid with them, that can pass for a
+    # triad): the hand frame is lost, and the result says so (it was exit 0 without a word).
+    _, model, _, test = takes
+    positions = test[:200].positions.copy()
+    positions[:, [test.index(n) for n in RIGID + [f"{f}_mcp" for f in ("index", "middle", "ring", "pinky")]]] = np.nan
+    unlabeled, _ = corrupt(MarkerSequence(positions, test.names, test.rate), ghost_rate=0.0, dropout=0.0, seed=0)
+    with pytest.warns(HandcapWarning, match="hand frame lost in"):
+        result = label_take(unlabeled, model)
+    assert any("hand frame lost" in w for w in result.warnings)
+    assert any("labels for" in w for w in result.warnings)
+    assert result.markers.warnings == result.warnings
+
+
+def test_several_training_takes(takes):
+    # Two takes of other days (the second with its triad put on again 13 degrees / 13 mm away): pooled in
+    # their own hand frames, the mixtures are as tight as from one take; the tolerance is the within-take spread.
+    layout, model, rom, _ = takes
+    turn = Rotation.from_rotvec(np.deg2rad(13) * np.array([0.0, 0.6, 0.8])).as_matrix()
+    other_day = moved_triad(rom, turn, np.array([0.0075, -0.0075, 0.0075]))
+    both = LabelingModel.train([rom[:600], other_day[600:]], layout.names, layout.rigid)
+    # Trained on both halves, labelling a take of the first day is as good as with a model of the first day.
+    np.testing.assert_allclose(both.rigid.canonical, model.rigid.canonical, atol=0.001)
+    assert 0.5 * model.rigid.tolerance < both.rigid.tolerance < 2 * model.rigid.tolerance
+    spread_one = np.sqrt(np.trace(np.linalg.inv(model.spatial.precision_chol @ np.swapaxes(
+        model.spatial.precision_chol, -1, -2)), axis1=-2, axis2=-1)).mean()
+    spread_two = np.sqrt(np.trace(np.linalg.inv(both.spatial.precision_chol @ np.swapaxes(
+        both.spatial.precision_chol, -1, -2)), axis1=-2, axis2=-1)).mean()
+    assert spread_two < 1.3 * spread_one
+    with pytest.raises(Exception, match="different frame rates"):
+        LabelingModel.train([rom, MarkerSequence(rom.positions, rom.names, 50.0)], layout.names, layout.rigid)
