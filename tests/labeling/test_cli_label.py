@@ -84,3 +84,59 @@ def test_a_held_object_from_the_training_take(takes, capsys):
     assert main(["label", str(r / "all.c3d"), "--train", str(r / "rom_all.c3d"), "--layout", "glove-13",
                  "--object", "pillow_top,pillow_left", "--out", str(r / "x.c3d")]) == 2
     assert "3 or more markers, got 2" in capsys.readouterr().err
+
+
+def test_two_hands_from_the_command_line(takes, shared_data, tmp_path, capsys):
+    # Issue 14: --layout once per hand (each with its own names and rigid markers), --train takes holding both.
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from handcap import MarkerSequence
+    from handcap.layouts import load_layout
+    glove = load_layout("glove-13")
+    paths = []
+    for prefix in ("R_", "L_"):
+        layout = replace(glove, name=prefix + "glove", rigid=tuple(prefix + n for n in glove.rigid),
+                         markers=tuple(replace(m, name=prefix + m.name) for m in glove.markers))
+        layout.save(tmp_path / f"{prefix}layout.toml")
+        paths.append(str(tmp_path / f"{prefix}layout.toml"))
+    take = read_markers(shared_data / "markers" / "hand_embodiment_glove" / "recording.tsv").select(glove.names)
+    mirrored = take.positions * [-1.0, 1.0, 1.0]
+    centre = np.nanmean(mirrored.reshape(-1, 3), axis=0)
+    left = (mirrored - centre) @ Rotation.from_euler("z", 180, degrees=True).as_matrix().T + centre + [0.4, 0, 0]
+    names = tuple("R_" + n for n in glove.names) + tuple("L_" + n for n in glove.names)
+    both = MarkerSequence(np.concatenate([take.positions, np.roll(left, -1500, axis=0)], axis=1), names, take.rate)
+    write_markers(both[:2000], tmp_path / "rom.c3d")
+    write_markers(both[2000:2600], tmp_path / "test.c3d")
+    assert main(["corrupt", str(tmp_path / "test.c3d"), "--ghost-rate", "2", "--seed", "0",
+                 "--out", str(tmp_path / "unl.c3d")]) == 0
+    assert main(["label", str(tmp_path / "unl.c3d"), "--train", str(tmp_path / "rom.c3d"), "--layout", paths[0],
+                 "--layout", paths[1], "--out", str(tmp_path / "labeled.c3d")]) == 0
+    from handcap.labeling import score_labels
+    labeled, truth = read_markers(tmp_path / "labeled.c3d"), read_markers(tmp_path / "unl.truth.c3d")
+    assert set(labeled.names) == set(names)
+    score = score_labels(labeled, truth)
+    assert score.fraction("correct") > 0.995 and score.fraction("erroneous") < 0.001
+    capsys.readouterr()
+    assert main(["label", str(tmp_path / "unl.c3d"), "--train", str(tmp_path / "rom.c3d"), "--layout", paths[0],
+                 "--layout", paths[1], "--method", "nearest", "--out", str(tmp_path / "x.c3d")]) == 2
+    assert "several --layout" in capsys.readouterr().err
+
+
+def test_several_training_takes_and_strict_warnings(takes, capsys):
+    # --train repeated; a take whose hand frame cannot be found warns, and --strict makes that exit 2.
+    r = takes
+    assert main(["label", str(r / "test.c3d"), "--train", str(r / "rom.c3d"), "--train", str(r / "rom_all.c3d"),
+                 "--layout", "glove-13", "--out", str(r / "two_takes.c3d")]) == 0
+    take = read_markers(r / "test.c3d")
+    positions = take.positions.copy()
+    positions[:, [take.index(n) for n in ("hand_top", "hand_left", "hand_right")]] = np.nan
+    from handcap import MarkerSequence
+    write_markers(MarkerSequence(positions, take.names, take.rate), r / "no_back.c3d")
+    capsys.readouterr()
+    assert main(["--strict", "label", str(r / "no_back.c3d"), "--train", str(r / "rom.c3d"), "--layout", "glove-13",
+                 "--out", str(r / "no_back_labeled.c3d")]) == 2
+    err = capsys.readouterr().err
+    assert "warning: hand frame lost in" in err
+    assert (r / "no_back_labeled.c3d").exists()  # written all the same
