@@ -128,3 +128,28 @@ def test_a_motion_worn_by_other_subjects_keeps_the_pose_and_changes_the_hand():
     with pytest.raises(HandcapError, match="with poses"):
         worn_by_another_subject(PosedTake(first.positions, first.names, RATE), "active-9", 1)
     assert simulate_take("active-9", "random", 20, RATE, 4).subject == "synthetic subject 4"
+
+
+def test_each_finger_turns_on_its_own_about_the_back_of_the_hand():
+    from handcap.layouts import load_layout
+    from handcap.occlusion.augment import finger_groups
+
+    layout = load_layout("glove-13")
+    fingers = finger_groups(layout, layout.names)
+    # index, middle, pinky (little), ring, thumb: two markers each; the triad none.
+    assert fingers.tolist() == [-1, -1, -1, 4, 4, 0, 0, 1, 1, 3, 3, 2, 2]
+    rigid = np.array([n in layout.rigid for n in layout.names])
+    local = np.broadcast_to(layout.positions(), (3000, 13, 3)).copy()
+    a = Augmentation(scale=0, rigid_deg=0, rigid_mm=0, finger_deg=12.0, placement_mm=0)
+    out = augment_frames(local, np.zeros(3), rigid, a, np.random.default_rng(4), fingers)
+    pivot = local[0, rigid].mean(axis=0)
+    assert np.array_equal(out[:, rigid], local[:, rigid])
+    np.testing.assert_allclose(np.linalg.norm(out - pivot, axis=-1), np.linalg.norm(local - pivot, axis=-1))
+    for f in range(5):
+        pair = np.flatnonzero(fingers == f)
+        np.testing.assert_allclose(np.linalg.norm(out[:, pair[0]] - out[:, pair[1]], axis=-1),
+                                   np.linalg.norm(local[0, pair[0]] - local[0, pair[1]]))
+    # Two fingers turn independently: their moves are uncorrelated.
+    move = out - local
+    assert abs(np.corrcoef(move[:, 4, 0], move[:, 6, 0])[0, 1]) < 0.1
+    assert Augmentation().finger_deg == 20.0 and "fingers 20 deg" in Augmentation().describe()

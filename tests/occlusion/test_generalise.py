@@ -28,11 +28,11 @@ def _ratio(takes, augmentation, test):
 
 
 def test_augmentation_generalises_from_synthetic_hands_to_the_real_glove(synthetic_glove_takes, glove_split):
-    """No frame of the glove take is trained on. Measured: 1.05 without augmentation, 0.91 with it."""
+    """No frame of the glove take is trained on. Measured: 1.05 without augmentation, 0.86 with it."""
     _, test = glove_split
     plain, _ = _ratio(synthetic_glove_takes, NO_AUGMENTATION, test)
     augmented, table = _ratio(synthetic_glove_takes, SUBJECT_AUGMENTATION, test)
     print(f"every frame of 0.5 s gaps, NN/AC: not augmented {plain:.3f}, augmented {augmented:.3f}")
-    assert augmented < 0.95 * plain
-    assert augmented < 1.0
+    assert augmented < 0.9 * plain
+    assert augmented < 0.95
     assert (table["ac"] > 0.0004).all() and (table["ac"] < 0.002).all()  # AC's error itself, 0.4-2 mm

@@ -135,7 +135,7 @@ def knock_out(visible, rng, probability=DROP_PROBABILITY) -> np.ndarray:
 def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60, samples_per_epoch: int = 50_000,
                            batch_size: int = 256, hidden=HIDDEN, weights=None, template=None,
                            mask_input: bool = True, jitter: float = 0.0, augmentation=None, rigid=None,
-                           progress=None) -> MarkerPredictor:
+                           fingers=None, progress=None) -> MarkerPredictor:
     """Train a marker predictor on labeled frames.
 
     Parameters
@@ -163,6 +163,8 @@ def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60,
         training sample becomes another subject's hand with another marker placement.
     rigid : ndarray (M,) bool, optional
         The layout's rigid set (for the augmentation's rigid-set placement).
+    fingers : ndarray (M,) int, optional
+        Finger of each marker, -1 for none (for the augmentation's finger rest pose).
     progress : callable (epoch, loss), optional
 
     Returns
@@ -203,7 +205,7 @@ def train_marker_predictor(positions, names, *, seed: int = 0, epochs: int = 60,
         pick = rng.integers(0, len(clean), samples_per_epoch)
         frames, seen = clean[pick], visible[pick]
         if augment:
-            frames = augment_frames(frames, centre, rigid, augmentation, rng)
+            frames = augment_frames(frames, centre, rigid, augmentation, rng, fingers)
         if jitter > 0:
             frames = frames + rng.normal(0.0, jitter, frames.shape)
         hidden_now = knock_out(seen, rng)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from handcap.core.errors import HandcapError, warn
-from handcap.occlusion.augment import NO_AUGMENTATION, Augmentation, warped_copies
+from handcap.occlusion.augment import NO_AUGMENTATION, Augmentation, finger_groups, warped_copies
 from handcap.occlusion.data import PosedTake, marker_columns
 from handcap.occlusion.model import OcclusionModel
 from handcap.occlusion.predictor import train_marker_predictor
@@ -135,7 +135,8 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
     try:
         predictor = train_marker_predictor(positions, names, seed=seed, epochs=epochs, weights=weights,
                                            samples_per_epoch=samples_per_epoch, augmentation=augmentation,
-                                           rigid=rigid, progress=report("markers"))
+                                           rigid=rigid, fingers=finger_groups(layout, names),
+                                           progress=report("markers"))
         posed = [t for t in takes + copies if t.has_poses]
         regressor = None
         if posed:
