@@ -252,6 +252,12 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         attachment = updated
         if moved < tolerance:
             break
+    if fit_shape:
+        # The trust-region solver stays strictly inside its bounds: a value that ended within 0.02 of one is on it
+        # (and is reported so). Only at the end: snapping between rounds would change the rounds' path.
+        stuck = np.abs(attachment.betas) > SHAPE_BOUND - 0.02
+        attachment = replace(attachment, betas=np.where(stuck, np.sign(attachment.betas) * SHAPE_BOUND,
+                                                        attachment.betas))
     model = MarkerModel(hand, attachment)
     poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
     fit = model.positions(poses.transl, poses.rot, poses.phi)
@@ -386,5 +392,4 @@ def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
         return np.concatenate([(fit - np.nan_to_num(target))[rows].ravel(), weight * betas])
 
     result = least_squares(residual, attachment.betas, bounds=(-SHAPE_BOUND, SHAPE_BOUND), diff_step=1e-3, max_nfev=40)
-    # The trust-region solver stays strictly inside its bounds: a value that ends within 0.02 of one is on it.
-    return np.where(np.abs(result.x) > SHAPE_BOUND - 0.02, np.sign(result.x) * SHAPE_BOUND, result.x)
+    return result.x
