@@ -60,6 +60,15 @@ class MarkerAttachment:
         if tri.shape != (m,) or bary.shape != (m, 3) or offset.shape != (m,) or betas.shape != (10,):
             raise HandcapError(f"attachment arrays do not match {m} markers: triangles {tri.shape}, "
                                f"barycentric {bary.shape}, offset {offset.shape}, betas {betas.shape}")
+        # Issue 14: NaN here used to surface as a LinAlgError deep in the solver.
+        bad = [name for name, a in (("barycentric", bary), ("offset", offset), ("betas", betas))
+               if not np.isfinite(a).all()]
+        if bad:
+            raise HandcapError(f"the attachment has NaN or infinite values in {', '.join(bad)}; "
+                               f"calibrate it again (handcap calibrate-markers)")
+        if m and tri.min() < 0:
+            raise HandcapError(f"the attachment has a negative triangle number ({tri.min()}); "
+                               f"calibrate it again (handcap calibrate-markers)")
         object.__setattr__(self, "marker_names", tuple(str(n) for n in self.marker_names))
         object.__setattr__(self, "triangles", tri)
         object.__setattr__(self, "barycentric", bary)
