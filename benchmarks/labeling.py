@@ -8,7 +8,7 @@ with 2 ghosts per second near the hand and 5 % extra random dropouts (seed 0):
 1. the Table-1 style table of the labeler, strictly online (lag 0, N = 5);
 2. the same table for the nearest-neighbour baseline;
 3. frames/s and p50/p99 per-frame latency of the streaming labeler
-   (``OnlineLabeler.update``), 13 markers, N = 5;
+   (``OnlineLabeler.update``), 13 markers, N = 5, with the adaptation to the take on (the default) and off;
 4. the effect of the look-ahead (lag 5, offline) and of the tracking hypothesis;
 5. two hands in one stream (a mirrored later range of the same recording as the left hand);
 6. synthetic joints-19 and glove-13 grasps of a cylinder (occlusion by the hand and the object, ghosts,
@@ -71,21 +71,26 @@ def main() -> None:
 
     print("== 3. streaming speed (OnlineLabeler.update, 13 markers, N = 5, lag 0) ==")
     points = PointCloudSequence.from_markers(unlabeled)
-    passes = []
+    passes = {True: [], False: []}
     for repeat in range(4):  # the first pass warms caches; the others are reported (this VM's timing varies)
-        labeler = OnlineLabeler(model, hypotheses=5, lag=0)
-        latency = np.empty(points.n_frames)
-        for t, frame in enumerate(points.frames):
-            tick = time.perf_counter()
-            labeler.update(frame)
-            latency[t] = time.perf_counter() - tick
-        if repeat:
-            passes.append((points.n_frames / latency.sum(), 1000 * latency))
-    passes.sort(key=lambda p: p[0])
-    fps, ms = passes[len(passes) // 2]
-    print(f"{fps:.0f} frames/s (median of {len(passes)} passes: {', '.join(f'{p[0]:.0f}' for p in passes)}), "
-          f"p50 {np.percentile(ms, 50):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms, max {ms.max():.2f} ms "
-          f"(targets: >= 1000 frames/s, p99 < 5 ms; the paper's Matlab: 45 frames/s)\n")
+        for adapt in (True, False):  # interleaved, so that both see the same load
+            labeler = OnlineLabeler(model, hypotheses=5, lag=0, adapt=adapt)
+            latency = np.empty(points.n_frames)
+            for t, frame in enumerate(points.frames):
+                tick = time.perf_counter()
+                labeler.update(frame)
+                latency[t] = time.perf_counter() - tick
+            if repeat:
+                passes[adapt].append((points.n_frames / latency.sum(), 1000 * latency))
+    for adapt in (True, False):
+        runs = sorted(passes[adapt], key=lambda p: p[0])
+        fps, ms = runs[len(runs) // 2]
+        print(f"adaptation {'on ' if adapt else 'off'}: {fps:.0f} frames/s (median of {len(runs)} passes: "
+              f"{', '.join(f'{p[0]:.0f}' for p in runs)}), p50 {np.percentile(ms, 50):.2f} ms, "
+              f"p99 {np.percentile(ms, 99):.2f} ms, max {ms.max():.2f} ms")
+    ratio = np.median([p[0] for p in passes[True]]) / np.median([p[0] for p in passes[False]])
+    print(f"on / off: {ratio:.2f} of the frame rate (targets: >= 1000 frames/s, p99 < 5 ms, with adaptation on; "
+          f"the paper's Matlab: 45 frames/s)\n")
 
     print("== 4. variants ==")
     print(f"{'variant':34s} {'correct %':>9s} {'erroneous %':>11s} {'false marker %':>14s} {'false occl. %':>13s}")

@@ -84,29 +84,29 @@ def register_to_model(spatial: SpatialModel, local, labels=None, *, weights=None
     weights = np.ones(len(local)) if weights is None else np.asarray(weights, dtype=np.float64)
     if len(local) < 10:
         return rot, trans
-    means = spatial.means  # (M, L, 3)
-    cov = _covariances(spatial)
     m, n_comp = spatial.weights.shape
+    cov = _covariances(spatial).reshape(-1, 3, 3)  # (M L, 3, 3)
     labelled = labels is not None
     if labelled:
         labels = np.asarray(labels)
         keep = labels >= 0
         local, labels, weights = local[keep], labels[keep], weights[keep]
-        mu = means[labels]  # (N, L, 3)
-        c0 = cov[labels]  # (N, L, 3, 3)
+        pick = labels[:, None] * n_comp + np.arange(n_comp)  # (N, L): each point's own label's components
         logw = np.log(np.maximum(spatial.weights[labels], 1e-300))  # (N, L)
     else:
         w = spatial.weights.ravel() / m
-        live = w > 0
-        mu = means.reshape(-1, 3)[live][None]
-        c0 = cov.reshape(-1, 3, 3)[live][None]
-        logw = np.log(w[live])[None]
+        pick = np.flatnonzero(w > 0)[None]  # (1, K): every label's components
+        logw = np.log(w[pick])
+    mu = spatial.means.reshape(-1, 3)[pick]  # (N or 1, K, 3)
     eye = np.eye(3)
     cut = max(1, int(0.6 * iterations))
     for it in range(iterations):
         extra = (anneal * max(0.0, 1.0 - it / cut)) ** 2
-        c = c0 + extra * eye
-        whiten = np.linalg.cholesky(np.linalg.inv(c))  # W W^T = C^-1; (N or 1, K, 3, 3)
+        if extra > 0:
+            comp = np.linalg.cholesky(np.linalg.inv(cov + extra * eye))  # W W^T = C^-1 per component
+        else:
+            comp = spatial.precision_chol.reshape(-1, 3, 3)
+        whiten = comp[pick]  # (N or 1, K, 3, 3)
         y = local @ rot.T  # (N, 3) turned points
         d = (y + trans)[:, None] - mu  # (N, K, 3)
         r = np.matmul(d[:, :, None, :], whiten)[:, :, 0, :]  # whitened residuals W^T d
@@ -394,7 +394,7 @@ class StreamAdaptation:
     """
 
     window = 1000  # frames of labelled points kept
-    most_points = 1600  # points per re-estimation (spread over the window), so that one stays ~1 ms
+    most_points = 800  # points per re-estimation (spread over the window), so that one stays ~1 ms
 
     def __init__(self, labeler, every: int, forget: float):
         self.labeler = labeler
@@ -501,5 +501,5 @@ class StreamAdaptation:
         local = self.local[slots, labels]
         weights = self.forget ** (self.count - self.stamp[slots])
         self.rotation, self.translation = register_to_model(self.base, local, labels, weights=weights, anneal=0.0,
-                                                            iterations=3, start=(self.rotation, self.translation))
+                                                            iterations=2, start=(self.rotation, self.translation))
         self.labeler.spatial = self.base.moved(self.rotation, self.translation)
