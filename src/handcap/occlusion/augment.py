@@ -113,7 +113,7 @@ NO_AUGMENTATION = Augmentation(scale=0.0, rigid_deg=0.0, rigid_mm=0.0, finger_de
 #: epochs; scale, rigid set, placement): 1.16 without augmentation, 0.99 at (8 %, 8 deg / 5 mm, 3 mm), 0.85
 #: at these values without the finger turn, 0.90 at (15 %, 25 deg / 15 mm, 10 mm); 0.75 with the finger
 #: turn. It costs where the subject is known: trained on the glove take's own first 60 %, 0.57 without
-#: and 0.77 with it (no finger turn); so it is not the default for a user's own takes.
+#: and 0.74 with it; so it is not the default for a user's own takes.
 SUBJECT_AUGMENTATION = Augmentation()
 
 
