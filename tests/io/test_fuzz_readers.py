@@ -26,6 +26,7 @@ from handcap import HandcapError, MarkerSequence
 from handcap.core.cameras import Camera, CameraRig
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
+from handcap.hand.attachment import MarkerAttachment
 from handcap.io import (
     read_hand_motion,
     read_markers,
@@ -169,6 +170,9 @@ READERS = {
     "opencv-xml": (lambda: _written(lambda p: write_cameras_opencv(_rig(), p), ".xml"), "rig.xml", read_rig,
                    "text"),
     "qualisys-qca": (_qca, "rig.qca.txt", read_rig, "text"),
+    "attachment-npz": (lambda: _written(lambda p: MarkerAttachment(
+        ("a", "b", "c"), np.array([1, 2, 3]), np.full((3, 3), 1 / 3), np.full(3, 0.005), np.zeros(10)).save(p),
+        ".npz"), "attachment.npz", MarkerAttachment.load, "npz"),
     "layout-toml": (_layout, "layout.toml", load_layout, "text"),
     "uci-postures-csv": (_uci, "Postures.csv", read_uci_postures, "text"),
 }

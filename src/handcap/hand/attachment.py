@@ -53,10 +53,14 @@ class MarkerAttachment:
 
     def __post_init__(self):
         m = len(self.marker_names)
-        tri = np.asarray(self.triangles, dtype=np.int64)
-        bary = np.asarray(self.barycentric, dtype=np.float64)
-        offset = np.asarray(self.offset, dtype=np.float64)
-        betas = np.asarray(self.betas, dtype=np.float64)
+        raw = {"triangles": self.triangles, "barycentric": self.barycentric, "offset": self.offset,
+               "betas": self.betas}
+        arrays = {key: np.asarray(value) for key, value in raw.items()}
+        not_real = [key for key, a in arrays.items() if a.dtype.kind not in "biuf"]
+        if not_real:
+            raise HandcapError(f"attachment entries {', '.join(not_real)} must hold real numbers")
+        tri = arrays["triangles"].astype(np.int64)
+        bary, offset, betas = (arrays[key].astype(np.float64) for key in ("barycentric", "offset", "betas"))
         if tri.shape != (m,) or bary.shape != (m, 3) or offset.shape != (m,) or betas.shape != (10,):
             raise HandcapError(f"attachment arrays do not match {m} markers: triangles {tri.shape}, "
                                f"barycentric {bary.shape}, offset {offset.shape}, betas {betas.shape}")
@@ -172,7 +176,10 @@ class MarkerAttachment:
     @classmethod
     def load(cls, path) -> "MarkerAttachment":
         arrays = load_npz(path, ("marker_names", "triangles", "barycentric", "offset", "betas"), "attachment .npz")
-        return cls(tuple(arrays["marker_names"]), arrays["triangles"], arrays["barycentric"], arrays["offset"],
-                   arrays["betas"], str(arrays.get("model", "openhand")), str(arrays.get("side", "right")),
-                   read_warnings(arrays))
+        try:
+            names = tuple(str(n) for n in np.atleast_1d(arrays["marker_names"]))
+            return cls(names, arrays["triangles"], arrays["barycentric"], arrays["offset"], arrays["betas"],
+                       str(arrays.get("model", "openhand")), str(arrays.get("side", "right")), read_warnings(arrays))
+        except HandcapError as err:
+            raise HandcapError(f"{path}: {err}") from None
 
