@@ -164,6 +164,7 @@ def _cmd_solve(args) -> tuple[str, ...]:
     motion = solve_hand(markers, attachment, hand, method=args.method, filter_cutoff=args.filter_cutoff,
                         filter_order=args.filter_order)
     seconds = time.perf_counter() - start
+    motion = motion.with_warnings(*markers.warnings)  # e.g. the unit of the input guessed: kept with the result
     write_hand_motion(motion, args.out)
     residuals = motion.marker_residuals
     print(f"{args.out}: {motion.n_frames} frames in {seconds:.1f} s ({motion.n_frames / seconds:.0f} frames/s, "
@@ -298,39 +299,46 @@ def _scan_points(path):
     return vertices
 
 
-def _cmd_label(args) -> None:
+def _cmd_label(args) -> tuple[str, ...]:
     from handcap.io import check_not_input, read_markers, read_points, write_markers
     from handcap.labeling import LabelingModel, label_take
     from handcap.layouts import load_layout
-    check_not_input(args.out, args.input, args.train)
+    check_not_input(args.out, args.input, *args.train)
     reuse = _is_model_file(args)  # --train is a saved model: it is used, and not written again
     if args.model and not reuse:
-        check_not_input(args.model, args.input, args.train, args.out)
-    layout = load_layout(args.layout)
+        check_not_input(args.model, args.input, *args.train, args.out)
+    layouts = [load_layout(name) for name in args.layout]
+    if len(layouts) > 1 and (args.model or args.method == "nearest"):
+        raise HandcapError("several --layout (hands) label with the viterbi labeler and save no --model; "
+                           "give one --layout for those")
     points = read_points(args.input, units=args.units)
     if reuse:
-        model = LabelingModel.load(args.train)
+        models = [LabelingModel.load(args.train[0])]
     else:
-        train = read_markers(args.train, units=args.units, hand=[m.name for m in layout.hand_markers])
-        model = LabelingModel.train(train, layout.names, layout.rigid, seed=args.seed)
+        hand = [m.name for layout in layouts for m in layout.hand_markers]
+        takes = [read_markers(path, units=args.units, hand=hand) for path in args.train]
+        models = [LabelingModel.train(takes, layout.names, layout.rigid, seed=args.seed) for layout in layouts]
     options = {} if args.method == "nearest" else dict(hypotheses=args.hypotheses, lag=args.lag)
     if args.object:
         if args.method == "nearest":
             raise HandcapError("--object works with the viterbi labeler")
-        options["objects"] = _label_objects(args.train if not _is_model_file(args) else None, args.object)
-    result = label_take(points, model, offline=args.offline, method=args.method, **options)
+        options["objects"] = _label_objects(args.train[0] if not reuse else None, args.object)
+    result = label_take(points, models[0] if len(models) == 1 else models, offline=args.offline,
+                        method=args.method, **options)
     write_markers(result.markers, args.out)
     if args.model and not reuse:
-        model.save(args.model)
+        models[0].save(args.model)
     seen = (result.markers.positions[..., 0] == result.markers.positions[..., 0]).mean()
     lost = result.lost_frames
     print(f"{args.out}: {points.n_frames} frames, {len(result.markers.names)} labels, {100 * seen:.1f} % of label-frames "
           f"filled; hand frame not found in {len(lost)} frames" + (f" (first: {lost[0]})" if len(lost) else ""))
+    return result.warnings
 
 
 def _is_model_file(args) -> bool:
     from pathlib import Path
-    return bool(args.model) and Path(args.train).suffix.lower() == ".npz" and _is_labeling_model(args.train)
+    return (bool(args.model) and len(args.train) == 1 and Path(args.train[0]).suffix.lower() == ".npz"
+            and _is_labeling_model(args.train[0]))
 
 
 def _label_objects(train_path, specs):
@@ -398,7 +406,7 @@ def _cmd_corrupt(args) -> None:
     print(f"{out}: {unlabeled.n_frames} frames of unlabeled points ({extra} ghost samples); truth in {truth_path}")
 
 
-def _cmd_train_occlusion(args) -> None:
+def _cmd_train_occlusion(args) -> tuple[str, ...]:
     import time
 
     from handcap.io import check_not_input
@@ -441,7 +449,7 @@ def _cmd_train_occlusion(args) -> None:
     return model.warnings
 
 
-def _cmd_fill(args) -> None:
+def _cmd_fill(args) -> tuple[str, ...]:
     import time
 
     from handcap.io import check_not_input, read_markers, write_markers
@@ -456,6 +464,7 @@ def _cmd_fill(args) -> None:
           f"gaps up to {report.max_gap_frames} frames = {args.max_gap:g} s), {report.left_gaps} gaps "
           f"({report.left_samples} samples) left missing, {seconds:.1f} s"
           + (f"; not in the model, left as they were: {', '.join(report.untouched)}" if report.untouched else ""))
+    return filled.warnings
 
 
 def _cmd_clean(args) -> tuple[str, ...]:
@@ -497,13 +506,21 @@ def _add_label(verbs) -> None:
                          description="Every point of IN is treated as unlabeled, whatever its name or slot. The "
                                      "labels and the spatial model come from ROM, a labeled range-of-motion take "
                                      "(any marker format) with the layout's markers; the layout's rigid markers give "
-                                     "the hand frame.")
+                                     "the hand frame. The spatial model is re-aligned to the take as it is labelled "
+                                     "(another day's glove, a re-stuck marker, another subject); a hand frame lost "
+                                     "in many frames or few points labelled are warnings.")
     p.add_argument("input", help="unlabeled points: any marker file, or a points .npz")
-    p.add_argument("--train", required=True, help="labeled range-of-motion take (or a model .npz with --model)")
-    p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
+    p.add_argument("--train", required=True, action="append", metavar="ROM",
+                   help="labeled range-of-motion take (or a model .npz with --model); repeat for several takes "
+                        "(other days, other subjects), each holding every --layout's markers")
+    p.add_argument("--layout", required=True, action="append",
+                   help=f"marker layout: {', '.join(SHIPPED)} or a .toml file; repeat once per hand in the stream "
+                        "(each with its own marker names and rigid markers, which may include wrist markers)")
     p.add_argument("--hypotheses", type=int, default=5, help="N best assignments per frame (default %(default)s)")
     p.add_argument("--lag", type=int, default=0, help="look-ahead frames before deciding (default 0: online)")
-    p.add_argument("--offline", action="store_true", help="decide on the whole take")
+    p.add_argument("--offline", action="store_true",
+                   help="decide on the whole take, in two passes: the spatial model re-aligned to the take's labels "
+                        "between them")
     p.add_argument("--method", choices=("viterbi", "nearest"), default="viterbi",
                    help="the labeler, or the nearest-neighbour baseline")
     p.add_argument("--model", help="also save the trained model here (.npz); if --train is such a model, use it")
@@ -676,8 +693,8 @@ def _add_occlusion(verbs) -> None:
                    help="also train on synthetic takes: SUBJECTS x every synthetic motion, each take a new subject "
                         "(default %(default)s)")
     p.add_argument("--augment", action="store_true",
-                   help="augment every sample as another subject (scale, back-of-hand and marker placement) for a "
-                        "model that must serve new subjects; it costs on the training subject itself")
+                   help="augment every sample as another subject (scale, back-of-hand, finger and marker "
+                        "placement) for a model that must serve new subjects; it costs on the training subject itself")
     p.add_argument("--speed-copies", type=int, default=0, metavar="N",
                    help="also train on N time-warped copies of every take (0.6-1.6x speed; default %(default)s)")
     p.add_argument("--out", required=True, help="model .npz")
@@ -838,7 +855,7 @@ def _cmd_calibrate_rig(args) -> tuple[str, ...]:
     if names is not None and len(names) != len(args.recordings):
         raise HandcapError(f"{len(names)} camera names for {len(args.recordings)} cameras; give one name per camera")
     _camera_toml_out(args.out, args.recordings + ([args.intrinsics] if args.intrinsics else []))
-    cameras = None if args.intrinsics is None else read_rig(args.intrinsics)
+    cameras = None if args.intrinsics is None else read_rig(args.intrinsics, positions=False)  # extrinsics unused
     detections = [detect_in_files(path, board, every=args.every) for path in args.recordings]
     result = calibrate_rig(detections, names=names, cameras=cameras, refine_intrinsics=args.refine_intrinsics,
                            fix_k3=args.fix_k3, origin=args.origin, origin_frame=args.origin_frame,
@@ -928,8 +945,8 @@ def _cmd_layout_new(args) -> None:
         raise HandcapError(f"{out}: exists; choose another name or add --force to replace it")
     layout = load_layout(args.like, side=args.side)
     with atomic_output(out, "w") as fh:
-        fh.write(layout_template(layout, like=args.like))
-    given = sum(m.position is not None for m in layout.markers)
+        fh.write(layout_template(layout, like=args.like, positions=not args.no_positions))
+    given = 0 if args.no_positions else sum(m.position is not None for m in layout.markers)
     print(f"{out}: {len(layout)} markers like {args.like} ({layout.side} hand, {given} with positions), every field "
           f"explained in its comments; next: handcap layout check {out} YOUR_TAKE")
 
@@ -961,6 +978,9 @@ def _add_layout(verbs) -> None:
                                                       "(default %(default)s)")
     q.add_argument("--side", choices=("right", "left"), default=None, help="write it for this hand (default: as "
                                                                             "--like)")
+    q.add_argument("--no-positions", action="store_true",
+                   help="leave the hand markers' positions out: calibrate-markers estimates them from a take (for "
+                        "markers placed otherwise than in --like)")
     q.add_argument("--force", action="store_true", help="replace --out if it exists")
     q.add_argument("--out", required=True, help="layout file to write (.toml)")
     q.set_defaults(run=_cmd_layout_new)
@@ -1037,7 +1057,8 @@ def main(argv=None) -> int:
             print(f"handcap {args.verb}: warning: {line}", file=sys.stderr)
         sys.stdout.flush()
     except HandcapError as err:
-        print(f"handcap {args.verb}: error: {err}", file=sys.stderr)
+        # One line, whatever the message quotes (an array's repr spans several).
+        print(f"handcap {args.verb}: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         # The reader of our output went away (``handcap ... | head``): not an error of ours. Point stdout at
