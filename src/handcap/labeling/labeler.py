@@ -24,7 +24,14 @@ and temporal evidence together given the best previous hypothesis (a tracking
 hypothesis; from every previous hypothesis labels no better on the real glove
 and synthetic takes), so a correct but spatially unlikely assignment (a finger in a
 pose the training take barely covered) is not lost when it is outside the N
-spatially best.
+spatially best; a track carries its label onto spatially filtered points for at
+most ``max_unlikely`` frames (a swap kept by continuity alone ends there).
+
+Issue 14 (takes of other days): the spatial model is re-aligned to the take
+(:mod:`handcap.labeling.adapt`; online every ``adapt_every`` frames, offline in
+two passes), the rigid set is re-learned from the take when its distances
+changed, and a hand frame lost in many frames or few labelled points are
+warnings stored on the :class:`LabelResult`.
 """
 
 from __future__ import annotations
