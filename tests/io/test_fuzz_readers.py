@@ -15,6 +15,7 @@ import re
 import shutil
 import tempfile
 import zipfile
+from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from handcap.core.cameras import Camera, CameraRig
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
 from handcap.hand.attachment import MarkerAttachment
+from handcap.occlusion.model import OcclusionModel
 from handcap.io import (
     read_hand_motion,
     read_markers,
@@ -173,6 +175,8 @@ READERS = {
     "attachment-npz": (lambda: _written(lambda p: MarkerAttachment(
         ("a", "b", "c"), np.array([1, 2, 3]), np.full((3, 3), 1 / 3), np.full(3, 0.005), np.zeros(10)).save(p),
         ".npz"), "attachment.npz", MarkerAttachment.load, "npz"),
+    "occlusion-model-npz": (lambda: files("handcap.occlusion").joinpath("weights", "glove-13.npz").read_bytes(),
+                            "model.npz", OcclusionModel.load, "npz"),
     "layout-toml": (_layout, "layout.toml", load_layout, "text"),
     "uci-postures-csv": (_uci, "Postures.csv", read_uci_postures, "text"),
 }

@@ -91,11 +91,16 @@ class OcclusionModel:
         try:
             predictor = MarkerPredictor.from_arrays(arrays)
             regressor = JointRegressor.from_arrays(arrays) if "jr_names" in arrays else None
+            info = dict(zip((str(k) for k in np.atleast_1d(arrays["info_keys"])),
+                            (str(v) for v in np.atleast_1d(arrays["info_values"]))))
+            warnings = tuple(str(w) for w in np.atleast_1d(arrays["warnings"])) if "warnings" in arrays else ()
+            return cls(predictor, regressor, str(arrays["side"]), str(arrays["layout"]), info, warnings)
         except KeyError as err:
             raise HandcapError(f"{path}: occlusion model is missing {err.args[0]!r}") from None
-        info = dict(zip((str(k) for k in arrays["info_keys"]), (str(v) for v in arrays["info_values"])))
-        warnings = tuple(str(w) for w in arrays["warnings"]) if "warnings" in arrays else ()
-        return cls(predictor, regressor, str(arrays["side"]), str(arrays["layout"]), info, warnings)
+        except (ValueError, TypeError, IndexError) as err:
+            # The format entry matched but an array has the wrong type or shape: a damaged file.
+            raise HandcapError(f"{path}: damaged occlusion model ({' '.join(str(err).split())[:120]}); "
+                               f"train it again with handcap train-occlusion") from None
 
     @classmethod
     def shipped(cls, layout: str) -> "OcclusionModel":
