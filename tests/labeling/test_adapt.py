@@ -180,3 +180,27 @@ def test_several_training_takes(takes):
     assert spread_two < 1.3 * spread_one
     with pytest.raises(Exception, match="different frame rates"):
         LabelingModel.train([rom, MarkerSequence(rom.positions, rom.names, 50.0)], layout.names, layout.rigid)
+
+
+def test_a_smooth_but_spatially_unlikely_point_starts_a_track(takes):
+    # Issue 14: a marker where the spatial model puts no label (the index fingertip 4 cm further out along its
+    # finger, as on a longer finger) but moving as a marker moves. Without births its label is left out in most
+    # frames (the model filters every pairing; adaptation moves the mean only part of the way); a chain of 5
+    # smooth frames starts the label's track on it once the labeler has aligned to the take.
+    # Measured: on the moved point in 22 % of the frames without births, 51 % with them (wrong 1.45 -> 0.25 %).
+    _, model, _, test = takes
+    pos = test.positions.copy()
+    tip, dip = test.index("index_tip"), test.index("index_dip")
+    step = pos[:, tip] - pos[:, dip]
+    pos[:, tip] += 0.04 * step / np.linalg.norm(step, axis=1, keepdims=True)
+    moved = MarkerSequence(pos, test.names, test.rate)
+    covered, score = {}, {}
+    for birth in (0, 5):
+        result = label_take(moved, model, birth=birth)
+        got = result.markers.positions[:, result.markers.index("index_tip")]
+        covered[birth] = np.isclose(got, pos[:, tip]).all(axis=1).mean()
+        score[birth] = score_labels(result.markers, moved)
+    assert covered[0] < 0.35
+    assert covered[5] > 0.4
+    assert score[5].fraction("correct") > score[0].fraction("correct")
+    assert score[5].fraction("erroneous") <= score[0].fraction("erroneous")

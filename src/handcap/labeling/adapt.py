@@ -414,6 +414,12 @@ class StreamAdaptation:
         self.relearned = 0
         self.checked = False
 
+    @property
+    def settled(self) -> bool:
+        """Whether the take's rigid shape has been checked (with rigid markers) and the model aligned to it:
+        until then a point the model filters out may as well mean a wrong hand frame."""
+        return self.aligned and (self.checked or self.labeler.finder is None)
+
     def watch_hand(self, points, found):
         """After the hand-frame finder: keep the frame, and re-learn the rigid set when it is mostly lost."""
         self.raw.append(points)

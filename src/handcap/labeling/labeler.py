@@ -25,7 +25,11 @@ hypothesis; from every previous hypothesis labels no better on the real glove
 and synthetic takes), so a correct but spatially unlikely assignment (a finger in a
 pose the training take barely covered) is not lost when it is outside the N
 spatially best; a track carries its label onto spatially filtered points for at
-most ``max_unlikely`` frames (a swap kept by continuity alone ends there).
+most ``max_unlikely`` frames (a swap kept by continuity alone ends there). A
+point no label accepts spatially but that has moved as a marker for ``birth``
+frames may start the track of the best label without one
+(:mod:`handcap.labeling.birth`; the paper's tracks started from temporally
+consistent, spatially unlikely points).
 
 Issue 14 (takes of other days): the spatial model is re-aligned to the take
 (:mod:`handcap.labeling.adapt`; online every ``adapt_every`` frames, offline in
@@ -44,6 +48,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.labeling.adapt import StreamAdaptation
+from handcap.labeling.birth import PointChains
 from handcap.labeling.frame import HandFrameFinder, RigidSet
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
 from handcap.labeling.murty import k_best_assignments
@@ -259,6 +264,20 @@ class OnlineLabeler:
     forget : float
         Weight kept per frame of age by a labelled point (0.999: a half-life
         of about 700 frames; a short memory sees one pose only).
+    birth : int
+        A point the spatial model filters out for every label may still
+        start a track (the tracking hypothesis) when it has moved as a marker
+        moves for this many frames (:mod:`handcap.labeling.birth`): it takes
+        the label without a track (never seen, warming up, or lost for over
+        ``max_coast`` frames) whose spatial model explains it best, scored
+        spatially at ``theta_min`` (as likely as the least likely pairing
+        the model accepts: the chain is evidence that it is no clutter).
+        Only while the labeler adapts to the take (``adapt``), once the take's
+        rigid shape is checked and the model aligned: before, an unlikely
+        point may as well mean a wrong hand frame; without adaptation (and in
+        the offline second pass, whose model is refit to labels that include
+        the born tracks) a birth started before any track was confirmed began
+        a 400-frame swap of two fingers on a synthetic take. 0: never.
 
     Attributes
     ----------
@@ -272,7 +291,7 @@ class OnlineLabeler:
     def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
                  max_coast: int = 10, warmup: int = 2, gate: float = 6.0, jump_cost: float = 6.0,
                  tracking: bool = True, max_hold: int = 10, objects=(), adapt: bool = True,
-                 adapt_every: int = 25, forget: float = 0.999, max_unlikely: int = 50):
+                 adapt_every: int = 25, forget: float = 0.999, max_unlikely: int = 50, birth: int = 5):
         if not (isinstance(hypotheses, (int, np.integer)) and hypotheses >= 1):
             raise HandcapError(f"hypotheses must be a whole number >= 1, got {hypotheses}")
         if not (isinstance(lag, (int, np.integer)) and lag >= 0):
@@ -309,6 +328,11 @@ class OnlineLabeler:
         if not 0.0 < forget <= 1.0:
             raise HandcapError(f"forget must be in (0, 1], got {forget}")
         self.max_unlikely = int(max_unlikely)
+        if not (isinstance(birth, (int, np.integer)) and birth >= 0):
+            raise HandcapError(f"birth must be a whole number of frames >= 0, got {birth}")
+        self.birth = int(birth)
+        self._chains = PointChains(model.kalman, gate=self.gate) if self.birth and self.tracking else None
+        self._born = None  # (F, K) pairings of the frame that would start a track on a chain
         self.spatial = model.spatial  # the spatial model in the take's hand frame (adapted when adapt)
         self.adapt = bool(adapt)
         self._adaptation = StreamAdaptation(self, int(adapt_every), float(forget)) if self.adapt else None
@@ -408,6 +432,7 @@ class OnlineLabeler:
         trackable = ((filters.missed <= self.max_coast) & (filters.age >= self.warmup)).reshape(n_prev, n_free)
         self._log_norm_all = -1.5 * np.log(2 * np.pi * var)  # (P, F): Gaussian normaliser of each filter
         self._at_gate_all = self._log_norm_all - 0.5 * self.gate**2
+        self._born = None
         if pose is None:
             self.lost_frames.append(self.frame_index)
             hyps = np.full((1, n_free), -1)
@@ -420,6 +445,10 @@ class OnlineLabeler:
             if self.tracking and len(world):
                 best = int(np.argmax(self._scores))
                 self._log_norm, self._at_gate = self._log_norm_all[best], self._at_gate_all[best]
+                if self._chains is not None:
+                    chained = self._chains.match(world) >= self.birth
+                    if chained.any() and self._adaptation is not None and self._adaptation.settled:
+                        self._born = self._births(chained, trackable[best])
                 extra = self._tracking_hypothesis(world, pred[best], var[best], trackable[best],
                                                   trackable[best] & (self._unlikely[best] < self.max_unlikely))
                 if not (hyps == extra).all(axis=1).any():
@@ -441,6 +470,8 @@ class OnlineLabeler:
         else:
             self._unlikely = self._unlikely[back]
         self._scores = scores
+        if self._chains is not None:
+            self._advance_chains(world, hyps[int(np.argmax(scores))] if pose is not None else None)
         if self._adaptation is not None:
             self._adaptation.record(world, pose, hyps[int(np.argmax(scores))])
         # Store point indices of the frame (rest maps hypothesis indices back to points).
@@ -485,12 +516,41 @@ class OnlineLabeler:
 
     def _emission(self, hyps) -> np.ndarray:
         """Spatial score of hypotheses (N, F): log-likelihood of each pairing, ``log(1/M)`` for a gap and
-        for a pairing below ``theta_min`` (the paper's filtered assignment)."""
+        for a pairing below ``theta_min`` (the paper's filtered assignment), ``theta_min`` for a birth."""
         ll = self._last_ll
         f = np.arange(self.n_free)
         values = np.where(hyps >= 0, ll[f, np.maximum(hyps, 0)] if ll.shape[1] else 0.0, self._occluded_score)
-        values = np.where((hyps >= 0) & (values < self.theta_min), self._occluded_score, values)
+        filtered = (hyps >= 0) & (values < self.theta_min)
+        values = np.where(filtered, self._occluded_score, values)
+        if self._born is not None:
+            born = filtered & self._born[f, np.maximum(hyps, 0)]
+            values = np.where(born, self.theta_min, values)
         return values.sum(axis=1)
+
+    def _births(self, chained, trackable) -> np.ndarray:
+        """(F, K) pairings that would start a track: each point at the end of a long enough chain (K,) with
+        the label without a track (``trackable`` (F,) of the best hypothesis' filters) that explains it best, where
+        the spatial model filters every pairing of the point."""
+        ll = self._last_ll
+        free = ~trackable
+        born = np.zeros(ll.shape, dtype=bool)
+        if not free.any():
+            return born
+        k = np.flatnonzero(chained & (ll.max(axis=0) < self.theta_min))  # points no label accepts
+        if not len(k):
+            return born
+        which = np.flatnonzero(free)[np.argmax(ll[free][:, k], axis=0)]  # the best label without a track
+        born[which, k] = True
+        return born
+
+    def _advance_chains(self, world, best) -> None:
+        """Step the point chains with the points the best hypothesis (F,) left without a spatially accepted
+        label (a birth's point stays on its chain until its track can vouch for it)."""
+        free = np.ones(len(world), dtype=bool)
+        if best is not None and len(world):
+            f = np.flatnonzero(best >= 0)
+            free[best[f]] = self._last_ll[f, best[f]] < self.theta_min
+        self._chains.advance(world, free)
 
     def _tracking_hypothesis(self, world, pred, var, trackable, vouch) -> np.ndarray:
         """The assignment (1, F) best for spatial and temporal evidence together, given the best previous
@@ -509,7 +569,11 @@ class OnlineLabeler:
         reward = np.where(allowed, ll, self._occluded_score) + track * np.maximum(temporal, at_gate[:, None]
                                                                                     - self.jump_cost)
         cost = np.full((n_free, k + n_free), np.inf)
-        cost[:, :k] = np.where(allowed | (vouch[:, None] & (temporal >= at_gate[:, None])), -reward, np.inf)
+        ok = allowed | (vouch[:, None] & (temporal >= at_gate[:, None]))
+        if self._born is not None:  # a birth: no track to score it, spatially at theta_min (see ``birth``)
+            reward = np.where(self._born, self.theta_min, reward)
+            ok |= self._born
+        cost[:, :k] = np.where(ok, -reward, np.inf)
         cost[self._rows, k + self._rows] = -self._occluded_score - trackable * at_gate
         r, c = linear_sum_assignment(cost)
         out = np.full((1, n_free), -1)
