@@ -40,7 +40,9 @@ from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
 from handcap.hand.attachment import MarkerAttachment
-from handcap.quality.plausibility import attach, residual_warnings, shape_warnings
+# Shape values stay within SHAPE_BOUND standard deviations of the average hand: the fit's bound and the
+# plausibility check's are one number.
+from handcap.quality.plausibility import SHAPE_BOUND, attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors
 from handcap.solve.markers import MarkerModel
 from handcap.solve.motion import MRE_WARNING, _solve_lm, observed_markers
@@ -49,8 +51,6 @@ from handcap.solve.motion import MRE_WARNING, _solve_lm, observed_markers
 OPEN_HAND_WEIGHT = 0.02
 #: Furthest a marker may end from the nominal spot its layout gives, metres (markers without one move freely).
 MAX_SHIFT = 0.02
-#: Shape values stay within this many standard deviations of the average hand.
-SHAPE_BOUND = 3.0
 
 
 @dataclass(frozen=True)
