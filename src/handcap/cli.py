@@ -436,7 +436,8 @@ def _cmd_train_occlusion(args) -> tuple[str, ...]:
             print(f"  {stage}: epoch {epoch + 1}, loss {loss:.4f}", file=sys.stderr, flush=True)
 
     model = train_occlusion_model(takes, args.layout, seed=args.seed, epochs=args.epochs,
-                                  regressor_epochs=args.epochs, progress=progress, augmentation=augmentation)
+                                  regressor_epochs=args.epochs, progress=progress, augmentation=augmentation,
+                                  pair_seconds=args.pair_seconds)
     model.save(args.out)
     info = model.info
     posed = int(info["posed_frames"])
@@ -444,7 +445,7 @@ def _cmd_train_occlusion(args) -> tuple[str, ...]:
           f"  saw {info['takes']} take(s) ({info['recorded_takes']} recorded, {info['synthetic_takes']} synthetic) "
           f"of {info['subjects']} subject(s), {info['frames']} frames; {info['augmented_copies']} augmented "
           f"copies ({info['augmented_frames']} frames); {info['samples']} training samples\n"
-          f"  augmentation: {info['augmentation']}\n"
+          f"  augmentation: {info['augmentation']}; gaps up to {args.pair_seconds:g} s\n"
           + (f"  joint regressor on {posed} posed frames" if posed else "  no poses: markers only"))
     return model.warnings
 
@@ -677,6 +678,7 @@ def _add_synth(verbs) -> None:
 def _add_occlusion(verbs) -> None:
     from handcap.layouts import SHIPPED
     from handcap.occlusion import FILL_METHODS, SHIPPED_MODELS
+    from handcap.occlusion.train import PAIR_SECONDS
     p = verbs.add_parser("train-occlusion", help="train the occluded-marker predictor (and joint regressor) on takes",
                          description="Trains the autoencoder that predicts occluded markers on labeled takes (any "
                                      "marker format, or handcap synth folders); with poses (synth truth, or --poses "
@@ -697,6 +699,9 @@ def _add_occlusion(verbs) -> None:
                         "placement) for a model that must serve new subjects; it costs on the training subject itself")
     p.add_argument("--speed-copies", type=int, default=0, metavar="N",
                    help="also train on N time-warped copies of every take (0.6-1.6x speed; default %(default)s)")
+    p.add_argument("--pair-seconds", type=float, default=PAIR_SECONDS, metavar="SECONDS",
+                   help="score the marker predictor as the filler uses it over gaps up to this long (default "
+                        "%(default)s); 0 trains on single frames as the paper does")
     p.add_argument("--out", required=True, help="model .npz")
     p.set_defaults(run=_cmd_train_occlusion)
 

@@ -153,3 +153,21 @@ def test_each_finger_turns_on_its_own_about_the_back_of_the_hand():
     move = out - local
     assert abs(np.corrcoef(move[:, 4, 0], move[:, 6, 0])[0, 1]) < 0.1
     assert Augmentation().finger_deg == 20.0 and "fingers 20 deg" in Augmentation().describe()
+
+
+def test_frames_of_one_sample_share_the_subject():
+    # Two frames per sample (the frame before a gap and one in it): one subject and placement for both, so
+    # the change between them is only the motion (here: a known shift of the fingers).
+    local, rigid = _hand(2000)
+    later = local.copy()
+    later[:, ~rigid] += [0.002, -0.001, 0.0005]
+    pair = np.stack([local, later], axis=1)  # (N, 2, M, 3)
+    out = augment_frames(pair, np.zeros(3), rigid, Augmentation(), np.random.default_rng(5),
+                         np.array([-1, -1, -1, -1, 0, 0, 1]))
+    assert out.shape == pair.shape
+    np.testing.assert_allclose(out[:, 0, rigid], out[:, 1, rigid], atol=1e-12)  # the rigid set did not move
+    moved = np.linalg.norm(out[:, 1] - out[:, 0], axis=-1)[:, ~rigid]
+    # The fingers moved 2.3 mm, scaled by the sample's subject (12 % spread): not by two placements.
+    assert np.all(np.abs(moved - np.linalg.norm([0.002, -0.001, 0.0005])) < 0.0015)
+    # Frames of different samples are different subjects.
+    assert np.std(out[:, 0, 4] - local[:, 4], axis=0).min() > 0.005

@@ -218,3 +218,61 @@ def test_cli_trains_on_synthetic_subjects_and_says_so(tmp_path):
     r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", "--layout", "active-9",
                         "--out", str(tmp_path / "none.npz")], capture_output=True, text=True)
     assert r.returncode == 2 and "give takes to train on, or --synthetic" in r.stderr
+
+
+def test_offset_consistent_loss_is_the_error_of_the_filled_gap():
+    # Independent computation in numpy: the filler's prediction in a gap is the output there plus (truth before
+    # minus output before) on the hidden coordinates; the loss is its squared error there, plus a tenth of the
+    # plain weighted error.
+    import torch
+
+    from handcap.occlusion.predictor import ABSOLUTE_WEIGHT, offset_consistent_loss
+
+    rng = np.random.default_rng(0)
+    module = torch.nn.Linear(6, 6)
+    x0, x1, y0, y1 = (rng.normal(size=(5, 6)) for _ in range(4))
+    hidden = np.zeros((5, 6))
+    hidden[:, :3] = 1.0
+    w = np.where(hidden > 0, 1.0, 0.1)
+    batch = tuple(torch.from_numpy(a.astype(np.float32)) for a in (x0, x1, y0, y1, w, hidden))
+    got = float(offset_consistent_loss(module, batch).detach())
+    weight = module.weight.detach().numpy().astype(np.float64)
+    bias = module.bias.detach().numpy().astype(np.float64)
+    out0, out1 = x0 @ weight.T + bias, x1 @ weight.T + bias
+    filled = out1 + (y0 - out0) * hidden
+    want = ((filled - y1) ** 2 * hidden).sum() / hidden.sum() + ABSOLUTE_WEIGHT * ((out1 - y1) ** 2 * w).sum() / w.sum()
+    assert got == pytest.approx(want, rel=1e-5)
+
+
+def test_pairs_stay_within_a_take_and_bad_lengths_are_refused(small_take):
+    from handcap.occlusion.predictor import draw_pairs, train_marker_predictor
+
+    lengths, steps = np.array([30, 200, 5]), np.array([29, 100, 0])
+    pairs = draw_pairs(lengths, steps, 20000, np.random.default_rng(0))
+    take = np.searchsorted(np.cumsum(lengths), pairs, side="right")
+    assert np.array_equal(take[:, 0], take[:, 1])  # never across takes
+    gap = pairs[:, 1] - pairs[:, 0]
+    assert (gap >= 0).all() and (gap <= steps[take[:, 0]]).all() and (gap[take[:, 0] == 2] == 0).all()
+    assert (gap[take[:, 0] == 1] >= 1).all() and gap[take[:, 0] == 1].max() == 100
+    np.testing.assert_allclose(np.bincount(take[:, 0]) / len(pairs), lengths / lengths.sum(), atol=0.01)
+    # Log-uniform: as many distances in 1-9 as in 10-100 (about).
+    one = gap[take[:, 0] == 1]
+    assert 0.4 < np.mean(one < 10) < 0.6
+
+    positions = small_take.positions
+    with pytest.raises(HandcapError, match="do not add up"):
+        train_marker_predictor(positions, small_take.names, epochs=1, samples_per_epoch=100, lengths=[100, 100])
+    with pytest.raises(HandcapError, match="pair_seconds"):
+        train_occlusion_model([small_take], "active-9", epochs=1, pair_seconds=-1.0)
+    # Takes of one frame each: no pair can span two takes, so every pair is a frame with itself (no error to
+    # learn from the gap) and training still runs.
+    model = train_marker_predictor(positions[:50], small_take.names, epochs=1, samples_per_epoch=200,
+                                   lengths=[1] * 50, pair_steps=100)
+    assert np.isfinite(model.net.weights[0]).all()
+
+
+def test_paper_training_without_pairs_is_recorded(small_take):
+    model = train_occlusion_model([small_take], "active-9", epochs=1, regressor_epochs=1, samples_per_epoch=500,
+                                  pair_seconds=0.0)
+    assert model.info["pair_seconds"] == 0.0
+    assert _train(small_take, 0).info["pair_seconds"] == 1.0

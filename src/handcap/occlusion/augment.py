@@ -113,7 +113,8 @@ NO_AUGMENTATION = Augmentation(scale=0.0, rigid_deg=0.0, rigid_mm=0.0, finger_de
 #: epochs; scale, rigid set, placement): 1.16 without augmentation, 0.99 at (8 %, 8 deg / 5 mm, 3 mm), 0.85
 #: at these values without the finger turn, 0.90 at (15 %, 25 deg / 15 mm, 10 mm); 0.75 with the finger
 #: turn. It costs where the subject is known: trained on the glove take's own first 60 %, 0.57 without
-#: and 0.74 with it; so it is not the default for a user's own takes.
+#: and 0.74 with it; so it is not the default for a user's own takes. (All with single-frame training; with
+#: the offset-consistent pairs that are now the default, 40 epochs: 0.95 without augmentation, 0.70 with it.)
 SUBJECT_AUGMENTATION = Augmentation()
 
 
@@ -142,12 +143,14 @@ def finger_groups(layout, names) -> np.ndarray:
 
 
 def augment_frames(local, centre, rigid, augmentation: Augmentation, rng, fingers=None) -> np.ndarray:
-    """Each frame as another subject's hand with another marker placement.
+    """Each sample as another subject's hand with another marker placement.
 
     Parameters
     ----------
-    local : ndarray (N, M, 3)
-        Complete or partial frames in the hand's registered frame, metres (NaN kept as NaN).
+    local : ndarray (N, M, 3) or (N, F, M, 3)
+        Frames in the hand's registered frame, metres (NaN kept as NaN). With F, each
+        sample is F frames of one take (e.g. before and during a gap): they get the
+        same subject and placement, as frames of one take do.
     centre : ndarray (3,)
         Centre of the scaling (the template's), metres.
     rigid : ndarray (M,) bool
@@ -159,31 +162,34 @@ def augment_frames(local, centre, rigid, augmentation: Augmentation, rng, finger
 
     Returns
     -------
-    ndarray (N, M, 3)
+    ndarray, the shape of ``local``
         A new array, metres.
     """
     a = augmentation
-    n, m = local.shape[:2]
-    out = local - centre
+    local = np.asarray(local, dtype=np.float64)
+    single = local.ndim == 3
+    out = (local[:, None] if single else local) - centre  # (N, F, M, 3)
+    n, m = out.shape[0], out.shape[2]
     if a.scale > 0:
-        common = rng.normal(0.0, a.scale * np.sqrt(2 / 3), (n, 1, 1))
-        axes = rng.normal(0.0, a.scale * np.sqrt(1 / 3), (n, 1, 3))
+        common = rng.normal(0.0, a.scale * np.sqrt(2 / 3), (n, 1, 1, 1))
+        axes = rng.normal(0.0, a.scale * np.sqrt(1 / 3), (n, 1, 1, 3))
         out = out * np.exp(common + axes)
     if rigid.sum() >= 3 and (a.rigid_deg > 0 or a.rigid_mm > 0):
-        pivot = out[:, rigid].mean(axis=1, keepdims=True)
-        turn = _random_rotations(n, np.radians(a.rigid_deg), rng)
-        shift = rng.normal(0.0, a.rigid_mm / 1000, (n, 1, 3))
-        out[:, rigid] = (out[:, rigid] - pivot) @ turn + pivot + shift
+        pivot = out[:, :, rigid].mean(axis=2, keepdims=True)
+        turn = _random_rotations(n, np.radians(a.rigid_deg), rng)[:, None]
+        shift = rng.normal(0.0, a.rigid_mm / 1000, (n, 1, 1, 3))
+        out[:, :, rigid] = (out[:, :, rigid] - pivot) @ turn + pivot + shift
     if fingers is not None and a.finger_deg > 0:
         # About the back of the hand (the rigid set's centre, else the template's centre).
-        pivot = out[:, rigid].mean(axis=1, keepdims=True) if rigid.sum() >= 3 else np.zeros((n, 1, 3))
+        pivot = out[:, :, rigid].mean(axis=2, keepdims=True) if rigid.sum() >= 3 else np.zeros((n, 1, 1, 3))
         for finger in np.unique(fingers[fingers >= 0]):
             members = fingers == finger
-            turn = _random_rotations(n, np.radians(a.finger_deg), rng)
-            out[:, members] = (out[:, members] - pivot) @ turn + pivot
+            turn = _random_rotations(n, np.radians(a.finger_deg), rng)[:, None]
+            out[:, :, members] = (out[:, :, members] - pivot) @ turn + pivot
     if a.placement_mm > 0:
-        out = out + rng.normal(0.0, a.placement_mm / 1000, out.shape)
-    return out + centre
+        out = out + rng.normal(0.0, a.placement_mm / 1000, (n, 1, m, 3))
+    out = out + centre
+    return out[:, 0] if single else out
 
 
 def time_warp(take: PosedTake, rng, speed=(0.6, 1.6)) -> PosedTake:

@@ -102,16 +102,22 @@ def mlp_from_torch(module) -> Mlp:
                tuple(m.bias.detach().numpy().copy() for m in linear))
 
 
+def weighted_mse(module, batch):
+    """Mean squared error of ``module`` on a batch ``(inputs, targets, weights)`` of float32 tensors;
+    ``weights`` multiplies the squared error element by element (zero where there is no target)."""
+    inputs, targets, weights = batch
+    return ((module(inputs) - targets) ** 2 * weights).sum() / weights.sum().clamp(min=1.0)
+
+
 def train_network(module, make_batches, *, epochs: int, seed: int, lr: float = 1e-3, patience: int = 5,
-                  validate=None, progress=None) -> list[float]:
-    """Train with Adam on a mean squared error, halving the learning rate on plateaus (section 3.3).
+                  validate=None, progress=None, loss=weighted_mse) -> list[float]:
+    """Train with Adam, halving the learning rate on plateaus (section 3.3).
 
     Parameters
     ----------
     module : torch.nn.Module
-    make_batches : callable (epoch, numpy Generator) -> iterable of (inputs, targets, weights)
-        Float32 tensors; ``weights`` multiplies the squared error element by element
-        (zero where there is no target).
+    make_batches : callable (epoch, numpy Generator) -> iterable of batches
+        Each a tuple of float32 tensors whose first has one row per sample, as ``loss`` takes it.
     epochs : int
     seed : int
         Seeds torch and the batch generator: training is deterministic for a seed.
@@ -122,6 +128,8 @@ def train_network(module, make_batches, *, epochs: int, seed: int, lr: float = 1
     validate : callable (module) -> float, optional
         Validation loss per epoch; the training loss is used when omitted.
     progress : callable (epoch, loss) -> None, optional
+    loss : callable (module, batch) -> scalar tensor
+        Default :func:`weighted_mse` (the paper's loss).
 
     Returns
     -------
@@ -138,14 +146,13 @@ def train_network(module, make_batches, *, epochs: int, seed: int, lr: float = 1
     for epoch in range(epochs):
         module.train()
         total, count = 0.0, 0
-        for inputs, targets, weights in make_batches(epoch, rng):
+        for batch in make_batches(epoch, rng):
             optimiser.zero_grad()
-            error = (module(inputs) - targets) ** 2 * weights
-            loss = error.sum() / weights.sum().clamp(min=1.0)
-            loss.backward()
+            value = loss(module, batch)
+            value.backward()
             optimiser.step()
-            total += float(loss.detach()) * len(inputs)
-            count += len(inputs)
+            total += float(value.detach()) * len(batch[0])
+            count += len(batch[0])
         module.eval()
         with torch.no_grad():
             value = validate(module) if validate is not None else total / max(count, 1)

@@ -3,10 +3,11 @@
 For every layout of :data:`~handcap.occlusion.model.SHIPPED_MODELS`: synthetic
 takes of :data:`SUBJECTS` subjects doing every motion of
 :data:`~handcap.occlusion.data.TRAIN_MOTIONS` (6 s each, 100 Hz, right hand),
-then :func:`~handcap.occlusion.train.train_occlusion_model` with seed 0 and
+then :func:`~handcap.occlusion.train.train_occlusion_model` with seed 0,
 :data:`~handcap.occlusion.augment.SUBJECT_AUGMENTATION` (every training sample
 another subject's scale and marker placement: the shipped models serve subjects
-they never saw, issue 14). Both steps are deterministic, so the files come out
+they never saw, issue 14) and its default offset-consistent pairs (the marker
+predictor scored as the filler uses it over gaps up to a second). Both steps are deterministic, so the files come out
 byte for byte the same; the SHA-256 of each is printed to compare with the
 shipped one.
 """

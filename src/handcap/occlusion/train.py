@@ -22,6 +22,11 @@ from handcap.occlusion.predictor import train_marker_predictor
 from handcap.occlusion.regressor import train_joint_regressor
 
 RIGID_WEIGHT, OTHER_WEIGHT = 1.0, 0.1
+#: Longest gap the marker predictor is trained for, seconds: each sample is a frame before a gap and one up to
+#: this much later, scored as the filler fills (offset-consistent training, :mod:`handcap.occlusion.predictor`).
+#: Measured on the real glove (every frame of 0.5 s gaps, NN/AC, 108 synthetic takes, augmented, 40 epochs):
+#: single frames 0.75, pairs up to 1 s 0.68, up to 2 s 0.68.
+PAIR_SECONDS = 1.0
 
 
 def registration_weights(layout, names) -> np.ndarray:
@@ -81,7 +86,7 @@ def _columns(take: PosedTake, names, source: str) -> np.ndarray:
 
 def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, regressor_epochs: int = 60,
                           samples_per_epoch: int = 50_000, side: str | None = None,
-                          augmentation: Augmentation | None = None,
+                          augmentation: Augmentation | None = None, pair_seconds: float = PAIR_SECONDS,
                           progress=None) -> OcclusionModel:
     """Train the marker predictor on every take and the joint regressor on the takes with poses.
 
@@ -103,6 +108,10 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
         marker placement (the marker predictor); None for the paper's training. Use
         :data:`~handcap.occlusion.augment.SUBJECT_AUGMENTATION` for a model that must serve
         subjects it never saw (it costs where the subject is the training one).
+    pair_seconds : float
+        The marker predictor learns how its output moves over gaps up to this long (its
+        error scored with the filler's discontinuity offset); 0 for the paper's training
+        on single frames.
     progress : callable (stage, epoch, loss), optional
 
     Returns
@@ -127,6 +136,10 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
     copies = warped_copies(takes, augmentation, seed=seed)
     copy_columns = [_columns(t, names, "augmented take") for t in copies]
     positions = np.concatenate(columns + copy_columns)
+    if not (np.isfinite(pair_seconds) and pair_seconds >= 0):
+        raise HandcapError(f"pair_seconds must be >= 0, got {pair_seconds}")
+    every = takes + copies
+    pair_steps = [int(round(pair_seconds * t.rate)) for t in every]
     weights = registration_weights(layout, names)
     rigid = np.array([n in set(layout.rigid) for n in names])
     report = (lambda stage: (lambda e, loss: progress(stage, e, loss))) if progress else (lambda stage: None)
@@ -136,6 +149,7 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
         predictor = train_marker_predictor(positions, names, seed=seed, epochs=epochs, weights=weights,
                                            samples_per_epoch=samples_per_epoch, augmentation=augmentation,
                                            rigid=rigid, fingers=finger_groups(layout, names),
+                                           lengths=[len(t.positions) for t in every], pair_steps=pair_steps,
                                            progress=report("markers"))
         posed = [t for t in takes + copies if t.has_poses]
         regressor = None
@@ -148,7 +162,7 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
     finally:
         torch.set_num_threads(threads)
     info = training_summary(takes, copies, augmentation)
-    info.update({"seed": seed, "epochs": epochs, "regressor_epochs": regressor_epochs,
+    info.update({"seed": seed, "epochs": epochs, "regressor_epochs": regressor_epochs, "pair_seconds": pair_seconds,
                  "samples": epochs * samples_per_epoch, "posed_frames": sum(len(t.positions) for t in posed)})
     return OcclusionModel(predictor, regressor, side, layout.name, info, data_warnings(info))
 
