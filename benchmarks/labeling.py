@@ -12,7 +12,12 @@ with 2 ghosts per second near the hand and 5 % extra random dropouts (seed 0):
 4. the effect of the look-ahead (lag 5, offline) and of the tracking hypothesis;
 5. two hands in one stream (a mirrored later range of the same recording as the left hand);
 6. synthetic joints-19 and glove-13 grasps of a cylinder (occlusion by the hand and the object, ghosts,
-   dropouts), with the cylinder's marker layout known and not (``--skip-synthetic`` leaves it out).
+   dropouts), with the cylinder's marker layout known and not (``--skip-synthetic`` leaves it out);
+7. issue 14's takes of another day (synthetic joints-19, known truth; ``--skip-synthetic`` leaves it out):
+   trained on one take, labelled on a take of the same subject and day, one whose back triad sits
+   13 degrees / 13 mm elsewhere relative to the fingers, one whose triad distances grew by 3-5 mm, and
+   a take of another subject (other proportions and marker placement); online without and with the
+   adaptation, and offline in two passes. Targets: >= 99 % correct with <= 0.1 % wrong.
 
     .venv/bin/python benchmarks/labeling.py [--threads 2] [--skip-synthetic]
 """
@@ -147,6 +152,50 @@ def main() -> None:
             s = score_labels(label_take(grasp.points, syn_model, objects=objects).markers, syn_truth)
             print(f"{name:10s} {label:>24s} {100 * s.fraction('correct'):9.2f} {100 * s.fraction('erroneous'):11.3f} "
                   f"{100 * s.fraction('false_marker'):14.3f} {100 * s.fraction('false_occlusion'):13.3f}")
+    other_days(args)
+
+
+def other_days(args) -> None:
+    """Section 7: takes of another day (issue 14), synthetic joints-19 with known truth."""
+    import warnings
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from handcap.core.errors import HandcapWarning
+    from handcap.labeling import LabelingModel, corrupt, label_take, move_rigid_set, score_labels
+    from handcap.layouts import load_layout
+    from handcap.synth.scene import SynthConfig, synthesize
+
+    print("\n== 7. issue 14: takes of another day (synthetic joints-19, 8 cameras, 2 ghosts/s, 5 % dropouts) ==")
+    layout = load_layout("joints-19")
+
+    def take(seed, subject, frames):
+        return synthesize(SynthConfig(layout="joints-19", motion="random", object="none", frames=frames, seed=seed,
+                                      subject_seed=subject, cameras=8), progress=False).labeled_points(layout.names)
+
+    model = LabelingModel.train(take(11, 5, args.synthetic_frames), layout.names, layout.rigid)
+    same = take(21, 5, args.synthetic_frames // 2)
+    axis = np.array([0.48, 0.6, -0.64])
+    turn = Rotation.from_rotvec(np.deg2rad(13) * axis / np.linalg.norm(axis)).as_matrix()
+    cases = {"same subject and day": same,
+             "triad turned 13 deg, moved 13 mm": move_rigid_set(same, layout.rigid, turn, np.full(3, 0.0075) * [1, -1, 1]),
+             "triad distances +8 % (3-5 mm)": move_rigid_set(same, layout.rigid, np.eye(3), np.zeros(3), scale=1.08),
+             "another subject (seed 7)": take(21, 7, args.synthetic_frames // 2)}
+    print(f"trained on {args.synthetic_frames} frames of subject 5; test takes of {same.n_frames} frames; "
+          "correct / wrong % of the points, frames with the hand frame lost")
+    print(f"{'take':34s} {'online, not adapting':>22s} {'online, adapting':>22s} {'offline, two passes':>22s}")
+    for name, markers in cases.items():
+        unlabeled, truth = corrupt(markers, ghost_rate=2.0, dropout=0.05, seed=0)
+        cells = []
+        for options in ({"adapt": False}, {}, {"offline": True}):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", HandcapWarning)
+                result = label_take(unlabeled, model, **options)
+            score = score_labels(result.markers, truth)
+            cells.append(f"{100 * score.fraction('correct'):6.2f} / {100 * score.fraction('erroneous'):5.2f} "
+                         f"({len(result.lost_frames):3d})")
+        print(f"{name:34s} " + " ".join(f"{c:>22s}" for c in cells))
 
 
 if __name__ == "__main__":

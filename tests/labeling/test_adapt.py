@@ -8,11 +8,11 @@ from scipy.spatial.transform import Rotation
 
 from handcap import MarkerSequence
 from handcap.core.errors import HandcapWarning
-from handcap.labeling import LabelingModel, corrupt, label_take, score_labels
+from handcap.labeling import LabelingModel, corrupt, label_take, move_rigid_set, score_labels
 from handcap.labeling.adapt import register_to_model, rigid_from_take
 from handcap.labeling.labeler import _rigid_transforms
 from handcap.layouts import load_layout
-from handcap.objects.rigid import canonical_from_markers, kabsch
+from handcap.objects.rigid import canonical_from_markers
 from handcap.synth.scene import SynthConfig, synthesize
 
 RIGID = ["hand_top", "hand_left", "hand_right"]
@@ -29,29 +29,28 @@ def takes():
     return layout, model, rom, test
 
 
-def triad_frames(take):
-    """Per frame the triad's rotation and translation (Kabsch onto its mean shape), and which frames have it."""
-    idx = [take.index(n) for n in RIGID]
-    tri = take.positions[:, idx]
-    canon = canonical_from_markers(tri)
-    seen = ~np.isnan(tri[..., 0])
-    ok = seen.all(axis=1)
-    rot, trans = kabsch(np.broadcast_to(canon, tri[ok].shape), tri[ok])
-    return idx, tri, canon, ok, rot, trans
-
-
 def moved_triad(take, rotation, shift, scale=1.0):
-    """The take with its back triad put elsewhere on the hand (turned by ``rotation`` about its centre, moved by
-    ``shift`` metres, both in its own frame, and scaled), as a glove put on again on another day; the finger
-    markers are where they were. Frames without the whole triad lose it."""
-    idx, tri, canon, ok, rot, trans = triad_frames(take)
-    local = np.einsum("tji,tmj->tmi", rot, tri[ok] - trans[:, None])  # noise kept
-    new = scale * canon @ rotation.T + shift
-    out = np.full(tri.shape, np.nan)
-    out[ok] = np.einsum("tij,tmj->tmi", rot, local - canon + new) + trans[:, None]
-    positions = take.positions.copy()
-    positions[:, idx] = out
-    return MarkerSequence(positions, take.names, take.rate)
+    """The take with its back triad put elsewhere on the hand, as a glove put on again on another day."""
+    return move_rigid_set(take, RIGID, rotation, shift, scale=scale)
+
+
+def test_move_rigid_set_moves_the_set_and_keeps_the_rest(takes):
+    # Independent check: in every frame the moved triad has the scaled distances, the fingers are untouched,
+    # and the triad's offset from a finger marker, seen in the triad's own frame, changed by the same amount.
+    _, _, _, test = takes
+    turn = Rotation.from_rotvec([0.0, 0.2, 0.1]).as_matrix()
+    moved = moved_triad(test, turn, np.array([0.004, 0.0, -0.003]), scale=1.1)
+    idx = [test.index(n) for n in RIGID]
+    others = [i for i in range(len(test.names)) if i not in idx]
+    np.testing.assert_array_equal(moved.positions[:, others], test.positions[:, others])
+    whole = ~np.isnan(test.positions[:, idx, 0]).any(axis=1)
+    i, j = np.triu_indices(3, 1)
+    before = np.linalg.norm(test.positions[whole][:, idx][:, i] - test.positions[whole][:, idx][:, j], axis=-1)
+    after = np.linalg.norm(moved.positions[whole][:, idx][:, i] - moved.positions[whole][:, idx][:, j], axis=-1)
+    np.testing.assert_allclose(np.median(after / before, axis=0), 1.1, atol=0.01)
+    centre_shift = np.linalg.norm(moved.positions[whole][:, idx].mean(1) - test.positions[whole][:, idx].mean(1), axis=1)
+    np.testing.assert_allclose(centre_shift, 0.005, atol=0.0002)  # the set's centre moved by |shift| = 5 mm
+    assert not np.shares_memory(moved.positions, test.positions)
 
 
 def test_moved_spatial_model_equals_moved_points(takes):

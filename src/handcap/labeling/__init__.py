@@ -6,7 +6,7 @@ motion capture labeling of finger markers, Proc. Motion in Games, doi:10.1145/29
 hypotheses, several hands, scoring and a corruption tool.
 """
 
-from handcap.labeling.corrupt import corrupt
+from handcap.labeling.corrupt import corrupt, move_rigid_set
 from handcap.labeling.frame import HandFrameFinder, RigidSet
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
 from handcap.labeling.labeler import LabelingModel, LabelResult, MultiHandLabeler, OnlineLabeler, label_take
@@ -16,4 +16,4 @@ from handcap.labeling.spatial import SpatialModel
 
 __all__ = ["HandFrameFinder", "KalmanBatch", "KalmanSettings", "LabelResult", "LabelScore", "LabelingModel",
            "MultiHandLabeler", "OnlineLabeler", "RigidSet", "SpatialModel", "corrupt", "k_best_assignments",
-           "label_take", "score_labels"]
+           "label_take", "move_rigid_set", "score_labels"]
