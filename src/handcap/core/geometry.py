@@ -108,18 +108,24 @@ def segments_cross_triangles(starts, ends, triangles, eps: float = 1e-12) -> np.
     hit : ndarray (N,) bool
         True where the open segment meets the triangle's interior or edges.
     """
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    d = ends - starts
-    e1, e2 = b - a, c - a
-    pvec = np.cross(d, e2)
-    det = (e1 * pvec).sum(1)
+    # Components as columns (N,) each: NumPy is slow on reductions over axes of length 3.
+    e1, e2 = (triangles[:, 1] - triangles[:, 0]).T, (triangles[:, 2] - triangles[:, 0]).T
+    d, tvec = (ends - starts).T, (starts - triangles[:, 0]).T
+
+    def cross(x, y):
+        return x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]
+
+    def dot(x, y):
+        return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+
+    pvec = cross(d, e2)
+    det = dot(e1, pvec)
     ok = np.abs(det) > eps
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    tvec = starts - a
-    u = (tvec * pvec).sum(1) * inv
-    qvec = np.cross(tvec, e1)
-    v = (d * qvec).sum(1) * inv
-    t = (e2 * qvec).sum(1) * inv
+    u = dot(tvec, pvec) * inv
+    qvec = cross(tvec, e1)
+    v = dot(d, qvec) * inv
+    t = dot(e2, qvec) * inv
     return ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < 1)
 
 

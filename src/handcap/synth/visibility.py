@@ -6,15 +6,31 @@ of the camera, faces it (printed patch corners only: within
 line between the camera centre and the marker: no triangle of the hand (its
 own skin included) or of the object. The ray test is exact (Moller-Trumbore,
 in camera coordinates); the triangles tried for each marker are found in the
-image first, through a k-d tree of projected triangle centres.
+image first: those facing the camera whose bounding box holds its projection.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from handcap.core.geometry import segments_cross_triangles
+
+
+#: Marker-triangle pairs compared at once in the image (memory bound of the candidate search).
+PAIRS_AT_ONCE = 2_000_000
+
+
+class _Surface:
+    """The occluding triangles of one frame, shared by every camera: vertices (V, 3), the corners of each
+    face as three index columns (F,) and the face normals (F, 3) with their offsets ``n . a`` (F,), metres."""
+
+    def __init__(self, vertices, faces):
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.faces = np.asarray(faces)
+        self.corner = tuple(np.ascontiguousarray(self.faces[:, k]) for k in range(3))
+        a, b, c = (self.vertices[i] for i in self.corner)
+        self.normal = np.cross(b - a, c - a)
+        self.offset = np.einsum("fi,fi->f", self.normal, a)
 
 
 def occluded(camera, points, vertices, faces, *, end_gap: float = 1e-4) -> np.ndarray:
@@ -40,41 +56,48 @@ def occluded(camera, points, vertices, faces, *, end_gap: float = 1e-4) -> np.nd
     -----
     A line from the camera to a point outside a closed surface that passes
     through it enters through a triangle facing the camera, so only those
-    (about half) are tested.
+    (about half) are tested, and only those whose bounding box in the image
+    holds the point's projection (a point can only be behind a triangle it
+    projects into).
     """
+    return _occluded(_Surface(vertices, faces), camera, points, end_gap)
+
+
+def _occluded(surface: _Surface, camera, points, end_gap: float = 1e-4) -> np.ndarray:
     points = np.asarray(points, dtype=np.float64)
     hidden = np.zeros(len(points), bool)
-    if len(points) == 0 or len(faces) == 0:
+    if len(points) == 0 or len(surface.faces) == 0:
         return hidden
-    cam = vertices @ camera.rotation_matrix.T + camera.translation
-    tri = cam[faces]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    keep = np.flatnonzero(((normal * tri[:, 0]).sum(axis=1) < 0) & (tri[:, :, 2] > 1e-6).all(axis=1))
+    rot, trans = camera.rotation_matrix, camera.translation
+    cam = surface.vertices @ rot.T + trans  # (V, 3) camera coordinates
+    depth = cam[:, 2]
+    ahead = depth > 1e-6
+    i, j, k = surface.corner
+    # In front of the camera, and facing it: the normal points against the line of sight (n . (a - centre) < 0).
+    keep = np.flatnonzero(ahead[i] & ahead[j] & ahead[k] & (surface.offset < surface.normal @ camera.center))
     if len(keep) == 0:
         return hidden
-    tri_px = tri[keep, :, :2] / tri[keep, :, 2:]  # normalised image coordinates
-    centre = tri_px.mean(axis=1)
-    radius = np.sqrt(((tri_px - centre[:, None]) ** 2).sum(axis=2).max(axis=1))
-    pt_cam = points @ camera.rotation_matrix.T + camera.translation
-    pt_px = pt_cam[:, :2] / pt_cam[:, 2:]
-    # Small triangles through a k-d tree of their centres; the few large ones
-    # (long slivers of an object) are tried against every point.
-    cut = 3.0 * np.median(radius)
-    small = radius <= cut
-    lists = cKDTree(centre[small]).query_ball_point(pt_px, r=cut)
-    counts = np.fromiter((len(c) for c in lists), int, len(lists))
-    which = np.repeat(np.arange(len(points)), counts)
-    cand = np.flatnonzero(small)[np.concatenate([np.asarray(c, int) for c in lists] + [np.zeros(0, int)])]
-    large = np.flatnonzero(~small)
-    which = np.concatenate([which, np.repeat(np.arange(len(points)), len(large))])
-    cand = np.concatenate([cand, np.tile(large, len(points))])
-    # A point can only be behind a triangle it projects into: within its circumradius.
-    near = ((pt_px[which] - centre[cand]) ** 2).sum(axis=1) <= radius[cand] ** 2
-    which, cand = which[near], keep[cand[near]]
+    px = cam[:, :2] / np.where(ahead, depth, 1.0)[:, None]  # normalised image coordinates
+    x, y = np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1])
+    xs, ys = (x[i[keep]], x[j[keep]], x[k[keep]]), (y[i[keep]], y[j[keep]], y[k[keep]])
+    x_low, x_high = np.minimum(np.minimum(*xs[:2]), xs[2]), np.maximum(np.maximum(*xs[:2]), xs[2])
+    y_low, y_high = np.minimum(np.minimum(*ys[:2]), ys[2]), np.maximum(np.maximum(*ys[:2]), ys[2])
+    pt_cam = points @ rot.T + trans
+    pt_x, pt_y = (pt_cam[:, 0] / pt_cam[:, 2])[:, None], (pt_cam[:, 1] / pt_cam[:, 2])[:, None]
+    which, cand = [], []
+    step = max(1, PAIRS_AT_ONCE // len(keep))
+    for start in range(0, len(points), step):
+        s = slice(start, start + step)
+        # A point can only be behind a triangle it projects into: inside its bounding box in the image.
+        inside = (pt_x[s] >= x_low) & (pt_x[s] <= x_high) & (pt_y[s] >= y_low) & (pt_y[s] <= y_high)
+        w, c = np.nonzero(inside)
+        which.append(w + start)
+        cand.append(c)
+    which, cand = np.concatenate(which), keep[np.concatenate(cand)]
     if len(which) == 0:
         return hidden
     ends = pt_cam[which] * (1.0 - end_gap / np.linalg.norm(pt_cam[which], axis=1, keepdims=True))
-    hit = segments_cross_triangles(np.zeros_like(ends), ends, tri[cand])
+    hit = segments_cross_triangles(np.zeros_like(ends), ends, cam[surface.faces[cand]])
     hidden[np.unique(which[hit])] = True
     return hidden
 
@@ -103,6 +126,7 @@ def camera_visibility(points, rig, vertices, faces, *, normals=None,
     points = np.asarray(points, dtype=np.float64)
     valid = ~np.isnan(points).any(axis=1)
     out = np.zeros((len(rig), len(points)), bool)
+    surface = _Surface(vertices, faces)
     for c, camera in enumerate(rig):
         pixels, depth = camera.project(np.where(valid[:, None], points, 0.0))
         ok = valid & (depth > 0) & camera.in_image(pixels)
@@ -111,6 +135,6 @@ def camera_visibility(points, rig, vertices, faces, *, normals=None,
             to_camera /= np.linalg.norm(to_camera, axis=1, keepdims=True)
             ok &= np.einsum("mi,mi->m", normals, to_camera) > np.cos(max_view_angle)
         idx = np.flatnonzero(ok)
-        ok[idx[occluded(camera, points[idx], vertices, faces)]] = False
+        ok[idx[_occluded(surface, camera, points[idx])]] = False
         out[c] = ok
     return out
