@@ -127,9 +127,10 @@ def test_triad_moved_relative_to_the_fingers_adapted(takes, triad_13):
     online = score_labels(label_take(unlabeled, model).markers, truth)
     offline = label_take(unlabeled, model, offline=True)
     two_pass = score_labels(offline.markers, truth)
-    # Measured on this take: online 92 %, offline two passes 97 % correct (the goal, 99 %, is not met).
-    assert online.fraction("correct") > 0.88
-    assert two_pass.fraction("correct") > 0.95 and two_pass.fraction("erroneous") < 0.03
+    # Measured on this take: online 95.1 % correct / 1.5 % wrong, offline two passes 98.6 % / 0.06 % (the
+    # issue's goal, 99 % / 0.1 %, is not met; the same-day take scores 98.0 % / 0.9 % here, see benchmark 7).
+    assert online.fraction("correct") > 0.93
+    assert two_pass.fraction("correct") > 0.98 and two_pass.fraction("erroneous") < 0.005
     assert offline.model is not None
 
 
