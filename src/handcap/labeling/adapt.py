@@ -376,7 +376,7 @@ def _fit_in_frames(spatial: SpatialModel, rigid: RigidSet, use, *, most: int = 2
     return float((best.sum() + floor * missing) / (len(best) + missing))
 
 
-def _largest_change(a: RigidSet, b: RigidSet) -> float:
+def largest_change(a: RigidSet, b: RigidSet) -> float:
     """Largest difference between the two sets' marker distances, metres."""
     i, j = np.triu_indices(len(a.names), 1)
     return float(np.abs(np.linalg.norm(a.canonical[i] - a.canonical[j], axis=1)
@@ -438,7 +438,7 @@ class StreamAdaptation:
         rigid = lab.finder.rigid
         new = rigid_from_take(rigid, frames, spatial=self.base, width=max(0.01, 3 * rigid.tolerance),
                               min_share=0.5)
-        if new is None or _largest_change(new, rigid) <= 0.5 * rigid.tolerance:
+        if new is None or largest_change(new, rigid) <= 0.5 * rigid.tolerance:
             return False
         lab.finder = HandFrameFinder(new, max_hold=lab.finder.max_hold)
         self.relearned += 1

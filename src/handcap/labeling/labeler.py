@@ -47,7 +47,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
-from handcap.labeling.adapt import StreamAdaptation
+from handcap.labeling.adapt import StreamAdaptation, largest_change, rigid_from_take
 from handcap.labeling.birth import PointChains
 from handcap.labeling.frame import HandFrameFinder, RigidSet
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
@@ -766,6 +766,10 @@ FIRST_PASS_BIRTH = 5
 LOST_WARNING = 0.05
 #: Warn when fewer than this share of the points in the stream get a label.
 LABELLED_WARNING = 0.95
+#: Warn when the rigid markers' distances in the take differ from training by more than this (metres): the
+#: rigid set was re-learned from the take (a marker stuck back elsewhere, another glove or subject), and the
+#: labels rest on that.
+RIGID_CHANGE_WARNING = 0.002
 
 
 @dataclass(frozen=True)
@@ -786,6 +790,9 @@ class LabelResult:
         points labelled).
     model : LabelingModel or None
         The model as adapted to the take by the offline second pass (None otherwise).
+    rigid : RigidSet or None
+        The hand's rigid set as the labeler ended the take with it (re-learned from the take when its
+        distances differed from training); None for several hands or without rigid markers.
     """
 
     markers: MarkerSequence
@@ -793,6 +800,7 @@ class LabelResult:
     lost_frames: np.ndarray
     warnings: tuple = ()
     model: LabelingModel | None = None
+    rigid: RigidSet | None = None
 
 
 def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False, method: str = "viterbi",
@@ -842,7 +850,7 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         raise HandcapError("the nearest-neighbour baseline labels one hand")
     two_pass = (offline and adapt and method == "viterbi" and isinstance(model, LabelingModel)
                 and model.rigid is not None and transforms is None)
-    adapted = None
+    adapted, trained = None, model
     if two_pass:
         model = _rigid_from_take(model, points.frames)
         first = _run(points, model, None, True, method, progress,
@@ -853,19 +861,18 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         if method == "viterbi":
             options["adapt"] = adapt
         result = _run(points, model, transforms, offline, method, progress, options)
-    return _with_warnings(result, points, adapted)
+    return _with_warnings(result, points, adapted, trained)
 
 
 def _rigid_from_take(model: LabelingModel, frames) -> LabelingModel:
     """The model with its rigid set re-learned from the take when the take's shape differs from training."""
     from dataclasses import replace
 
-    from handcap.labeling.adapt import _largest_change, rigid_from_take
     rigid = model.rigid
     new = rigid_from_take(rigid, frames, spatial=model.spatial, width=max(0.01, 3 * rigid.tolerance))
     if new is None:
         return model
-    if _largest_change(new, rigid) <= 0.5 * rigid.tolerance:
+    if largest_change(new, rigid) <= 0.5 * rigid.tolerance:
         return model
     return replace(model, rigid=new)
 
@@ -937,16 +944,26 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
     for t, (frame, lab) in enumerate(zip(points.frames, labels)):
         hit = lab >= 0
         positions[t, lab[hit]] = frame[hit]
+    finder = getattr(labeler, "finder", None)
     return LabelResult(MarkerSequence(positions, names, points.rate), labels,
-                       np.array(getattr(labeler, "lost_frames", []), dtype=int))
+                       np.array(getattr(labeler, "lost_frames", []), dtype=int),
+                       rigid=None if finder is None else finder.rigid)
 
 
-def _with_warnings(result: LabelResult, points, model) -> LabelResult:
-    """The result with its warnings (issued and stored on it and on its markers)."""
+def _with_warnings(result: LabelResult, points, model, trained=None) -> LabelResult:
+    """The result with its warnings (issued and stored on it and on its markers); ``model`` the adapted model
+    (offline), ``trained`` the one given."""
     from dataclasses import replace
 
     from handcap.core.errors import warn
     lines = []
+    if isinstance(trained, LabelingModel) and trained.rigid is not None and result.rigid is not None:
+        change = largest_change(trained.rigid, result.rigid)
+        if change > RIGID_CHANGE_WARNING:
+            lines.append(warn(f"the rigid markers' distances in this take differ from training by up to "
+                              f"{1000 * change:.1f} mm (re-learned from the take; plausible <= "
+                              f"{1000 * RIGID_CHANGE_WARNING:.0f} mm): a marker moved, or another glove or subject; "
+                              f"check the labels, or train on a take of this session", stacklevel=3))
     n_frames = max(points.n_frames, 1)
     lost = len(result.lost_frames)
     if lost > LOST_WARNING * n_frames:
