@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from handcap import cli
-from handcap.core.errors import HandcapWarning, merge_warnings, warn
+from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.hand.attachment import MarkerAttachment
@@ -24,6 +24,13 @@ def test_warn_issues_a_handcap_warning_and_returns_one_line():
     with pytest.warns(HandcapWarning, match="MRE 7.1 mm"):
         line = warn("MRE 7.1 mm\n above   5 mm")
     assert line == "MRE 7.1 mm above 5 mm"
+
+
+def test_a_bad_input_error_is_a_value_error():
+    # Issue 15: a library user may catch the built-in type; the message stays one line.
+    with pytest.raises(ValueError, match="no such file") as caught:
+        read_markers("no/such/take.c3d")
+    assert isinstance(caught.value, HandcapError) and "\n" not in str(caught.value)
 
 
 def test_merge_keeps_order_and_drops_repeats():

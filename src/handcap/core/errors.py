@@ -13,11 +13,12 @@ from __future__ import annotations
 import warnings as _warnings
 
 
-class HandcapError(Exception):
+class HandcapError(ValueError):
     """A user mistake or unusable input: bad file, wrong units, unknown name.
 
     The message is one line that says what is wrong and, where possible, how to
-    mend it. The command line prints it and exits with code 2.
+    mend it. The command line prints it and exits with code 2. A
+    :class:`ValueError`, so that a library user may catch the built-in type.
     """
 
 

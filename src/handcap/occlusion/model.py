@@ -95,6 +95,8 @@ class OcclusionModel:
                             (str(v) for v in np.atleast_1d(arrays["info_values"]))))
             warnings = tuple(str(w) for w in np.atleast_1d(arrays["warnings"])) if "warnings" in arrays else ()
             return cls(predictor, regressor, str(arrays["side"]), str(arrays["layout"]), info, warnings)
+        except HandcapError:
+            raise  # already says what is wrong (a ValueError too, so kept apart from numpy's below)
         except KeyError as err:
             raise HandcapError(f"{path}: occlusion model is missing {err.args[0]!r}") from None
         except (ValueError, TypeError, IndexError) as err:
