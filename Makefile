@@ -1,12 +1,13 @@
 # Two commands do everything on a machine with only Python:
 #   make demo   - set up .venv if needed, write a synthetic capture to demo-output/
 #   make test   - set up .venv if needed, run the test suite
+#   make lint   - ruff (configured in pyproject.toml); .ci/run runs it after the tests
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.handcap-installed
 
-.PHONY: demo test bench clean-venv asset occlusion-weights
+.PHONY: demo test lint bench clean-venv asset occlusion-weights
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -21,6 +22,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks tools
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/hand_forward.py

@@ -179,7 +179,8 @@ def other_days(args) -> None:
     axis = np.array([0.48, 0.6, -0.64])
     turn = Rotation.from_rotvec(np.deg2rad(13) * axis / np.linalg.norm(axis)).as_matrix()
     cases = {"same subject and day": same,
-             "triad turned 13 deg, moved 13 mm": move_rigid_set(same, layout.rigid, turn, np.full(3, 0.0075) * [1, -1, 1]),
+             "triad turned 13 deg, moved 13 mm": move_rigid_set(same, layout.rigid, turn,
+                                                                np.full(3, 0.0075) * [1, -1, 1]),
              "triad distances +8 % (3-5 mm)": move_rigid_set(same, layout.rigid, np.eye(3), np.zeros(3), scale=1.08),
              "another subject (seed 7)": take(21, 7, args.synthetic_frames // 2)}
     print(f"trained on {args.synthetic_frames} frames of subject 5; test takes of {same.n_frames} frames; "

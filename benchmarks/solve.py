@@ -77,7 +77,7 @@ def main() -> None:
     print(f"{'take':12s} {'frames':>6s} {'visible':>8s} {'frames/s':>9s} {'MRE mm':>13s} {'joint err mm':>13s}")
     dense_fps = []
     for name, take in takes.items():
-        motion, seconds = timed(lambda: solve_hand(take.markers, calibration.attachment, hand))
+        motion, seconds = timed(lambda take=take: solve_hand(take.markers, calibration.attachment, hand))
         r = 1000 * motion.marker_residuals
         dense_fps.append(take.markers.n_frames / seconds)
         print(f"{name:12s} {take.markers.n_frames:6d} {take.truth['visible'][:, :362].mean():8.1%} "
@@ -90,7 +90,7 @@ def main() -> None:
     rows = {}
     solve_hand(clip, calibration.attachment, hand)  # warm up caches and imports
     for method in ("lm", "adam"):
-        motion, seconds = timed(lambda: solve_hand(clip, calibration.attachment, hand, method=method))
+        motion, seconds = timed(lambda method=method: solve_hand(clip, calibration.attachment, hand, method=method))
         rows[method] = (args.adam_frames / seconds, np.nanmean(motion.marker_residuals) * 1000,
                         joint_err(motion, take, slice(0, args.adam_frames)))
         print(f"{method:5s} {rows[method][0]:10.2f} frames/s   MRE {rows[method][1]:.3f} mm   "
@@ -118,8 +118,8 @@ def main() -> None:
     print(f"{'layout':24s} {'calibration s':>13s} {'cal MRE mm':>10s} {'solve MRE mm':>15s} {'frames/s':>8s}  shape")
     solved = {}
     for label, lay in (("with positions", layout), ("without any position", bare)):
-        result, cal_seconds = timed(lambda: calibrate_attachment(real, lay, hand, frames=slice(0, 1000)))
-        motion, seconds = timed(lambda: solve_hand(real, result.attachment, hand))
+        result, cal_seconds = timed(lambda lay=lay: calibrate_attachment(real, lay, hand, frames=slice(0, 1000)))
+        motion, seconds = timed(lambda result=result: solve_hand(real, result.attachment, hand))
         r = motion.marker_residuals * 1000
         solved[label] = (result, motion)
         print(f"{label:24s} {cal_seconds:13.1f} {1000 * result.mre:10.2f} {np.nanmean(r):7.2f} ± {np.nanstd(r):4.2f} "

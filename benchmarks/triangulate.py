@@ -42,7 +42,10 @@ from handcap.synth.scene import SynthConfig, synthesize
 
 def _detections(d, repeat: int, n_frames: int) -> Detections:
     frame = np.concatenate([d["frame"] + k * n_frames for k in range(repeat)])
-    tile = lambda key: np.concatenate([d[key]] * repeat)
+
+    def tile(key):
+        return np.concatenate([d[key]] * repeat)
+
     return Detections(d["camera_names"], d["marker_names"], frame, tile("camera"), tile("marker"), tile("xy"),
                       tile("score"), d["rate"], n_frames * repeat, source="synth")
 
@@ -135,18 +138,20 @@ def main() -> None:
     truth_flat = truth.reshape(-1, 3)[sample]
     e_theirs = np.linalg.norm(theirs - truth_flat, axis=1) * 1000
     e_ours = np.linalg.norm(ours - truth_flat, axis=1) * 1000
-    print(f"\n2. research way (Python loops, last inlier set) on {len(sample)} points with a wrong id among their views")
-    print(f"   median / 95th pct 3D error, mm: research {np.nanmedian(e_theirs):.3f} / {np.nanpercentile(e_theirs, 95):.3f}"
-          f", handcap {np.nanmedian(e_ours):.3f} / {np.nanpercentile(e_ours, 95):.3f}")
-    print(f"   time per point: research {1e6 * t_theirs / len(sample):.0f} us, handcap {1e6 * t_ours / len(sample):.1f} us"
-          f" ({t_theirs / t_ours:.0f}x)")
+    print(f"\n2. research way (Python loops, last inlier set) on {len(sample)} points with a wrong id among "
+          "their views")
+    print(f"   median / 95th pct 3D error, mm: research {np.nanmedian(e_theirs):.3f} / "
+          f"{np.nanpercentile(e_theirs, 95):.3f}, handcap {np.nanmedian(e_ours):.3f} / "
+          f"{np.nanpercentile(e_ours, 95):.3f}")
+    print(f"   time per point: research {1e6 * t_theirs / len(sample):.0f} us, "
+          f"handcap {1e6 * t_ours / len(sample):.1f} us ({t_theirs / t_ours:.0f}x)")
 
     # 3. Throughput on a longer take.
     long = _detections(d, args.repeat, args.frames)
     marker_frames = long.n_frames * len(long.marker_names)
     cores = default_workers()
-    print(f"\n3. throughput, {long.n_frames} frames x {len(long.marker_names)} markers = {marker_frames:,} marker-frames, "
-          f"RANSAC on, {cores} cores")
+    print(f"\n3. throughput, {long.n_frames} frames x {len(long.marker_names)} markers = {marker_frames:,} "
+          f"marker-frames, RANSAC on, {cores} cores")
     runs = {}
     t0 = time.perf_counter()
     runs["one process"] = triangulate_detections(long, rig, workers=1, progress=False)

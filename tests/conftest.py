@@ -20,3 +20,38 @@ def shared_data() -> Path:
         pytest.skip(f"real data folder {SHARED_DATA} is absent: put the shared data beside the checkout "
                     "(../shared/data) or set HANDCAP_SHARED_DATA; see README, 'Test data'")
     return SHARED_DATA
+
+
+# Tests that read ../shared/data carry the ``realdata`` marker (``-m "not realdata"`` leaves them out), and with
+# HANDCAP_REQUIRE_REALDATA set (.ci/run sets it) a run in which none of them ran fails: a CI that skipped them all,
+# for a moved folder or a mistyped path, would otherwise pass without ever reading a real recording.
+REQUIRE_REALDATA = "HANDCAP_REQUIRE_REALDATA"
+_ran_realdata: list = []
+_failures: list = []
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if "shared_data" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.realdata)
+
+
+def pytest_runtest_logreport(report):
+    if report.when == "call" and "realdata" in report.keywords:
+        _ran_realdata.append(report.nodeid)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    if not os.environ.get(REQUIRE_REALDATA) or session.testscollected == 0:
+        return
+    if not any(item.get_closest_marker("realdata") for item in session.items):
+        return  # deselected on purpose (-m "not realdata", -k, a single file)
+    if not _ran_realdata:
+        _failures.append(f"{REQUIRE_REALDATA} is set but no real-data test ran: the folder {SHARED_DATA} is absent "
+                         "or unreadable (see README, 'Test data')")
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def pytest_terminal_summary(terminalreporter):
+    for line in _failures:
+        terminalreporter.write_line(line, red=True)

@@ -22,14 +22,16 @@ def test_local_results_come_in_order(workers):
 def test_errors_in_workers_reach_the_caller():
     with pytest.raises(ValueError):
         map_chunks(math.sqrt, [4.0, -1.0, 9.0], workers=2)
-    with pytest.raises(HandcapError, match="must be a positive finite number"):  # handcap's own errors keep their type and line
+    # handcap's own errors keep their type and line
+    with pytest.raises(HandcapError, match="must be a positive finite number"):
         map_chunks(check_rate, [100.0, -5.0], workers=2)
 
 
 def test_dask_client_gives_the_same_results():
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster, \
-            distributed.Client(cluster, set_as_default=False) as client:
+    with (distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                   dashboard_address=None) as cluster,
+          distributed.Client(cluster, set_as_default=False) as client):
         assert map_chunks(math.factorial, NUMBERS, scheduler=client) == EXPECTED
         with pytest.raises(HandcapError, match="must be a positive finite number"):
             map_chunks(check_rate, [100.0, 0.0], scheduler=client)

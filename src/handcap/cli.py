@@ -330,8 +330,9 @@ def _cmd_label(args) -> tuple[str, ...]:
         models[0].save(args.model)
     seen = (result.markers.positions[..., 0] == result.markers.positions[..., 0]).mean()
     lost = result.lost_frames
-    print(f"{args.out}: {points.n_frames} frames, {len(result.markers.names)} labels, {100 * seen:.1f} % of label-frames "
-          f"filled; hand frame not found in {len(lost)} frames" + (f" (first: {lost[0]})" if len(lost) else ""))
+    print(f"{args.out}: {points.n_frames} frames, {len(result.markers.names)} labels, {100 * seen:.1f} % of "
+          f"label-frames filled; hand frame not found in {len(lost)} frames"
+          + (f" (first: {lost[0]})" if len(lost) else ""))
     return result.warnings
 
 
@@ -549,7 +550,8 @@ def _add_label(verbs) -> None:
     p.add_argument("input", help="a labeled take")
     p.add_argument("--out", required=True, help="unlabeled points (.c3d .trc .npz)")
     p.add_argument("--ghost-rate", type=float, default=2.0, help="ghost markers per second (default %(default)s)")
-    p.add_argument("--dropout", type=float, default=0.05, help="extra fraction of samples dropped (default %(default)s)")
+    p.add_argument("--dropout", type=float, default=0.05,
+                   help="extra fraction of samples dropped (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--layout", help="keep only this layout's markers")
     _add_units(p)
@@ -656,8 +658,10 @@ def _add_synth(verbs) -> None:
     p.add_argument("--dropout", type=float, default=d.dropout, help="extra fraction lost in bursts")
     p.add_argument("--ghost-rate", type=float, default=d.ghost_rate, help="ghost markers per second")
     p.add_argument("--swap-rate", type=float, default=d.swap_rate, help="label swaps per second")
-    p.add_argument("--outlier-rate", type=float, default=d.outlier_rate, help="fraction of 2D detections with a wrong id")
-    p.add_argument("--max-view-angle", type=float, default=None, help="degrees; default 75 for patches, none for spheres")
+    p.add_argument("--outlier-rate", type=float, default=d.outlier_rate,
+                   help="fraction of 2D detections with a wrong id")
+    p.add_argument("--max-view-angle", type=float, default=None,
+                   help="degrees; default 75 for patches, none for spheres")
     p.add_argument("--placement-mm", type=float, default=d.placement_mm,
                    help="how far markers sit from their nominal layout spots, mm (default %(default)s)")
     p.add_argument("--subject-seed", type=int, default=None,
@@ -669,8 +673,8 @@ def _add_synth(verbs) -> None:
     p.set_defaults(run=_cmd_synth)
 
     p = verbs.add_parser("demo", help="run the main job on built-in data into demo-output/",
-                         description="Synthetic DexterCap-style session -> marker calibration -> solve -> 5 Hz smoothing -> "
-                                     "metrics against the truth, written to demo-output/.")
+                         description="Synthetic DexterCap-style session -> marker calibration -> solve -> "
+                                     "5 Hz smoothing -> metrics against the truth, written to demo-output/.")
     p.add_argument("--out", default="demo-output")
     p.set_defaults(run=_cmd_demo)
 

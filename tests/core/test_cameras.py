@@ -43,7 +43,8 @@ def test_project_matches_opencv(seed):
     rng = np.random.default_rng(seed)
     camera = random_camera(rng, distortion_scale=1.0)
     # Points in front of the camera within about 40 degrees of the optical axis.
-    local = np.concatenate([rng.uniform(-0.8, 0.8, (500, 2)), np.ones((500, 1))], axis=1) * rng.uniform(0.3, 3, (500, 1))
+    depth = rng.uniform(0.3, 3, (500, 1))
+    local = np.concatenate([rng.uniform(-0.8, 0.8, (500, 2)), np.ones((500, 1))], axis=1) * depth
     points = (local - camera.translation) @ camera.rotation_matrix  # R.T (x - t)
     pixels, depth = camera.project(points)
     expected, _ = cv2.projectPoints(points, camera.rotation, camera.translation, camera.matrix, camera.distortions)

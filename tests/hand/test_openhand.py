@@ -124,9 +124,9 @@ def test_left_hand_is_the_mirror_of_the_right():
     mirror = np.array([1.0, 1.0, -1.0])
     # Mirroring in z maps a rotation vector (a, b, c) to (-a, -b, c).
     r = right.forward(betas, orient, phi=phi, transl=transl)
-    l = left.forward(betas, orient * np.array([-1.0, -1.0, 1.0]), phi=phi, transl=transl * mirror)
-    np.testing.assert_allclose(l.joints, r.joints * mirror, atol=1e-12)
-    np.testing.assert_allclose(l.vertices, r.vertices * mirror, atol=1e-12)
+    lh = left.forward(betas, orient * np.array([-1.0, -1.0, 1.0]), phi=phi, transl=transl * mirror)
+    np.testing.assert_allclose(lh.joints, r.joints * mirror, atol=1e-12)
+    np.testing.assert_allclose(lh.vertices, r.vertices * mirror, atol=1e-12)
     np.testing.assert_array_equal(left.faces, right.faces[:, ::-1])
 
 

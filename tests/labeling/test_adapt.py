@@ -48,7 +48,8 @@ def test_move_rigid_set_moves_the_set_and_keeps_the_rest(takes):
     before = np.linalg.norm(test.positions[whole][:, idx][:, i] - test.positions[whole][:, idx][:, j], axis=-1)
     after = np.linalg.norm(moved.positions[whole][:, idx][:, i] - moved.positions[whole][:, idx][:, j], axis=-1)
     np.testing.assert_allclose(np.median(after / before, axis=0), 1.1, atol=0.01)
-    centre_shift = np.linalg.norm(moved.positions[whole][:, idx].mean(1) - test.positions[whole][:, idx].mean(1), axis=1)
+    centre_shift = np.linalg.norm(moved.positions[whole][:, idx].mean(1) - test.positions[whole][:, idx].mean(1),
+                                  axis=1)
     np.testing.assert_allclose(centre_shift, 0.005, atol=0.0002)  # the set's centre moved by |shift| = 5 mm
     assert not np.shares_memory(moved.positions, test.positions)
 

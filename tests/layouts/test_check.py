@@ -161,7 +161,7 @@ def test_synthetic_take_matches_with_a_subject_prefix_and_extras(glove_take):
     assert result.matched == {n: f"Sub1:{n}" for n in glove_take.names}
     assert result.missing == () and result.extra == ("box1",)
     # The synthetic subject's triad is where its layout put it, up to the subject's shape and placement.
-    for a, b, measured, nominal in result.rigid_distances:
+    for _, _, measured, nominal in result.rigid_distances:
         assert measured == pytest.approx(nominal, rel=0.2)
     summary = result.summary()
     assert "13 of 13 found in take.c3d (prefix Sub1: ignored)" in summary

@@ -109,6 +109,7 @@ def test_unknown_layout_name():
 
 def test_object_markers_are_allowed_but_not_attached():
     from handcap.layouts import LayoutMarker, MarkerLayout
-    layout = MarkerLayout("x", "right", (LayoutMarker("a", "object:cube"), LayoutMarker("b", "palm", np.zeros(3) + [0.05, 0.02, 0])))
+    layout = MarkerLayout("x", "right", (LayoutMarker("a", "object:cube"),
+                                         LayoutMarker("b", "palm", np.zeros(3) + [0.05, 0.02, 0])))
     att = MarkerAttachment.from_layout(layout, OpenHand())
     assert att.marker_names == ("b",)

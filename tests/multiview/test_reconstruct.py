@@ -76,7 +76,8 @@ def test_process_pool_and_dask_cluster_give_identical_results(capture, detection
     distributed = pytest.importorskip("distributed")
     pooled = triangulate_detections(detections, capture.rig, chunk_frames=10, workers=2)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        clustered = triangulate_detections(detections, capture.rig, chunk_frames=10, scheduler=cluster.scheduler_address)
+        clustered = triangulate_detections(detections, capture.rig, chunk_frames=10,
+                                           scheduler=cluster.scheduler_address)
     for other in (pooled, clustered):
         assert np.array_equal(other.positions, result.positions, equal_nan=True)
         assert np.array_equal(other.used, result.used)
@@ -132,8 +133,11 @@ def test_per_camera_files_merge_into_the_whole(detections):
                                 detections.n_frames, source=f"{name}.npz"))
     merged = merge_detections(parts[::-1])
     assert sorted(merged.camera_names) == sorted(detections.camera_names) and len(merged) == len(detections)
-    as_names = lambda d: sorted(zip(d.frame.tolist(), np.array(d.camera_names)[d.camera].tolist(),
-                                    np.array(d.marker_names)[d.marker].tolist(), d.xy[:, 0].tolist()))
+
+    def as_names(d):
+        return sorted(zip(d.frame.tolist(), np.array(d.camera_names)[d.camera].tolist(),
+                          np.array(d.marker_names)[d.marker].tolist(), d.xy[:, 0].tolist()))
+
     assert as_names(merged) == as_names(detections)
     short = parts[3].select_frames(0, detections.n_frames - 5)
     with pytest.raises(HandcapError, match=f"mismatched frame counts: {parts[3].source} has {detections.n_frames - 5}"):

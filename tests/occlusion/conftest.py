@@ -1,6 +1,5 @@
 """Fixtures: the real Qualisys glove take and a small marker predictor trained on its first 60 %."""
 
-import numpy as np
 import pytest
 
 from handcap.io import read_markers

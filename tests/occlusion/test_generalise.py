@@ -4,7 +4,6 @@ The full figure (54 synthetic takes, 40 epochs, 5 seeds) is in ``benchmarks/occl
 (section 1c); this is a small, fast version of it that can fail.
 """
 
-import numpy as np
 import pytest
 
 from handcap.occlusion import train_occlusion_model

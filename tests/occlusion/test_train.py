@@ -68,7 +68,8 @@ def test_model_round_trip(small_take, tmp_path):
 
 def test_wrist_pose_survives_the_registered_frame():
     rng = np.random.default_rng(0)
-    phi, orient, transl = rng.normal(0, 0.3, (7, 27)), Rotation.random(7, random_state=1).as_rotvec(), rng.normal(0, 1, (7, 3))
+    phi, orient = rng.normal(0, 0.3, (7, 27)), Rotation.random(7, random_state=1).as_rotvec()
+    transl = rng.normal(0, 1, (7, 3))
     rotation = Rotation.random(7, random_state=2).as_matrix()
     centre, template_centre = rng.normal(0, 1, (7, 3)), rng.normal(0, 0.1, (7, 3))
     out = targets_in_frame(phi, orient, transl, rotation, centre, template_centre)

@@ -111,8 +111,9 @@ def test_track_object_reports_a_deformed_object(tmp_path, capsys):
     from handcap.io import save_npz
     save_npz(tmp_path / "canonical.npz", {"canonical": canonical})  # the object as designed, 6 % smaller
     out = tmp_path / "box_motion.npz"
-    lines = _run_both(["track-object", str(source), "--markers", "box:*", "--canonical", str(tmp_path / "canonical.npz"),
-                       "--name", "box", "--out", str(out)], out, capsys, "track-object")
+    lines = _run_both(["track-object", str(source), "--markers", "box:*",
+                       "--canonical", str(tmp_path / "canonical.npz"), "--name", "box", "--out", str(out)],
+                      out, capsys, "track-object")
     assert len(lines) == 1 and "object 'box': mean residual" in lines[0]
     assert read_object_motion(out).warnings == tuple(lines)
 

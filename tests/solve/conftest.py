@@ -1,6 +1,5 @@
 """Synthetic sessions shared by the solver tests (a calibration take and a capture, one subject)."""
 
-import numpy as np
 import pytest
 
 from handcap.synth.scene import SynthConfig, synthesize

@@ -92,7 +92,8 @@ def test_fingers_behind_the_object_are_hidden(grasp):
             targets = truth["positions"][t, :13]
             direction = targets - camera.center
             dist = np.linalg.norm(direction, axis=1)
-            hits, ray, _ = mesh.ray.intersects_location(np.repeat(camera.center[None], 13, 0), direction / dist[:, None])
+            hits, ray, _ = mesh.ray.intersects_location(np.repeat(camera.center[None], 13, 0),
+                                                        direction / dist[:, None])
             blocked = np.zeros(13, bool)
             for r, h in zip(ray, hits):
                 if np.linalg.norm(h - camera.center) < dist[r] - 1e-3:

@@ -374,7 +374,8 @@ def _inspect(path, partial: bool = False) -> _Layout:
         if not partial or complete == 0:
             raise HandcapError(f"{path}: truncated C3D file ({size} bytes, its header promises {n_frames} frames "
                                f"in {needed} bytes, only {complete} complete); copy or export the file again"
-                               + (", or keep those with read_c3d(path, partial=True) (handcap convert --partial)" if complete else ""))
+                               + (", or keep those with read_c3d(path, partial=True) (handcap convert --partial)"
+                                  if complete else ""))
         n_frames = complete
     # Rates are float32 in C3D: keep the shortest decimal that gives the same
     # float32 (69.9, not 69.9000015258789).

@@ -278,7 +278,6 @@ def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = 5) -> 
     """Shapes of the rigid set that recur in the frames ``use``: most frequent first (at most ``most``, each
     seen in at least 80 % as many frames as the first), each a RigidSet."""
     c, tol = rigid.canonical, rigid.tolerance
-    n = len(c)
     (a, b, e), trained = _anchor(c)
     sides, owner, where = [], [], []
     for t, pts in enumerate(use):

@@ -175,9 +175,10 @@ def read_detections(path) -> Detections:
 
 def write_detections(detections: Detections, path) -> None:
     """Write detections as an ``.npz`` (atomically; identical input, identical bytes)."""
-    save_npz(path, {"camera_names": np.array(detections.camera_names), "marker_names": np.array(detections.marker_names),
-                    "frame": detections.frame, "camera": detections.camera, "marker": detections.marker,
-                    "xy": detections.xy, "score": detections.score, "rate": np.array(detections.rate),
+    save_npz(path, {"camera_names": np.array(detections.camera_names),
+                    "marker_names": np.array(detections.marker_names), "frame": detections.frame,
+                    "camera": detections.camera, "marker": detections.marker, "xy": detections.xy,
+                    "score": detections.score, "rate": np.array(detections.rate),
                     "n_frames": np.array(detections.n_frames)})
 
 

@@ -214,7 +214,8 @@ class OcclusionFiller:
         except (TypeError, ValueError):
             speed = np.nan
         if not speed >= 0:
-            raise HandcapError(f"reentry_speed must be a non-negative number of metres per second, got {reentry_speed!r}")
+            raise HandcapError(f"reentry_speed must be a non-negative number of metres per second, "
+                               f"got {reentry_speed!r}")
         self.reentry_step = speed / self.rate
         hands = (self.model.side,) if hands is None else tuple(hands)
         if not hands:

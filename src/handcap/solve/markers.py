@@ -203,7 +203,8 @@ class MarkerModel:
         flat[:, :, self._entry_flat] = self._angle_columns(phi, world_rot, lever).transpose(2, 0, 1)
         return jac
 
-    def normal_equations(self, transl, rot, phi, resid, weights, *, kin=None, dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
+    def normal_equations(self, transl, rot, phi, resid, weights, *, kin=None,
+                         dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
         """Gauss-Newton matrix ``J^T W J`` (T, 33, 33) and gradient ``J^T W r`` (T, 33), without forming J.
 
         Equal to the products with :meth:`jacobian` (to rounding), but built

@@ -145,8 +145,9 @@ def betas_from_scan(hand, scan_points, *, fit_pose: bool = True, iterations: int
 
         def residual(p):
             v = model_vertices(p)
-            r_model = ((v - scan[to_scan]) * normals).sum(axis=1, keepdims=True) * w_model
-            r_scan = (np.einsum("nk,nki->ni", bary, v[corners]) - scan) * w_scan
+            # This round's correspondences; the function is used within this round only.
+            r_model = ((v - scan[to_scan]) * normals).sum(axis=1, keepdims=True) * w_model  # noqa: B023
+            r_scan = (np.einsum("nk,nki->ni", bary, v[corners]) - scan) * w_scan  # noqa: B023
             r = np.concatenate([r_model.ravel(), r_scan.ravel()])
             extra = [prior * p[:10]]
             if fit_pose:

@@ -27,7 +27,7 @@ from scipy.signal import butter, sosfiltfilt
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from handcap.core.errors import HandcapError
-from handcap.hand.anatomy import DIP_PIP_RATIO, PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
+from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
 from handcap.hand.anatomy import pose_from_degrees as _pose
 
 MOTIONS = ("calibration", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
@@ -342,7 +342,8 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
     f = np.array([0.0, 0.15, 0.28, 0.82, 0.92, 1.0]) * duration
     n_carry = max(2, int(round((f[3] - f[2]) / 0.7)))
     table_pose = np.eye(4)
-    table_pose[:3, :3] = (NEUTRAL * Rotation.from_rotvec(np.deg2rad(rng.normal(0, 10, 3)))).as_matrix() @ object2hand[:3, :3]
+    tilt = Rotation.from_rotvec(np.deg2rad(rng.normal(0, 10, 3)))
+    table_pose[:3, :3] = (NEUTRAL * tilt).as_matrix() @ object2hand[:3, :3]
     table_pose[:3, 3] = WORK_CENTRE + np.array([0.0, 0.0, -0.08]) + rng.normal(0, 0.02, 3) * [1, 1, 0]
     wrist_at_grasp = table_pose @ np.linalg.inv(object2hand)
     grasp_rot = Rotation.from_matrix(wrist_at_grasp[:3, :3])

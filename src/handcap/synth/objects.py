@@ -98,8 +98,8 @@ def make_object(kind: str, *, seed: int = 0, scale: float = 1.0) -> SynthObject:
         markers, normals = _box_markers(half, radius, rng)
     elif kind == "cube2x2":
         half = np.full(3, 0.028) * scale
-        cubies = [trimesh.creation.box(extents=np.full(3, 0.0275 * scale),
-                                       transform=trimesh.transformations.translation_matrix(np.array(c) * 0.014 * scale))
+        move = trimesh.transformations.translation_matrix
+        cubies = [trimesh.creation.box(extents=np.full(3, 0.0275 * scale), transform=move(np.array(c) * 0.014 * scale))
                   for c in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T]
         mesh = trimesh.util.concatenate(cubies)
         markers, normals = _box_markers(half, radius, rng)

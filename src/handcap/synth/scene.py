@@ -305,8 +305,8 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
     for t in tqdm(range(n_frames), desc="visibility", unit="frame", disable=hidden, leave=False):
         surface = vertices[t]
         if obj is not None:
-            surface = np.concatenate([surface, obj.vertices @ Rotation.from_rotvec(motion.object_rotation[t]).as_matrix().T
-                                      + motion.object_translation[t]])
+            turned = Rotation.from_rotvec(motion.object_rotation[t]).as_matrix()
+            surface = np.concatenate([surface, obj.vertices @ turned.T + motion.object_translation[t]])
         if max_angle is None:
             seen_by[t] = camera_visibility(truth_markers[t], rig, surface, faces)
         else:  # printed patches are on the hand; object markers stay spheres
