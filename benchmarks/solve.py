@@ -44,7 +44,7 @@ def main() -> None:
     from handcap.io import read_markers
     from handcap.layouts import LayoutMarker, MarkerLayout, load_layout
     from handcap.objects import track_rigid
-    from handcap.quality import leave_one_marker_out
+    from handcap.solve import leave_one_marker_out
     from handcap.solve import calibrate_attachment, solve_hand
     from handcap.synth.scene import SynthConfig, synthesize
 

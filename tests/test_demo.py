@@ -8,7 +8,7 @@ import pytest
 
 import handcap.demo as demo
 from handcap.cli import main
-from handcap.io._files import atomic_output
+from handcap.core.files import atomic_output
 from handcap.synth.scene import SynthConfig, synthesize
 
 

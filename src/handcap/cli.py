@@ -204,7 +204,7 @@ def _expand_names(markers, text: str) -> list[str]:
 def _cmd_metrics(args) -> tuple[str, ...]:
     import json
 
-    from handcap.quality.report import metrics_table, motion_metrics
+    from handcap.report import metrics_table, motion_metrics
     if args.out:
         from handcap.io import check_output
         check_output(args.out, args.motion, args.truth, args.markers, args.attachment, args.object, args.object_mesh)
@@ -270,7 +270,7 @@ def _cmd_shape(args) -> tuple[str, ...]:
                                    f"got {item!r}") from None
         betas = betas_from_measurements(hand, **lengths)
         note = "from " + ", ".join(lengths)
-    from handcap.io._files import warnings_entry
+    from handcap.core.files import warnings_entry
     from handcap.quality import plausibility as q
     warnings = tuple(q.shape_warnings(betas))
     save_npz(args.out, {"betas": betas, **warnings_entry(warnings)})

@@ -137,11 +137,11 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
     import time
 
     from handcap.io import write_hand_motion, write_markers
-    from handcap.io._files import atomic_output
+    from handcap.core.files import atomic_output
     from handcap.layouts import load_layout
     from handcap.multiview import clean_markers, read_detections, triangulate_detections, write_quality
     from handcap.quality import plausibility as q
-    from handcap.quality.report import metrics_table, motion_metrics
+    from handcap.report import metrics_table, motion_metrics
     from handcap.solve import calibrate_attachment, solve_hand
     from handcap.synth.objects import make_object
     from handcap.synth.render import save_png

@@ -15,6 +15,11 @@ Conventions (written down once)
 * Lens distortion is OpenCV's five-term model ``k1 k2 p1 p2 k3`` (radial and
   tangential, Brown-Conrady). The camera matrix has no skew, as in OpenCV's
   :func:`cv2.projectPoints`, which ignores it.
+
+Rigs are stored as anipose-style TOML (:func:`read_cameras_toml`,
+:func:`write_cameras_toml`, ``CameraRig.save`` and ``CameraRig.load``; the
+format is described in :mod:`handcap.io.cameras`, which names these for
+users beside the other formats).
 """
 
 from __future__ import annotations
@@ -22,12 +27,15 @@ from __future__ import annotations
 import operator
 from collections.abc import Iterator
 from dataclasses import dataclass
+import tomllib
 from pathlib import Path
 
 import cv2
 import numpy as np
+import tomli_w
 
 from handcap.core.errors import HandcapError, merge_warnings
+from handcap.core.files import atomic_output, existing_file
 from handcap.core.rotations import matrix_from_axis_angle
 
 # OpenCV's iterative undistortion stops when the point re-distorts to within
@@ -531,16 +539,13 @@ class CameraRig:
         return pixels
 
     # -- files -------------------------------------------------------------------------
-    # handcap.io depends on handcap.core, so the readers are imported when used.
     def save(self, path) -> None:
         """Write the rig to ``path`` (``.toml``, anipose style), atomically.
 
         See Also
         --------
-        handcap.io.cameras.write_cameras_toml
+        write_cameras_toml
         """
-        from handcap.io.cameras import write_cameras_toml
-
         _check_suffix(path)
         write_cameras_toml(self, path)
 
@@ -550,10 +555,8 @@ class CameraRig:
 
         See Also
         --------
-        handcap.io.cameras.read_cameras_toml
+        read_cameras_toml
         """
-        from handcap.io.cameras import read_cameras_toml
-
         _check_suffix(path)
         return read_cameras_toml(path)
 
@@ -564,4 +567,142 @@ def _check_suffix(path) -> None:
         raise HandcapError(f"{path}: camera files are anipose-style .toml, got '{suffix or 'no extension'}'")
 
 
-__all__ = ["Camera", "CameraRig"]
+# -- anipose-style TOML rig files (handcap.io.cameras names them for users) ----------------------------------
+
+CAMERA_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation")
+_METADATA = "metadata"
+
+
+def read_cameras_toml(path) -> CameraRig:
+    """Read a camera rig from an anipose-style TOML file.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    CameraRig
+        Cameras in the order of the file's tables; translations in metres.
+
+    Raises
+    ------
+    HandcapError
+        Missing or unreadable file, invalid TOML, no camera table, a missing
+        key, a value of the wrong shape or type, a non-finite number, a fisheye
+        camera, or repeated camera names. The message names the file and table.
+    """
+    path = existing_file(path)
+    try:
+        with open(path, "rb") as fh:
+            document = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as err:
+        raise HandcapError(f"{path}: not valid TOML ({err})") from None
+    except UnicodeDecodeError:
+        raise HandcapError(f"{path}: not valid TOML (not UTF-8 text)") from None
+    cameras = []
+    for key, table in document.items():
+        if key == _METADATA:
+            continue
+        if not isinstance(table, dict):
+            raise HandcapError(f"{path}: top-level key '{key}' is not a camera table; "
+                               f"expected tables [cam_0], [cam_1], ... (and optionally [metadata])")
+        cameras.append(_camera_from_table(table, f"{path}: [{key}]"))
+    if not cameras:
+        raise HandcapError(f"{path}: no camera tables; expected [cam_0], [cam_1], ... "
+                           f"with keys {', '.join(CAMERA_KEYS)}")
+    try:
+        return CameraRig(cameras, _stored_warnings(document.get(_METADATA)))
+    except HandcapError as err:
+        raise HandcapError(f"{path}: {err}") from None
+
+
+def _stored_warnings(metadata) -> tuple[str, ...]:
+    """The ``warnings`` list of a ``[metadata]`` table (anything else there is anipose's and ignored)."""
+    found = metadata.get("warnings", []) if isinstance(metadata, dict) else []
+    return tuple(str(w) for w in found) if isinstance(found, list) else ()
+
+
+def _camera_from_table(table: dict, where: str) -> Camera:
+    missing = [key for key in CAMERA_KEYS if key not in table]
+    if missing:
+        raise HandcapError(f"{where} lacks {', '.join(missing)}; each camera table needs "
+                           f"{', '.join(CAMERA_KEYS)}")
+    if table.get("fisheye", False):
+        raise HandcapError(f"{where} is a fisheye camera; handcap supports OpenCV's pinhole model only")
+    for key in CAMERA_KEYS[1:]:
+        # tomllib gives str, bool, dates and tables as they are; numpy would turn
+        # some of them into numbers (True -> 1.0, "1" -> 1.0), so refuse them here.
+        if not all_numbers(table[key]):
+            raise HandcapError(f"{where} {key} must be an array of numbers, got {table[key]!r}")
+    try:
+        return Camera(**{key: table[key] for key in CAMERA_KEYS})
+    except HandcapError as err:
+        raise HandcapError(f"{where} {err}") from None
+
+
+def all_numbers(value) -> bool:
+    """Whether ``value`` is a number or a (nested) list of numbers only (no bool, str, date or table)."""
+    if isinstance(value, list):
+        return all(all_numbers(item) for item in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def write_cameras_toml(rig: CameraRig, path, *, warnings=()) -> None:
+    """Write a camera rig as an anipose-style TOML file, atomically.
+
+    Parameters
+    ----------
+    rig : CameraRig
+    path : str or Path
+        Written through a temporary file renamed into place.
+    warnings : sequence of str
+        One-line warnings of the calibration, stored in ``[metadata]`` after the rig's own
+        (``rig.warnings``); with none at all, no metadata table is written.
+
+    Raises
+    ------
+    HandcapError
+        If ``rig`` is not a :class:`CameraRig` or the folder does not exist.
+    """
+    if not isinstance(rig, CameraRig):
+        raise HandcapError(f"write_cameras_toml needs a CameraRig, got {type(rig).__name__}")
+    document = {f"cam_{i}": _table_from_camera(camera) for i, camera in enumerate(rig)}
+    warnings = merge_warnings(rig.warnings, warnings)
+    if warnings:
+        document[_METADATA] = {"warnings": list(warnings)}
+    text = tomli_w.dumps(document)
+    with atomic_output(path, "wb") as fh:
+        fh.write(text.encode("utf-8"))
+
+
+def read_cameras_warnings(path) -> tuple[str, ...]:
+    """The warnings stored in an anipose-style TOML file's ``[metadata]`` (empty when there are none).
+
+    Raises
+    ------
+    HandcapError
+        Missing, unreadable or invalid TOML file.
+    """
+    path = existing_file(path)
+    try:
+        with open(path, "rb") as fh:
+            return _stored_warnings(tomllib.load(fh).get(_METADATA))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise HandcapError(f"{path}: not valid TOML ({err})") from None
+
+
+def _table_from_camera(camera: Camera) -> dict:
+    # tolist() gives Python floats, which tomli_w writes with repr: shortest round trip.
+    return {
+        "name": camera.name,
+        "size": list(camera.size),
+        "matrix": camera.matrix.tolist(),
+        "distortions": camera.distortions.tolist(),
+        "rotation": camera.rotation.tolist(),
+        "translation": camera.translation.tolist(),
+    }
+
+
+__all__ = ["CAMERA_KEYS", "Camera", "CameraRig", "all_numbers", "read_cameras_toml", "read_cameras_warnings",
+           "write_cameras_toml"]

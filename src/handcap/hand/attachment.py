@@ -18,7 +18,7 @@ from array_api_compat import array_namespace
 
 from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.geometry import closest_points_on_mesh
-from handcap.io._files import load_npz, read_warnings, save_npz, warnings_entry
+from handcap.core.files import load_npz, read_warnings, save_npz, warnings_entry
 
 
 @dataclass(frozen=True, eq=False)

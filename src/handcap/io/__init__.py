@@ -28,7 +28,7 @@ from pathlib import Path
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.points import PointCloudSequence
-from handcap.io._files import (
+from handcap.core.files import (
     atomic_output,
     check_not_input,
     check_output,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.io._files import existing_file
+from handcap.core.files import existing_file
 
 # Cells that mean "no sample": empty, and the spellings of NaN that exporters write.
 MISSING_TOKENS = ("", "nan", "NaN", "NAN", "null", "NULL", "Null")

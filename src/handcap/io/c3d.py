@@ -61,7 +61,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
-from handcap.io._files import atomic_output, existing_file
+from handcap.core.files import atomic_output, existing_file
 from handcap.io._units import check_units, metres_per_unit, settle_marker_units, unit_name
 
 _BLOCK = 512

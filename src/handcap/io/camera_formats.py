@@ -123,9 +123,9 @@ import tomli_w
 from handcap.core.cameras import Camera, CameraRig
 from handcap.core.errors import HandcapError
 from handcap.core.rotations import axis_angle_from_matrix
-from handcap.io._files import atomic_output, existing_file
+from handcap.core.files import atomic_output, existing_file
 from handcap.io._units import check_units, metres_per_unit, settle_rig_units
-from handcap.io.cameras import _all_numbers, read_cameras_toml, write_cameras_toml
+from handcap.core.cameras import all_numbers, read_cameras_toml, write_cameras_toml
 
 OPENCV_SUFFIXES = (".yml", ".yaml", ".xml")
 QCA_SUBPIXELS = 64  # QTM sensor coordinates per pixel
@@ -601,7 +601,7 @@ def read_cameras_caliscope(path) -> CameraRig:
             raise HandcapError(f"{where} lacks {', '.join(missing)}; each camera needs {', '.join(CALISCOPE_KEYS)} "
                                f"(is its calibration finished?)")
         for key in CALISCOPE_KEYS:
-            if not _all_numbers(table[key]):
+            if not all_numbers(table[key]):
                 raise HandcapError(f"{where} {key} must be an array of numbers, got {table[key]!r}")
         rotation = _rotation_vector(table["rotation"], f"{where} rotation")
         cameras.append(_camera(where, name=f"cam_{int(port)}", size=table["size"], matrix=table["matrix"],

@@ -13,7 +13,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence, as_positions
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
-from handcap.io._files import load_npz, read_warnings, save_npz, warnings_entry
+from handcap.core.files import load_npz, read_warnings, save_npz, warnings_entry
 from handcap.io._units import check_units, metres_per_unit, settle_marker_units
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
-from handcap.io._files import atomic_output
+from handcap.core.files import atomic_output
 from handcap.io._text import check_complete, data_rows, floats, read_text, uniform_rows
 from handcap.io._units import check_units, metres_per_unit, settle_marker_units, unit_name
 

@@ -169,7 +169,7 @@ class LabelingModel:
         return cls(tuple(ordered), rigid_set, spatial, kalman)
 
     def save(self, path) -> None:
-        from handcap.io._files import save_npz
+        from handcap.core.files import save_npz
         data = {"kind": np.array("labeling_model"), "names": np.array(self.names), **self.spatial.to_arrays(),
                 "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
         if self.rigid is not None:
@@ -178,7 +178,7 @@ class LabelingModel:
 
     @classmethod
     def load(cls, path) -> "LabelingModel":
-        from handcap.io._files import load_npz
+        from handcap.core.files import load_npz
         data = load_npz(path, required=("names", "gmm_weights", "gmm_means", "gmm_precision_chol", "kalman"),
                         what="labeling model")
         dt, jerk, measurement = (float(v) for v in data["kalman"])

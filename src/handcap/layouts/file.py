@@ -148,7 +148,7 @@ class MarkerLayout:
 
     def save(self, path) -> None:
         """Write the layout as TOML (atomically), one line per value."""
-        from handcap.io._files import atomic_output
+        from handcap.core.files import atomic_output
 
         table = self.to_toml()
         markers = table.pop("markers")

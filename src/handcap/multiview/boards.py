@@ -56,7 +56,7 @@ import cv2
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.io._files import existing_file
+from handcap.core.files import existing_file
 
 KINDS = ("checkerboard", "charuco")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")

@@ -25,7 +25,7 @@ import numpy as np
 
 from handcap.core.cameras import CameraRig
 from handcap.core.errors import HandcapError
-from handcap.io._files import load_npz, save_npz
+from handcap.core.files import load_npz, save_npz
 
 REQUIRED = ("camera_names", "marker_names", "frame", "camera", "marker", "xy", "score", "rate")
 

@@ -27,7 +27,7 @@ import numpy as np
 from handcap.core.cameras import CameraRig
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
-from handcap.io._files import save_npz
+from handcap.core.files import save_npz
 from handcap.multiview.detections import Detections
 from handcap.multiview.triangulation import _project, triangulate_ransac
 from handcap.parallel import default_workers, idle_workers, map_chunks

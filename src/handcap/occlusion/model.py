@@ -17,7 +17,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.motion import check_side
-from handcap.io._files import load_npz, save_npz
+from handcap.core.files import load_npz, save_npz
 from handcap.occlusion.predictor import MarkerPredictor
 from handcap.occlusion.regressor import JointRegressor
 

@@ -54,7 +54,7 @@ def read_take(path, *, poses=None, rate=None) -> PosedTake:
         A hand motion ``.npz`` (``phi``, ``global_orient``, ``transl``) for the take, e.g. from ``handcap solve``.
     """
     from handcap.io import read_markers
-    from handcap.io._files import load_npz
+    from handcap.core.files import load_npz
 
     path = Path(path)
     truth = None

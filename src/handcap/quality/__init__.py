@@ -6,13 +6,12 @@ from handcap.quality.metrics import (
     diversity_coherence,
     jerk,
     joint_position_error,
-    leave_one_marker_out,
     marker_reconstruction_error,
     msnr,
     penetration,
     pose_features,
 )
 
-__all__ = ["Stat", "diversity_coherence", "jerk", "joint_position_error", "leave_one_marker_out", "lowpass",
+__all__ = ["Stat", "diversity_coherence", "jerk", "joint_position_error", "lowpass",
            "marker_reconstruction_error", "msnr", "penetration", "pose_features", "smooth_hand_motion",
            "smooth_object_motion", "smooth_rotations"]

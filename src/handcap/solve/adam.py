@@ -25,6 +25,7 @@ from handcap.core.rotations import matrix_from_euler_zyx
 from handcap.hand.anatomy import PHI_AXIS, PHI_JOINT
 from handcap.hand.kinematics import chain_transforms
 from handcap.solve.lm import Poses, unconstrained_angles
+from handcap.solve.markers import rigid_start
 
 LEARNING_RATE = 0.002
 ITERATIONS = 400
@@ -90,8 +91,6 @@ def solve_adam(model, target, observed, priors, *, learning_rate: float = LEARNI
     -------
     Poses
     """
-    from handcap.solve.motion import rigid_start
-
     n = len(target)
     markers = TorchMarkers(model)
     rest = priors.rest_phi()

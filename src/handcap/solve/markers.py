@@ -33,6 +33,7 @@ from scipy.sparse import csr_matrix
 from handcap.hand.anatomy import PARENTS, PHI_AXIS, PHI_JOINT
 from handcap.hand.kinematics import chain_transforms
 from handcap.hand.model import HandModel
+from handcap.objects.rigid import kabsch
 
 N_PARAMS = 33  # translation 3, world rotation increment 3, phi 27
 
@@ -361,3 +362,38 @@ class MarkerModel:
         parent_rot = world_rot[:, PARENTS[1:]]  # (T, 15, 3, 3)
         world = np.einsum("tjab,tjkb->tjka", parent_rot, in_parent)  # (T, 15, 3 dofs, 3)
         return world[:, PHI_JOINT - 1, PHI_AXIS]
+
+
+def rigid_start(model: MarkerModel, target, observed, rest_phi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-frame rotation and translation from the palm markers (Kabsch).
+
+    All markers are used where fewer than three palm markers are seen, or
+    where the palm markers do not span a plane on the model (2nd singular
+    value of their spread under 5 mm).
+
+    Returns rotation (T, 3, 3), translation (T, 3) and a (T,) mask of frames
+    where at least three markers made the alignment possible.
+    """
+    n = len(target)
+    rest = model.positions(np.zeros((1, 3)), np.eye(3)[None], rest_phi[None])[0]
+    palm = model.marker_weights[:, 0] > 0.9
+    if palm.sum() >= 3:
+        # Palm markers that (nearly) coincide on the model, as position-less markers do before a calibration
+        # has placed them, fix no rotation: align all markers then.
+        spread = np.linalg.svd(rest[palm] - rest[palm].mean(axis=0), compute_uv=False)
+        if spread[1] < 0.005:
+            palm = np.zeros_like(palm)
+    use_palm = (observed & palm).sum(axis=1) >= 3
+    weights = np.where(use_palm[:, None], observed & palm, observed).astype(float)
+    ok = weights.sum(axis=1) >= 3
+    src = np.broadcast_to(rest, target.shape)
+    tgt = np.where(observed[..., None], target, 0.0)
+    rot = np.tile(np.eye(3), (n, 1, 1))
+    trans = np.zeros((n, 3))
+    if ok.any():
+        r, t = kabsch(src[ok], tgt[ok], weights[ok])
+        rot[ok] = r
+        # Kabsch gives y = R x + t about the origin; the model turns about the wrist joint J0.
+        j0 = model.rest_joints[0]
+        trans[ok] = t + np.einsum("tij,j->ti", r, j0) - j0
+    return rot, trans, ok

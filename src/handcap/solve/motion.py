@@ -38,10 +38,10 @@ from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
 from handcap.core.rotations import axis_angle_from_matrix
-from handcap.objects.rigid import kabsch
+from handcap.quality.filters import lowpass, smooth_rotations
 from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
-from handcap.solve.markers import MarkerModel
+from handcap.solve.markers import MarkerModel, rigid_start
 
 METHODS = ("lm", "adam")
 #: A fit whose mean marker error exceeds this (metres) is implausible for a calibrated attachment: warned.
@@ -61,41 +61,6 @@ def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[s
         except HandcapError:
             absent.append(name)
     return out, absent
-
-
-def rigid_start(model: MarkerModel, target, observed, rest_phi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-frame rotation and translation from the palm markers (Kabsch).
-
-    All markers are used where fewer than three palm markers are seen, or
-    where the palm markers do not span a plane on the model (2nd singular
-    value of their spread under 5 mm).
-
-    Returns rotation (T, 3, 3), translation (T, 3) and a (T,) mask of frames
-    where at least three markers made the alignment possible.
-    """
-    n = len(target)
-    rest = model.positions(np.zeros((1, 3)), np.eye(3)[None], rest_phi[None])[0]
-    palm = model.marker_weights[:, 0] > 0.9
-    if palm.sum() >= 3:
-        # Palm markers that (nearly) coincide on the model, as position-less markers do before a calibration
-        # has placed them, fix no rotation: align all markers then.
-        spread = np.linalg.svd(rest[palm] - rest[palm].mean(axis=0), compute_uv=False)
-        if spread[1] < 0.005:
-            palm = np.zeros_like(palm)
-    use_palm = (observed & palm).sum(axis=1) >= 3
-    weights = np.where(use_palm[:, None], observed & palm, observed).astype(float)
-    ok = weights.sum(axis=1) >= 3
-    src = np.broadcast_to(rest, target.shape)
-    tgt = np.where(observed[..., None], target, 0.0)
-    rot = np.tile(np.eye(3), (n, 1, 1))
-    trans = np.zeros((n, 3))
-    if ok.any():
-        r, t = kabsch(src[ok], tgt[ok], weights[ok])
-        rot[ok] = r
-        # Kabsch gives y = R x + t about the origin; the model turns about the wrist joint J0.
-        j0 = model.rest_joints[0]
-        trans[ok] = t + np.einsum("tij,j->ti", r, j0) - j0
-    return rot, trans, ok
 
 
 def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = "lm", priors: Priors | None = None,
@@ -162,7 +127,7 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         raise HandcapError("the input has no visible marker of the attachment in any frame")
     model = MarkerModel(hand, attachment)
     if method == "adam":
-        from handcap.solve.adam import solve_adam
+        from handcap.solve.adam import solve_adam  # imports torch: only for the baseline solver
         poses = solve_adam(model, target, observed, priors, progress=progress)
     else:
         poses = _solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
@@ -178,7 +143,6 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
 def _smoothed(poses: Poses, rate, cutoff, order) -> Poses:
     from scipy.spatial.transform import Rotation
 
-    from handcap.quality.filters import lowpass, smooth_rotations
     orient = smooth_rotations(axis_angle_from_matrix(poses.rot), rate, cutoff, order)
     return Poses(lowpass(poses.transl, rate, cutoff, order), Rotation.from_rotvec(orient).as_matrix(),
                  lowpass(poses.phi, rate, cutoff, order))

@@ -377,7 +377,7 @@ def write_capture(capture: SynthCapture, folder) -> dict:
     import tomli_w
 
     from handcap.io import write_c3d, write_markers_npz, write_points_npz
-    from handcap.io._files import atomic_output, save_npz
+    from handcap.core.files import atomic_output, save_npz
     from handcap.io.npz import write_hand_motion
 
     folder = Path(folder)

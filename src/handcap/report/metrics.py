@@ -5,6 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.core.files import existing_file
+from handcap.hand import OpenHand
+from handcap.hand.attachment import MarkerAttachment
+from handcap.io import read_hand_motion, read_markers, read_object_motion
+from handcap.quality import metrics as q
+from handcap.solve.leave_one_out import leave_one_marker_out
+from handcap.solve.motion import observed_markers
 
 
 def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_mesh=None, attachment=None,
@@ -28,15 +35,10 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         The model the motion was solved with (for the mesh and ``leave_one_out``);
         OpenHand of the motion's side by default, which only an ``openhand`` motion accepts.
     """
-    from handcap.io import read_hand_motion, read_markers, read_object_motion
-    from handcap.quality import metrics as q
-    from handcap.solve.motion import observed_markers
-
     motion = read_hand_motion(motion_path)
     if motion.joints is None:
         raise HandcapError(f"{motion_path}: has no joints; solve it with handcap solve")
     if object_mesh is not None:
-        from handcap.io import existing_file
         existing_file(object_mesh)  # before any work: a missing mesh is one line, not a traceback at the end
     out = {"frames": motion.n_frames, "rate_hz": motion.rate}
     if motion.marker_residuals is not None:
@@ -65,7 +67,7 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         q.pose_features(motion.joints, None if object_motion is None else object_motion.translation))
     out["diversity"], out["coherence"] = diversity, coherence
     if object_motion is not None and object_mesh is not None:
-        import trimesh
+        import trimesh  # heavy: loaded only when a mesh is given
         try:
             mesh = trimesh.load(object_mesh, force="mesh", process=False)
         except (ValueError, OSError, KeyError, IndexError, TypeError) as err:  # what trimesh raises on bad files
@@ -80,9 +82,7 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     if leave_one_out:
         if attachment is None or markers is None:
             raise HandcapError("--leave-one-out needs --markers and --attachment")
-        from handcap.hand.attachment import MarkerAttachment
-        loo = q.leave_one_marker_out(read_markers(markers), MarkerAttachment.load(attachment),
-                                     _hand_for(motion, hand))
+        loo = leave_one_marker_out(read_markers(markers), MarkerAttachment.load(attachment), _hand_for(motion, hand))
         out["leave_one_out_mm"] = {k: 1000 * v.mean for k, v in loo.items()}
     return out
 
@@ -94,7 +94,6 @@ def _hand_for(motion, hand):
     if motion.model != "openhand":
         raise HandcapError(f"the motion was solved with the {motion.model} hand model: give --hand-model "
                            f"{motion.model} (and --mano-dir DIR or HANDCAP_MANO_DIR)")
-    from handcap.hand import OpenHand
     return OpenHand(motion.side)
 
 
