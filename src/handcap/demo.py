@@ -24,6 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
+from handcap.core.files import atomic_output
+from handcap.hand import OpenHand
+from handcap.io import write_hand_motion, write_markers, write_object_motion
+from handcap.layouts import load_layout
+from handcap.multiview import clean_markers, read_detections, triangulate_detections, write_quality
+from handcap.quality import plausibility as q
+from handcap.report import metrics_table, motion_metrics
+from handcap.solve import calibrate_attachment, solve_hand
+from handcap.synth.objects import make_object
+from handcap.synth.render import View, render, save_png
 from handcap.synth.scene import SynthConfig, synthesize, write_capture
 
 DEMO_CONFIG = SynthConfig(layout="dense-patches", motion="grasp", frames=120, rate=20.0, seed=7, min_views=3,
@@ -88,10 +98,6 @@ def picture(capture, motion=None, frame: int | None = None) -> np.ndarray:
     import cv2
     from scipy.spatial.transform import Rotation
 
-    from handcap.hand import OpenHand
-    from handcap.synth.objects import make_object
-    from handcap.synth.render import View, render
-
     truth_motion = capture.hand_motion
     holding = capture.object_motion.state["holding"] if capture.object_motion is not None else None
     if frame is None:
@@ -135,16 +141,6 @@ def picture(capture, motion=None, frame: int | None = None) -> np.ndarray:
 def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
     """Run the demo into ``out`` (see the module docstring); returns the summary with the metrics."""
     import time
-
-    from handcap.io import write_hand_motion, write_markers
-    from handcap.core.files import atomic_output
-    from handcap.layouts import load_layout
-    from handcap.multiview import clean_markers, read_detections, triangulate_detections, write_quality
-    from handcap.quality import plausibility as q
-    from handcap.report import metrics_table, motion_metrics
-    from handcap.solve import calibrate_attachment, solve_hand
-    from handcap.synth.objects import make_object
-    from handcap.synth.render import save_png
 
     out = Path(out)
     before = file_stamps(out)
@@ -208,7 +204,6 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
     import trimesh
     with atomic_output(mesh_path) as fh:
         fh.write(trimesh.Trimesh(obj.vertices, obj.faces, process=False).export(file_type="ply"))
-    from handcap.io import write_object_motion
     write_object_motion(capture.object_motion, out / "object.npz")
     metrics = motion_metrics(out / "motion.npz", truth=paths["truth.npz"], markers=out / "cleaned.c3d",
                              obj=out / "object.npz", object_mesh=mesh_path)

@@ -8,6 +8,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.markers import check_rate
+from handcap.core.rotations import matrix_from_axis_angle
 
 SIDES = ("right", "left")
 
@@ -191,7 +192,6 @@ class ObjectMotion:
 
     def matrices(self) -> np.ndarray:
         """Homogeneous object-to-world transforms, shape (T, 4, 4)."""
-        from handcap.core.rotations import matrix_from_axis_angle
         out = np.zeros((self.n_frames, 4, 4))
         out[:, :3, :3] = matrix_from_axis_angle(self.rotation)
         out[:, :3, 3] = self.translation
@@ -201,6 +201,5 @@ class ObjectMotion:
     def transform_points(self, points) -> np.ndarray:
         """Object-frame points (N, 3) moved into the world, shape (T, N, 3)."""
         points = np.asarray(points, dtype=np.float64)
-        from handcap.core.rotations import matrix_from_axis_angle
         rot = matrix_from_axis_angle(self.rotation)
         return np.einsum("tij,nj->tni", rot, points) + self.translation[:, None, :]

@@ -41,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 from array_api_compat import array_namespace
 
-from handcap.core.rotations import axis_angle_from_matrix, euler_zyx_from_matrix
+from handcap.core.rotations import axis_angle_from_matrix, euler_zyx_from_matrix, matrix_from_axis_angle
 
 FINGER_NAMES = ("index", "middle", "pinky", "ring", "thumb")  # MANO order
 PARENTS = np.array([-1, 0, 1, 2, 0, 4, 5, 0, 7, 8, 0, 10, 11, 0, 13, 14])
@@ -274,7 +274,6 @@ def phi_from_hand_pose(hand_pose, frames) -> np.ndarray:
     -------
     phi : ndarray (..., 27)
     """
-    from handcap.core.rotations import matrix_from_axis_angle
 
     hand_pose = np.asarray(hand_pose, dtype=np.float64)
     frames = frames_to_numpy(frames)

@@ -16,6 +16,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.objects.rigid import canonical_from_markers, kabsch
+from handcap.synth.faults import burst_dropouts, ghost_markers
 
 
 def corrupt(markers: MarkerSequence, *, ghost_rate: float = 2.0, dropout: float = 0.05, seed: int = 0,
@@ -46,7 +47,6 @@ def corrupt(markers: MarkerSequence, *, ghost_rate: float = 2.0, dropout: float 
     truth : MarkerSequence
         The kept markers, labeled, with the dropouts applied.
     """
-    from handcap.synth.faults import burst_dropouts, ghost_markers
     if not (np.isfinite(ghost_rate) and ghost_rate >= 0):
         raise HandcapError(f"ghost rate must be >= 0, got {ghost_rate}")
     if not (0.0 <= dropout < 1.0):

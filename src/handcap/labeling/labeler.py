@@ -45,9 +45,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
+from handcap.core.files import load_npz, save_npz
 from handcap.core.markers import MarkerSequence
-from handcap.labeling.adapt import StreamAdaptation, largest_change, rigid_from_take
+from handcap.core.points import PointCloudSequence
+from handcap.labeling.adapt import StreamAdaptation, adapt_means, largest_change, register_to_model, rigid_from_take
+from handcap.labeling.baseline import NearestNeighbourLabeler
 from handcap.labeling.birth import PointChains
 from handcap.labeling.frame import HandFrameFinder, RigidSet
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
@@ -169,7 +172,6 @@ class LabelingModel:
         return cls(tuple(ordered), rigid_set, spatial, kalman)
 
     def save(self, path) -> None:
-        from handcap.core.files import save_npz
         data = {"kind": np.array("labeling_model"), "names": np.array(self.names), **self.spatial.to_arrays(),
                 "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
         if self.rigid is not None:
@@ -178,7 +180,6 @@ class LabelingModel:
 
     @classmethod
     def load(cls, path) -> "LabelingModel":
-        from handcap.core.files import load_npz
         data = load_npz(path, required=("names", "gmm_weights", "gmm_means", "gmm_precision_chol", "kalman"),
                         what="labeling model")
         dt, jerk, measurement = (float(v) for v in data["kalman"])
@@ -841,7 +842,6 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         when the hand frame is lost in more than 5 % of the frames or fewer
         than 95 % of the points are labelled.
     """
-    from handcap.core.points import PointCloudSequence
     if isinstance(points, MarkerSequence):
         points = PointCloudSequence.from_markers(points)
     if method not in ("viterbi", "nearest"):
@@ -897,7 +897,6 @@ def refit_to_labels(model: LabelingModel, labeled: MarkerSequence) -> LabelingMo
     """
     from dataclasses import replace
 
-    from handcap.labeling.adapt import adapt_means, register_to_model
     n_rigid = len(model.rigid.names)
     positions = np.stack([labeled.positions[:, labeled.index(n)] for n in model.names], axis=1)
     rot, trans, ok = _rigid_transforms(model.rigid.canonical, positions[:, :n_rigid])
@@ -921,7 +920,6 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
     """One labeling pass over a take."""
     from tqdm import tqdm
     if method == "nearest":
-        from handcap.labeling.baseline import NearestNeighbourLabeler
         options.pop("adapt", None)
         labeler = NearestNeighbourLabeler(model, **options)
     else:
@@ -955,7 +953,6 @@ def _with_warnings(result: LabelResult, points, model, trained=None) -> LabelRes
     (offline), ``trained`` the one given."""
     from dataclasses import replace
 
-    from handcap.core.errors import warn
     lines = []
     if isinstance(trained, LabelingModel) and trained.rigid is not None and result.rigid is not None:
         change = largest_change(trained.rigid, result.rigid)

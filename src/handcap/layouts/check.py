@@ -36,6 +36,7 @@ import numpy as np
 from handcap.core.errors import HandcapError, warn
 from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
+from handcap.hand import OpenHand
 from handcap.hand.anatomy import SEGMENT_NAMES
 from handcap.layouts.file import MarkerLayout
 
@@ -169,7 +170,6 @@ def check_layout(layout: MarkerLayout, markers: MarkerSequence | None = None, *,
     if not isinstance(layout, MarkerLayout):
         raise HandcapError(f"need a MarkerLayout, got {type(layout).__name__}")
     if hand is None:
-        from handcap.hand import OpenHand
         hand = OpenHand(layout.side)
     layout_for_hand = layout.for_side(hand.side)
     messages = []

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output
 from handcap.core.motion import check_side
 from handcap.hand.anatomy import SEGMENT_NAMES
 
@@ -148,7 +149,6 @@ class MarkerLayout:
 
     def save(self, path) -> None:
         """Write the layout as TOML (atomically), one line per value."""
-        from handcap.core.files import atomic_output
 
         table = self.to_toml()
         markers = table.pop("markers")

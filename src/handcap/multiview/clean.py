@@ -46,7 +46,9 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence, as_positions, positive_number, runs
+from handcap.layouts import MarkerLayout, load_layout
 from handcap.objects.rigid import kabsch
+from handcap.occlusion.fill import fill_gaps
 
 # Default radius of a group from its template: scale x (largest template distance) + margin.
 # A printed patch is rigid, but the subject's hand (so the patch's place on it) differs from
@@ -157,7 +159,6 @@ def layout_groups(names, layout, *, radius: float | None = None) -> MarkerGroups
     -------
     MarkerGroups
     """
-    from handcap.layouts import MarkerLayout, load_layout
     if not isinstance(layout, MarkerLayout):
         layout = load_layout(layout)
     if radius is not None:
@@ -404,7 +405,6 @@ def _max_gap(value, what) -> int:
 
 def _interpolated(positions, max_gap, method):
     """Reuse handcap.occlusion.fill_gaps, whose gaps are in seconds: at 1 Hz they are frames."""
-    from handcap.occlusion.fill import fill_gaps
     if max_gap == 0 or positions.shape[0] < 3:
         return positions.copy(), np.zeros(positions.shape[:2], bool)
     names = [str(i) for i in range(positions.shape[1])]

@@ -14,6 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.hand import OpenHand
+from handcap.hand.attachment import MarkerAttachment
+from handcap.layouts import MarkerLayout, load_layout
+from handcap.synth.motions import make_motion
+from handcap.synth.objects import make_object
+from handcap.synth.scene import DEFAULT_OBJECT, misplaced
 
 TRAIN_MOTIONS = ("random", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist",
                  "calibration")
@@ -117,11 +123,6 @@ def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, s
         Draws the subject (shape, marker placement): takes with the same subject seed
         share them, like the takes of one session.
     """
-    from handcap.hand import OpenHand
-    from handcap.hand.attachment import MarkerAttachment
-    from handcap.synth.motions import make_motion
-    from handcap.synth.objects import make_object
-    from handcap.synth.scene import DEFAULT_OBJECT
 
     rng_shape, rng_place, rng_motion, rng_noise = (np.random.default_rng(s)
                                                    for s in np.random.SeedSequence(seed).spawn(4))
@@ -167,8 +168,6 @@ def worn_by_another_subject(take: PosedTake, layout, subject_seed: int, *, place
     -------
     PosedTake
     """
-    from handcap.hand import OpenHand
-    from handcap.hand.attachment import MarkerAttachment
 
     if not take.has_poses:
         raise HandcapError("only a take with poses can be worn by another subject")
@@ -186,8 +185,6 @@ def worn_by_another_subject(take: PosedTake, layout, subject_seed: int, *, place
 
 
 def _misplaced_hand_layout(layout, side, hand, placement_mm, rng):
-    from handcap.layouts import MarkerLayout, load_layout
-    from handcap.synth.scene import misplaced
 
     layout = layout.for_side(side) if isinstance(layout, MarkerLayout) else load_layout(layout, side=side)
     hand_only = type(layout)(layout.name, layout.side, layout.hand_markers, layout.rigid, layout.marker_radius,

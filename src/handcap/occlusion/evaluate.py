@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.hand import OpenHand
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
 from handcap.occlusion.register import apply_registration, undo_registration
 
@@ -246,7 +247,6 @@ FINGER_JOINTS = (2, 3, 5, 6, 8, 9, 11, 12, 14, 15, 16, 17, 18, 19, 20)
 
 def joints_from_pose(phi, global_orient, transl, betas, side: str) -> np.ndarray:
     """The 21 joints (..., 21, 3) of the OpenHand in a pose, metres."""
-    from handcap.hand import OpenHand
     return OpenHand(side).forward(betas, global_orient, transl=transl, phi=phi, vertices=False).joints
 
 

@@ -34,6 +34,9 @@ import numpy as np
 from handcap.core.errors import HandcapError, warn
 from handcap.core.markers import MarkerSequence, positive_number, runs
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
+from handcap.occlusion.data import marker_columns
+from handcap.occlusion.filler import OcclusionFiller
+from handcap.occlusion.model import OcclusionModel
 
 FILL_METHODS = ("linear", "spline", "lk", "ma", "ac", "nn")
 MAX_GAP_S = 0.5
@@ -116,9 +119,7 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_
     if method == "nn":
         if model is None:
             raise HandcapError("the nn method needs a trained model (--model, or a shipped layout name)")
-        from handcap.occlusion.model import OcclusionModel
         model = OcclusionModel.resolve(model)
-        from handcap.occlusion.data import marker_columns
         # The same name matching as train-occlusion (issue 14): exact, or without a Subject: prefix.
         columns = np.array(marker_columns(markers.names, model.names,
                                           f"the take (for the occlusion model {model.layout or 'model'})"))
@@ -194,7 +195,6 @@ def _causal(positions, method, rate, model, progress):
     if method == "nn":
         from tqdm import tqdm
 
-        from handcap.occlusion.filler import OcclusionFiller
         filler = OcclusionFiller(model, rate=rate, method="nn", reentry_speed=np.inf, regress=False)
         out = np.full(positions.shape, np.nan)
         hidden = None if progress is None else not progress

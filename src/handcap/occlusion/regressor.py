@@ -20,6 +20,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.rotations import axis_angle_from_matrix, matrix_from_axis_angle
+from handcap.hand import OpenHand
 from handcap.occlusion.network import Mlp, mlp_from_torch, torch_mlp, train_network
 from handcap.occlusion.predictor import knock_out
 from handcap.occlusion.register import apply_registration, fit_registration
@@ -207,7 +208,6 @@ def joint_sensitivity(targets, *, pick, frames: int = 16, step: float = 1e-4) ->
 
     Finite differences of the OpenHand (average shape) at ``frames`` training poses drawn by ``pick``.
     """
-    from handcap.hand import OpenHand
 
     hand = OpenHand("right")
     rows = targets[pick.choice(len(targets), size=min(frames, len(targets)), replace=False)]

@@ -15,7 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from handcap.core.errors import HandcapError, warn
-from handcap.occlusion.augment import NO_AUGMENTATION, Augmentation, finger_groups, warped_copies
+from handcap.core.files import load_npz
+from handcap.io import read_markers
+from handcap.layouts import MarkerLayout, load_layout
+from handcap.occlusion.augment import Augmentation, NO_AUGMENTATION, finger_groups, warped_copies
 from handcap.occlusion.data import PosedTake, marker_columns
 from handcap.occlusion.model import OcclusionModel
 from handcap.occlusion.predictor import train_marker_predictor
@@ -53,8 +56,6 @@ def read_take(path, *, poses=None, rate=None) -> PosedTake:
     poses : path, optional
         A hand motion ``.npz`` (``phi``, ``global_orient``, ``transl``) for the take, e.g. from ``handcap solve``.
     """
-    from handcap.io import read_markers
-    from handcap.core.files import load_npz
 
     path = Path(path)
     truth = None
@@ -122,8 +123,6 @@ def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, reg
         Its ``warnings`` say when that is too little to trust.
     """
     import torch
-
-    from handcap.layouts import MarkerLayout, load_layout
 
     layout = layout if isinstance(layout, MarkerLayout) else load_layout(layout)
     side = side or layout.side

@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.core.motion import HandMotion, ObjectMotion
+from handcap.hand import OpenHand
 
 
 def check_cutoff(cutoff: float, rate: float, order: int) -> None:
@@ -119,7 +120,6 @@ def smooth_hand_motion(motion: HandMotion, hand=None, *, cutoff: float = 5.0, or
     orient = smooth_rotations(motion.global_orient, motion.rate, cutoff, order)
     phi = lowpass(motion.phi, motion.rate, cutoff, order)
     if hand is None:
-        from handcap.hand import OpenHand
         if motion.model != "openhand":
             raise HandcapError("pass the hand model to smooth a MANO motion")
         hand = OpenHand(motion.side)

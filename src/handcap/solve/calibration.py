@@ -39,7 +39,9 @@ from scipy.optimize import least_squares
 from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
+from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
+from handcap.layouts import LayoutMarker, MarkerLayout
 # Shape values stay within SHAPE_BOUND standard deviations of the average hand: the fit's bound and the
 # plausibility check's are one number.
 from handcap.quality.plausibility import SHAPE_BOUND, attach, residual_warnings, shape_warnings
@@ -141,7 +143,6 @@ def initial_attachment(layout, hand, betas) -> MarkerAttachment:
     The latter are only a start for the first poses: :func:`calibrate_attachment`
     then puts each where it was measured.
     """
-    from handcap.layouts import LayoutMarker, MarkerLayout
     layout = layout.for_side(hand.side)
     template = hand.forward().vertices
     seg = hand.segment_of_vertex
@@ -206,7 +207,6 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         A layout marker never seen in the calibration frames, or too few frames.
     """
     if hand is None:
-        from handcap.hand import OpenHand
         hand = OpenHand(layout.side)
     layout = layout.for_side(hand.side)
     if fit_shape is None:

@@ -38,6 +38,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
 from handcap.core.rotations import axis_angle_from_matrix
+from handcap.hand import OpenHand
 from handcap.quality.filters import lowpass, smooth_rotations
 from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
@@ -151,7 +152,6 @@ def _smoothed(poses: Poses, rate, cutoff, order) -> Poses:
 def _hand_for(attachment):
     if attachment.model != "openhand":
         raise HandcapError(f"the attachment was made for the {attachment.model} model: pass hand=ManoHand.load(...)")
-    from handcap.hand import OpenHand
     return OpenHand(attachment.side)
 
 

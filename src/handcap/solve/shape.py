@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 
 from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
+from handcap.core.rotations import axis_angle_from_matrix
 from handcap.objects.rigid import kabsch
 
 MEASUREMENTS = ("hand_length", "palm_length", "hand_breadth", "thumb_length", "index_length", "middle_length",
@@ -203,7 +204,6 @@ def _principal_alignment(template, scan):
 
 
 def _rotvec(rot) -> np.ndarray:
-    from handcap.core.rotations import axis_angle_from_matrix
     return axis_angle_from_matrix(rot)
 
 

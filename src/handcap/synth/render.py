@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from handcap.core.files import atomic_output
+
 
 @dataclass(frozen=True)
 class View:
@@ -120,7 +122,6 @@ def render(view: View, meshes=(), points=(), *, background=(255, 255, 255), supe
 
 def save_png(path, image) -> None:
     """Write an RGB image as PNG (atomically)."""
-    from handcap.core.files import atomic_output
     ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     if not ok:
         raise RuntimeError("OpenCV could not encode the PNG")

@@ -31,13 +31,18 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from handcap import __version__
 from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output, save_npz
+from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion, ObjectMotion, check_side
 from handcap.core.points import PointCloudSequence
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
-from handcap.layouts import load_layout
+from handcap.io import write_c3d, write_markers_npz, write_points_npz
+from handcap.io.npz import write_hand_motion
+from handcap.layouts import LayoutMarker, MarkerLayout, load_layout
 from handcap.synth.cameras import cage_rig
 from handcap.synth.faults import burst_dropouts, ghost_markers, swap_labels
 from handcap.synth.motions import MOTIONS, WORK_CENTRE, make_motion
@@ -173,7 +178,6 @@ class SynthCapture:
                                 t["attachment_barycentric"], t["attachment_offset"], self.hand_motion.betas,
                                 self.hand_motion.model, self.hand_motion.side)
 
-
     def labeled_points(self, names=None, *, radius: float = 0.003) -> MarkerSequence:
         """The true labels of the unlabeled points: each marker's point in every frame, NaN where it was
         not reconstructed (hidden, dropped, or no point within ``radius`` metres of its true place).
@@ -209,8 +213,6 @@ def misplaced(layout, hand, sigma: float, rng):
     Shifts happen on the flat template and every marker is put back on the
     skin of its own segment (closest point), so it stays where a marker can be.
     """
-    from handcap.core.geometry import closest_points_on_mesh
-    from handcap.layouts import LayoutMarker, MarkerLayout
     if sigma <= 0:
         return layout
     template = hand.forward().vertices
@@ -376,10 +378,6 @@ def write_capture(capture: SynthCapture, folder) -> dict:
 
     import tomli_w
 
-    from handcap.io import write_c3d, write_markers_npz, write_points_npz
-    from handcap.core.files import atomic_output, save_npz
-    from handcap.io.npz import write_hand_motion
-
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise HandcapError(f"{folder} exists and is not a folder")
@@ -409,7 +407,6 @@ def write_capture(capture: SynthCapture, folder) -> dict:
 
 def scene_table(config: SynthConfig) -> dict:
     """``scene.toml`` contents: every setting, plus the handcap version."""
-    from handcap import __version__
     table = {k: v for k, v in asdict(config).items() if v is not None}
     if config.betas is not None:
         table["betas"] = [float(b) for b in config.betas]
