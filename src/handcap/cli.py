@@ -459,7 +459,7 @@ def _cmd_fill(args) -> tuple[str, ...]:
     check_not_input(args.out, args.input, *([args.model] if args.model else []))
     markers = read_markers(args.input, units=args.units)
     start = time.perf_counter()
-    filled, report = fill_gaps(markers, args.method, max_gap=args.max_gap, model=args.model)
+    filled, report = fill_gaps(markers, args.method, max_gap_s=args.max_gap, model=args.model)
     seconds = time.perf_counter() - start
     write_markers(filled, args.out)
     print(f"{args.out}: {report.filled_samples} samples in {report.filled_gaps} gaps filled ({args.method}, "
@@ -488,8 +488,8 @@ def _cmd_clean(args) -> tuple[str, ...]:
                            hand=None if layout is None else [m.name for m in layout.hand_markers])
     cleaned, report = clean_markers(
         markers, layout, radius=None if args.radius_mm is None else args.radius_mm / 1000, window=args.window,
-        z=args.z, floor=args.floor_mm / 1000, max_linear=args.max_linear, max_rigid=args.max_rigid,
-        max_spline=args.max_spline, rigid_tolerance=args.rigid_tolerance_mm / 1000)
+        z=args.z, floor=args.floor_mm / 1000, max_linear_frames=args.max_linear, max_rigid_frames=args.max_rigid,
+        max_spline_frames=args.max_spline, rigid_tolerance=args.rigid_tolerance_mm / 1000)
     from handcap.quality import plausibility as q
     cleaned = q.attach(cleaned, [*markers.warnings, *q.clean_warnings(report, markers.missing),
                                  *q.marker_warnings(cleaned, hand=None if layout is None else layout.names)])

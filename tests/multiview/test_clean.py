@@ -230,9 +230,9 @@ def test_spline_beats_straight_lines_on_curved_motion():
     truth = np.stack([0.05 * np.sin(2 * np.pi * t), 0.03 * np.cos(3 * np.pi * t), t * 0.01], axis=1)[:, None]
     holed = truth.copy()
     holed[100:108] = np.nan
-    spline, done = fill_spline(holed, max_gap=8)
-    linear, _ = fill_linear(holed, max_gap=8)
-    assert done.sum() == 8 and not fill_spline(holed, max_gap=7)[1].any()
+    spline, done = fill_spline(holed, max_gap_frames=8)
+    linear, _ = fill_linear(holed, max_gap_frames=8)
+    assert done.sum() == 8 and not fill_spline(holed, max_gap_frames=7)[1].any()
     gap = np.isnan(holed[..., 0])
     assert _error_mm(spline, truth, gap).max() < 0.05 < 0.5 < _error_mm(linear, truth, gap).max()
 
@@ -260,7 +260,7 @@ def test_rigid_fill_error_is_at_noise_level(synthetic):
     error = _error_mm(filled, truth, mask & done)
     noise = 1000 * np.linalg.norm(noisy - truth, axis=-1).mean()  # 0.8 mm
     assert error.mean() < 1.1 * noise and np.percentile(error, 95) < 2.0
-    spline = _error_mm(fill_spline(holed, max_gap=30)[0], truth, mask)
+    spline = _error_mm(fill_spline(holed, max_gap_frames=30)[0], truth, mask)
     assert spline.mean() > 5 * error.mean()
 
 
@@ -270,18 +270,18 @@ def test_fills_leave_long_and_end_gaps(synthetic):
     holed[50:90, 0] = np.nan  # 40 frames, longer than every maximum
     holed[:3, 1] = np.nan  # at the start of the take
     holed[-2:, 2] = np.nan  # at the end
-    for fill in (lambda p: fill_linear(p, max_gap=39), lambda p: fill_spline(p, max_gap=39),
-                 lambda p: fill_rigid(p, groups, max_gap=39)):
+    for fill in (lambda p: fill_linear(p, max_gap_frames=39), lambda p: fill_spline(p, max_gap_frames=39),
+                 lambda p: fill_rigid(p, groups, max_gap_frames=39)):
         filled, done = fill(holed)
         assert not done.any() and np.isnan(filled[50:90, 0]).all()
         assert np.isnan(filled[:3, 1]).all() and np.isnan(filled[-2:, 2]).all()
-    assert fill_linear(holed, max_gap=40)[1][50:90, 0].all()
+    assert fill_linear(holed, max_gap_frames=40)[1][50:90, 0].all()
 
 
 @pytest.mark.parametrize("bad", [-1, 2.5, True])
 def test_max_gap_must_be_frames(bad):
     with pytest.raises(HandcapError, match="whole number of frames"):
-        fill_linear(np.zeros((5, 1, 3)), max_gap=bad)
+        fill_linear(np.zeros((5, 1, 3)), max_gap_frames=bad)
 
 
 # -- all steps ------------------------------------------------------------------------------
@@ -308,7 +308,7 @@ def test_clean_markers_end_to_end(synthetic):
     observed, long = _punch(observed, rng, 60, (40, 60))
     bad = (wrong | spikes) & ~np.isnan(observed[..., 0])
     markers = MarkerSequence(observed, names, 50.0)
-    cleaned, report = clean_markers(markers, "dense-patches", max_rigid=30)
+    cleaned, report = clean_markers(markers, "dense-patches", max_rigid_frames=30)
     removed = report.cluster_removed | report.outlier_removed
     assert bad.sum() > 500 and removed[bad].mean() >= 0.99
     assert (removed & ~bad).sum() <= 0.0005 * (~bad).sum()
@@ -349,7 +349,7 @@ def test_cli_cleans_and_leaves_the_input_alone(take, tmp_path, capsys):
     assert main(["clean", str(take), "--layout", "dense-patches", "--out", str(out), "--max-spline", "4"]) == 0
     assert _digest(take) == before
     printed = capsys.readouterr().out
-    expected, report = clean_markers(read_markers(take), "dense-patches", max_spline=4)
+    expected, report = clean_markers(read_markers(take), "dense-patches", max_spline_frames=4)
     summary = report.summary()
     assert f"removed {summary['cluster_removed']} samples" in printed and summary["cluster_removed"] > 0
     np.testing.assert_array_equal(read_markers(out).positions, expected.positions)

@@ -38,7 +38,7 @@ def punched(glove_split):
 
 def test_linear_is_straight_line_interpolation(punched):
     truth, markers, mask = punched
-    filled, report = fill_gaps(markers, "linear", max_gap=1.0)
+    filled, report = fill_gaps(markers, "linear", max_gap_s=1.0)
     t = np.arange(markers.n_frames)
     for m in range(markers.n_markers):
         seen = ~np.isnan(markers.positions[:, m, 0])
@@ -52,7 +52,7 @@ def test_methods_on_real_gaps(punched, glove_model):
     truth, markers, mask = punched
     errors = {}
     for method in ("linear", "spline", "lk", "ma", "ac", "nn"):
-        filled, _ = fill_gaps(markers, method, max_gap=1.0, model=glove_model)
+        filled, _ = fill_gaps(markers, method, max_gap_s=1.0, model=glove_model)
         assert np.isfinite(filled.positions[mask]).all(), method
         errors[method] = np.linalg.norm(filled.positions[mask] - truth[mask], axis=-1).mean()
         unchanged = ~np.isnan(markers.positions)
@@ -66,7 +66,7 @@ def test_methods_on_real_gaps(punched, glove_model):
 @pytest.mark.parametrize("method", ["linear", "spline", "lk", "ma", "ac", "nn"])
 def test_max_gap_is_never_exceeded(punched, glove_model, method):
     _, markers, _ = punched
-    filled, report = fill_gaps(markers, method, max_gap=0.1, model=glove_model)
+    filled, report = fill_gaps(markers, method, max_gap_s=0.1, model=glove_model)
     before = np.isnan(markers.positions[..., 0])
     after = np.isnan(filled.positions[..., 0])
     for m in range(markers.n_markers):
@@ -92,13 +92,13 @@ def test_bad_inputs(glove, glove_model):
         fill_gaps(glove, "cubic")
     for bad in (0, -1, np.nan, "long"):
         with pytest.raises(HandcapError, match="max_gap"):
-            fill_gaps(glove, "linear", max_gap=bad)
+            fill_gaps(glove, "linear", max_gap_s=bad)
     with pytest.raises(HandcapError, match="needs a trained model"):
         fill_gaps(glove, "nn")
     with pytest.raises(HandcapError, match="lacks marker"):
         fill_gaps(glove.select(glove.names[:-1]), "nn", model=glove_model)
     nothing = MarkerSequence(np.full((50, 13, 3), np.nan), glove.names, glove.rate)
-    filled, report = fill_gaps(nothing, "ac", max_gap=10.0)  # nothing to go on: nothing invented
+    filled, report = fill_gaps(nothing, "ac", max_gap_s=10.0)  # nothing to go on: nothing invented
     assert np.isnan(filled.positions).all() and report.filled_samples == 0
 
 
@@ -153,7 +153,7 @@ def test_gaps_whose_two_passes_part_are_flagged(glove_split):
     holed[near + 1:near + 1 + n] = np.nan
     markers = MarkerSequence(holed, ["Glove:index_tip"], 100.0)
     with pytest.warns(HandcapWarning, match="1 of 2 gaps filled"):
-        filled, report = fill_gaps(markers, "lk", max_gap=0.5)
+        filled, report = fill_gaps(markers, "lk", max_gap_s=0.5)
     assert report.filled_gaps == 2 and len(report.warnings) == 1
     assert f"up to {100 * shift[far]:.1f} cm, Glove:index_tip from frame {far + 1}" in report.warnings[0]
     assert filled.warnings == report.warnings

@@ -403,24 +403,24 @@ def _max_gap(value, what) -> int:
     return int(value)
 
 
-def _interpolated(positions, max_gap, method):
+def _interpolated(positions, max_gap_frames, method):
     """Reuse handcap.occlusion.fill_gaps, whose gaps are in seconds: at 1 Hz they are frames."""
-    if max_gap == 0 or positions.shape[0] < 3:
+    if max_gap_frames == 0 or positions.shape[0] < 3:
         return positions.copy(), np.zeros(positions.shape[:2], bool)
     names = [str(i) for i in range(positions.shape[1])]
-    filled, _ = fill_gaps(MarkerSequence(positions, names, 1.0), method, max_gap=max_gap)
+    filled, _ = fill_gaps(MarkerSequence(positions, names, 1.0), method, max_gap_s=max_gap_frames)
     out = filled.positions
     return out, np.isnan(positions[..., 0]) & ~np.isnan(out[..., 0])
 
 
-def fill_linear(positions, *, max_gap: int = MAX_LINEAR) -> tuple[np.ndarray, np.ndarray]:
-    """Fill interior gaps of at most ``max_gap`` frames by straight-line interpolation.
+def fill_linear(positions, *, max_gap_frames: int = MAX_LINEAR) -> tuple[np.ndarray, np.ndarray]:
+    """Fill interior gaps of at most ``max_gap_frames`` frames by straight-line interpolation.
 
     Parameters
     ----------
     positions : ndarray of shape (T, M, 3)
         Metres, NaN where missing.
-    max_gap : int
+    max_gap_frames : int
         Frames; 0 fills nothing.
 
     Returns
@@ -433,11 +433,11 @@ def fill_linear(positions, *, max_gap: int = MAX_LINEAR) -> tuple[np.ndarray, np
     --------
     handcap.occlusion.fill_gaps : does the interpolation (method ``linear``).
     """
-    return _interpolated(as_positions(positions), _max_gap(max_gap, "max_gap (linear)"), "linear")
+    return _interpolated(as_positions(positions), _max_gap(max_gap_frames, "max_gap_frames (linear)"), "linear")
 
 
-def fill_spline(positions, *, max_gap: int = MAX_SPLINE) -> tuple[np.ndarray, np.ndarray]:
-    """Fill interior gaps of at most ``max_gap`` frames with a cubic spline in time.
+def fill_spline(positions, *, max_gap_frames: int = MAX_SPLINE) -> tuple[np.ndarray, np.ndarray]:
+    """Fill interior gaps of at most ``max_gap_frames`` frames with a cubic spline in time.
 
     The spline (``scipy.interpolate.CubicSpline``) runs through every sample of
     the marker; a marker with fewer than four samples is interpolated linearly.
@@ -446,7 +446,7 @@ def fill_spline(positions, *, max_gap: int = MAX_SPLINE) -> tuple[np.ndarray, np
     ----------
     positions : ndarray of shape (T, M, 3)
         Metres, NaN where missing.
-    max_gap : int
+    max_gap_frames : int
         Frames; 0 fills nothing.
 
     Returns
@@ -458,10 +458,10 @@ def fill_spline(positions, *, max_gap: int = MAX_SPLINE) -> tuple[np.ndarray, np
     --------
     handcap.occlusion.fill_gaps : does the interpolation (method ``spline``).
     """
-    return _interpolated(as_positions(positions), _max_gap(max_gap, "max_gap (spline)"), "spline")
+    return _interpolated(as_positions(positions), _max_gap(max_gap_frames, "max_gap_frames (spline)"), "spline")
 
 
-def fill_rigid(positions, groups: MarkerGroups, *, max_gap: int = MAX_RIGID,
+def fill_rigid(positions, groups: MarkerGroups, *, max_gap_frames: int = MAX_RIGID,
                tolerance: float = RIGID_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
     """Fill gaps by carrying the marker along with the rigid motion of its group.
 
@@ -481,7 +481,7 @@ def fill_rigid(positions, groups: MarkerGroups, *, max_gap: int = MAX_RIGID,
         Metres, NaN where missing.
     groups : MarkerGroups
         Markers that move as one rigid body (patches; see :func:`layout_groups`).
-    max_gap : int
+    max_gap_frames : int
         Frames; longer gaps and gaps at the start or end of the take are not filled.
     tolerance : float
         Metres, largest RMS residual of the rigid fit.
@@ -497,7 +497,7 @@ def fill_rigid(positions, groups: MarkerGroups, *, max_gap: int = MAX_RIGID,
     """
     positions = as_positions(positions)
     groups = _check_groups(groups, positions.shape[1])
-    max_gap = _max_gap(max_gap, "max_gap (rigid)")
+    max_gap_frames = _max_gap(max_gap_frames, "max_gap_frames (rigid)")
     tolerance = positive_number(tolerance, "rigid tolerance (metres)")
     out = positions.copy()
     mask = np.zeros(positions.shape[:2], bool)
@@ -505,12 +505,12 @@ def fill_rigid(positions, groups: MarkerGroups, *, max_gap: int = MAX_RIGID,
     n_frames = positions.shape[0]
     for g in range(len(groups.names)):
         cols = groups.members(g)
-        if len(cols) < 4 or max_gap == 0:
+        if len(cols) < 4 or max_gap_frames == 0:
             continue
         frames, member, first, length = [], [], [], []
         for j, col in enumerate(cols):
             starts, lengths = runs(~present[:, col])
-            ok = (starts > 0) & (starts + lengths < n_frames) & (lengths <= max_gap)
+            ok = (starts > 0) & (starts + lengths < n_frames) & (lengths <= max_gap_frames)
             for s, n in zip(starts[ok], lengths[ok]):
                 frames.append(np.arange(s, s + n))
                 member += [j] * n
@@ -560,8 +560,8 @@ def _rigid_fill(pts, seen, t, member, first, length, tolerance):
 
 
 def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None = None, window: int = WINDOW,
-                  z: float = Z, floor: float = FLOOR, max_linear: int = MAX_LINEAR, max_rigid: int = MAX_RIGID,
-                  max_spline: int = MAX_SPLINE,
+                  z: float = Z, floor: float = FLOOR, max_linear_frames: int = MAX_LINEAR,
+                  max_rigid_frames: int = MAX_RIGID, max_spline_frames: int = MAX_SPLINE,
                   rigid_tolerance: float = RIGID_TOLERANCE) -> tuple[MarkerSequence, CleanReport]:
     """Remove wrong samples and fill gaps of triangulated markers (DexterCap section 3.3).
 
@@ -580,7 +580,7 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
         Cluster radius in metres for every group (default: from the layout).
     window, z, floor
         See :func:`remove_window_outliers` (frames, robust standard deviations, metres).
-    max_linear, max_rigid, max_spline : int
+    max_linear_frames, max_rigid_frames, max_spline_frames : int
         Longest gap, frames, each method fills (0: the method is not used).
     rigid_tolerance : float
         Metres, see :func:`fill_rigid`.
@@ -598,7 +598,8 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
     """
     positions = markers.positions
     # Check every option before any work, also those of steps a missing layout skips.
-    for value, what in ((max_linear, "max_linear"), (max_rigid, "max_rigid"), (max_spline, "max_spline")):
+    for value, what in ((max_linear_frames, "max_linear_frames"), (max_rigid_frames, "max_rigid_frames"),
+                        (max_spline_frames, "max_spline_frames")):
         _max_gap(value, what)
     _odd_window(window)
     positive_number(z, "z (robust standard deviations)")
@@ -615,9 +616,9 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
     positions, spikes = remove_window_outliers(positions, window=window, z=z, floor=floor)
     rigid = nothing
     if groups is not None:
-        positions, rigid = fill_rigid(positions, groups, max_gap=max_rigid, tolerance=rigid_tolerance)
-    positions, linear = fill_linear(positions, max_gap=max_linear)
-    positions, spline = fill_spline(positions, max_gap=max_spline)
+        positions, rigid = fill_rigid(positions, groups, max_gap_frames=max_rigid_frames, tolerance=rigid_tolerance)
+    positions, linear = fill_linear(positions, max_gap_frames=max_linear_frames)
+    positions, spline = fill_spline(positions, max_gap_frames=max_spline_frames)
     residuals = None
     if markers.residuals is not None:
         residuals = markers.residuals.copy()

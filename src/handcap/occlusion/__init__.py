@@ -7,7 +7,7 @@ two-hands mutual occlusions" (doi:10.1016/j.cagx.2019.100011)::
     result = filler.update(frame)        # frame (M, 3) metres, NaN = occluded
     result.markers, result.filled, result.phi, result.global_orient, result.transl
 
-    filled, report = fill_gaps(markers, "nn", model="glove-13", max_gap=0.5)   # a recorded take
+    filled, report = fill_gaps(markers, "nn", model="glove-13", max_gap_s=0.5)   # a recorded take
 
     model = train_occlusion_model([read_take("rom.c3d")], "glove-13", seed=0)  # torch, a user's takes
     model.save("mine.npz")

@@ -1,6 +1,6 @@
 """Batch gap filling of a recorded take: ``handcap fill``.
 
-    filled, report = fill_gaps(markers, "nn", model="glove-13", max_gap=0.5)
+    filled, report = fill_gaps(markers, "nn", model="glove-13", max_gap_s=0.5)
 
 Methods:
 
@@ -15,7 +15,7 @@ Methods:
     both ends, with no re-entry jump. Gaps at the start (end) of the take get
     the backward (forward) pass only.
 
-No gap longer than ``max_gap`` seconds is touched: beyond it the data stays
+No gap longer than ``max_gap_s`` seconds is touched: beyond it the data stays
 missing rather than invented. Markers the method cannot use (not in the model)
 pass through unchanged. The input is never modified.
 
@@ -81,16 +81,16 @@ def _gaps(missing: np.ndarray):
     return out
 
 
-def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_S, model=None,
+def fill_gaps(markers: MarkerSequence, method: str, *, max_gap_s: float = MAX_GAP_S, model=None,
               progress=None) -> tuple[MarkerSequence, FillReport]:
-    """Fill the gaps of a labeled take, up to ``max_gap`` seconds long.
+    """Fill the gaps of a labeled take, up to ``max_gap_s`` seconds long.
 
     Parameters
     ----------
     markers : MarkerSequence
         Metres, NaN where missing.
     method : {"linear", "spline", "lk", "ma", "ac", "nn"}
-    max_gap : float
+    max_gap_s : float
         Longest gap filled, seconds.
     model : OcclusionModel, str or path, optional
         Needed by ``nn`` (a shipped layout name or a model file).
@@ -105,12 +105,12 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap: float = MAX_GAP_
     Raises
     ------
     HandcapError
-        Unknown method, bad ``max_gap``, ``nn`` without a model or with a take lacking the model's markers.
+        Unknown method, bad ``max_gap_s``, ``nn`` without a model or with a take lacking the model's markers.
     """
     if method not in FILL_METHODS:
         raise HandcapError(f"unknown fill method {method!r}; choose one of {', '.join(FILL_METHODS)}")
-    max_gap = positive_number(max_gap, "max_gap (seconds)")
-    limit = int(np.floor(max_gap * markers.rate + 1e-9))
+    max_gap_s = positive_number(max_gap_s, "max_gap_s (seconds)")
+    limit = int(np.floor(max_gap_s * markers.rate + 1e-9))
     positions = markers.positions
     t_count = markers.n_frames
     missing = np.isnan(positions).any(axis=-1)
