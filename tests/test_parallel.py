@@ -5,7 +5,7 @@ import math
 import pytest
 
 from handcap import HandcapError
-from handcap.core.markers import check_rate
+from handcap.core.checks import check_rate
 from handcap.parallel import map_chunks
 
 # Workers are separate interpreters: the functions must be importable there (not defined in a test module).

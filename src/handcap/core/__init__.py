@@ -1,7 +1,8 @@
-"""Data model: marker, point-cloud and motion containers, errors, rotations."""
+"""Data model: marker, point-cloud and motion containers, errors, checks of inputs, rotations."""
 
+from handcap.core.checks import check_positions
 from handcap.core.errors import HandcapError, HandcapWarning, warn
-from handcap.core.markers import MarkerGaps, MarkerSequence, as_positions, marker_gaps
+from handcap.core.markers import MarkerGaps, MarkerSequence, marker_gaps
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
 
@@ -13,7 +14,7 @@ __all__ = [
     "MarkerSequence",
     "ObjectMotion",
     "PointCloudSequence",
-    "as_positions",
+    "check_positions",
     "marker_gaps",
     "warn",
 ]

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 import tomli_w
 
+from handcap.core.checks import all_numbers, check_finite, check_numbers, check_pixels, check_points, check_vector
 from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.files import atomic_output, existing_file
 from handcap.core.rotations import matrix_from_axis_angle
@@ -45,39 +46,16 @@ _UNDISTORT_EPS_PX = 1e-11
 _UNDISTORT_MAX_ITER = 200
 
 
-# -- validation helpers (boundary only) ------------------------------------------------
-def _numbers(value, what: str) -> np.ndarray:
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise HandcapError(f"{what} must be numbers, got {value!r}") from None
-    return array
-
-
-def _finite(array: np.ndarray, what: str) -> np.ndarray:
-    if not np.isfinite(array).all():
-        raise HandcapError(f"{what} must be finite, got {array.ravel().tolist()}")
-    array.setflags(write=False)
-    return array
-
-
-def _vector(value, n: int, what: str) -> np.ndarray:
-    """A finite float64 (n,) copy; OpenCV's (n, 1) and (1, n) are accepted too."""
-    array = _numbers(value, what)
-    if array.shape not in ((n,), (n, 1), (1, n)):
-        raise HandcapError(f"{what} must have {n} values, got shape {array.shape}")
-    return _finite(array.reshape(n), what)
-
-
+# -- validation of the camera model's own values (the generic checks are handcap.core.checks) --------------
 def _distortions(value) -> np.ndarray:
     """Five OpenCV coefficients from 4, 5 or 8 (see :class:`Camera`)."""
-    array = _numbers(value, "distortions")
+    array = check_numbers(value, "distortions")
     if array.ndim == 2 and 1 in array.shape:
         array = array.ravel()
     if array.ndim != 1 or array.shape[0] not in (4, 5, 8):
         raise HandcapError(f"distortions must be 5 values k1 k2 p1 p2 k3 (4 or 8 accepted), "
                            f"got shape {array.shape}")
-    _finite(array, "distortions")
+    check_finite(array, "distortions")
     if array.shape[0] == 8:
         if np.any(array[5:] != 0):
             raise HandcapError(f"distortions has OpenCV's rational terms k4 k5 k6 = {array[5:].tolist()}; "
@@ -106,10 +84,10 @@ def _size(value) -> tuple[int, int]:
 
 
 def _matrix(value) -> np.ndarray:
-    matrix = _numbers(value, "matrix")
+    matrix = check_numbers(value, "matrix")
     if matrix.shape != (3, 3):
         raise HandcapError(f"matrix must be 3x3 [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got shape {matrix.shape}")
-    _finite(matrix, "matrix")
+    check_finite(matrix, "matrix")
     if matrix[0, 0] <= 0 or matrix[1, 1] <= 0:
         raise HandcapError(f"matrix focal lengths fx, fy must be positive pixels, got {matrix[0, 0]}, {matrix[1, 1]}")
     if matrix[0, 1] != 0:
@@ -117,20 +95,6 @@ def _matrix(value) -> np.ndarray:
     if matrix[1, 0] != 0 or matrix[2].tolist() != [0.0, 0.0, 1.0]:
         raise HandcapError(f"matrix must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {matrix.tolist()}")
     return matrix
-
-
-def _points(points, what: str = "points") -> np.ndarray:
-    array = _numbers(points, what)
-    if array.ndim < 1 or array.shape[-1] != 3:
-        raise HandcapError(f"{what} must have shape (..., 3) in metres, got {array.shape}")
-    return array
-
-
-def _pixels(pixels, what: str = "pixels") -> np.ndarray:
-    array = _numbers(pixels, what)
-    if array.ndim < 1 or array.shape[-1] != 2:
-        raise HandcapError(f"{what} must have shape (..., 2), got {array.shape}")
-    return array
 
 
 # -- one camera ------------------------------------------------------------------------
@@ -179,8 +143,8 @@ class Camera:
         object.__setattr__(self, "size", _size(self.size))
         object.__setattr__(self, "matrix", _matrix(self.matrix))
         object.__setattr__(self, "distortions", _distortions(self.distortions))
-        object.__setattr__(self, "rotation", _vector(self.rotation, 3, "rotation"))
-        object.__setattr__(self, "translation", _vector(self.translation, 3, "translation"))
+        object.__setattr__(self, "rotation", check_vector(self.rotation, 3, "rotation"))
+        object.__setattr__(self, "translation", check_vector(self.translation, 3, "translation"))
         rotation_matrix = np.asarray(matrix_from_axis_angle(self.rotation))
         rotation_matrix.setflags(write=False)
         object.__setattr__(self, "_rotation_matrix", rotation_matrix)
@@ -262,7 +226,7 @@ class Camera:
         ``v = fy y' + cy``. Like OpenCV it does not detect points so far off
         axis that a strong barrel distortion folds them back into the image.
         """
-        camera_points = _points(points) @ self._rotation_matrix.T + self.translation
+        camera_points = check_points(points) @ self._rotation_matrix.T + self.translation
         depth = camera_points[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             normalised = camera_points[..., :2] / depth[..., None]
@@ -309,7 +273,7 @@ class Camera:
         cv2.undistortPoints : the iterative inversion used here, run to
             convergence (the default stops after 5 iterations).
         """
-        pixels = _pixels(pixels)
+        pixels = check_pixels(pixels)
         coords = self._undistort(pixels.reshape(-1, 2)).reshape(pixels.shape)
         return coords if normalised else self._pixels_from_normalised(coords)
 
@@ -364,7 +328,7 @@ class Camera:
             True where ``-0.5 <= u < w - 0.5`` and ``-0.5 <= v < h - 0.5``;
             False for NaN.
         """
-        pixels = _pixels(pixels)
+        pixels = check_pixels(pixels)
         w, h = self.size
         u, v = pixels[..., 0], pixels[..., 1]
         return (u >= -0.5) & (u < w - 0.5) & (v >= -0.5) & (v < h - 0.5)
@@ -512,7 +476,7 @@ class CameraRig:
         --------
         Camera.project
         """
-        points = _points(points)
+        points = check_points(points)
         results = [camera.project(points) for camera in self.cameras]
         return np.stack([r[0] for r in results]), np.stack([r[1] for r in results])
 
@@ -533,7 +497,7 @@ class CameraRig:
         return np.stack([camera.in_image(p) for camera, p in zip(self.cameras, pixels)])
 
     def _per_camera(self, pixels) -> np.ndarray:
-        pixels = _pixels(pixels)
+        pixels = check_pixels(pixels)
         if pixels.ndim < 2 or pixels.shape[0] != len(self):
             raise HandcapError(f"pixels must have shape (C, N, 2) with C = {len(self)} cameras, got {pixels.shape}")
         return pixels
@@ -641,13 +605,6 @@ def _camera_from_table(table: dict, where: str) -> Camera:
         raise HandcapError(f"{where} {err}") from None
 
 
-def all_numbers(value) -> bool:
-    """Whether ``value`` is a number or a (nested) list of numbers only (no bool, str, date or table)."""
-    if isinstance(value, list):
-        return all(all_numbers(item) for item in value)
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
 def write_cameras_toml(rig: CameraRig, path, *, warnings=()) -> None:
     """Write a camera rig as an anipose-style TOML file, atomically.
 
@@ -704,5 +661,5 @@ def _table_from_camera(camera: Camera) -> dict:
     }
 
 
-__all__ = ["CAMERA_KEYS", "Camera", "CameraRig", "all_numbers", "read_cameras_toml", "read_cameras_warnings",
+__all__ = ["CAMERA_KEYS", "Camera", "CameraRig", "read_cameras_toml", "read_cameras_warnings",
            "write_cameras_toml"]

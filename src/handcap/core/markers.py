@@ -6,37 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from handcap.core.checks import check_positions, check_rate
 from handcap.core.errors import HandcapError, merge_warnings
-
-
-def as_positions(positions) -> np.ndarray:
-    """Return ``positions`` as a float64 array of shape (T, M, 3), checked.
-
-    Raises
-    ------
-    HandcapError
-        If the array does not have shape (T, M, 3).
-    """
-    positions = np.asarray(positions, dtype=np.float64)
-    if positions.ndim != 3 or positions.shape[2] != 3:
-        raise HandcapError(f"positions must have shape (T, M, 3), got {positions.shape}")
-    return positions
-
-
-def positive_number(value, what: str) -> float:
-    """``value`` as a float, checked to be finite and positive."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise HandcapError(f"{what} must be a number, got {value!r}") from None
-    if not np.isfinite(number) or number <= 0:
-        raise HandcapError(f"{what} must be a positive finite number, got {value!r}")
-    return number
-
-
-def check_rate(rate) -> float:
-    """Return ``rate`` (Hz) as a float; reject non-finite or non-positive values."""
-    return positive_number(rate, "rate (frames per second)")
 
 
 def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +105,7 @@ class MarkerSequence:
     warnings: tuple[str, ...] = field(default=())
 
     def __post_init__(self):
-        positions = as_positions(self.positions).copy()
+        positions = check_positions(self.positions).copy()
         names = tuple(str(n) for n in self.names)
         if len(names) != positions.shape[1]:
             raise HandcapError(f"{len(names)} marker names for {positions.shape[1]} markers")

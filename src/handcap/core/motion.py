@@ -7,7 +7,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from handcap.core.errors import HandcapError, merge_warnings
-from handcap.core.markers import check_rate
+from handcap.core.checks import check_rate
 from handcap.core.rotations import matrix_from_axis_angle
 
 SIDES = ("right", "left")

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.markers import MarkerSequence, check_rate
+from handcap.core.checks import check_rate
+from handcap.core.markers import MarkerSequence
 
 
 @dataclass(frozen=True, eq=False)

@@ -125,7 +125,8 @@ from handcap.core.errors import HandcapError
 from handcap.core.rotations import axis_angle_from_matrix
 from handcap.core.files import atomic_output, existing_file
 from handcap.io._units import check_units, metres_per_unit, settle_rig_units
-from handcap.core.cameras import all_numbers, read_cameras_toml, write_cameras_toml
+from handcap.core.cameras import read_cameras_toml, write_cameras_toml
+from handcap.core.checks import all_numbers
 
 OPENCV_SUFFIXES = (".yml", ".yaml", ".xml")
 QCA_SUBPIXELS = 64  # QTM sensor coordinates per pixel

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.markers import MarkerSequence, as_positions
+from handcap.core.checks import check_positions
+from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
 from handcap.core.files import load_npz, read_warnings, save_npz, warnings_entry
@@ -130,7 +131,7 @@ def read_points_npz(path, *, units: str | None = None) -> PointCloudSequence:
     arrays = load_npz(path, ("points", "rate"), "point-cloud .npz file")
     _check_kind(arrays, path, "points")
     try:
-        padded = as_positions(_numeric(arrays, "points", path))
+        padded = check_positions(_numeric(arrays, "points", path))
         rate = _scalar(arrays, "rate", path)
         points = PointCloudSequence.from_padded(padded * metres_per_unit(units or "m", "units"), rate)
         padded = points.padded()

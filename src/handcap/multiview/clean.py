@@ -45,7 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.markers import MarkerSequence, as_positions, positive_number, runs
+from handcap.core.checks import check_frames, check_odd_window, check_positions, check_positive
+from handcap.core.markers import MarkerSequence, runs
 from handcap.layouts import MarkerLayout, load_layout
 from handcap.objects.rigid import kabsch
 from handcap.occlusion.fill import fill_gaps
@@ -162,7 +163,7 @@ def layout_groups(names, layout, *, radius: float | None = None) -> MarkerGroups
     if not isinstance(layout, MarkerLayout):
         layout = load_layout(layout)
     if radius is not None:
-        radius = positive_number(radius, "cluster radius (metres)")
+        radius = check_positive(radius, "cluster radius (metres)")
     by_name = {m.name: (i, m) for i, m in enumerate(layout.markers)}
     template = layout.positions()
     labels = np.full(len(names), -1)
@@ -224,7 +225,7 @@ def remove_cluster_outliers(positions, groups: MarkerGroups) -> tuple[np.ndarray
         A copy with the removed samples NaN.
     removed : ndarray of bool, shape (T, M)
     """
-    positions = as_positions(positions)
+    positions = check_positions(positions)
     groups = _check_groups(groups, positions.shape[1])
     removed = np.zeros(positions.shape[:2], bool)
     for g, radius in enumerate(groups.radii):
@@ -305,9 +306,9 @@ def remove_window_outliers(positions, *, window: int = WINDOW, z: float = Z, flo
     cleaned : ndarray of shape (T, M, 3)
     removed : ndarray of bool, shape (T, M)
     """
-    positions = as_positions(positions)
-    window = _odd_window(window)
-    z = positive_number(z, "z (robust standard deviations)")
+    positions = check_positions(positions)
+    window = check_odd_window(window)
+    z = check_positive(z, "z (robust standard deviations)")
     floor = float(floor)
     if not np.isfinite(floor) or floor < 0:
         raise HandcapError(f"floor must be a non-negative distance in metres, got {floor}")
@@ -322,12 +323,6 @@ def remove_window_outliers(positions, *, window: int = WINDOW, z: float = Z, flo
     cleaned = positions.copy()
     cleaned[removed] = np.nan
     return cleaned, removed
-
-
-def _odd_window(window) -> int:
-    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 7 or window % 2 == 0:
-        raise HandcapError(f"window must be an odd number of frames, at least 7, got {window!r}")
-    return int(window)
 
 
 def _windows(values, half, fill=None):
@@ -397,12 +392,6 @@ def _window_test(x, present, flags, half, z, floor, min_neighbours):
 # -- step 3: gap filling -------------------------------------------------------------------
 
 
-def _max_gap(value, what) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-        raise HandcapError(f"{what} must be a whole number of frames >= 0, got {value!r}")
-    return int(value)
-
-
 def _interpolated(positions, max_gap_frames, method):
     """Reuse handcap.occlusion.fill_gaps, whose gaps are in seconds: at 1 Hz they are frames."""
     if max_gap_frames == 0 or positions.shape[0] < 3:
@@ -433,7 +422,7 @@ def fill_linear(positions, *, max_gap_frames: int = MAX_LINEAR) -> tuple[np.ndar
     --------
     handcap.occlusion.fill_gaps : does the interpolation (method ``linear``).
     """
-    return _interpolated(as_positions(positions), _max_gap(max_gap_frames, "max_gap_frames (linear)"), "linear")
+    return _interpolated(check_positions(positions), check_frames(max_gap_frames, "max_gap_frames (linear)"), "linear")
 
 
 def fill_spline(positions, *, max_gap_frames: int = MAX_SPLINE) -> tuple[np.ndarray, np.ndarray]:
@@ -458,7 +447,7 @@ def fill_spline(positions, *, max_gap_frames: int = MAX_SPLINE) -> tuple[np.ndar
     --------
     handcap.occlusion.fill_gaps : does the interpolation (method ``spline``).
     """
-    return _interpolated(as_positions(positions), _max_gap(max_gap_frames, "max_gap_frames (spline)"), "spline")
+    return _interpolated(check_positions(positions), check_frames(max_gap_frames, "max_gap_frames (spline)"), "spline")
 
 
 def fill_rigid(positions, groups: MarkerGroups, *, max_gap_frames: int = MAX_RIGID,
@@ -495,10 +484,10 @@ def fill_rigid(positions, groups: MarkerGroups, *, max_gap_frames: int = MAX_RIG
     --------
     handcap.objects.rigid.kabsch
     """
-    positions = as_positions(positions)
+    positions = check_positions(positions)
     groups = _check_groups(groups, positions.shape[1])
-    max_gap_frames = _max_gap(max_gap_frames, "max_gap_frames (rigid)")
-    tolerance = positive_number(tolerance, "rigid tolerance (metres)")
+    max_gap_frames = check_frames(max_gap_frames, "max_gap_frames (rigid)")
+    tolerance = check_positive(tolerance, "rigid tolerance (metres)")
     out = positions.copy()
     mask = np.zeros(positions.shape[:2], bool)
     present = ~np.isnan(positions[..., 0])
@@ -600,12 +589,12 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
     # Check every option before any work, also those of steps a missing layout skips.
     for value, what in ((max_linear_frames, "max_linear_frames"), (max_rigid_frames, "max_rigid_frames"),
                         (max_spline_frames, "max_spline_frames")):
-        _max_gap(value, what)
-    _odd_window(window)
-    positive_number(z, "z (robust standard deviations)")
-    positive_number(rigid_tolerance, "rigid tolerance (metres)")
+        check_frames(value, what)
+    check_odd_window(window)
+    check_positive(z, "z (robust standard deviations)")
+    check_positive(rigid_tolerance, "rigid tolerance (metres)")
     if radius is not None:
-        positive_number(radius, "cluster radius (metres)")
+        check_positive(radius, "cluster radius (metres)")
     if not (np.isfinite(floor) and floor >= 0):
         raise HandcapError(f"floor must be a non-negative distance in metres, got {floor}")
     groups = None if layout is None else layout_groups(markers.names, layout, radius=radius)

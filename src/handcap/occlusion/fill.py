@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError, warn
-from handcap.core.markers import MarkerSequence, positive_number, runs
+from handcap.core.checks import check_positive
+from handcap.core.markers import MarkerSequence, runs
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
 from handcap.occlusion.data import marker_columns
 from handcap.occlusion.filler import OcclusionFiller
@@ -109,7 +110,7 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap_s: float = MAX_GA
     """
     if method not in FILL_METHODS:
         raise HandcapError(f"unknown fill method {method!r}; choose one of {', '.join(FILL_METHODS)}")
-    max_gap_s = positive_number(max_gap_s, "max_gap_s (seconds)")
+    max_gap_s = check_positive(max_gap_s, "max_gap_s (seconds)")
     limit = int(np.floor(max_gap_s * markers.rate + 1e-9))
     positions = markers.positions
     t_count = markers.n_frames

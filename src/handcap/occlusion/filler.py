@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.markers import check_rate
+from handcap.core.checks import check_rate
 from handcap.core.motion import check_side
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
 from handcap.occlusion.model import OcclusionModel

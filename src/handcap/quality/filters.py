@@ -14,20 +14,10 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 from scipy.spatial.transform import Rotation
 
+from handcap.core.checks import check_cutoff
 from handcap.core.errors import HandcapError
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.hand import OpenHand
-
-
-def check_cutoff(cutoff: float, rate: float, order: int) -> None:
-    """Refuse a cutoff at or above Nyquist (rate / 2), or a bad order."""
-    if not (isinstance(order, (int, np.integer)) and 1 <= order <= 8):
-        raise HandcapError(f"filter order must be an integer from 1 to 8, got {order}")
-    if not (np.isfinite(cutoff) and cutoff > 0):
-        raise HandcapError(f"filter cutoff must be a positive frequency in Hz, got {cutoff}")
-    if cutoff >= rate / 2:
-        raise HandcapError(f"filter cutoff {cutoff:g} Hz is not below the Nyquist frequency {rate / 2:g} Hz "
-                           f"of a {rate:g} Hz capture; choose a lower cutoff")
 
 
 def lowpass(values, rate: float, cutoff: float = 5.0, order: int = 2) -> np.ndarray:

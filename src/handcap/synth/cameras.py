@@ -14,7 +14,7 @@ import numpy as np
 
 from handcap.core.cameras import Camera, CameraRig
 from handcap.core.errors import HandcapError
-from handcap.core.markers import positive_number
+from handcap.core.checks import check_positive
 from handcap.core.rotations import axis_angle_from_matrix
 
 # Diameter of the work volume each camera frames by default, metres.
@@ -106,7 +106,7 @@ def cage_rig(n_cameras: int = 12, *, cage_size=(2.0, 1.0, 2.0), target=(0.0, 0.0
                            f"[-{half[0]:g}, {half[0]:g}] x [-{half[1]:g}, {half[1]:g}] x [0, {cage[2]:g}] m")
     width, height = _resolution(resolution)
     if focal_px is not None:
-        focal_px = positive_number(focal_px, "focal_px")
+        focal_px = check_positive(focal_px, "focal_px")
     try:
         scale = float(distortion_scale)
     except (TypeError, ValueError):
