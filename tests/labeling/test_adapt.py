@@ -10,7 +10,7 @@ from handcap import MarkerSequence
 from handcap.core.errors import HandcapWarning
 from handcap.labeling import LabelingModel, corrupt, label_take, move_rigid_set, score_labels
 from handcap.labeling.adapt import register_to_model, rigid_from_take
-from handcap.labeling.labeler import _rigid_transforms
+from handcap.labeling.model import rigid_transforms as _rigid_transforms
 from handcap.layouts import load_layout
 from handcap.objects.rigid import canonical_from_markers
 from handcap.synth.scene import SynthConfig, synthesize

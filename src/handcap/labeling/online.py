@@ -30,12 +30,6 @@ point no label accepts spatially but that has moved as a marker for ``birth``
 frames may start the track of the best label without one
 (:mod:`handcap.labeling.birth`; the paper's tracks started from temporally
 consistent, spatially unlikely points; on in the offline first pass).
-
-Issue 14 (takes of other days): the spatial model is re-aligned to the take
-(:mod:`handcap.labeling.adapt`; online every ``adapt_every`` frames, offline in
-two passes), the rigid set is re-learned from the take when its distances
-changed, and a hand frame lost in many frames or few labelled points are
-warnings stored on the :class:`LabelResult`.
 """
 
 from __future__ import annotations
@@ -45,160 +39,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handcap.core.errors import HandcapError, warn
-from handcap.core.files import load_npz, save_npz
-from handcap.core.markers import MarkerSequence
-from handcap.core.points import PointCloudSequence
-from handcap.labeling.adapt import StreamAdaptation, adapt_means, largest_change, register_to_model, rigid_from_take
-from handcap.labeling.baseline import NearestNeighbourLabeler
+from handcap.core.errors import HandcapError
+from handcap.labeling.adapt import StreamAdaptation
 from handcap.labeling.birth import PointChains
-from handcap.labeling.frame import HandFrameFinder, RigidSet
-from handcap.labeling.kalman import KalmanBatch, KalmanSettings
+from handcap.labeling.frame import HandFrameFinder
+from handcap.labeling.kalman import KalmanBatch
+from handcap.labeling.model import LabelingModel
 from handcap.labeling.murty import k_best_assignments
-from handcap.labeling.spatial import SpatialModel
 from handcap.labeling.viterbi import backtrack, viterbi_step
-from handcap.objects.rigid import canonical_from_markers, kabsch
-
-
-@dataclass(frozen=True)
-class LabelingModel:
-    """What a labeler learns from a labeled range-of-motion take.
-
-    Attributes
-    ----------
-    names : tuple of str
-        Every label: the rigid markers, then the others (the order of output).
-    rigid : RigidSet or None
-        The back-of-hand markers; None when the caller gives the hand frame.
-    spatial : SpatialModel
-        Mixtures of the other markers in the hand frame.
-    kalman : KalmanSettings
-    """
-
-    names: tuple
-    rigid: RigidSet | None
-    spatial: SpatialModel
-    kalman: KalmanSettings
-
-    @property
-    def free_names(self) -> tuple:
-        return self.spatial.names
-
-    @classmethod
-    def train(cls, markers, names=None, rigid=None, *, transforms=None, components: int = 3,
-              seed: int = 0) -> "LabelingModel":
-        """Train on one labeled take or several.
-
-        Parameters
-        ----------
-        markers : MarkerSequence or sequence of MarkerSequence
-            Labeled training takes (ranges of motion), metres, at one rate.
-            Several takes (other days, other subjects) are pooled: each take's
-            hand frame comes from its own rigid-marker shape turned onto the
-            first take's, so a triad put on again does not blur the mixtures,
-            and the rigid tolerance is learned from how much the distances
-            vary within each take.
-        names : sequence of str, optional
-            The labels to learn (default: every marker of the first take).
-        rigid : sequence of str, optional
-            Which of them are the rigid back-of-hand markers (3 or more).
-        transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
-            Hand frame per training frame (``world = R @ local + t``), when
-            there are no rigid markers (one take only).
-        components : int
-            Mixture components per label.
-        seed : int
-        """
-        takes = [markers] if isinstance(markers, MarkerSequence) else list(markers)
-        if not takes:
-            raise HandcapError("give at least one labeled training take")
-        if any(abs(t.rate - takes[0].rate) > 1e-9 for t in takes):
-            raise HandcapError(f"the training takes have different frame rates: "
-                               f"{', '.join(f'{t.rate:g}' for t in takes)} Hz; resample them to one rate")
-        if transforms is not None and len(takes) > 1:
-            raise HandcapError("transforms=... describe one take; give one take with them")
-        names = list(takes[0].names if names is None else names)
-        rigid = list(rigid or [])
-        for k, take in enumerate(takes):
-            which = "the training take" if len(takes) == 1 else f"training take {k + 1}"
-            missing = [n for n in names if n not in take.names and n not in take.short_names]
-            if missing:
-                raise HandcapError(f"labels not in {which}: {', '.join(missing)}")
-        unknown = [n for n in rigid if n not in names]
-        if unknown:
-            raise HandcapError(f"rigid markers not among the labels: {', '.join(unknown)}")
-        free = [n for n in names if n not in rigid]
-        if not free:
-            raise HandcapError("every label is rigid: nothing left to label")
-        ordered = rigid + free
-        per_take = [np.stack([t.positions[:, t.index(n)] for n in ordered], axis=1) for t in takes]
-        everything = np.concatenate(per_take)
-        for n, s in zip(ordered, ~np.isnan(everything[..., 0]).T):
-            if not s.any():
-                raise HandcapError(f"marker {n!r} never appears in the training take")
-        n_rigid = len(rigid)
-        locals_, known = [], 0
-        if rigid:
-            rigid_set = RigidSet.from_takes(rigid, [p[:, :n_rigid] for p in per_take])
-            for p in per_take:
-                shape = canonical_from_markers(p[:, :n_rigid])
-                r0, t0 = kabsch(shape, rigid_set.canonical)  # this take's shape onto the reference
-                rot, trans, ok = _rigid_transforms(shape @ r0.T + t0, p[:, :n_rigid])
-                local = np.full((len(p), len(free), 3), np.nan)
-                local[ok] = np.einsum("tji,tmj->tmi", rot[ok], p[ok, n_rigid:] - trans[ok, None])
-                locals_.append(local)
-                known += int(ok.sum())
-        elif transforms is not None:
-            rot, trans = (np.asarray(a, dtype=np.float64) for a in transforms)
-            n_frames = takes[0].n_frames
-            if rot.shape != (n_frames, 3, 3) or trans.shape != (n_frames, 3):
-                raise HandcapError(f"transforms must be ((T, 3, 3), (T, 3)) with T = {n_frames}")
-            ok = np.isfinite(rot).all(axis=(1, 2)) & np.isfinite(trans).all(axis=1)
-            rigid_set = None
-            local = np.full((n_frames, len(free), 3), np.nan)
-            local[ok] = np.einsum("tji,tmj->tmi", rot[ok], per_take[0][ok] - trans[ok, None])
-            locals_.append(local)
-            known = int(ok.sum())
-        else:
-            raise HandcapError("give the rigid back-of-hand markers (rigid=...) or the hand frame per frame "
-                               "(transforms=...)")
-        if known < 10:
-            raise HandcapError(f"the hand frame is known in only {known} training frames")
-        spatial = SpatialModel.fit(free, np.concatenate(locals_), components=components, seed=seed)
-        # The filters see the takes one after the other, a gap longer than any coasting between them.
-        gap = np.full((12, len(free), 3), np.nan)
-        joined = np.concatenate([x for p in per_take for x in (p[:, n_rigid:], gap)][:-1])
-        kalman = KalmanSettings.from_training(joined, takes[0].rate)
-        return cls(tuple(ordered), rigid_set, spatial, kalman)
-
-    def save(self, path) -> None:
-        data = {"kind": np.array("labeling_model"), "names": np.array(self.names), **self.spatial.to_arrays(),
-                "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
-        if self.rigid is not None:
-            data.update(self.rigid.to_arrays())
-        save_npz(path, data)
-
-    @classmethod
-    def load(cls, path) -> "LabelingModel":
-        data = load_npz(path, required=("names", "gmm_weights", "gmm_means", "gmm_precision_chol", "kalman"),
-                        what="labeling model")
-        dt, jerk, measurement = (float(v) for v in data["kalman"])
-        rigid = RigidSet.from_arrays(data) if "rigid_names" in data else None
-        return cls(tuple(str(n) for n in data["names"]), rigid, SpatialModel.from_arrays(data),
-                   KalmanSettings(dt, jerk, measurement))
-
-
-def _rigid_transforms(canonical, positions):
-    """Kabsch per frame from labeled rigid markers (T, R, 3); frames with < 3 markers are not ok."""
-    seen = ~np.isnan(positions[..., 0])
-    ok = seen.sum(axis=1) >= 3
-    rot = np.tile(np.eye(3), (len(positions), 1, 1))
-    trans = np.zeros((len(positions), 3))
-    if ok.any():
-        r, t = kabsch(np.broadcast_to(canonical, positions[ok].shape), np.nan_to_num(positions[ok]),
-                      seen[ok].astype(float))
-        rot[ok], trans[ok] = r, t
-    return rot, trans, ok
 
 
 @dataclass
@@ -361,7 +209,7 @@ class OnlineLabeler:
             -1 for a point that is no marker. None while the first ``lag``
             frames are still open.
         """
-        points, valid = _frame_points(points)
+        points, valid = frame_points(points)
         return self._push(self._step(points[valid], transform), valid)
 
     def _push(self, frame: "_Frame", valid) -> np.ndarray | None:
@@ -396,7 +244,7 @@ class OnlineLabeler:
         # Each object's markers first (a rigid object with many markers is the surest find), then the
         # hand's frame among the points left (given, or from its back markers, ranked by the spatial
         # fit); the fingers are labelled among what remains.
-        rest, object_points = _find_objects(self._object_finders, points, self._n_object_markers)
+        rest, object_points = find_objects(self._object_finders, points, self._n_object_markers)
         pose, rigid_points, rest = self._find_hand(points, rest, transform)
         return self._label(points, rest, pose, rigid_points, object_points)
 
@@ -625,7 +473,7 @@ class OnlineLabeler:
         return labels
 
 
-def _frame_points(points):
+def frame_points(points):
     """A frame's points as (K, 3) floats and which of them are not NaN."""
     points = np.asarray(points, dtype=np.float64)
     if points.size == 0:
@@ -635,7 +483,7 @@ def _frame_points(points):
     return points, ~np.isnan(points).any(axis=1)
 
 
-def _find_objects(finders, points, n_markers):
+def find_objects(finders, points, n_markers):
     """Each rigid object's markers among the points: (indices of the points left, (O,) point per object
     label or -1)."""
     rest = np.arange(len(points))
@@ -650,328 +498,3 @@ def _find_objects(finders, points, n_markers):
             rest = np.delete(rest, found.points[got])
         at += n
     return rest, object_points
-
-
-class MultiHandLabeler:
-    """Several hands in one stream, each found by its own rigid back markers: ``update(points) -> labels``.
-
-    Every frame, the objects' markers are found first, then each hand's back
-    markers among the points left (in the order of ``models``); every other
-    point goes to the hand whose spatial model explains it best, and each hand
-    labels its points with its own hypotheses, filters and Viterbi trellis
-    (:class:`OnlineLabeler`).
-
-    Parameters
-    ----------
-    models : sequence of LabelingModel
-        One per hand (each with rigid markers); the same model may serve
-        both hands of a pair of identical gloves.
-    prefixes : sequence of str, optional
-        Put before each hand's labels (needed when the models share names).
-    objects : sequence of RigidSet
-    options
-        :class:`OnlineLabeler` settings, shared by the hands.
-
-    Attributes
-    ----------
-    names : tuple of str
-        Every hand's labels (prefixed), then the objects'.
-    """
-
-    def __init__(self, models, *, prefixes=None, objects=(), **options):
-        models = list(models)
-        if not models:
-            raise HandcapError("give at least one hand's labeling model")
-        if any(m.rigid is None for m in models):
-            raise HandcapError("each hand needs rigid back markers to be told apart in one stream")
-        prefixes = [""] * len(models) if prefixes is None else [str(p) for p in prefixes]
-        if len(prefixes) != len(models):
-            raise HandcapError(f"{len(prefixes)} prefixes for {len(models)} hands")
-        self.hands = [OnlineLabeler(m, **options) for m in models]
-        self.objects = tuple(objects)
-        self._object_finders = [HandFrameFinder(o, max_hold=0) for o in self.objects]
-        self._n_object_markers = sum(len(o.names) for o in self.objects)
-        hand_names = [p + n for p, m in zip(prefixes, models) for n in m.names]
-        self.names = tuple(hand_names) + tuple(n for o in self.objects for n in o.names)
-        if len(set(self.names)) != len(self.names):
-            raise HandcapError("the hands share label names: give prefixes (e.g. prefixes=('left_', 'right_'))")
-        self._offsets = np.cumsum([0] + [len(m.names) for m in models])
-        self._object_pending: deque = deque()
-        self.lag = self.hands[0].lag
-
-    @property
-    def lost_frames(self) -> list:
-        """Frames where some hand's frame could not be found."""
-        return sorted(set().union(*(h.lost_frames for h in self.hands)))
-
-    def update(self, points, transform=None):
-        """Label one frame: as :meth:`OnlineLabeler.update`, with indices into :attr:`names`."""
-        if transform is not None:
-            raise HandcapError("several hands are found by their rigid markers; a transform cannot be given")
-        points, valid = _frame_points(points)
-        pts = points[valid]
-        rest, object_points = _find_objects(self._object_finders, pts, self._n_object_markers)
-        found = []
-        for hand in self.hands:
-            pose, rigid_points, rest = hand._find_hand(pts, rest)
-            found.append((pose, rigid_points))
-        # Each remaining point to the hand whose spatial model explains it best, in that hand's frame.
-        lls = []
-        for hand, (pose, _) in zip(self.hands, found):
-            if pose is None or not len(rest):
-                lls.append(np.full((hand.n_free, len(rest)), -np.inf))
-            else:
-                lls.append(hand.spatial.log_likelihood((pts[rest] - pose[1]) @ pose[0]))
-        owner = np.argmax(np.stack([ll.max(axis=0) if len(rest) else np.zeros(0) for ll in lls]), axis=0)
-        decided = []
-        for h, (hand, (pose, rigid_points)) in enumerate(zip(self.hands, found)):
-            mine = owner == h
-            frame = hand._label(pts, rest[mine], pose, rigid_points, np.zeros(0, int),
-                                None if pose is None else lls[h][:, mine])
-            decided.append(hand._push(frame, valid))
-        self._object_pending.append((object_points, valid))
-        if decided[0] is None:
-            return None
-        return self._combine(decided, self._object_pending.popleft())
-
-    def flush(self) -> list[np.ndarray]:
-        """Decide every frame still open (end of a take); returns their labels, oldest first."""
-        per_hand = [hand.flush() for hand in self.hands]
-        out = [self._combine(list(labels), self._object_pending.popleft()) for labels in zip(*per_hand)]
-        self._object_pending.clear()
-        return out
-
-    def _combine(self, decided, objects) -> np.ndarray:
-        object_points, valid = objects
-        labels = np.full(len(valid), -1)
-        for lab, offset in zip(decided, self._offsets):
-            hit = lab >= 0
-            labels[hit] = lab[hit] + offset
-        valid_index = np.flatnonzero(valid)
-        got = object_points >= 0
-        labels[valid_index[object_points[got]]] = self._offsets[-1] + np.flatnonzero(got)
-        return labels
-
-
-#: The offline second pass refits the spatial model only when the first pass's labels put the take's hand
-#: frame further than this from the trained one (degrees, metres). A take of the training session measures
-#: up to ~2.4 degrees / 1.3 mm from its different poses alone (real glove, 8 s and 40 s); there a refit follows
-#: the take's poses, not the markers, and labels worse (99.96 -> 99.62 % correct).
-REFIT_TURN_DEG = 3.0
-REFIT_SHIFT = 0.003
-#: Track births (``OnlineLabeler(birth=...)``) in the offline first pass: its labels only feed the refit, where a
-#: wrong born track is outvoted by the take's other labels (synthetic triad moved 13 deg / 13 mm: offline wrong
-#: 0.87 -> 0.03 %; same-day, triad +3.5 mm, another subject and the real glove unchanged).
-FIRST_PASS_BIRTH = 5
-#: Warn when the hand frame is lost in more than this share of the frames.
-LOST_WARNING = 0.05
-#: Warn when fewer than this share of the points in the stream get a label.
-LABELLED_WARNING = 0.95
-#: Warn when the rigid markers' distances in the take differ from training by more than this (metres): the
-#: rigid set was re-learned from the take (a marker stuck back elsewhere, another glove or subject), and the
-#: labels rest on that.
-RIGID_CHANGE_WARNING = 0.002
-
-
-@dataclass(frozen=True)
-class LabelResult:
-    """A labeled take.
-
-    Attributes
-    ----------
-    markers : MarkerSequence
-        (T, M, 3) positions of every label, NaN where the labeler reports a gap
-        (its ``warnings`` hold this result's warnings too).
-    labels : list of ndarray
-        Per frame, the label index (into ``markers.names``) of every input point, -1 for none.
-    lost_frames : ndarray (L,) int
-        Frames where the hand frame could not be found.
-    warnings : tuple of str
-        One line per implausible figure (hand frame lost in many frames, few
-        points labelled).
-    model : LabelingModel or None
-        The model as adapted to the take by the offline second pass (None otherwise).
-    rigid : RigidSet or None
-        The hand's rigid set as the labeler ended the take with it (re-learned from the take when its
-        distances differed from training); None for several hands or without rigid markers.
-    """
-
-    markers: MarkerSequence
-    labels: list
-    lost_frames: np.ndarray
-    warnings: tuple = ()
-    model: LabelingModel | None = None
-    rigid: RigidSet | None = None
-
-
-def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False, method: str = "viterbi",
-               progress: bool | None = None, adapt: bool = True, **options) -> LabelResult:
-    """Label a whole take, frame by frame as a live labeler would (or on the whole take with ``offline``).
-
-    Parameters
-    ----------
-    points : PointCloudSequence or MarkerSequence
-        Unlabeled points; a MarkerSequence's names and columns are ignored.
-    model : LabelingModel or sequence of LabelingModel
-        Several: one per hand in the stream (:class:`MultiHandLabeler`; give
-        ``prefixes`` when they share names).
-    transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
-        Hand frame per frame (for models without rigid markers).
-    offline : bool
-        Decide every frame on the whole take (Viterbi over everything) instead
-        of online. With ``adapt`` and one hand, in two passes: the rigid
-        markers' shape re-learned from the take where it differs from
-        training, a first labeling (adapting as it goes, with track births:
-        ``FIRST_PASS_BIRTH``), the spatial model
-        registered to that pass's labels and its means moved toward them
-        (:mod:`handcap.labeling.adapt`), and a second labeling with it.
-    method : {"viterbi", "nearest"}
-        The labeler, or the nearest-neighbour baseline
-        (:class:`handcap.labeling.baseline.NearestNeighbourLabeler`).
-    progress : bool, optional
-    adapt : bool
-        Re-align the spatial model to the take (see ``offline`` and
-        :class:`OnlineLabeler`).
-    options
-        :class:`OnlineLabeler` settings (``hypotheses``, ``lag``, ``theta_min``, ...).
-
-    Returns
-    -------
-    LabelResult
-        With warnings (also issued as :class:`handcap.core.errors.HandcapWarning`)
-        when the hand frame is lost in more than 5 % of the frames or fewer
-        than 95 % of the points are labelled.
-    """
-    if isinstance(points, MarkerSequence):
-        points = PointCloudSequence.from_markers(points)
-    if method not in ("viterbi", "nearest"):
-        raise HandcapError(f"unknown labeling method {method!r}; choose viterbi or nearest")
-    if method == "nearest" and not isinstance(model, LabelingModel):
-        raise HandcapError("the nearest-neighbour baseline labels one hand")
-    two_pass = (offline and adapt and method == "viterbi" and isinstance(model, LabelingModel)
-                and model.rigid is not None and transforms is None)
-    adapted, trained = None, model
-    if two_pass:
-        model = _rigid_from_take(model, points.frames)
-        first = _run(points, model, None, True, method, progress,
-                     {"birth": FIRST_PASS_BIRTH, **options, "adapt": True})
-        adapted = refit_to_labels(model, first.markers)
-        result = _run(points, adapted, None, True, method, progress, {**options, "adapt": False})
-    else:
-        if method == "viterbi":
-            options["adapt"] = adapt
-        result = _run(points, model, transforms, offline, method, progress, options)
-    return _with_warnings(result, points, adapted, trained)
-
-
-def _rigid_from_take(model: LabelingModel, frames) -> LabelingModel:
-    """The model with its rigid set re-learned from the take when the take's shape differs from training."""
-    from dataclasses import replace
-
-    rigid = model.rigid
-    new = rigid_from_take(rigid, frames, spatial=model.spatial, width=max(0.01, 3 * rigid.tolerance))
-    if new is None:
-        return model
-    if largest_change(new, rigid) <= 0.5 * rigid.tolerance:
-        return model
-    return replace(model, rigid=new)
-
-
-def refit_to_labels(model: LabelingModel, labeled: MarkerSequence) -> LabelingModel:
-    """The model's spatial model registered to a labelled take and its means moved toward it.
-
-    Parameters
-    ----------
-    model : LabelingModel
-        With rigid markers.
-    labeled : MarkerSequence
-        A labeling of a take by this model (its names in ``model.names`` order).
-
-    Returns
-    -------
-    LabelingModel
-        The same rigid set and filters; the spatial model expressed in the
-        hand frame the take's rigid markers give (:mod:`handcap.labeling.adapt`),
-        or ``model`` itself when that frame is within ``REFIT_TURN_DEG`` and
-        ``REFIT_SHIFT`` of the trained one.
-    """
-    from dataclasses import replace
-
-    n_rigid = len(model.rigid.names)
-    positions = np.stack([labeled.positions[:, labeled.index(n)] for n in model.names], axis=1)
-    rot, trans, ok = _rigid_transforms(model.rigid.canonical, positions[:, :n_rigid])
-    local = np.einsum("tji,tmj->tmi", rot[ok], positions[ok, n_rigid:] - trans[ok, None])
-    labels = np.broadcast_to(np.arange(local.shape[1]), local.shape[:2])
-    seen = ~np.isnan(local[..., 0])
-    local, labels = local[seen], labels[seen]
-    if len(local) < 50:
-        return model
-    # From the label-free registration (the first pass's labels may be wrong where the take was most off).
-    start = register_to_model(model.spatial, local[np.linspace(0, len(local) - 1, min(len(local), 3000)).astype(int)])
-    r, t = register_to_model(model.spatial, local, labels, anneal=0.0, iterations=10, start=start)
-    turn = np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
-    if turn < REFIT_TURN_DEG and np.linalg.norm(t) < REFIT_SHIFT:
-        return model  # the take sits as the training take did: a refit would only follow this take's poses
-    spatial = adapt_means(model.spatial, local @ r.T + t, labels)
-    return replace(model, spatial=spatial.moved(r, t))
-
-
-def _run(points, model, transforms, offline, method, progress, options) -> LabelResult:
-    """One labeling pass over a take."""
-    from tqdm import tqdm
-    if method == "nearest":
-        options.pop("adapt", None)
-        labeler = NearestNeighbourLabeler(model, **options)
-    else:
-        if offline:
-            options["lag"] = points.n_frames
-        if isinstance(model, LabelingModel):
-            labeler = OnlineLabeler(model, **options)
-        else:
-            labeler = MultiHandLabeler(model, **options)
-    labels = []
-    hidden = None if progress is None else not progress
-    for t, frame in enumerate(tqdm(points.frames, desc="label", unit="frame", disable=hidden, leave=False)):
-        transform = None if transforms is None else (transforms[0][t], transforms[1][t])
-        out = labeler.update(frame, transform)
-        if out is not None:
-            labels.append(out)
-    labels.extend(labeler.flush())
-    names = labeler.names
-    positions = np.full((points.n_frames, len(names), 3), np.nan)
-    for t, (frame, lab) in enumerate(zip(points.frames, labels)):
-        hit = lab >= 0
-        positions[t, lab[hit]] = frame[hit]
-    finder = getattr(labeler, "finder", None)
-    return LabelResult(MarkerSequence(positions, names, points.rate), labels,
-                       np.array(getattr(labeler, "lost_frames", []), dtype=int),
-                       rigid=None if finder is None else finder.rigid)
-
-
-def _with_warnings(result: LabelResult, points, model, trained=None) -> LabelResult:
-    """The result with its warnings (issued and stored on it and on its markers); ``model`` the adapted model
-    (offline), ``trained`` the one given."""
-    from dataclasses import replace
-
-    lines = []
-    if isinstance(trained, LabelingModel) and trained.rigid is not None and result.rigid is not None:
-        change = largest_change(trained.rigid, result.rigid)
-        if change > RIGID_CHANGE_WARNING:
-            lines.append(warn(f"the rigid markers' distances in this take differ from training by up to "
-                              f"{1000 * change:.1f} mm (re-learned from the take; plausible <= "
-                              f"{1000 * RIGID_CHANGE_WARNING:.0f} mm): a marker moved, or another glove or subject; "
-                              f"check the labels, or train on a take of this session", stacklevel=3))
-    n_frames = max(points.n_frames, 1)
-    lost = len(result.lost_frames)
-    if lost > LOST_WARNING * n_frames:
-        lines.append(warn(f"hand frame lost in {100 * lost / n_frames:.1f} % of the frames ({lost} of {n_frames}; "
-                          f"plausible <= {100 * LOST_WARNING:.0f} %): the rigid markers were not found at their "
-                          f"trained distances; check the layout's rigid markers or train on a take of this session",
-                          stacklevel=3))
-    total = sum(int(np.isfinite(f).all(axis=1).sum()) for f in points.frames)
-    labelled = sum(int((lab >= 0).sum()) for lab in result.labels)
-    if total and labelled < LABELLED_WARNING * total:
-        lines.append(warn(f"labels for {100 * labelled / total:.1f} % of the points in the stream (plausible >= "
-                          f"{100 * LABELLED_WARNING:.0f} %): many points fit no label; check the layout and the "
-                          f"training take", stacklevel=3))
-    return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)

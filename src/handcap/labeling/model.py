@@ -1,0 +1,156 @@
+"""What a labeler learns from a labeled range-of-motion take, and the hand frame of labeled rigid markers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.core.files import load_npz, save_npz
+from handcap.core.markers import MarkerSequence
+from handcap.labeling.frame import RigidSet
+from handcap.labeling.kalman import KalmanSettings
+from handcap.labeling.spatial import SpatialModel
+from handcap.objects.rigid import canonical_from_markers, kabsch
+
+
+@dataclass(frozen=True)
+class LabelingModel:
+    """What a labeler learns from a labeled range-of-motion take.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Every label: the rigid markers, then the others (the order of output).
+    rigid : RigidSet or None
+        The back-of-hand markers; None when the caller gives the hand frame.
+    spatial : SpatialModel
+        Mixtures of the other markers in the hand frame.
+    kalman : KalmanSettings
+    """
+
+    names: tuple
+    rigid: RigidSet | None
+    spatial: SpatialModel
+    kalman: KalmanSettings
+
+    @property
+    def free_names(self) -> tuple:
+        return self.spatial.names
+
+    @classmethod
+    def train(cls, markers, names=None, rigid=None, *, transforms=None, components: int = 3,
+              seed: int = 0) -> "LabelingModel":
+        """Train on one labeled take or several.
+
+        Parameters
+        ----------
+        markers : MarkerSequence or sequence of MarkerSequence
+            Labeled training takes (ranges of motion), metres, at one rate.
+            Several takes (other days, other subjects) are pooled: each take's
+            hand frame comes from its own rigid-marker shape turned onto the
+            first take's, so a triad put on again does not blur the mixtures,
+            and the rigid tolerance is learned from how much the distances
+            vary within each take.
+        names : sequence of str, optional
+            The labels to learn (default: every marker of the first take).
+        rigid : sequence of str, optional
+            Which of them are the rigid back-of-hand markers (3 or more).
+        transforms : (ndarray (T, 3, 3), ndarray (T, 3)), optional
+            Hand frame per training frame (``world = R @ local + t``), when
+            there are no rigid markers (one take only).
+        components : int
+            Mixture components per label.
+        seed : int
+        """
+        takes = [markers] if isinstance(markers, MarkerSequence) else list(markers)
+        if not takes:
+            raise HandcapError("give at least one labeled training take")
+        if any(abs(t.rate - takes[0].rate) > 1e-9 for t in takes):
+            raise HandcapError(f"the training takes have different frame rates: "
+                               f"{', '.join(f'{t.rate:g}' for t in takes)} Hz; resample them to one rate")
+        if transforms is not None and len(takes) > 1:
+            raise HandcapError("transforms=... describe one take; give one take with them")
+        names = list(takes[0].names if names is None else names)
+        rigid = list(rigid or [])
+        for k, take in enumerate(takes):
+            which = "the training take" if len(takes) == 1 else f"training take {k + 1}"
+            missing = [n for n in names if n not in take.names and n not in take.short_names]
+            if missing:
+                raise HandcapError(f"labels not in {which}: {', '.join(missing)}")
+        unknown = [n for n in rigid if n not in names]
+        if unknown:
+            raise HandcapError(f"rigid markers not among the labels: {', '.join(unknown)}")
+        free = [n for n in names if n not in rigid]
+        if not free:
+            raise HandcapError("every label is rigid: nothing left to label")
+        ordered = rigid + free
+        per_take = [np.stack([t.positions[:, t.index(n)] for n in ordered], axis=1) for t in takes]
+        everything = np.concatenate(per_take)
+        for n, s in zip(ordered, ~np.isnan(everything[..., 0]).T):
+            if not s.any():
+                raise HandcapError(f"marker {n!r} never appears in the training take")
+        n_rigid = len(rigid)
+        locals_, known = [], 0
+        if rigid:
+            rigid_set = RigidSet.from_takes(rigid, [p[:, :n_rigid] for p in per_take])
+            for p in per_take:
+                shape = canonical_from_markers(p[:, :n_rigid])
+                r0, t0 = kabsch(shape, rigid_set.canonical)  # this take's shape onto the reference
+                rot, trans, ok = rigid_transforms(shape @ r0.T + t0, p[:, :n_rigid])
+                local = np.full((len(p), len(free), 3), np.nan)
+                local[ok] = np.einsum("tji,tmj->tmi", rot[ok], p[ok, n_rigid:] - trans[ok, None])
+                locals_.append(local)
+                known += int(ok.sum())
+        elif transforms is not None:
+            rot, trans = (np.asarray(a, dtype=np.float64) for a in transforms)
+            n_frames = takes[0].n_frames
+            if rot.shape != (n_frames, 3, 3) or trans.shape != (n_frames, 3):
+                raise HandcapError(f"transforms must be ((T, 3, 3), (T, 3)) with T = {n_frames}")
+            ok = np.isfinite(rot).all(axis=(1, 2)) & np.isfinite(trans).all(axis=1)
+            rigid_set = None
+            local = np.full((n_frames, len(free), 3), np.nan)
+            local[ok] = np.einsum("tji,tmj->tmi", rot[ok], per_take[0][ok] - trans[ok, None])
+            locals_.append(local)
+            known = int(ok.sum())
+        else:
+            raise HandcapError("give the rigid back-of-hand markers (rigid=...) or the hand frame per frame "
+                               "(transforms=...)")
+        if known < 10:
+            raise HandcapError(f"the hand frame is known in only {known} training frames")
+        spatial = SpatialModel.fit(free, np.concatenate(locals_), components=components, seed=seed)
+        # The filters see the takes one after the other, a gap longer than any coasting between them.
+        gap = np.full((12, len(free), 3), np.nan)
+        joined = np.concatenate([x for p in per_take for x in (p[:, n_rigid:], gap)][:-1])
+        kalman = KalmanSettings.from_training(joined, takes[0].rate)
+        return cls(tuple(ordered), rigid_set, spatial, kalman)
+
+    def save(self, path) -> None:
+        data = {"kind": np.array("labeling_model"), "names": np.array(self.names), **self.spatial.to_arrays(),
+                "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
+        if self.rigid is not None:
+            data.update(self.rigid.to_arrays())
+        save_npz(path, data)
+
+    @classmethod
+    def load(cls, path) -> "LabelingModel":
+        data = load_npz(path, required=("names", "gmm_weights", "gmm_means", "gmm_precision_chol", "kalman"),
+                        what="labeling model")
+        dt, jerk, measurement = (float(v) for v in data["kalman"])
+        rigid = RigidSet.from_arrays(data) if "rigid_names" in data else None
+        return cls(tuple(str(n) for n in data["names"]), rigid, SpatialModel.from_arrays(data),
+                   KalmanSettings(dt, jerk, measurement))
+
+
+def rigid_transforms(canonical, positions):
+    """Kabsch per frame from labeled rigid markers (T, R, 3); frames with < 3 markers are not ok."""
+    seen = ~np.isnan(positions[..., 0])
+    ok = seen.sum(axis=1) >= 3
+    rot = np.tile(np.eye(3), (len(positions), 1, 1))
+    trans = np.zeros((len(positions), 3))
+    if ok.any():
+        r, t = kabsch(np.broadcast_to(canonical, positions[ok].shape), np.nan_to_num(positions[ok]),
+                      seen[ok].astype(float))
+        rot[ok], trans[ok] = r, t
+    return rot, trans, ok
