@@ -38,6 +38,7 @@ from handcap.core.checks import all_numbers, check_finite, check_numbers, check_
 from handcap.core.errors import HandcapError, merge_warnings
 from handcap.core.files import atomic_output, existing_file
 from handcap.core.rotations import matrix_from_axis_angle
+from handcap.core.transforms import homogeneous
 
 # OpenCV's iterative undistortion stops when the point re-distorts to within
 # this many pixels of the input (the EPS test of cvUndistortPointsInternal
@@ -177,18 +178,12 @@ class Camera:
     @property
     def world2camera(self) -> np.ndarray:
         """Homogeneous transform (4, 4) from world to camera coordinates."""
-        transform = np.eye(4)
-        transform[:3, :3] = self._rotation_matrix
-        transform[:3, 3] = self.translation
-        return transform
+        return homogeneous(self._rotation_matrix, self.translation)
 
     @property
     def camera2world(self) -> np.ndarray:
         """Homogeneous transform (4, 4) from camera to world coordinates."""
-        transform = np.eye(4)
-        transform[:3, :3] = self._rotation_matrix.T
-        transform[:3, 3] = self.center
-        return transform
+        return homogeneous(self._rotation_matrix.T, self.center)
 
     @property
     def projection(self) -> np.ndarray:

@@ -27,6 +27,7 @@ from scipy.signal import butter, sosfiltfilt
 from scipy.spatial.transform import Rotation, RotationSpline
 
 from handcap.core.errors import HandcapError
+from handcap.core.transforms import homogeneous
 from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
 from handcap.hand.anatomy import pose_from_degrees as _pose
 
@@ -185,10 +186,7 @@ def _place_against_palm(hand, obj, rotation, start, direction, open_phi, *, clea
         local = (skin - centre) @ rotation
         if obj.signed_distance(local).min() >= clearance:
             break
-    out = np.eye(4)
-    out[:3, :3] = rotation
-    out[:3, 3] = centre
-    return out
+    return homogeneous(rotation, centre)
 
 
 def grasp_configuration(hand, obj, kind: str):
@@ -341,10 +339,9 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
     # Timeline (fractions of the take): approach, close, carry, put down, open, leave.
     f = np.array([0.0, 0.15, 0.28, 0.82, 0.92, 1.0]) * duration
     n_carry = max(2, int(round((f[3] - f[2]) / 0.7)))
-    table_pose = np.eye(4)
     tilt = Rotation.from_rotvec(np.deg2rad(rng.normal(0, 10, 3)))
-    table_pose[:3, :3] = (NEUTRAL * tilt).as_matrix() @ object2hand[:3, :3]
-    table_pose[:3, 3] = WORK_CENTRE + np.array([0.0, 0.0, -0.08]) + rng.normal(0, 0.02, 3) * [1, 1, 0]
+    table_pose = homogeneous((NEUTRAL * tilt).as_matrix() @ object2hand[:3, :3],
+                             WORK_CENTRE + np.array([0.0, 0.0, -0.08]) + rng.normal(0, 0.02, 3) * [1, 1, 0])
     wrist_at_grasp = table_pose @ np.linalg.inv(object2hand)
     grasp_rot = Rotation.from_matrix(wrist_at_grasp[:3, :3])
     grasp_pos = wrist_at_grasp[:3, 3]
@@ -382,9 +379,7 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
         progress = np.clip((t - f[2]) / max(f[3] - f[2], 1e-9), 0, 1)
         angle = np.deg2rad(180.0) * (0.5 - 0.5 * np.cos(np.pi * progress))
         turn = Rotation.from_rotvec(angle[:, None] * axis).as_matrix()
-        spin = np.tile(np.eye(4), (len(t), 1, 1))
-        spin[:, :3, :3] = turn
-        spin[:, :3, 3] = pivot - np.einsum("tij,j->ti", turn, pivot)
+        spin = homogeneous(turn, pivot - np.einsum("tij,j->ti", turn, pivot))
         in_hand = spin @ in_hand
     carried = wrist @ in_hand
     first, last = np.flatnonzero(holding)[[0, -1]]
