@@ -109,8 +109,9 @@ def test_core_io_and_solve_load_no_torch():
     assert done.stdout.strip() == "True", done.stderr
 
 
-# The command line still imports inside its verbs; it becomes a package of thin modules next (issue 15, item 2).
-NOT_YET = {"handcap.cli"}
+# The command line still imports the stages inside its verbs (each stage loads scipy, trimesh or sklearn: 0.6 s
+# for `handcap --help` instead of 2 s); its verbs become thin calls of the library next (issue 15, item 2).
+NOT_YET = {name for name in MODULES if name == "handcap.cli" or name.startswith("handcap.cli.")}
 
 
 def _inner_handcap_imports(name: str, path: Path) -> list:
@@ -133,6 +134,6 @@ def _inner_handcap_imports(name: str, path: Path) -> list:
 
 def test_no_handcap_import_inside_a_function():
     # Allowed only for a module that loads a heavy library (torch) on import, with a comment saying so.
-    assert _inner_handcap_imports("handcap.cli", MODULES["handcap.cli"])  # the check finds them where they are
+    assert _inner_handcap_imports("handcap.cli.solve", MODULES["handcap.cli.solve"])  # found where they are
     found = [hit for name, path in MODULES.items() if name not in NOT_YET for hit in _inner_handcap_imports(name, path)]
     assert found == []

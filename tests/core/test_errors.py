@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from handcap import cli
+from handcap.cli import convert as cli_convert
 from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion, ObjectMotion
@@ -79,7 +80,7 @@ def _verb_with_warnings(args):
 
 @pytest.mark.parametrize("strict, code", [(False, 0), (True, 2)])
 def test_cli_prints_each_warning_once_and_strict_exits_2(monkeypatch, capsys, tmp_path, strict, code):
-    monkeypatch.setattr(cli, "_cmd_convert", _verb_with_warnings)
+    monkeypatch.setattr(cli_convert, "_cmd_convert", _verb_with_warnings)
     argv = (["--strict"] if strict else []) + ["convert", str(tmp_path / "a.c3d"), str(tmp_path / "b.npz")]
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a HandcapWarning escaping main() would fail here

@@ -42,9 +42,3 @@ def test_a_name_of_two_subjects_asks_for_the_prefix():
     with pytest.raises(HandcapError, match="'index_tip' is ambiguous: L:index_tip, R:index_tip; give the prefix"):
         expand_names(["L:index_tip", "R:index_tip"], "index_tip")
     assert expand_names(["L:index_tip", "R:index_tip"], "R:index_tip") == ["R:index_tip"]
-
-
-def test_cli_name_keeps_working():
-    from handcap.cli import _expand_names
-    markers = MarkerSequence(np.zeros((2, len(NAMES), 3)), NAMES, 100.0)
-    assert _expand_names(markers, "boite:*") == ["boite:c1", "boite:c2"]

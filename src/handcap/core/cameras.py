@@ -505,7 +505,7 @@ class CameraRig:
         --------
         write_cameras_toml
         """
-        _check_suffix(path)
+        check_rig_suffix(path)
         write_cameras_toml(self, path)
 
     @classmethod
@@ -516,11 +516,12 @@ class CameraRig:
         --------
         read_cameras_toml
         """
-        _check_suffix(path)
+        check_rig_suffix(path)
         return read_cameras_toml(path)
 
 
-def _check_suffix(path) -> None:
+def check_rig_suffix(path) -> None:
+    """Refuse a rig file name that is not ``.toml`` (handcap's own rig files are anipose-style TOML)."""
     suffix = Path(path).suffix.lower()
     if suffix != ".toml":
         raise HandcapError(f"{path}: camera files are anipose-style .toml, got '{suffix or 'no extension'}'")
@@ -656,5 +657,5 @@ def _table_from_camera(camera: Camera) -> dict:
     }
 
 
-__all__ = ["CAMERA_KEYS", "Camera", "CameraRig", "read_cameras_toml", "read_cameras_warnings",
+__all__ = ["CAMERA_KEYS", "Camera", "CameraRig", "check_rig_suffix", "read_cameras_toml", "read_cameras_warnings",
            "write_cameras_toml"]

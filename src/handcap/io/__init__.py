@@ -40,6 +40,7 @@ from handcap.core.files import (
 from handcap.io._units import UNITS
 from handcap.io.c3d import read_c3d, write_c3d
 from handcap.io.camera_formats import read_rig, write_rig
+from handcap.io.meshes import read_mesh, read_scan_points
 from handcap.io.motive import read_motive_csv
 from handcap.io.npz import (
     npz_kind,
@@ -144,8 +145,9 @@ def convert(source, target, *, partial: bool = False, units: str | None = None) 
 __all__ = [
     "UNITS", "UciPostures", "atomic_output", "check_not_input", "check_output", "check_output_folder", "convert",
     "existing_file", "load_npz", "npz_kind",
-    "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_motive_csv",
-    "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig", "read_trc",
+    "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_mesh", "read_motive_csv",
+    "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig", "read_scan_points",
+    "read_trc",
     "read_uci_postures", "save_npz", "write_c3d", "write_hand_motion", "write_markers", "write_markers_npz",
     "write_object_motion", "write_points", "write_points_npz", "write_rig", "write_trc",
 ]

@@ -7,7 +7,7 @@ hypotheses, several hands, scoring and a corruption tool.
 """
 
 from handcap.labeling.corrupt import corrupt, move_rigid_set
-from handcap.labeling.frame import HandFrameFinder, RigidSet
+from handcap.labeling.frame import HandFrameFinder, RigidSet, objects_from_take
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
 from handcap.labeling.model import LabelingModel
 from handcap.labeling.multihand import MultiHandLabeler
@@ -19,4 +19,4 @@ from handcap.labeling.spatial import SpatialModel
 
 __all__ = ["HandFrameFinder", "KalmanBatch", "KalmanSettings", "LabelResult", "LabelScore", "LabelingModel",
            "MultiHandLabeler", "OnlineLabeler", "RigidSet", "SpatialModel", "corrupt", "k_best_assignments",
-           "label_take", "move_rigid_set", "score_labels"]
+           "label_take", "move_rigid_set", "objects_from_take", "score_labels"]

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.core.markers import MarkerSequence, expand_names
 from handcap.objects.rigid import canonical_from_markers, kabsch
 
 
@@ -133,6 +134,30 @@ class RigidSet:
     def from_arrays(cls, data) -> "RigidSet":
         return cls(tuple(str(n) for n in data["rigid_names"]), np.asarray(data["rigid_canonical"], dtype=np.float64),
                    float(data["rigid_tolerance"]))
+
+
+#: The least distance tolerance of a rigid object's markers learned from a take, metres (a soft object varies more,
+#: and its own spread then sets it).
+OBJECT_MIN_TOLERANCE = 0.0015
+
+
+def objects_from_take(markers: MarkerSequence, specs) -> list[RigidSet]:
+    """Rigid objects for the labeler: per spec (comma-separated names or patterns such as ``box:*``), those
+    markers of a labeled take, with the shape and rigidity the take shows.
+
+    Raises
+    ------
+    HandcapError
+        A spec matching fewer than 3 markers (or none), or markers the take never shows together.
+    """
+    objects = []
+    for spec in specs:
+        names = expand_names(markers, spec)
+        if len(names) < 3:
+            raise HandcapError(f"--object {spec}: a rigid object needs 3 or more markers, got {len(names)}")
+        positions = np.stack([markers.positions[:, markers.index(n)] for n in names], axis=1)
+        objects.append(RigidSet.from_training(names, positions, min_tolerance=OBJECT_MIN_TOLERANCE))
+    return objects
 
 
 @dataclass

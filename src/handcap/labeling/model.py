@@ -154,3 +154,10 @@ def rigid_transforms(canonical, positions):
                       seen[ok].astype(float))
         rot[ok], trans[ok] = r, t
     return rot, trans, ok
+
+
+def is_labeling_model(path) -> bool:
+    """Whether ``path`` is a labeling model saved by :meth:`LabelingModel.save` (an ``.npz`` of that kind)."""
+    from pathlib import Path
+
+    return Path(path).suffix.lower() == ".npz" and str(load_npz(path).get("kind", "")) == "labeling_model"

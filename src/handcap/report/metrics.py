@@ -8,7 +8,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import existing_file
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
-from handcap.io import read_hand_motion, read_markers, read_object_motion
+from handcap.io import read_hand_motion, read_markers, read_mesh, read_object_motion
 from handcap.quality import metrics as q
 from handcap.solve.leave_one_out import leave_one_marker_out
 from handcap.solve.motion import observed_markers
@@ -67,11 +67,7 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         q.pose_features(motion.joints, None if object_motion is None else object_motion.translation))
     out["diversity"], out["coherence"] = diversity, coherence
     if object_motion is not None and object_mesh is not None:
-        import trimesh  # heavy: loaded only when a mesh is given
-        try:
-            mesh = trimesh.load(object_mesh, force="mesh", process=False)
-        except (ValueError, OSError, KeyError, IndexError, TypeError) as err:  # what trimesh raises on bad files
-            raise HandcapError(f"{object_mesh}: not a readable mesh ({' '.join(str(err).split())[:120]})") from None
+        mesh = read_mesh(object_mesh)
         if len(getattr(mesh, "faces", ())) == 0:
             raise HandcapError(f"{object_mesh}: holds no mesh faces; give the object's surface mesh")
         hand = _hand_for(motion, hand)

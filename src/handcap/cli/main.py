@@ -1,0 +1,89 @@
+"""The ``handcap`` command. Every verb has ``--help``; user mistakes exit with code 2."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from handcap.cli.calibrate import add_calibrate
+from handcap.cli.convert import add_convert
+from handcap.cli.label import add_label
+from handcap.cli.layout import add_layout
+from handcap.cli.multiview import add_clean, add_multiview
+from handcap.cli.occlusion import add_occlusion
+from handcap.cli.solve import add_solve
+from handcap.cli.synth import add_synth
+from handcap.core.errors import HandcapError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="handcap", description=__doc__)
+    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--strict", action="store_true",
+                        help="exit with code 2 when the result carries a warning (implausible figures, guessed "
+                             "units); the output is still written")
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
+    verbs.required = True
+
+    add_convert(verbs)
+    add_synth(verbs)
+    add_solve(verbs)
+    add_label(verbs)
+    add_occlusion(verbs)
+    add_multiview(verbs)
+    add_clean(verbs)
+    add_calibrate(verbs)
+    add_layout(verbs)
+    return parser
+
+
+def _version() -> str:
+    from handcap import __version__
+    return f"handcap {__version__}"
+
+
+def main(argv=None) -> int:
+    """Run one verb. Exit codes: 0 done, 2 user error (or a warning with ``--strict``), 130 interrupted.
+
+    A verb's ``_cmd_`` function may return the warnings of the result it wrote (one-line strings): they are
+    printed on stderr as ``handcap VERB: warning: ...``, once each.
+    """
+    import warnings
+
+    from handcap.core.errors import HandcapWarning, merge_warnings
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        # Every HandcapWarning the library issues is caught here and printed once, with those the verb returns
+        # (the ones stored in its output); Python's own display of them would repeat each line.
+        with warnings.catch_warnings(record=True) as issued:
+            warnings.simplefilter("always", HandcapWarning)
+            returned = args.run(args)
+        found = merge_warnings(returned, [str(w.message) for w in issued if issubclass(w.category, HandcapWarning)])
+        for w in issued:
+            if not issubclass(w.category, HandcapWarning):
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        for line in found:
+            print(f"handcap {args.verb}: warning: {line}", file=sys.stderr)
+        sys.stdout.flush()
+    except HandcapError as err:
+        # One line, whatever the message quotes (an array's repr spans several).
+        print(f"handcap {args.verb}: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # The reader of our output went away (``handcap ... | head``): not an error of ours. Point stdout at
+        # devnull so the interpreter's final flush does not raise again.
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except KeyboardInterrupt:
+        print("handcap: interrupted", file=sys.stderr)
+        return 130
+    if found and args.strict:
+        print(f"handcap {args.verb}: error: {len(found)} warning(s) and --strict given", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
