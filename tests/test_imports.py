@@ -143,3 +143,14 @@ def test_no_handcap_import_inside_a_function():
     assert _inner_handcap_imports("handcap.cli.solve", MODULES["handcap.cli.solve"])  # found where they are
     found = [hit for name, path in MODULES.items() if name not in NOT_YET for hit in _inner_handcap_imports(name, path)]
     assert found == []
+
+
+def test_no_private_name_is_imported_from_another_module():
+    # A name with a leading underscore is the module's own (issue 15); what others use is public and documented.
+    found = []
+    for path in MODULES.values():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("handcap"):
+                found += [f"{path.relative_to(SRC)}:{node.lineno} {alias.name}" for alias in node.names
+                          if alias.name.startswith("_") and alias.name != "__version__"]
+    assert found == []

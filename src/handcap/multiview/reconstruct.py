@@ -29,7 +29,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.files import save_npz
 from handcap.multiview.detections import Detections
-from handcap.multiview.triangulation import _project, triangulate_ransac
+from handcap.multiview.triangulation import project_undistorted, triangulate_ransac
 from handcap.parallel import default_workers, idle_workers, map_chunks
 
 
@@ -303,7 +303,7 @@ def _triangulate_block(block: _Block):
 
 def _ray_residual(points, pixels, projections, focal, inliers):
     """Mean distance (metres) from each point (N, 3) to its inlier rays: pixel error x depth / focal."""
-    u, v, depth = _project(points.T, projections)
+    u, v, depth = project_undistorted(points.T, projections)
     pixel_error = np.hypot(u - pixels[..., 0], v - pixels[..., 1])
     distance = np.where(inliers, pixel_error * depth / focal[:, None], 0.0)
     return distance.sum(axis=0) / np.maximum(inliers.sum(axis=0), 1)

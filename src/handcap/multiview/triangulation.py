@@ -116,8 +116,9 @@ def _solve(a, b, enough):
                      (c02 * b0 + c12 * b1 + c22 * b2) * inv])
 
 
-def _project(x, projections):
-    """Undistorted pixels u, v (C, N) and depth-like z (C, N) of points x (3, N)."""
+def project_undistorted(x, projections):
+    """Undistorted pixels u, v (C, N) and depth-like z (C, N) of points x (3, N), metres, through projection
+    matrices (C, 3, 4)."""
     # Written out rather than a matrix product: BLAS kernels may round differently with the
     # number of points, and a point's result must not depend on which block it was solved in.
     p = projections[:, :, :, None]  # (C, 3, 4, 1)
@@ -129,7 +130,7 @@ def _project(x, projections):
 
 def _errors(x, u, v, projections):
     """Reprojection errors (C, N) in pixels; inf where unseen or behind a camera."""
-    pu, pv, z = _project(x, projections)
+    pu, pv, z = project_undistorted(x, projections)
     error = np.hypot(pu - u, pv - v)
     return np.where(np.isnan(error) | ~(z > 0), np.inf, error)
 
@@ -161,7 +162,7 @@ def triangulate_linear(pixels, projections, weights=None) -> np.ndarray:
 
 def project(points, projections) -> np.ndarray:
     """Undistorted pixels (C, N, 2) of points (N, 3) in metres; NaN behind a camera."""
-    u, v, z = _project(np.asarray(points, np.float64).T, np.asarray(projections, np.float64))
+    u, v, z = project_undistorted(np.asarray(points, np.float64).T, np.asarray(projections, np.float64))
     out = np.stack([u, v], axis=-1)
     out[~(z > 0)] = np.nan
     return out
@@ -312,7 +313,7 @@ def _refine(x, u, v, projections, inliers, iterations):
     ul, vl = np.where(w, u[:, live], 0.0), np.where(w, v[:, live], 0.0)
     p3 = projections[:, :, :3, None]  # (C, 3, 3, 1)
     for _ in range(iterations):
-        pu, pv, z = _project(xl, projections)
+        pu, pv, z = project_undistorted(xl, projections)
         z = np.where(w, z, 1.0)
         ru, rv = np.where(w, pu - ul, 0.0), np.where(w, pv - vl, 0.0)
         # d(u, v)/dX = (P[0:2] - (u, v) P[2]) / z, rows zero outside the inliers: (3, C, K) each.

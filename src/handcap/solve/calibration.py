@@ -47,7 +47,7 @@ from handcap.layouts import LayoutMarker, MarkerLayout
 from handcap.quality.plausibility import SHAPE_BOUND, attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors
 from handcap.solve.markers import MarkerModel
-from handcap.solve.motion import MRE_WARNING, _solve_lm, observed_markers
+from handcap.solve.motion import MRE_WARNING, solve_lm, observed_markers
 
 #: How strongly calibration frames are drawn to the open hand, metres per radian.
 OPEN_HAND_WEIGHT = 0.02
@@ -228,12 +228,12 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
     done = 0
     for done in range(1, rounds + 1):
         model = MarkerModel(hand, attachment)
-        poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
+        poses = solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
         if fit_shape:
             betas = _fit_shape(hand, attachment, poses, target, observed)
             attachment = replace(attachment, betas=betas)
             model = MarkerModel(hand, attachment)
-            poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
+            poses = solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
         fit = model.positions(poses.transl, poses.rot, poses.phi)
         error = float(np.mean(np.linalg.norm(fit - np.nan_to_num(target), axis=-1)[observed]))
         if step == 1.0 and error > 0.98 * previous_error:
@@ -259,7 +259,7 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         attachment = replace(attachment, betas=np.where(stuck, np.sign(attachment.betas) * SHAPE_BOUND,
                                                         attachment.betas))
     model = MarkerModel(hand, attachment)
-    poses = _solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
+    poses = solve_lm(model, target, observed, priors, 0.01, markers.rate, 12, 60, False)
     fit = model.positions(poses.transl, poses.rot, poses.phi)
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), np.nan)
     messages = calibration_warnings(attachment.betas if fit_shape else None, residuals, attachment.marker_names)

@@ -131,7 +131,7 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         from handcap.solve.adam import solve_adam  # imports torch: only for the baseline solver
         poses = solve_adam(model, target, observed, priors, progress=progress)
     else:
-        poses = _solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
+        poses = solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
                           first_iterations, progress)
     if filter_cutoff is not None:
         poses = _smoothed(poses, markers.rate, filter_cutoff, filter_order)
@@ -155,7 +155,30 @@ def _hand_for(attachment):
     return OpenHand(attachment.side)
 
 
-def _solve_lm(model, target, observed, priors, scale, rate, iterations, first_iterations, progress) -> Poses:
+def solve_lm(model, target, observed, priors, scale, rate, iterations, first_iterations, progress) -> Poses:
+    """Levenberg-Marquardt over a take: key frames first (0.1 s apart), then every frame from its neighbours.
+
+    Parameters
+    ----------
+    model : MarkerModel
+    target : ndarray (T, M, 3)
+        Observed marker positions, metres (anything where not ``observed``).
+    observed : ndarray (T, M) bool
+    priors : Priors
+    scale : float
+        Robust (Cauchy) scale of the marker residuals, metres.
+    rate : float
+        Frames per second.
+    iterations, first_iterations : int
+        Gauss-Newton iterations per frame, and for the first key frame.
+    progress : bool or None
+        Progress bar (None: only on a terminal).
+
+    Returns
+    -------
+    Poses
+        Translation (T, 3) metres, rotation (T, 3, 3) and the 27 angles (T, 27) radians.
+    """
     n = len(target)
     rest = priors.rest_phi()
     rot0, trans0, rigid_ok = rigid_start(model, target, observed, rest)
