@@ -1,39 +1,10 @@
-"""Each part of the labeler against an independent computation."""
+"""The constant-acceleration Kalman filters (handcap.labeling.kalman) against the textbook equations."""
 
-import itertools
 
 import numpy as np
-import pytest
 from scipy.stats import multivariate_normal
 
-from handcap.labeling import KalmanBatch, KalmanSettings, SpatialModel, k_best_assignments
-from handcap.labeling.viterbi import viterbi_path
-
-
-@pytest.mark.parametrize("seed", range(40))
-def test_murty_k_best_equals_brute_force(seed):
-    rng = np.random.default_rng(seed)
-    rows = int(rng.integers(1, 5))
-    cols = int(rng.integers(rows, 7))
-    cost = rng.normal(size=(rows, cols))
-    cost[rng.uniform(size=cost.shape) < 0.2] = np.inf
-    every = sorted(v for perm in itertools.permutations(range(cols), rows)
-                   if np.isfinite(v := cost[np.arange(rows), perm].sum()))
-    k = int(rng.integers(1, 12))
-    got = k_best_assignments(cost, k)
-    assert len(got) == min(k, len(every))
-    np.testing.assert_allclose([t for _, t in got], every[:len(got)], atol=1e-12)
-    assert len({tuple(c) for c, _ in got}) == len(got)  # all different
-    for columns, total in got:
-        assert len(set(columns)) == rows and np.isclose(cost[np.arange(rows), columns].sum(), total)
-
-
-def test_murty_edge_cases():
-    assert k_best_assignments(np.full((2, 3), np.inf), 3) == []
-    (cols, total), = k_best_assignments(np.zeros((0, 4)), 2)
-    assert cols.shape == (0,) and total == 0.0
-    with pytest.raises(ValueError):
-        k_best_assignments(np.zeros((3, 2)), 1)
+from handcap.labeling import KalmanBatch, KalmanSettings
 
 
 def test_kalman_likelihood_is_the_gaussian_density():
@@ -70,7 +41,6 @@ def test_kalman_filter_matches_the_textbook_equations():
         np.testing.assert_allclose(batch.cov[0], p[:3, :3], rtol=1e-9, atol=1e-15)
 
 
-
 def test_successors_equal_copy_step_and_restart():
     # The labeler's one-call advance against the separate operations: pick filters, step, restart the lost.
     s = KalmanSettings(dt=0.01, jerk=50.0, measurement=(0.3e-3) ** 2)
@@ -93,39 +63,6 @@ def test_successors_equal_copy_step_and_restart():
     slow.restart(lost, measured)
     for name in ("state", "cov", "age", "missed"):
         np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=1e-12, atol=0, err_msg=name)
-
-
-@pytest.mark.parametrize("seed", range(20))
-def test_viterbi_equals_exhaustive_search(seed):
-    rng = np.random.default_rng(seed)
-    sizes = rng.integers(1, 4, size=int(rng.integers(1, 6)))
-    emissions = [rng.normal(size=n) for n in sizes]
-    transitions = [rng.normal(size=(a, b)) for a, b in zip(sizes[:-1], sizes[1:])]
-    best, best_path = -np.inf, None
-    for path in itertools.product(*(range(n) for n in sizes)):
-        score = sum(e[s] for e, s in zip(emissions, path)) + sum(t[a, b] for t, a, b in
-                                                                 zip(transitions, path[:-1], path[1:]))
-        if score > best:
-            best, best_path = score, list(path)
-    path, score = viterbi_path(emissions, transitions)
-    assert path == best_path and np.isclose(score, best)
-
-
-def test_spatial_model_matches_scikit_learn():
-    from sklearn.mixture import GaussianMixture
-    rng = np.random.default_rng(2)
-    local = np.stack([rng.normal([0.05, 0.0, 0.0], 0.01, (300, 3)),
-                      np.concatenate([rng.normal([0.0, 0.08, 0.0], 0.004, (150, 3)),
-                                      rng.normal([0.0, 0.1, 0.03], 0.006, (150, 3))])], axis=1)
-    local[::7, 1] = np.nan
-    model = SpatialModel.fit(["a", "b"], local, components=3, seed=0)
-    query = rng.normal(0.03, 0.05, (9, 3))
-    for i in range(2):
-        x = local[:, i][~np.isnan(local[:, i, 0])]
-        ref = GaussianMixture(3, covariance_type="full", reg_covar=1e-6, random_state=0).fit(x)
-        np.testing.assert_allclose(model.log_likelihood(query)[i], ref.score_samples(query), rtol=1e-9)
-    again = SpatialModel.from_arrays(model.to_arrays())
-    np.testing.assert_array_equal(again.log_likelihood(query), model.log_likelihood(query))
 
 
 def test_noise_tuning_scores_every_setting_like_the_filters_do():
