@@ -27,7 +27,6 @@ from __future__ import annotations
 import operator
 from collections.abc import Iterator
 from dataclasses import dataclass
-import tomllib
 from pathlib import Path
 
 import cv2
@@ -36,7 +35,7 @@ import tomli_w
 
 from handcap.core.checks import all_numbers, check_finite, check_numbers, check_pixels, check_points, check_vector
 from handcap.core.errors import HandcapError, merge_warnings
-from handcap.core.files import atomic_output, existing_file
+from handcap.core.files import atomic_output, existing_file, read_toml
 from handcap.core.rotations import matrix_from_axis_angle
 from handcap.core.transforms import homogeneous
 
@@ -553,13 +552,7 @@ def read_cameras_toml(path) -> CameraRig:
         camera, or repeated camera names. The message names the file and table.
     """
     path = existing_file(path)
-    try:
-        with open(path, "rb") as fh:
-            document = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as err:
-        raise HandcapError(f"{path}: not valid TOML ({err})") from None
-    except UnicodeDecodeError:
-        raise HandcapError(f"{path}: not valid TOML (not UTF-8 text)") from None
+    document = read_toml(path)
     cameras = []
     for key, table in document.items():
         if key == _METADATA:
@@ -637,12 +630,7 @@ def read_cameras_warnings(path) -> tuple[str, ...]:
     HandcapError
         Missing, unreadable or invalid TOML file.
     """
-    path = existing_file(path)
-    try:
-        with open(path, "rb") as fh:
-            return _stored_warnings(tomllib.load(fh).get(_METADATA))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise HandcapError(f"{path}: not valid TOML ({err})") from None
+    return _stored_warnings(read_toml(path).get(_METADATA))
 
 
 def _table_from_camera(camera: Camera) -> dict:

@@ -16,6 +16,7 @@ import contextlib
 import io
 import os
 import tempfile
+import tomllib
 import zipfile
 import zlib
 from pathlib import Path
@@ -215,6 +216,18 @@ def read_warnings(arrays: dict) -> tuple[str, ...]:
     """The ``warnings`` entry of a loaded ``.npz`` as a tuple of one-line strings (empty when absent)."""
     value = arrays.get("warnings")
     return () if value is None else tuple(str(w) for w in np.atleast_1d(value))
+
+
+def read_toml(path) -> dict:
+    """The document of a TOML file, with one clear line for a missing file, invalid TOML or text not in UTF-8."""
+    path = existing_file(path)
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as err:
+        raise HandcapError(f"{path}: not valid TOML ({err})") from None
+    except UnicodeDecodeError:
+        raise HandcapError(f"{path}: not valid TOML (not UTF-8 text)") from None
 
 
 def load_npz(path, required=(), what: str = "handcap .npz file") -> dict:

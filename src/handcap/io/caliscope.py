@@ -17,15 +17,13 @@ is ignored, as are other keys.
 from __future__ import annotations
 
 import re
-import tomllib
-from pathlib import Path
 
 import tomli_w
 
 from handcap.core.cameras import CameraRig
 from handcap.core.checks import all_numbers
 from handcap.core.errors import HandcapError
-from handcap.core.files import atomic_output, existing_file
+from handcap.core.files import atomic_output, existing_file, read_toml
 from handcap.io.rig_fields import camera_from_fields, check_rig_to_write, rig_from_cameras, rotation_vector
 
 CALISCOPE_KEYS = ("size", "matrix", "distortions", "rotation", "translation")
@@ -75,16 +73,6 @@ def read_cameras_caliscope(path) -> CameraRig:
                                distortions=table["distortions"], rotation=rotation,
                                translation=table["translation"]))
     return rig_from_cameras(path, cameras, "[cameras.N] tables that are not ignored")
-
-
-def read_toml(path: Path) -> dict:
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except tomllib.TOMLDecodeError as err:
-        raise HandcapError(f"{path}: not valid TOML ({err})") from None
-    except UnicodeDecodeError:
-        raise HandcapError(f"{path}: not valid TOML (not UTF-8 text)") from None
 
 
 def is_caliscope(document: dict) -> bool:

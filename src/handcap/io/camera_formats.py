@@ -30,10 +30,9 @@ from pathlib import Path
 
 from handcap.core.cameras import CameraRig, read_cameras_toml, write_cameras_toml
 from handcap.core.errors import HandcapError
-from handcap.core.files import existing_file
+from handcap.core.files import existing_file, read_toml
 from handcap.io._units import check_units, metres_per_unit, settle_rig_units
-from handcap.io.caliscope import (CALISCOPE_KEYS, is_caliscope, read_cameras_caliscope, read_toml,
-                                  write_cameras_caliscope)
+from handcap.io.caliscope import CALISCOPE_KEYS, is_caliscope, read_cameras_caliscope, write_cameras_caliscope
 from handcap.io.opencv_rig import OPENCV_SUFFIXES, read_cameras_opencv, write_cameras_opencv
 from handcap.io.qca import QCA_SUBPIXELS, read_cameras_qca
 

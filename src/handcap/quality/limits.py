@@ -1,14 +1,5 @@
 """The limits of the plausibility checks (:mod:`handcap.quality.plausibility`), each with its reason.
 
-handcap never gives a silent wrong answer. Every stage that writes a result runs the checks below on it;
-each check is a pure function that returns a list of one-line warnings (empty when the result looks
-plausible). A warning names the figure, its value and the plausible range, so a user can judge it without
-reading the code, e.g. ``"solve: MRE 13.1 mm is above 5 mm (plausible: <= 5 mm); ..."``.
-
-The caller decides what to do with them: library code issues them with :func:`handcap.core.errors.warn`
-and stores them on its result (:func:`attach` does both for the containers); the command line prints them
-and, with ``handcap --strict``, exits with code 2.
-
 Every limit is a module constant with the reason for its value; none is fitted to one file:
 
 ==================  =====================================================================================
