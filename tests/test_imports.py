@@ -115,11 +115,6 @@ def test_core_io_and_solve_load_no_torch():
     assert done.stdout.strip() == "True", done.stderr
 
 
-# The command line still imports the stages inside its verbs (each stage loads scipy, trimesh or sklearn: 0.6 s
-# for `handcap --help` instead of 2 s); its verbs become thin calls of the library next (issue 15, item 2).
-NOT_YET = {name for name in MODULES if name == "handcap.cli" or name.startswith("handcap.cli.")}
-
-
 def _inner_handcap_imports(name: str, path: Path) -> list:
     """``path:line`` of every handcap import inside a function of the module, but those marked as loading torch."""
     lines = path.read_text().splitlines()
@@ -134,14 +129,21 @@ def _inner_handcap_imports(name: str, path: Path) -> list:
                 else:
                     continue
                 if any(t.startswith("handcap") for t in targets) and "torch" not in lines[inner.end_lineno - 1]:
-                    found.append(f"{path.relative_to(SRC)}:{inner.lineno}")
+                    found.append(f"{path.relative_to(SRC) if path.is_relative_to(SRC) else path.name}:{inner.lineno}")
     return found
+
+
+def test_an_import_inside_a_function_is_found(tmp_path):
+    # The check itself can fail: a module with one hidden import and one marked as loading torch.
+    module = tmp_path / "m.py"
+    module.write_text("def f():\n    from handcap.io import read_markers\n\n\n"
+                      "def g():\n    from handcap.solve import adam  # loads torch\n")
+    assert _inner_handcap_imports("m", module) == ["m.py:2"]
 
 
 def test_no_handcap_import_inside_a_function():
     # Allowed only for a module that loads a heavy library (torch) on import, with a comment saying so.
-    assert _inner_handcap_imports("handcap.cli.solve", MODULES["handcap.cli.solve"])  # found where they are
-    found = [hit for name, path in MODULES.items() if name not in NOT_YET for hit in _inner_handcap_imports(name, path)]
+    found = [hit for name, path in MODULES.items() for hit in _inner_handcap_imports(name, path)]
     assert found == []
 
 

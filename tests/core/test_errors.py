@@ -7,6 +7,7 @@ import pytest
 
 from handcap import cli
 from handcap.cli import convert as cli_convert
+from handcap.steps import Step
 from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion, ObjectMotion
@@ -75,7 +76,7 @@ def test_motion_and_attachment_warnings_round_trip(tmp_path):
 
 def _verb_with_warnings(args):
     warn("implausible figure")  # what library code does; the CLI must not print it twice
-    return ("implausible figure", "second figure")
+    return Step((), ("implausible figure", "second figure"))
 
 
 @pytest.mark.parametrize("strict, code", [(False, 0), (True, 2)])

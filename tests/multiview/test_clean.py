@@ -350,7 +350,7 @@ def test_cli_cleans_and_leaves_the_input_alone(take, tmp_path, capsys):
     assert _digest(take) == before
     printed = capsys.readouterr().out
     expected, report = clean_markers(read_markers(take), "dense-patches", max_spline_frames=4)
-    summary = report.summary()
+    summary = report.counts()
     assert f"removed {summary['cluster_removed']} samples" in printed and summary["cluster_removed"] > 0
     np.testing.assert_array_equal(read_markers(out).positions, expected.positions)
 

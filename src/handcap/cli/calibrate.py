@@ -4,72 +4,23 @@ from __future__ import annotations
 
 import argparse
 
-from handcap.core.errors import HandcapError
+from handcap.cli.common import names_arg
+from handcap.multiview.calibration import LOSSES, ORIGINS
+from handcap.steps import calibrate
 
 
-def _camera_toml_out(out: str, inputs) -> None:
-    """Check a camera file's name before the slow work: .toml, in a folder that can be written, not an input."""
-    from handcap.core.cameras import check_rig_suffix
-    from handcap.io import check_output
-    check_rig_suffix(out)
-    check_output(out, *inputs)
+def _cmd_calibrate_intrinsics(a):
+    return calibrate.intrinsics(a.inputs, a.out, board=a.board, name=a.name, every=a.every, fix_k3=a.fix_k3,
+                                keep_outliers=a.keep_outliers)
 
 
-def _cmd_calibrate_intrinsics(args) -> tuple[str, ...]:
-    from handcap.core.cameras import CameraRig
-    from handcap.multiview.boards import detect_in_files, parse_board
-    from handcap.multiview.calibration import calibrate_intrinsics
-    board = parse_board(args.board)
-    _camera_toml_out(args.out, args.inputs)
-    detections = detect_in_files(args.inputs, board, every=args.every)
-    result = calibrate_intrinsics(detections, name=args.name, fix_k3=args.fix_k3,
-                                  reject_outliers=not args.keep_outliers)
-    from handcap.quality import plausibility as q
-    rig = q.attach(CameraRig([result.camera]), q.camera_warnings(result.rms, names=[result.camera.name]))
-    rig.save(args.out)  # the warnings go to the file's [metadata]
-    warnings = rig.warnings
-    camera = result.camera
-    (fx, fy), (cx, cy) = camera.matrix[[0, 1], [0, 1]], camera.matrix[:2, 2]
-    print(f"{args.out}: camera {camera.name}, {camera.size[0]}x{camera.size[1]} px, f = {fx:.2f}, {fy:.2f} px, "
-          f"principal point ({cx:.1f}, {cy:.1f}) px, k1 k2 p1 p2 k3 = "
-          f"{' '.join(f'{k:.4g}' for k in camera.distortions)}")
-    print(f"reprojection RMS {result.rms:.3f} px over {len(result.views)} views (board seen in "
-          f"{int(detections.found.sum())} of {detections.n_frames} frames), worst view "
-          f"{result.labels[int(result.view_rms.argmax())]} {result.view_rms.max():.3f} px"
-          + (f"; rejected as outliers: {', '.join(detections.labels[t] for t in result.rejected)}"
-             if len(result.rejected) else ""))
-    print("quality: " + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
-    return warnings
-
-
-def _cmd_calibrate_rig(args) -> tuple[str, ...]:
-    from handcap.io.camera_formats import read_rig
-    from handcap.multiview.boards import detect_in_files, parse_board
-    from handcap.multiview.calibration import calibrate_rig
-    board = parse_board(args.board)
-    names = args.names
-    if names is not None and len(names) == 1 and "," in names[0]:
-        names = [n.strip() for n in names[0].split(",")]
-    if names is not None and len(names) != len(args.recordings):
-        raise HandcapError(f"{len(names)} camera names for {len(args.recordings)} cameras; give one name per camera")
-    _camera_toml_out(args.out, args.recordings + ([args.intrinsics] if args.intrinsics else []))
-    cameras = None if args.intrinsics is None else read_rig(args.intrinsics, positions=False)  # extrinsics unused
-    detections = [detect_in_files(path, board, every=args.every) for path in args.recordings]
-    result = calibrate_rig(detections, names=names, cameras=cameras, refine_intrinsics=args.refine_intrinsics,
-                           fix_k3=args.fix_k3, origin=args.origin, origin_frame=args.origin_frame,
-                           loss=args.loss, f_scale=args.f_scale)
-    from handcap.quality import plausibility as q
-    rig = q.attach(result.rig, q.camera_warnings(result.rms, names=result.names))
-    rig.save(args.out)  # the warnings go to the file's [metadata]
-    warnings = rig.warnings
-    print(result.summary())
-    print(f"{args.out}: {len(result.rig)} cameras; " + (f"{len(warnings)} warning(s), see below" if warnings
-                                                        else "no warnings"))
-    return warnings
+def _cmd_calibrate_rig(a):
+    return calibrate.rig(a.recordings, a.out, board=a.board, names=names_arg(a.names), every=a.every,
+                         intrinsics=a.intrinsics, refine_intrinsics=a.refine_intrinsics, fix_k3=a.fix_k3,
+                         origin=a.origin, origin_frame=a.origin_frame, loss=a.loss, f_scale=a.f_scale)
 
 
 def add_calibrate(verbs) -> None:
-    from handcap.multiview.calibration import LOSSES, ORIGINS
     board_help = ("checkerboard:COLSxROWS:SQUARE_M (inner corners, metres) or "
                   "charuco:COLSxROWS:SQUARE_M[:MARKER_M][:DICT][:inverted] (squares; marker 0.75 x square and "
                   "DICT_4X4_1000 by default), e.g. charuco:4x5:0.054:0.0405:DICT_4X4_1000:inverted")

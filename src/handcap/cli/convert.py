@@ -3,18 +3,11 @@
 from __future__ import annotations
 
 from handcap.cli.common import add_units
+from handcap.steps import markers
 
 
-def _cmd_convert(args) -> tuple[str, ...]:
-    from handcap.io import check_output, read_markers, write_markers
-    from handcap.quality import plausibility as q
-    check_output(args.output, args.input)
-    markers = read_markers(args.input, partial=args.partial, units=args.units)
-    markers = q.attach(markers, q.marker_warnings(markers))  # stored in the output (.npz, .c3d) as well
-    write_markers(markers, args.output)
-    print(q.summary(f"{args.output}: {markers.n_frames} frames, {markers.n_markers} markers at {markers.rate:g} Hz",
-                    q.marker_figures(markers), markers.warnings))
-    return markers.warnings
+def _cmd_convert(args):
+    return markers.convert(args.input, args.output, partial=args.partial, units=args.units)
 
 
 def add_convert(verbs) -> None:

@@ -3,94 +3,26 @@
 from __future__ import annotations
 
 from handcap.cli.common import add_units
-from handcap.core.errors import HandcapError
+from handcap.layouts import SHIPPED
+from handcap.steps import label, markers
 
 
-def _cmd_label(args) -> tuple[str, ...]:
-    from handcap.io import check_not_input, read_markers, read_points, write_markers
-    from handcap.labeling import LabelingModel, label_take, objects_from_take
-    from handcap.layouts import load_layout
-    check_not_input(args.out, args.input, *args.train)
-    reuse = _is_model_file(args)  # --train is a saved model: it is used, and not written again
-    if args.model and not reuse:
-        check_not_input(args.model, args.input, *args.train, args.out)
-    layouts = [load_layout(name) for name in args.layout]
-    if len(layouts) > 1 and (args.model or args.method == "nearest"):
-        raise HandcapError("several --layout (hands) label with the viterbi labeler and save no --model; "
-                           "give one --layout for those")
-    points = read_points(args.input, units=args.units)
-    if reuse:
-        models = [LabelingModel.load(args.train[0])]
-    else:
-        hand = [m.name for layout in layouts for m in layout.hand_markers]
-        takes = [read_markers(path, units=args.units, hand=hand) for path in args.train]
-        models = [LabelingModel.train(takes, layout.names, layout.rigid, seed=args.seed) for layout in layouts]
-    options = {} if args.method == "nearest" else dict(hypotheses=args.hypotheses, lag=args.lag)
-    if args.object:
-        if args.method == "nearest":
-            raise HandcapError("--object works with the viterbi labeler")
-        if reuse:
-            raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
-        options["objects"] = objects_from_take(read_markers(args.train[0]), args.object)
-    result = label_take(points, models[0] if len(models) == 1 else models, offline=args.offline,
-                        method=args.method, **options)
-    write_markers(result.markers, args.out)
-    if args.model and not reuse:
-        models[0].save(args.model)
-    seen = (result.markers.positions[..., 0] == result.markers.positions[..., 0]).mean()
-    lost = result.lost_frames
-    print(f"{args.out}: {points.n_frames} frames, {len(result.markers.names)} labels, {100 * seen:.1f} % of "
-          f"label-frames filled; hand frame not found in {len(lost)} frames"
-          + (f" (first: {lost[0]})" if len(lost) else ""))
-    return result.warnings
+def _cmd_label(a):
+    return label.label(a.input, a.out, train=a.train, layouts=a.layout, model=a.model, method=a.method,
+                       hypotheses=a.hypotheses, lag=a.lag, offline=a.offline, seed=a.seed, objects=a.object,
+                       units=a.units)
 
 
-def _is_model_file(args) -> bool:
-    from handcap.labeling.model import is_labeling_model
-    return bool(args.model) and len(args.train) == 1 and is_labeling_model(args.train[0])
+def _cmd_score_labels(a):
+    return label.score_labels(a.labeled, a.truth, out=a.json, units=a.units)
 
 
-def _cmd_score_labels(args) -> None:
-    import json
-
-    from handcap.io import read_markers
-    from handcap.labeling import score_labels
-    if args.json:
-        from handcap.io import check_output
-        check_output(args.json, args.labeled, args.truth)
-    score = score_labels(read_markers(args.labeled, units=args.units), read_markers(args.truth, units=args.units))
-    print(score.table(f"{args.labeled} against {args.truth}"))
-    if args.json:
-        from handcap.io import atomic_output
-        with atomic_output(args.json, "w") as fh:
-            json.dump(score.to_dict(), fh, indent=2)
-
-
-def _cmd_corrupt(args) -> None:
-    from pathlib import Path
-
-    from handcap.io import check_not_input, read_markers, write_markers
-    from handcap.labeling import corrupt
-    out = Path(args.out)
-    truth_path = out.with_name(out.stem + ".truth" + out.suffix)
-    check_not_input(args.out, args.input)
-    check_not_input(truth_path, args.input)
-    markers = read_markers(args.input, units=args.units)
-    names = None
-    if args.layout:
-        from handcap.layouts import load_layout
-        names = load_layout(args.layout).names
-    unlabeled, truth = corrupt(markers, ghost_rate=args.ghost_rate, dropout=args.dropout, seed=args.seed,
-                               names=names)
-    write_markers(unlabeled, out)
-    write_markers(truth, truth_path)
-    extra = int((unlabeled.positions[..., 0] == unlabeled.positions[..., 0]).sum()
-                - (truth.positions[..., 0] == truth.positions[..., 0]).sum())
-    print(f"{out}: {unlabeled.n_frames} frames of unlabeled points ({extra} ghost samples); truth in {truth_path}")
+def _cmd_corrupt(a):
+    return markers.corrupt(a.input, a.out, ghost_rate=a.ghost_rate, dropout=a.dropout, seed=a.seed, layout=a.layout,
+                           units=a.units)
 
 
 def add_label(verbs) -> None:
-    from handcap.layouts import SHIPPED
     p = verbs.add_parser("label", help="label unlabeled finger markers online (GMM + N-best + Kalman + Viterbi)",
                          description="Every point of IN is treated as unlabeled, whatever its name or slot. The "
                                      "labels and the spatial model come from ROM, a labeled range-of-motion take "

@@ -3,44 +3,19 @@
 from __future__ import annotations
 
 from handcap.cli.common import add_units
-from handcap.core.errors import HandcapError
+from handcap.layouts import SHIPPED
+from handcap.steps import layout
 
 
-def _cmd_layout_new(args) -> None:
-    from pathlib import Path
-
-    from handcap.io import atomic_output, check_not_input
-    from handcap.layouts import SHIPPED, layout_template, load_layout
-    out = Path(args.out)
-    if out.is_dir():
-        raise HandcapError(f"{out}: is a folder; give a file name such as {out / 'my-layout.toml'}")
-    if out.suffix.lower() != ".toml":
-        raise HandcapError(f"{out}: layouts are TOML files; name it NAME.toml")
-    if args.like not in SHIPPED:
-        check_not_input(out, args.like)
-    if out.exists() and not args.force:
-        raise HandcapError(f"{out}: exists; choose another name or add --force to replace it")
-    layout = load_layout(args.like, side=args.side)
-    with atomic_output(out, "w") as fh:
-        fh.write(layout_template(layout, like=args.like, positions=not args.no_positions))
-    given = 0 if args.no_positions else sum(m.position is not None for m in layout.markers)
-    print(f"{out}: {len(layout)} markers like {args.like} ({layout.side} hand, {given} with positions), every field "
-          f"explained in its comments; next: handcap layout check {out} YOUR_TAKE")
+def _cmd_layout_new(a):
+    return layout.new(a.out, like=a.like, side=a.side, positions=not a.no_positions, force=a.force)
 
 
-def _cmd_layout_check(args):
-    from handcap.io import read_markers
-    from handcap.layouts import check_layout, load_layout
-    layout = load_layout(args.layout, side=args.side)
-    markers = None if args.take is None else read_markers(args.take, units=args.units,
-                                                          hand=[m.name for m in layout.hand_markers])
-    result = check_layout(layout, markers, take=args.take)
-    print(result.summary())
-    return result.warnings
+def _cmd_layout_check(a):
+    return layout.check(a.layout, a.take, side=a.side, units=a.units)
 
 
 def add_layout(verbs) -> None:
-    from handcap.layouts import SHIPPED
     p = verbs.add_parser("layout", help="write a layout for your own marker set, and check it against a take",
                          description="new: a commented copy of a shipped layout to edit (names, segments, rigid "
                                      "set, positions). check: the layout's names in a take (a Subject: prefix is "

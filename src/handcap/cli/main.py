@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import warnings
 
 from handcap.cli.calibrate import add_calibrate
 from handcap.cli.convert import add_convert
 from handcap.cli.label import add_label
 from handcap.cli.layout import add_layout
 from handcap.cli.multiview import add_clean, add_multiview
+from handcap.cli.objects import add_objects
 from handcap.cli.occlusion import add_occlusion
 from handcap.cli.solve import add_solve
 from handcap.cli.synth import add_synth
-from handcap.core.errors import HandcapError
+from handcap import __version__
+from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_convert(verbs)
     add_synth(verbs)
     add_solve(verbs)
+    add_objects(verbs)
     add_label(verbs)
     add_occlusion(verbs)
     add_multiview(verbs)
@@ -38,19 +43,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _version() -> str:
-    from handcap import __version__
     return f"handcap {__version__}"
 
 
 def main(argv=None) -> int:
     """Run one verb. Exit codes: 0 done, 2 user error (or a warning with ``--strict``), 130 interrupted.
 
-    A verb's ``_cmd_`` function may return the warnings of the result it wrote (one-line strings): they are
-    printed on stderr as ``handcap VERB: warning: ...``, once each.
+    A verb's ``_cmd_`` function calls a step of :mod:`handcap.steps` and returns its
+    :class:`~handcap.steps.step.Step`: the summary is printed on stdout, the warnings of the result it wrote
+    (one-line strings) on stderr as ``handcap VERB: warning: ...``, once each.
     """
-    import warnings
-
-    from handcap.core.errors import HandcapWarning, merge_warnings
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -58,8 +60,11 @@ def main(argv=None) -> int:
         # (the ones stored in its output); Python's own display of them would repeat each line.
         with warnings.catch_warnings(record=True) as issued:
             warnings.simplefilter("always", HandcapWarning)
-            returned = args.run(args)
-        found = merge_warnings(returned, [str(w.message) for w in issued if issubclass(w.category, HandcapWarning)])
+            done = args.run(args)
+            if done.lines:
+                print(done.summary())
+        issued_lines = [str(w.message) for w in issued if issubclass(w.category, HandcapWarning)]
+        found = merge_warnings(done.warnings, issued_lines)
         for w in issued:
             if not issubclass(w.category, HandcapWarning):
                 warnings.showwarning(w.message, w.category, w.filename, w.lineno)
@@ -73,7 +78,6 @@ def main(argv=None) -> int:
     except BrokenPipeError:
         # The reader of our output went away (``handcap ... | head``): not an error of ours. Point stdout at
         # devnull so the interpreter's final flush does not raise again.
-        import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except KeyboardInterrupt:

@@ -4,37 +4,24 @@ from __future__ import annotations
 
 from handcap.cli.common import add_units
 from handcap.core.errors import HandcapError
+from handcap.layouts import SHIPPED
+from handcap.multiview import clean
+from handcap.steps import multiview
 
 
-def _cmd_triangulate(args) -> tuple[str, ...]:
-    import time
+def _cmd_triangulate(a):
+    return multiview.triangulate(a.detections, a.cameras, a.out, min_views=a.min_views, threshold_px=a.threshold_px,
+                                 chunk_frames=a.chunk_frames, scheduler=a.scheduler, workers=a.workers, units=a.units)
 
-    from handcap.io import check_not_input, write_markers
-    from handcap.io.camera_formats import read_rig
-    from handcap.multiview import merge_detections, read_detections, triangulate_detections, write_quality
 
-    from handcap.multiview import quality_path
-    check_not_input(args.out, args.cameras, *args.detections)
-    check_not_input(quality_path(args.out), args.cameras, *args.detections)
-    detections = merge_detections([read_detections(path) for path in args.detections])
-    rig = read_rig(args.cameras, units=args.units)
-    start = time.perf_counter()
-    result = triangulate_detections(detections, rig, min_views=args.min_views, threshold_px=args.threshold_px,
-                                    chunk_frames=args.chunk_frames, scheduler=args.scheduler, workers=args.workers)
-    seconds = time.perf_counter() - start
-    from handcap.quality import plausibility as q
-    markers = result.to_markers()
-    markers = q.attach(markers, [*rig.warnings, *q.triangulation_warnings(
-        result.error_px, result.views, threshold_px=args.threshold_px, used=result.used), *q.marker_warnings(markers)])
-    write_markers(markers, args.out)
-    quality = write_quality(result, args.out)
-    s = result.summary()
-    print(q.summary(f"{args.out}: {s['frames']} frames, {s['markers']} markers, {s['points']} points from "
-                    f"{s['detections']} detections ({s['rejected']} rejected), mean reprojection error "
-                    f"{s['mean_error_px']:.2f} px over {s['mean_views']:.1f} views, "
-                    f"{s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} marker-frames/s; per-marker errors and "
-                    f"view counts in {quality}", q.marker_figures(markers), markers.warnings))
-    return markers.warnings
+def _cmd_clean(a):
+    for name in ("max_linear", "max_rigid", "max_spline"):
+        if getattr(a, name) < 0:
+            raise HandcapError(f"--{name.replace('_', '-')} must be 0 or more frames, got {getattr(a, name)}")
+    return multiview.clean(a.input, a.out, layout=a.layout, radius=None if a.radius_mm is None else a.radius_mm / 1000,
+                           window=a.window, z=a.z, floor=a.floor_mm / 1000, max_linear_frames=a.max_linear,
+                           max_rigid_frames=a.max_rigid, max_spline_frames=a.max_spline,
+                           rigid_tolerance=a.rigid_tolerance_mm / 1000, units=a.units)
 
 
 def add_multiview(verbs) -> None:
@@ -63,42 +50,7 @@ def add_multiview(verbs) -> None:
     p.set_defaults(run=_cmd_triangulate)
 
 
-def _cmd_clean(args) -> tuple[str, ...]:
-    from pathlib import Path
-
-    from handcap.io import MARKER_WRITERS, check_not_input, read_markers, write_markers
-    from handcap.layouts import load_layout
-    from handcap.multiview.clean import clean_markers
-    check_not_input(args.out, args.input)
-    suffix = Path(args.out).suffix.lower()
-    if suffix not in MARKER_WRITERS:
-        raise HandcapError(f"{args.out}: cannot write '{suffix or 'no extension'}' marker files; "
-                           f"use one of {', '.join(sorted(MARKER_WRITERS))}")
-    for name in ("max_linear", "max_rigid", "max_spline"):
-        if getattr(args, name) < 0:
-            raise HandcapError(f"--{name.replace('_', '-')} must be 0 or more frames, got {getattr(args, name)}")
-    layout = None if args.layout is None else load_layout(args.layout)
-    markers = read_markers(args.input, units=args.units,
-                           hand=None if layout is None else [m.name for m in layout.hand_markers])
-    cleaned, report = clean_markers(
-        markers, layout, radius=None if args.radius_mm is None else args.radius_mm / 1000, window=args.window,
-        z=args.z, floor=args.floor_mm / 1000, max_linear_frames=args.max_linear, max_rigid_frames=args.max_rigid,
-        max_spline_frames=args.max_spline, rigid_tolerance=args.rigid_tolerance_mm / 1000)
-    from handcap.quality import plausibility as q
-    cleaned = q.attach(cleaned, [*markers.warnings, *q.clean_warnings(report, markers.missing),
-                                 *q.marker_warnings(cleaned, hand=None if layout is None else layout.names)])
-    write_markers(cleaned, args.out)
-    n = report.summary()
-    print(q.summary(f"{args.out}: removed {n['cluster_removed']} samples away from their patch and "
-                    f"{n['outlier_removed']} spikes; filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, "
-                    f"{n['spline_filled']} spline; {n['missing']} of {report.missing.size} samples missing",
-                    q.marker_figures(cleaned, hand=None if layout is None else layout.names), cleaned.warnings))
-    return cleaned.warnings
-
-
 def add_clean(verbs) -> None:
-    from handcap.layouts import SHIPPED
-    from handcap.multiview import clean
     p = verbs.add_parser("clean", help="remove mislabelled points and spikes from 3D markers, fill short gaps",
                          description="DexterCap section 3.3: in every frame keep the largest cluster of each "
                                      "patch (or segment) of --layout, remove samples far from a local fit in a "

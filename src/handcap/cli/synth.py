@@ -2,70 +2,28 @@
 
 from __future__ import annotations
 
+from handcap.layouts import SHIPPED
+from handcap.steps import synth
+from handcap.synth.motions import MOTIONS
+from handcap.synth.objects import OBJECTS
+from handcap.synth.scene import SynthConfig
 
-def _cmd_synth(args) -> tuple[str, ...]:
-    from handcap.synth.scene import SynthConfig, config_from_scene, synthesize, write_capture
-    if args.scene:
-        config = config_from_scene(args.scene)
-    else:
-        betas = None if args.betas is None else tuple(float(b) for b in args.betas.split(","))
-        config = SynthConfig(layout=args.layout, motion=args.motion, frames=args.frames, rate=args.rate,
-                             seed=args.seed, side=args.side, object=args.object, betas=betas, cameras=args.cameras,
-                             min_views=args.min_views, noise_mm=args.noise_mm, pixel_noise=args.pixel_noise,
-                             dropout=args.dropout, ghost_rate=args.ghost_rate, swap_rate=args.swap_rate,
-                             outlier_rate=args.outlier_rate, max_view_angle_deg=args.max_view_angle,
-                             placement_mm=args.placement_mm, subject_seed=args.subject_seed)
-    from handcap.io import check_output_folder
-    check_output_folder(args.out, args.scene, force=args.force)
-    capture = synthesize(config)
-    capture, warnings = _checked_capture(capture)
-    write_capture(capture, args.out)
-    m = capture.markers
-    from handcap.quality import plausibility as q
-    print(q.summary(f"{args.out}: {m.n_frames} frames, {len(capture.hand_motion.marker_names)} hand markers, "
-                    f"{m.n_markers} trajectories, {100 * capture.truth['visible'].mean():.1f}% reconstructed",
-                    {**q.marker_figures(m, hand=capture.hand_motion.marker_names),
-                     **q.motion_figures(capture.hand_motion)}, warnings))
-    return warnings
+_SETTINGS = ("layout", "motion", "frames", "rate", "seed", "side", "object", "cameras", "min_views", "noise_mm",
+             "pixel_noise", "dropout", "ghost_rate", "swap_rate", "outlier_rate", "placement_mm", "subject_seed")
 
 
-def _checked_capture(capture):
-    """The capture with the warnings of its markers and true motion stored on both (markers and truth files)."""
-    from dataclasses import replace
-
-    from handcap.quality import plausibility as q
-    warnings = q.marker_warnings(capture.markers, hand=capture.hand_motion.marker_names) + \
-        q.motion_warnings(capture.hand_motion)
-    capture = replace(capture, markers=q.attach(capture.markers, warnings),
-                      hand_motion=capture.hand_motion.with_warnings(*warnings))
-    return capture, capture.markers.warnings
+def _cmd_synth(a):
+    betas = None if a.betas is None else tuple(float(b) for b in a.betas.split(","))
+    config = None if a.scene else SynthConfig(**{k: getattr(a, k) for k in _SETTINGS}, betas=betas,
+                                              max_view_angle_deg=a.max_view_angle)
+    return synth.synth(a.out, config, scene=a.scene, force=a.force)
 
 
-def _cmd_demo(args) -> tuple[str, ...]:
-    from handcap.demo import run_demo
-    from handcap.io import check_output_folder
-    check_output_folder(args.out, force=True)  # demo-output/ is rewritten on every run
-    summary = run_demo(args.out)
-    for key, value in summary.items():
-        if key not in ("files", "seen_per_camera_fraction", "metrics", "warnings"):
-            print(f"{key:28s} {value}")
-    print("\nsolved motion against the ground truth:")
-    print(summary["metrics"])
-    warnings = tuple(summary["warnings"])
-    from pathlib import Path
-    files = [Path(f) for f in summary["files"]]
-    print(f"\nwrote {len(files)} files to {args.out}/ (picture of the truth beside the solve: {args.out}/hand.png); "
-          + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
-    for path in files:
-        print(f"  {path.relative_to(args.out) if path.is_relative_to(args.out) else path}")
-    return warnings
+def _cmd_demo(a):
+    return synth.demo(a.out)
 
 
 def add_synth(verbs) -> None:
-    from handcap.layouts import SHIPPED
-    from handcap.synth.motions import MOTIONS
-    from handcap.synth.objects import OBJECTS
-    from handcap.synth.scene import SynthConfig
     d = SynthConfig()
     p = verbs.add_parser("synth", help="make a synthetic capture with ground truth",
                          description="Move the open hand (and an object) through a motion, film its markers with a "

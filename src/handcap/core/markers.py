@@ -163,6 +163,11 @@ class MarkerSequence:
         return (f"MarkerSequence({self.n_frames} frames x {self.n_markers} markers "
                 f"at {self.rate:g} Hz, {100 * self.missing.mean() if self.positions.size else 0:.1f}% missing)")
 
+    def summary(self) -> str:
+        """One line: frames, markers, rate and the share of samples missing."""
+        return (f"{self.n_frames} frames, {self.n_markers} markers at {self.rate:g} Hz, "
+                f"{100 * self.missing.mean() if self.positions.size else 0:.1f}% missing")
+
     # -- names -------------------------------------------------------------
     @property
     def short_names(self) -> tuple[str, ...]:

@@ -117,6 +117,14 @@ class HandMotion:
     def __repr__(self) -> str:
         return f"HandMotion({self.side} {self.model}, {self.n_frames} frames at {self.rate:g} Hz)"
 
+    def summary(self) -> str:
+        """One line: frames, rate, and the marker error of the fit (when it has residuals)."""
+        line = f"{self.n_frames} frames at {self.rate:g} Hz ({self.side} hand, {self.model})"
+        r = self.marker_residuals
+        if r is not None and np.isfinite(r).any():
+            line += f", MRE {1000 * np.nanmean(r):.2f} ± {1000 * np.nanstd(r):.2f} mm"
+        return line
+
     def frames(self, start: int = 0, stop: int | None = None) -> "HandMotion":
         """Frames ``start:stop`` of the motion."""
         sl = slice(start, stop)
@@ -182,6 +190,11 @@ class ObjectMotion:
     def with_warnings(self, *messages) -> "ObjectMotion":
         """The same motion with ``messages`` (one-line strings) added to its warnings."""
         return replace(self, warnings=merge_warnings(self.warnings, messages))
+
+    def summary(self) -> str:
+        """One line: name, frames, rate and how many frames hold a pose."""
+        solved = int(np.isfinite(self.translation).all(axis=1).sum()) if self.translation.size else 0
+        return f"{self.name}: {self.n_frames} frames at {self.rate:g} Hz, {solved} with a pose"
 
     @property
     def n_frames(self) -> int:

@@ -62,7 +62,10 @@ MARKER_READERS = {".c3d": read_c3d, ".tsv": read_qualisys_tsv, ".csv": read_moti
 MARKER_WRITERS = {".c3d": write_c3d, ".trc": write_trc, ".npz": write_markers_npz}
 
 
-def _suffix(path, table, verb: str) -> str:
+def marker_suffix(path, *, write: bool = False) -> str:
+    """The lower-case extension of a marker file handcap can read (or, with ``write``, write); else a
+    :class:`HandcapError` naming the extensions it can."""
+    table, verb = (MARKER_WRITERS, "write") if write else (MARKER_READERS, "read")
     suffix = Path(path).suffix.lower()
     if suffix not in table:
         raise HandcapError(f"{path}: cannot {verb} '{suffix or 'no extension'}' marker files; "
@@ -98,7 +101,7 @@ def read_markers(path, *, partial: bool = False, units: str | None = None, hand=
         Unknown extension, unreadable, truncated or inconsistent file, or
         coordinates that fit no unit (or several, when the file's does not).
     """
-    suffix = _suffix(path, MARKER_READERS, "read")
+    suffix = marker_suffix(path)
     existing_file(path)
     if partial:
         if suffix != ".c3d":
@@ -109,7 +112,7 @@ def read_markers(path, *, partial: bool = False, units: str | None = None, hand=
 
 def write_markers(markers: MarkerSequence, path) -> None:
     """Write ``markers`` to ``path`` (format from the extension), atomically."""
-    writer = MARKER_WRITERS[_suffix(path, MARKER_WRITERS, "write")]
+    writer = MARKER_WRITERS[marker_suffix(path, write=True)]
     writer(markers, path)
 
 
@@ -144,7 +147,7 @@ def convert(source, target, *, partial: bool = False, units: str | None = None) 
 
 __all__ = [
     "UNITS", "UciPostures", "atomic_output", "check_not_input", "check_output", "check_output_folder", "convert",
-    "existing_file", "load_npz", "npz_kind",
+    "existing_file", "load_npz", "marker_suffix", "npz_kind",
     "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_mesh", "read_motive_csv",
     "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig", "read_scan_points",
     "read_trc",

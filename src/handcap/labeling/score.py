@@ -62,6 +62,10 @@ class LabelScore:
         """Share of all instances in a category (0..1)."""
         return float(getattr(self, category).sum()) / max(self.instances, 1)
 
+    def summary(self) -> str:
+        """The Table-1 style table of :meth:`table`, without a title."""
+        return self.table()
+
     def table(self, title: str = "") -> str:
         """A Table-1 style text table: overall, then per label."""
         def row(label, counts, n, gaps, gap_len, seg_len):

@@ -74,6 +74,13 @@ class LabelResult:
     model: LabelingModel | None = None
     rigid: RigidSet | None = None
 
+    def summary(self) -> str:
+        """One line: frames, labels, the share of label-frames filled and the frames without a hand frame."""
+        seen = float(np.mean(~np.isnan(self.markers.positions[..., 0]))) if self.markers.positions.size else 0.0
+        lost = self.lost_frames
+        return (f"{self.markers.n_frames} frames, {len(self.markers.names)} labels, {100 * seen:.1f} % of label-frames "
+                f"filled; hand frame not found in {len(lost)} frames" + (f" (first: {lost[0]})" if len(lost) else ""))
+
 
 def label_take(points, model: LabelingModel, *, transforms=None, offline: bool = False, method: str = "viterbi",
                progress: bool | None = None, adapt: bool = True, **options) -> LabelResult:

@@ -131,7 +131,14 @@ class CleanReport:
     missing: np.ndarray
     groups: MarkerGroups | None = None
 
-    def summary(self) -> dict:
+    def summary(self) -> str:
+        """One line: samples removed and filled by each step, and those left missing."""
+        n = self.counts()
+        return (f"removed {n['cluster_removed']} samples away from their patch and {n['outlier_removed']} spikes; "
+                f"filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, {n['spline_filled']} spline; "
+                f"{n['missing']} of {self.missing.size} samples missing")
+
+    def counts(self) -> dict:
         """Sample counts of every mask."""
         keys = ("cluster_removed", "outlier_removed", "rigid_filled", "linear_filled", "spline_filled", "missing")
         return {key: int(getattr(self, key).sum()) for key in keys}

@@ -58,6 +58,13 @@ class Intrinsics:
         return (f"Intrinsics({self.camera!r}, RMS {self.rms:.3f} px over {len(self.views)} views, "
                 f"{len(self.rejected)} rejected)")
 
+    def summary(self) -> str:
+        """One line: the camera's size, focal lengths, principal point and distortion."""
+        camera = self.camera
+        (fx, fy), (cx, cy) = camera.matrix[[0, 1], [0, 1]], camera.matrix[:2, 2]
+        return (f"camera {camera.name}, {camera.size[0]}x{camera.size[1]} px, f = {fx:.2f}, {fy:.2f} px, principal "
+                f"point ({cx:.1f}, {cy:.1f}) px, k1 k2 p1 p2 k3 = {' '.join(f'{k:.4g}' for k in camera.distortions)}")
+
 
 def _view_arrays(detections: BoardDetections, views):
     points = detections.board.object_points

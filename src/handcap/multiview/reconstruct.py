@@ -66,7 +66,14 @@ class TriangulatedMarkers:
         """A :class:`MarkerSequence` with the metric residuals (what C3D stores)."""
         return MarkerSequence(self.positions, self.names, self.rate, self.residual)
 
-    def summary(self) -> dict:
+    def summary(self) -> str:
+        """One line: frames, markers, points from detections (rejected), mean reprojection error and views."""
+        s = self.counts()
+        return (f"{s['frames']} frames, {s['markers']} markers, {s['points']} points from {s['detections']} detections "
+                f"({s['rejected']} rejected), mean reprojection error {s['mean_error_px']:.2f} px over "
+                f"{s['mean_views']:.1f} views")
+
+    def counts(self) -> dict:
         """Counts and mean errors, for reports."""
         found = ~np.isnan(self.positions[..., 0])
         return {"frames": int(self.positions.shape[0]), "markers": len(self.names),

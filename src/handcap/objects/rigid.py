@@ -146,16 +146,27 @@ class RigidTrack:
     inliers : ndarray (T, M) bool
     unsolved : ndarray (F,) int
         Frames with fewer than 3 (inlier) markers: reported, not guessed.
+    observed : ndarray (T, M) bool or None
+        Which samples the input held (an observed sample that is not an inlier is an outlier).
     """
 
     motion: ObjectMotion
     residuals: np.ndarray
     inliers: np.ndarray
     unsolved: np.ndarray
+    observed: np.ndarray | None = None
 
     @property
     def mean_residual(self) -> float:
         return float(np.nanmean(self.residuals)) if np.isfinite(self.residuals).any() else float("nan")
+
+    def summary(self) -> str:
+        """One line: frames, mean residual, outlier samples and the frames left unsolved (the first ten named)."""
+        listed = ", ".join(map(str, self.unsolved[:10])) + (" ..." if len(self.unsolved) > 10 else "")
+        outliers = int(np.sum(~self.inliers & self.observed)) if self.observed is not None else 0
+        return (f"{self.motion.n_frames} frames, mean residual {1000 * self.mean_residual:.2f} mm, {outliers} outlier "
+                f"samples, {len(self.unsolved)} frames with fewer than 3 markers"
+                + (f": {listed}" if len(self.unsolved) else ""))
 
 
 def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: str = "object",
@@ -208,4 +219,4 @@ def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: st
         inliers[t, used] = True
         residuals[t, used] = np.linalg.norm(canonical[used] @ rot.T + trans - positions[t, used], axis=1)
     motion = ObjectMotion(rotation, translation, markers.rate, name, body.names, canonical)
-    return RigidTrack(motion, residuals, inliers, np.array(unsolved, dtype=int))
+    return RigidTrack(motion, residuals, inliers, np.array(unsolved, dtype=int), ~np.isnan(positions[..., 0]))

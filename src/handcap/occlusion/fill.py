@@ -72,6 +72,12 @@ class FillReport:
     untouched: tuple = ()
     warnings: tuple = ()
 
+    def summary(self) -> str:
+        """One line: what was filled and what was left missing."""
+        return (f"{self.filled_samples} samples in {self.filled_gaps} gaps filled ({self.method}, gaps up to "
+                f"{self.max_gap_frames} frames), {self.left_gaps} gaps ({self.left_samples} samples) left missing"
+                + (f"; not in the model, left as they were: {', '.join(self.untouched)}" if self.untouched else ""))
+
 
 def _gaps(missing: np.ndarray):
     """(marker, start, length) of every run of missing samples."""

@@ -65,6 +65,23 @@ class OcclusionModel:
         pose = "with joint regressor" if self.regressor is not None else "markers only"
         return f"OcclusionModel({self.layout!r}, {self.side}, {len(self.names)} markers, {pose})"
 
+    def summary(self) -> str:
+        """What it was trained on (from ``info``): takes, subjects, frames, augmentation, samples; several lines."""
+        info = self.info
+        if not info:
+            return repr(self)
+        posed = int(info.get("posed_frames", 0))
+        try:
+            pair = f"{float(info.get('pair_seconds', 'nan')):g}"
+        except ValueError:
+            pair = "?"
+        return (f"{self!r}\n"
+                f"  saw {info['takes']} take(s) ({info['recorded_takes']} recorded, {info['synthetic_takes']} "
+                f"synthetic) of {info['subjects']} subject(s), {info['frames']} frames; {info['augmented_copies']} "
+                f"augmented copies ({info['augmented_frames']} frames); {info['samples']} training samples\n"
+                f"  augmentation: {info['augmentation']}; gaps up to {pair} s\n"
+                + (f"  joint regressor on {posed} posed frames" if posed else "  no poses: markers only"))
+
     def save(self, path) -> None:
         """Write the model as ``.npz`` (atomically)."""
         arrays = {"format": np.array(FORMAT), "side": np.array(self.side), "layout": np.array(self.layout),

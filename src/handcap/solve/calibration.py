@@ -89,6 +89,13 @@ class Calibration:
         """Mean marker error of the calibration fit, metres."""
         return float(np.nanmean(self.residuals))
 
+    def summary(self) -> str:
+        """One line: markers, frames, rounds, calibration MRE and the shape values (when fitted)."""
+        shape = ("shape fitted: " + " ".join(f"{b:+.2f}" for b in self.attachment.betas)) if self.fit_shape \
+            else "shape not fitted (use --fit-shape)"
+        return (f"{len(self.attachment)} markers from {len(self.frames)} frames, {self.rounds} rounds, "
+                f"calibration MRE {1000 * self.mre:.2f} mm; {shape}")
+
 
 def shape_is_constrained(layout) -> bool:
     """Whether a layout's markers say enough about the hand's proportions to fit its shape by default.

@@ -170,6 +170,12 @@ class SynthCapture:
     object_motion: ObjectMotion | None
     truth: dict = field(repr=False)
 
+    def summary(self) -> str:
+        """One line: frames, hand markers, trajectories and the share of marker-frames reconstructed."""
+        m = self.markers
+        return (f"{m.n_frames} frames, {len(self.hand_motion.marker_names)} hand markers, {m.n_markers} trajectories, "
+                f"{100 * self.truth['visible'].mean():.1f}% reconstructed")
+
     @property
     def attachment(self) -> MarkerAttachment:
         """Where the hand markers really sit (the ground truth a calibration should find)."""

@@ -1,0 +1,92 @@
+"""Steps of labeling: ``label`` unlabeled points with a trained model, ``score_labels`` against the truth."""
+
+from __future__ import annotations
+
+import json
+
+from handcap.core.errors import HandcapError
+from handcap.io import atomic_output, check_not_input, check_output, read_markers, read_points, write_markers
+from handcap.labeling import LabelingModel, label_take, objects_from_take, score_labels as score
+from handcap.labeling.model import is_labeling_model
+from handcap.layouts import load_layout
+from handcap.steps.step import Step
+
+
+def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hypotheses: int = 5, lag: int = 0,
+          offline: bool = False, seed: int = 0, objects=None, units: str | None = None) -> Step:
+    """Label the unlabeled points of a take (see :func:`handcap.labeling.label_take`) and write the labeled markers.
+
+    Parameters
+    ----------
+    path, out : str or Path
+        Unlabeled points (any marker file, or a points .npz); the labeled markers to write.
+    train : sequence of str or Path
+        Labeled range-of-motion takes holding every layout's markers, or (with ``model``) one saved model .npz.
+    layouts : sequence of str
+        One marker layout per hand in the stream (shipped names or .toml files).
+    model : str, Path or None
+        Also save the trained model here; if ``train`` is one such model, it is used and not written again.
+    method : {'viterbi', 'nearest'}
+        The labeler, or the nearest-neighbour baseline.
+    hypotheses, lag : int
+        N best assignments per frame; look-ahead frames before deciding (0: online).
+    offline : bool
+        Decide on the whole take, in two passes.
+    seed : int
+        Seed of the mixture fits.
+    objects : sequence of str or None
+        Rigid objects in the stream: each the comma-separated names (or a pattern) of its markers in ``train[0]``.
+    units : {'mm', 'cm', 'm'} or None
+        Unit of the input's and the training takes' coordinates, overriding what the files say.
+    """
+    train = list(train)
+    check_not_input(out, path, *train)
+    reuse = bool(model) and len(train) == 1 and is_labeling_model(train[0])
+    if model and not reuse:
+        check_not_input(model, path, *train, out)
+    marker_layouts = [load_layout(name) for name in layouts]
+    if len(marker_layouts) > 1 and (model or method == "nearest"):
+        raise HandcapError("several --layout (hands) label with the viterbi labeler and save no --model; "
+                           "give one --layout for those")
+    points = read_points(path, units=units)
+    if reuse:
+        models = [LabelingModel.load(train[0])]
+    else:
+        hand = [m.name for layout in marker_layouts for m in layout.hand_markers]
+        takes = [read_markers(take, units=units, hand=hand) for take in train]
+        models = [LabelingModel.train(takes, layout.names, layout.rigid, seed=seed) for layout in marker_layouts]
+    options = {} if method == "nearest" else dict(hypotheses=hypotheses, lag=lag)
+    if objects:
+        if method == "nearest":
+            raise HandcapError("--object works with the viterbi labeler")
+        if reuse:
+            raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
+        options["objects"] = objects_from_take(read_markers(train[0]), objects)
+    result = label_take(points, models[0] if len(models) == 1 else models, offline=offline, method=method, **options)
+    write_markers(result.markers, out)
+    written = (str(out),)
+    if model and not reuse:
+        models[0].save(model)
+        written += (str(model),)
+    return Step((f"{out}: {result.summary()}",), result.warnings, written, result)
+
+
+def score_labels(labeled, truth, *, out=None, units: str | None = None) -> Step:
+    """Score a labeling against the truth in the categories of Table 1 (see :func:`handcap.labeling.score_labels`).
+
+    Parameters
+    ----------
+    labeled, truth : str or Path
+        Labeled markers (written by ``label``) and the true labels.
+    out : str, Path or None
+        Also write the scores as JSON.
+    units : {'mm', 'cm', 'm'} or None
+        Unit of both files' coordinates, overriding what they say.
+    """
+    if out:
+        check_output(out, labeled, truth)
+    result = score(read_markers(labeled, units=units), read_markers(truth, units=units))
+    if out:
+        with atomic_output(out, "w") as fh:
+            json.dump(result.to_dict(), fh, indent=2)
+    return Step((result.table(f"{labeled} against {truth}"),), (), (str(out),) if out else (), result)

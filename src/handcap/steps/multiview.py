@@ -1,0 +1,89 @@
+"""Steps from camera data to clean 3D markers: ``triangulate`` 2D detections and ``clean`` the markers."""
+
+from __future__ import annotations
+
+import time
+
+from handcap.io import check_not_input, marker_suffix, read_markers, write_markers
+from handcap.io.camera_formats import read_rig
+from handcap.layouts import load_layout
+from handcap.multiview import merge_detections, quality_path, read_detections, triangulate_detections, write_quality
+from handcap.multiview import clean as cleaning
+from handcap.quality import plausibility as q
+from handcap.steps.step import Step
+
+
+def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: float = 5.0,
+                chunk_frames: int | None = None, scheduler=None, workers: int | None = None,
+                units: str | None = None) -> Step:
+    """3D markers from the 2D detections of calibrated cameras (see
+    :func:`handcap.multiview.triangulate_detections`); per-marker quality beside them (``OUT_STEM.triangulation.npz``).
+
+    Parameters
+    ----------
+    detections : sequence of str or Path
+        2D detections .npz files (merged).
+    cameras : str or Path
+        The calibrated rig (anipose or caliscope TOML, OpenCV YAML/XML, Qualisys QCA).
+    out : str or Path
+        Markers to write (.c3d .trc .npz).
+    min_views : int
+        Inlier views a marker needs.
+    threshold_px : float
+        Reprojection error of an inlier view, pixels.
+    chunk_frames, scheduler, workers
+        Frames per block of work; a Dask scheduler address; local processes (see :mod:`handcap.parallel`).
+    units : {'mm', 'cm', 'm'} or None
+        Unit of the camera file's translations, overriding what it says.
+    """
+    detections = list(detections)
+    check_not_input(out, cameras, *detections)
+    check_not_input(quality_path(out), cameras, *detections)
+    merged = merge_detections([read_detections(path) for path in detections])
+    rig = read_rig(cameras, units=units)
+    start = time.perf_counter()
+    result = triangulate_detections(merged, rig, min_views=min_views, threshold_px=threshold_px,
+                                    chunk_frames=chunk_frames, scheduler=scheduler, workers=workers)
+    seconds = time.perf_counter() - start
+    markers = result.to_markers()
+    markers = q.attach(markers, [*rig.warnings, *q.triangulation_warnings(
+        result.error_px, result.views, threshold_px=threshold_px, used=result.used), *q.marker_warnings(markers)])
+    write_markers(markers, out)
+    quality = write_quality(result, out)
+    s = result.counts()
+    line = q.summary(f"{out}: {result.summary()}, {s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} "
+                     f"marker-frames/s; per-marker errors and view counts in {quality}",
+                     q.marker_figures(markers), markers.warnings)
+    return Step((line,), markers.warnings, (str(out), str(quality)), result)
+
+
+def clean(path, out, *, layout: str | None = None, radius: float | None = None, window: int = cleaning.WINDOW,
+          z: float = cleaning.Z, floor: float = cleaning.FLOOR, max_linear_frames: int = cleaning.MAX_LINEAR,
+          max_rigid_frames: int = cleaning.MAX_RIGID, max_spline_frames: int = cleaning.MAX_SPLINE,
+          rigid_tolerance: float = cleaning.RIGID_TOLERANCE, units: str | None = None) -> Step:
+    """Remove mislabelled points and spikes from 3D markers and fill short gaps (see
+    :func:`handcap.multiview.clean.clean_markers`, whose parameters these are; lengths in metres, gaps in frames).
+
+    Parameters
+    ----------
+    path, out : str or Path
+        Labeled markers in; cleaned markers out (.c3d .trc .npz).
+    layout : str or None
+        Marker layout for clustering and the rigid fill (None: those steps are skipped).
+    units : {'mm', 'cm', 'm'} or None
+        Unit of the input's coordinates, overriding what the file says.
+    """
+    check_not_input(out, path)
+    marker_suffix(out, write=True)  # before the work
+    marker_layout = None if layout is None else load_layout(layout)
+    markers = read_markers(path, units=units,
+                           hand=None if marker_layout is None else [m.name for m in marker_layout.hand_markers])
+    cleaned, report = cleaning.clean_markers(
+        markers, marker_layout, radius=radius, window=window, z=z, floor=floor, max_linear_frames=max_linear_frames,
+        max_rigid_frames=max_rigid_frames, max_spline_frames=max_spline_frames, rigid_tolerance=rigid_tolerance)
+    hand = None if marker_layout is None else marker_layout.names
+    cleaned = q.attach(cleaned, [*markers.warnings, *q.clean_warnings(report, markers.missing),
+                                 *q.marker_warnings(cleaned, hand=hand)])
+    write_markers(cleaned, out)
+    line = q.summary(f"{out}: {report.summary()}", q.marker_figures(cleaned, hand=hand), cleaned.warnings)
+    return Step((line,), cleaned.warnings, (str(out),), report)

@@ -1,0 +1,56 @@
+"""Steps ``synth`` (a synthetic capture with its truth) and ``demo`` (the end-to-end job on built-in data)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from handcap.demo import run_demo
+from handcap.io import check_output_folder
+from handcap.quality import plausibility as q
+from handcap.steps.step import Step
+from handcap.synth.scene import SynthConfig, config_from_scene, synthesize, write_capture
+
+
+def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = False) -> Step:
+    """Make a synthetic capture and write it into the folder ``out`` (see :func:`handcap.synth.scene.synthesize`).
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder: new or empty, unless ``force``.
+    config : SynthConfig or None
+        The settings (default: those of ``scene``, else the defaults).
+    scene : str, Path or None
+        A scene.toml written by an earlier run: every setting is taken from it.
+    force : bool
+        Write into ``out`` even if it holds files (those of the same names are replaced).
+    """
+    config = config_from_scene(scene) if scene else config or SynthConfig()
+    check_output_folder(out, scene, force=force)
+    capture = synthesize(config)
+    warnings = q.marker_warnings(capture.markers, hand=capture.hand_motion.marker_names) + \
+        q.motion_warnings(capture.hand_motion)
+    # The warnings of the markers and of the true motion are stored on both (markers and truth files).
+    capture = replace(capture, markers=q.attach(capture.markers, warnings),
+                      hand_motion=capture.hand_motion.with_warnings(*warnings))
+    write_capture(capture, out)
+    m = capture.markers
+    line = q.summary(f"{out}: {capture.summary()}", {**q.marker_figures(m, hand=capture.hand_motion.marker_names),
+                                                      **q.motion_figures(capture.hand_motion)}, m.warnings)
+    return Step((line,), m.warnings, (str(out),), capture)
+
+
+def demo(out="demo-output") -> Step:
+    """Run :func:`handcap.demo.run_demo` into ``out`` (rewritten on every run) and summarise it."""
+    check_output_folder(out, force=True)  # demo-output/ is rewritten on every run
+    summary = run_demo(out)
+    lines = [f"{key:28s} {value}" for key, value in summary.items()
+             if key not in ("files", "seen_per_camera_fraction", "metrics", "warnings")]
+    warnings = tuple(summary["warnings"])
+    files = [Path(f) for f in summary["files"]]
+    lines += ["\nsolved motion against the ground truth:", summary["metrics"],
+              f"\nwrote {len(files)} files to {out}/ (picture of the truth beside the solve: {out}/hand.png); "
+              + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings")]
+    lines += [f"  {path.relative_to(out) if path.is_relative_to(out) else path}" for path in files]
+    return Step(tuple(lines), warnings, tuple(map(str, files)), summary)
