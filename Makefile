@@ -39,7 +39,7 @@ asset: $(STAMP)
 # Rebuild the shipped occlusion models (src/handcap/occlusion/weights/*.npz) from
 # synthetic captures; deterministic, same bytes every time (about 6 minutes on 2 cores).
 occlusion-weights: $(STAMP)
-	$(BIN)/python -m handcap.occlusion.shipped
+	$(BIN)/python tools/occlusion_weights.py
 
 clean-venv:
 	rm -rf $(VENV)

@@ -4,7 +4,7 @@ The file holds plain arrays (no pickles): the two networks' layers, the
 template and standardisation, the marker names, the hand side it was trained
 on, and how it was trained (layout, seed, frames, command). Shipped models for
 the shipped layouts live in ``handcap/occlusion/weights/`` and are made by
-``python -m handcap.occlusion.shipped`` (deterministic for its seed).
+``make occlusion-weights`` (:func:`handcap.occlusion.shipped.build`, deterministic for its seed).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Make the shipped occlusion models: ``python -m handcap.occlusion.shipped`` (or ``make occlusion-weights``).
+"""How the shipped occlusion models are made: :func:`build` (run by ``make occlusion-weights``, that is
+``python tools/occlusion_weights.py``).
 
 For every layout of :data:`~handcap.occlusion.model.SHIPPED_MODELS`: synthetic
 takes of :data:`SUBJECTS` subjects doing every motion of
@@ -14,15 +15,12 @@ shipped one.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
-import sys
 import time
 from pathlib import Path
 
 from handcap.occlusion.augment import SUBJECT_AUGMENTATION
 from handcap.occlusion.data import synthetic_hand_takes
-from handcap.occlusion.model import SHIPPED_MODELS
 from handcap.occlusion.train import train_occlusion_model
 
 SUBJECTS = 6
@@ -45,23 +43,8 @@ def build(layout: str, out: Path, *, subjects: int = SUBJECTS, epochs: int = EPO
 
     model = train_occlusion_model(takes, layout, seed=seed, epochs=epochs, regressor_epochs=epochs,
                                   augmentation=SUBJECT_AUGMENTATION, progress=progress)
-    model.info["source"] = f"python -m handcap.occlusion.shipped (subjects={subjects}, seed={seed})"
+    model.info["source"] = f"handcap.occlusion.shipped.build (subjects={subjects}, seed={seed})"
     model.save(out)
     digest = hashlib.sha256(out.read_bytes()).hexdigest()
     print(f"{out}: {out.stat().st_size // 1024} kB, sha256 {digest}, {time.perf_counter() - start:.0f} s", flush=True)
     return digest
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m handcap.occlusion.shipped", description=__doc__.splitlines()[0])
-    parser.add_argument("--layout", action="append", choices=SHIPPED_MODELS, help="only this layout (repeatable)")
-    parser.add_argument("--out", type=Path, default=WEIGHTS, help="folder for the .npz files (default: the package)")
-    args = parser.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
-    for layout in args.layout or SHIPPED_MODELS:
-        build(layout, args.out / f"{layout}.npz")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
