@@ -248,7 +248,7 @@ def test_reads_a_plain_protocol_5_file(tmp_path, model):
 def test_reads_python2_str_array_data(tmp_path):
     # Python 2 pickles array bytes as str (SHORT_BINSTRING/BINSTRING), read back as latin-1 text.
     # Hand-assembled: {'x': array of shape (2, 3)} as Python 2 and numpy 1 wrote it.
-    from handcap.hand.mano import _read_pickle
+    from handcap.hand.mano_pickle import read_pickle as _read_pickle
 
     def string(b):
         return (b"U" + bytes([len(b)]) if len(b) < 256 else b"T" + struct.pack("<i", len(b))) + b
