@@ -139,7 +139,23 @@ def picture(capture, motion=None, frame: int | None = None) -> np.ndarray:
 
 
 def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
-    """Run the demo into ``out`` (see the module docstring); returns the summary with the metrics."""
+    """Run the demo into ``out`` (see the module docstring); returns the summary with the metrics.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder; created if needed, files already there are written over.
+    progress : bool, optional
+        Show progress bars (default: only on a terminal).
+
+    Returns
+    -------
+    dict
+        The capture summary (:func:`summarize`) and the stage results; each key names its unit
+        (``_mm`` millimetres, ``_px`` pixels, ``_seconds`` seconds, ``_fraction`` a share from 0 to 1).
+        Also ``warnings`` (list of str), ``metrics`` (the metrics table as text) and ``files``
+        (the paths written, :func:`written_since`).
+    """
     import time
 
     out = Path(out)
@@ -237,5 +253,17 @@ def written_since(folder, before: dict) -> list[str]:
     """Files under ``folder`` that are new or rewritten since ``before`` (:func:`file_stamps`), sorted.
 
     Every handcap write renames a new file into place, so a rewritten file has a new inode or time.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Folder searched recursively.
+    before : dict
+        Earlier :func:`file_stamps` of the same folder.
+
+    Returns
+    -------
+    list of str
+        Paths, sorted.
     """
     return sorted(str(p) for p, stamp in file_stamps(folder).items() if before.get(p) != stamp)

@@ -158,6 +158,25 @@ def atomic_output(path, mode: str = "wb"):
 
     Yields the open file object (``mode`` ``"wb"`` or ``"w"``), or, with
     ``mode=None``, the temporary path for libraries that write by file name.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; its folder is checked first (not a folder, writable).
+    mode : str or None
+        ``"wb"`` for bytes, ``"w"`` for UTF-8 text (no newline translation), or
+        None to yield the temporary path instead of an open file.
+
+    Yields
+    ------
+    file object or Path
+        The open temporary file, or its path when ``mode`` is None.
+
+    Raises
+    ------
+    HandcapError
+        The folder cannot be written in, or writing or renaming fails; the
+        temporary file is removed and ``path`` is left as it was.
     """
     path = Path(path)
     folder = _check_target(path)
@@ -193,9 +212,22 @@ def _umask() -> int:
 
 
 def save_npz(path, arrays: dict) -> None:
-    """Write ``arrays`` as an uncompressed-compatible ``.npz`` with fixed timestamps.
+    """Write ``arrays`` as a deflate-compressed ``.npz`` with fixed timestamps.
 
     Readable with :func:`numpy.load`; identical inputs give identical bytes.
+    Written through :func:`atomic_output`, entries sorted by key.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` file to write.
+    arrays : dict of str to array_like
+        One ``<key>.npy`` entry each, any shape and dtype that needs no pickling.
+
+    Raises
+    ------
+    HandcapError
+        The file cannot be written.
     """
     with atomic_output(path) as fh, zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for key in sorted(arrays):
@@ -232,6 +264,20 @@ def read_toml(path) -> dict:
 
 def load_npz(path, required=(), what: str = "handcap .npz file") -> dict:
     """Read a ``.npz`` into a dict of arrays, refusing pickled objects.
+
+    Parameters
+    ----------
+    path : str or Path
+        An existing, readable file.
+    required : sequence of str
+        Keys the file must hold.
+    what : str
+        Name of the file kind for the error messages.
+
+    Returns
+    -------
+    dict of str to ndarray
+        Every array in the file, loaded into memory, with the shapes and units it was written with.
 
     Raises
     ------

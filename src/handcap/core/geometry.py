@@ -136,6 +136,13 @@ def self_intersections(vertices, faces) -> np.ndarray:
     triangles cross when an edge of one passes through the other; exactly
     coplanar overlaps are not reported.
 
+    Parameters
+    ----------
+    vertices : array_like of shape (V, 3)
+        Vertex positions, metres (any length unit works: the test is scale-free).
+    faces : array_like of shape (F, 3) int
+        Vertex indices of each triangle.
+
     Returns
     -------
     pairs : ndarray (P, 2) int

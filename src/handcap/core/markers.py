@@ -46,23 +46,40 @@ class MarkerGaps:
 
     @property
     def n_gaps(self) -> int:
+        """Number of interior gaps."""
         return int(len(self.gap_lengths))
 
     @property
     def max_gap(self) -> int:
+        """Length of the longest interior gap, frames (0 when there is none)."""
         return int(self.gap_lengths.max()) if len(self.gap_lengths) else 0
 
     @property
     def mean_gap(self) -> float:
+        """Mean length of the interior gaps, frames (0.0 when there is none)."""
         return float(self.gap_lengths.mean()) if len(self.gap_lengths) else 0.0
 
     @property
     def mean_segment(self) -> float:
+        """Mean length of the visible runs, frames (0.0 when the marker is never seen)."""
         return float(self.segment_lengths.mean()) if len(self.segment_lengths) else 0.0
 
 
 def marker_gaps(missing: np.ndarray, name: str = "") -> MarkerGaps:
-    """Gap statistics of one trajectory from its (T,) boolean missing mask."""
+    """Gap statistics of one trajectory from its (T,) boolean missing mask.
+
+    Parameters
+    ----------
+    missing : array_like of bool, shape (T,)
+        True on the frames where the marker is missing.
+    name : str
+        Marker name stored in the result.
+
+    Returns
+    -------
+    MarkerGaps
+        Lengths in frames; a marker never seen has all T frames ``leading``.
+    """
     missing = np.asarray(missing, dtype=bool)
     seg_starts, seg_lengths = runs(~missing)
     if len(seg_starts) == 0:
@@ -135,10 +152,12 @@ class MarkerSequence:
     # -- sizes -------------------------------------------------------------
     @property
     def n_frames(self) -> int:
+        """Number of frames T."""
         return self.positions.shape[0]
 
     @property
     def n_markers(self) -> int:
+        """Number of markers M."""
         return self.positions.shape[1]
 
     @property
@@ -206,7 +225,27 @@ class MarkerSequence:
 
     # -- frames ------------------------------------------------------------
     def frames(self, start: int = 0, stop: int | None = None, step: int = 1) -> "MarkerSequence":
-        """Frames ``start:stop:step``; the rate is divided by ``step``."""
+        """Frames ``start:stop:step``; the rate is divided by ``step``.
+
+        Parameters
+        ----------
+        start : int
+            First frame kept (frame index; Python slice semantics, negative counts from the end).
+        stop : int, optional
+            Frame index one past the last kept; None for the end of the take.
+        step : int
+            Keep every ``step``-th frame, 1 or more.
+
+        Returns
+        -------
+        MarkerSequence
+            Positions (T', M, 3) in metres, rate ``rate / step`` Hz, warnings kept.
+
+        Raises
+        ------
+        HandcapError
+            ``step`` below 1.
+        """
         if step < 1:
             raise HandcapError(f"frame step must be a positive integer, got {step}")
         sl = slice(start, stop, step)
@@ -221,7 +260,20 @@ class MarkerSequence:
         raise HandcapError("index a MarkerSequence with a frame slice or a marker name")
 
     def time_range(self, start: float, stop: float | None = None) -> "MarkerSequence":
-        """Frames between ``start`` and ``stop`` seconds (half-open)."""
+        """Frames between ``start`` and ``stop`` seconds (half-open).
+
+        Parameters
+        ----------
+        start : float
+            Seconds from the first frame; the first frame at or after it is kept.
+        stop : float, optional
+            Seconds from the first frame; frames at or after it are dropped. None for the end.
+
+        Returns
+        -------
+        MarkerSequence
+            The frames whose time ``t`` satisfies ``start <= t < stop``, same rate.
+        """
         first = int(np.ceil(start * self.rate - 1e-9))
         last = None if stop is None else int(np.ceil(stop * self.rate - 1e-9))
         return self.frames(max(first, 0), last)

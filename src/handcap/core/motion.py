@@ -109,6 +109,7 @@ class HandMotion:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames T."""
         return self.global_orient.shape[0]
 
     def __len__(self) -> int:
@@ -126,7 +127,20 @@ class HandMotion:
         return line
 
     def frames(self, start: int = 0, stop: int | None = None) -> "HandMotion":
-        """Frames ``start:stop`` of the motion."""
+        """Frames ``start:stop`` of the motion.
+
+        Parameters
+        ----------
+        start : int
+            First frame kept (frame index; Python slice semantics).
+        stop : int, optional
+            Frame index one past the last kept; None for the end.
+
+        Returns
+        -------
+        HandMotion
+            Every per-frame array cut to the T' frames kept; ``betas``, rate, names and warnings unchanged.
+        """
         sl = slice(start, stop)
         pick = lambda a: None if a is None else a[sl]  # noqa: E731
         return HandMotion(self.betas, self.global_orient[sl], self.hand_pose[sl], self.transl[sl],
@@ -198,6 +212,7 @@ class ObjectMotion:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames T."""
         return self.rotation.shape[0]
 
     def __len__(self) -> int:

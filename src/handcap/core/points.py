@@ -38,7 +38,25 @@ class PointCloudSequence:
 
     @classmethod
     def from_padded(cls, points, rate) -> "PointCloudSequence":
-        """From a NaN-padded array of shape (T, K, 3); rows with any NaN are dropped."""
+        """From a NaN-padded array of shape (T, K, 3); rows with any NaN are dropped.
+
+        Parameters
+        ----------
+        points : array_like of shape (T, K, 3)
+            Metres, NaN rows for padding or missing points.
+        rate : float
+            Frames per second.
+
+        Returns
+        -------
+        PointCloudSequence
+            T frames, each with the finite rows of its frame, in column order.
+
+        Raises
+        ------
+        HandcapError
+            ``points`` not of shape (T, K, 3), infinite values, or a bad rate.
+        """
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 3 or points.shape[2] != 3:
             raise HandcapError(f"points must have shape (T, K, 3), got {points.shape}")
@@ -51,6 +69,7 @@ class PointCloudSequence:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames T."""
         return len(self.frames)
 
     @property
@@ -77,4 +96,17 @@ class PointCloudSequence:
         return out
 
     def frames_slice(self, start: int = 0, stop: int | None = None) -> "PointCloudSequence":
+        """Frames ``start:stop`` (frame indices, Python slice semantics) as a new sequence at the same rate.
+
+        Parameters
+        ----------
+        start : int
+            First frame kept.
+        stop : int, optional
+            Frame index one past the last kept; None for the end.
+
+        Returns
+        -------
+        PointCloudSequence
+        """
         return PointCloudSequence(self.frames[start:stop], self.rate)

@@ -82,7 +82,24 @@ def _axis_rotation(angle, axis: int):
 
 
 def matrix_from_euler_zyx(bend, spread, twist):
-    """``Rz(bend) @ Ry(spread) @ Rx(twist)`` for arrays of angles (radians), shape (..., 3, 3)."""
+    """``Rz(bend) @ Ry(spread) @ Rx(twist)`` for arrays of angles (radians), shape (..., 3, 3).
+
+    Works on numpy and torch arrays alike (through the array namespace).
+
+    Parameters
+    ----------
+    bend : array of shape (...)
+        Angle about z, radians.
+    spread : array of shape (...)
+        Angle about y, radians.
+    twist : array of shape (...)
+        Angle about x, radians.
+
+    Returns
+    -------
+    array of shape (..., 3, 3)
+        Rotation matrices, of the angles' array type; the three angle shapes are broadcast together.
+    """
     xp = array_namespace(bend, spread, twist)
     return xp.matmul(xp.matmul(_axis_rotation(bend, 2), _axis_rotation(spread, 1)),
                      _axis_rotation(twist, 0))

@@ -9,7 +9,20 @@ import numpy as np
 
 
 def homogeneous(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """Transforms (..., 4, 4) from rotations (..., 3, 3) and translations (..., 3), metres."""
+    """Transforms (..., 4, 4) from rotations (..., 3, 3) and translations (..., 3), metres.
+
+    Parameters
+    ----------
+    rotation : array_like of shape (..., 3, 3)
+        Rotation matrices.
+    translation : array_like of shape (..., 3)
+        Translations, metres; broadcast to the rotations' leading shape.
+
+    Returns
+    -------
+    ndarray of shape (..., 4, 4)
+        Float64, last row ``[0, 0, 0, 1]``.
+    """
     out = np.zeros(np.shape(rotation)[:-2] + (4, 4))
     out[..., :3, :3] = rotation
     out[..., :3, 3] = translation

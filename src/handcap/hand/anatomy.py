@@ -115,8 +115,26 @@ def pose_from_degrees(**degrees) -> np.ndarray:
 
 
 def finger_flexion(phi, finger: str, amount: float, *, mcp: float = 80.0, pip: float = 95.0) -> np.ndarray:
-    """``phi`` (27,) with one finger flexed to ``amount`` (0 straight .. 1 fist, MCP ``mcp`` and PIP ``pip``
-    degrees at 1), its DIP coupled to the PIP by :data:`DIP_PIP_RATIO`."""
+    """``phi`` (27,) with one finger flexed to ``amount``, its DIP coupled to the PIP by :data:`DIP_PIP_RATIO`.
+
+    Parameters
+    ----------
+    phi : ndarray of shape (27,)
+        Anatomical angles, radians; not changed (a copy is returned).
+    finger : {"index", "middle", "ring", "pinky"}
+        The finger to flex (the thumb has no PIP or DIP).
+    amount : float
+        0 straight .. 1 fist; scales ``mcp`` and ``pip`` linearly.
+    mcp : float
+        MCP flexion at ``amount`` 1, degrees.
+    pip : float
+        PIP flexion at ``amount`` 1, degrees.
+
+    Returns
+    -------
+    phi : ndarray of shape (27,)
+        Radians; the finger's MCP, PIP and DIP bend set (its other angles kept).
+    """
     phi = phi.copy()
     phi[_PHI_INDEX[f"{finger}_mcp_bend"]] = np.deg2rad(mcp * amount)
     phi[_PHI_INDEX[f"{finger}_pip_bend"]] = np.deg2rad(pip * amount)
@@ -285,13 +303,41 @@ def phi_from_hand_pose(hand_pose, frames) -> np.ndarray:
 
 
 def phi_from_rotations(rotations, frames) -> np.ndarray:
-    """Anatomical angles from joint rotation matrices (..., 15, 3, 3) (numpy)."""
+    """Anatomical angles from joint rotation matrices (..., 15, 3, 3) (numpy).
+
+    Parameters
+    ----------
+    rotations : array_like of shape (..., 15, 3, 3)
+        MANO joint rotations relative to the flat hand, joints 1 to 15.
+    frames : array of shape (15, 3, 3)
+        Joint frames from :func:`joint_frames` (a torch tensor is accepted).
+
+    Returns
+    -------
+    phi : ndarray of shape (..., 27)
+        Radians; see :func:`phi_from_hand_pose` for poses outside the hinge joints' axes.
+    """
     rotations = np.asarray(rotations, dtype=np.float64)
     return phi_from_hand_pose(axis_angle_from_matrix(rotations).reshape(rotations.shape[:-3] + (45,)), frames)
 
 
 def limit_violation(phi, limits=PHI_LIMITS):
-    """Eq. (3) of DexterCap per value: ``clip(phi, low, high) - phi`` (differentiable)."""
+    """Eq. (3) of DexterCap per value: ``clip(phi, low, high) - phi`` (differentiable).
+
+    Works on numpy arrays and torch tensors.
+
+    Parameters
+    ----------
+    phi : array of shape (..., 27)
+        Anatomical angles, radians.
+    limits : array_like of shape (27, 2)
+        Lowest and highest angle of each value, radians.
+
+    Returns
+    -------
+    array of shape (..., 27)
+        Radians, of ``phi``'s type: 0 inside the limits, positive below ``low``, negative above ``high``.
+    """
     xp = array_namespace(phi)
     limits = xp.asarray(np.array(limits), dtype=phi.dtype, device=getattr(phi, "device", None))
     return xp.clip(phi, limits[:, 0], limits[:, 1]) - phi

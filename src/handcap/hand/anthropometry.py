@@ -76,14 +76,21 @@ def _direction(azimuth_deg: float, palmar_deg: float = 0.0) -> np.ndarray:
 def rest_skeleton(hand_length: float = HAND_LENGTH, hand_breadth: float = HAND_BREADTH) -> dict:
     """Joint centres of the flat right hand (metres, model coordinates).
 
+    Parameters
+    ----------
+    hand_length : float
+        Wrist to the tip of the middle finger, metres (default: the adult mean, :data:`HAND_LENGTH`).
+    hand_breadth : float
+        Across the MCP joints, metres (default :data:`HAND_BREADTH`).
+
     Returns
     -------
     dict
-        ``"cmc"``: {finger: (3,)} carpometacarpal joints (the thumb's is a MANO
-        joint; the other fingers' are inside the rigid palm);
-        ``"chain"``: {finger: (4, 3) for the thumb, (4, 3) for fingers} the
-        MANO joints 1-3 of the finger followed by its tip. For fingers these are
-        MCP, PIP, DIP, tip; for the thumb CMC, MCP, IP, tip.
+        ``"cmc"``: {finger: ndarray (3,)} carpometacarpal joints, metres (the
+        thumb's is a MANO joint; the other fingers' are inside the rigid palm);
+        ``"chain"``: {finger: ndarray (4, 3)}, metres: the MANO joints 1-3 of
+        the finger followed by its tip. For fingers these are MCP, PIP, DIP,
+        tip; for the thumb CMC, MCP, IP, tip.
     """
     hl, hb = float(hand_length), float(hand_breadth)
     cmc, chain = {}, {}
@@ -111,12 +118,19 @@ def rest_skeleton(hand_length: float = HAND_LENGTH, hand_breadth: float = HAND_B
 def rest_joints(hand_length: float = HAND_LENGTH, hand_breadth: float = HAND_BREADTH):
     """The 16 MANO joints and 5 tips of the flat right hand.
 
+    Parameters
+    ----------
+    hand_length : float
+        Wrist to the tip of the middle finger, metres.
+    hand_breadth : float
+        Across the MCP joints, metres.
+
     Returns
     -------
     joints : ndarray (16, 3)
         Wrist, then index, middle, pinky, ring, thumb x 3 (MANO order), metres.
     tips : ndarray (5, 3)
-        Tips of thumb, index, middle, ring, pinky (the File-contract order).
+        Tips of thumb, index, middle, ring, pinky (the File-contract order), metres.
     """
     chain = rest_skeleton(hand_length, hand_breadth)["chain"]
     joints = [np.zeros(3)]

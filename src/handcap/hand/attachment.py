@@ -156,12 +156,36 @@ class MarkerAttachment:
         return on_skin + offset[:, None] * normal
 
     def normals(self, vertices, faces) -> np.ndarray:
-        """Outward unit normals (..., M, 3) of the markers' triangles (numpy)."""
+        """Outward unit normals (..., M, 3) of the markers' triangles (numpy).
+
+        Parameters
+        ----------
+        vertices : array_like of shape (..., V, 3)
+            Posed mesh vertices, metres.
+        faces : array_like of shape (F, 3) int
+            The hand model's faces (their winding makes the normal outward).
+
+        Returns
+        -------
+        ndarray of shape (..., M, 3)
+            Unit vectors (no unit), one per marker, in the attachment's marker order.
+        """
         tri = np.asarray(vertices)[..., np.asarray(faces)[self.triangles], :]
         n = np.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
     def subset(self, names) -> "MarkerAttachment":
+        """The attachment of the markers ``names`` only, in that order (shape, model, side and warnings kept).
+
+        Parameters
+        ----------
+        names : sequence of str
+            Marker names, each one of ``marker_names`` (an unknown name raises ``ValueError``).
+
+        Returns
+        -------
+        MarkerAttachment
+        """
         idx = [self.marker_names.index(n) for n in names]
         return MarkerAttachment(tuple(names), self.triangles[idx], self.barycentric[idx], self.offset[idx],
                                 self.betas, self.model, self.side, self.warnings)
@@ -175,6 +199,22 @@ class MarkerAttachment:
 
     @classmethod
     def load(cls, path) -> "MarkerAttachment":
+        """Read an ``attachment.npz`` written by :meth:`save` (File contract of DESIGN.md).
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        MarkerAttachment
+            Offsets in metres; ``model`` and ``side`` default to ``"openhand"`` and ``"right"`` when absent.
+
+        Raises
+        ------
+        HandcapError
+            The file is unreadable, lacks an entry, or its arrays do not match.
+        """
         arrays = load_npz(path, ("marker_names", "triangles", "barycentric", "offset", "betas"), "attachment .npz")
         try:
             names = tuple(str(n) for n in np.atleast_1d(arrays["marker_names"]))

@@ -95,7 +95,23 @@ def attached_points(world_rot, world_pos, rest_joints, points, joint_of_point):
 
 
 def skinning_transforms(world_rot, world_pos, rest_joints):
-    """Per-joint affine maps from the rest pose to the posed mesh, (..., 16, 3, 4)."""
+    """Per-joint affine maps from the rest pose to the posed mesh, (..., 16, 3, 4).
+
+    Parameters
+    ----------
+    world_rot : array (..., 16, 3, 3)
+        World rotations of the joints (:func:`chain_transforms`).
+    world_pos : array (..., 16, 3)
+        Posed joint positions, metres.
+    rest_joints : array (..., 16, 3)
+        Rest-pose joint positions, metres.
+
+    Returns
+    -------
+    transforms : array (..., 16, 3, 4)
+        ``[R | p - R r]`` per joint: a rest-pose point ``x`` goes to ``R x + p - R r``;
+        translation column in metres. Of the inputs' array type.
+    """
     xp = array_namespace(world_rot, world_pos)
     trans = world_pos - xp.sum(world_rot * rest_joints[..., None, :], axis=-1)
     return xp.concat([world_rot, trans[..., None]], axis=-1)

@@ -64,10 +64,12 @@ class HandModel(ABC):
 
     @property
     def is_right(self) -> bool:
+        """Whether this is a right-hand model."""
         return self.side == "right"
 
     @property
     def n_vertices(self) -> int:
+        """Number of mesh vertices V."""
         return self.weights.shape[0]
 
     @cached_property
@@ -110,7 +112,21 @@ class HandModel(ABC):
 
     # -- shared ------------------------------------------------------------
     def constant(self, value, like):
-        """A model array converted to the namespace, dtype and device of ``like``."""
+        """A model array converted to the namespace, dtype and device of ``like``.
+
+        Parameters
+        ----------
+        value : array_like
+            A model array (any shape and unit, kept as they are).
+        like : array
+            A numpy array or torch tensor whose kind, dtype and device the result takes.
+
+        Returns
+        -------
+        array
+            For numpy, ``value`` as float64 (dtype of ``like`` not used); for torch, a tensor cached per
+            model under ``id(value)``, dtype and device.
+        """
         if is_torch_array(like):
             import torch
             key = ("_torch_cache", id(value), like.dtype, like.device)

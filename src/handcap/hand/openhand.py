@@ -137,6 +137,22 @@ class OpenHand(HandModel):
         return palm, length, girth
 
     def rest(self, betas):
+        """Rest (flat) pose of the OpenHand for shape ``betas``.
+
+        Parameters
+        ----------
+        betas : array (..., 10)
+            Shape values (numpy, or torch for a differentiable result).
+
+        Returns
+        -------
+        vertices : array (..., V, 3)
+            Metres.
+        joints : array (..., 16, 3)
+            MANO joints, metres.
+        tips : array (..., 5, 3)
+            Tips of thumb, index, middle, ring, pinky, metres.
+        """
         xp = array_namespace(betas)
         c = lambda a: self.constant(a, betas)  # noqa: E731
         palm, length, girth = self.shape_factors(betas)

@@ -63,8 +63,25 @@ MARKER_WRITERS = {".c3d": write_c3d, ".trc": write_trc, ".npz": write_markers_np
 
 
 def marker_suffix(path, *, write: bool = False) -> str:
-    """The lower-case extension of a marker file handcap can read (or, with ``write``, write); else a
-    :class:`HandcapError` naming the extensions it can."""
+    """The lower-case extension of a marker file handcap can read (or, with ``write``, write).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file name; the file need not exist.
+    write : bool
+        Check against the formats handcap writes instead of those it reads.
+
+    Returns
+    -------
+    str
+        The suffix, lower case with its dot (``".c3d"``).
+
+    Raises
+    ------
+    HandcapError
+        An extension not in the table, naming those it can.
+    """
     table, verb = (MARKER_WRITERS, "write") if write else (MARKER_READERS, "read")
     suffix = Path(path).suffix.lower()
     if suffix not in table:
@@ -111,7 +128,21 @@ def read_markers(path, *, partial: bool = False, units: str | None = None, hand=
 
 
 def write_markers(markers: MarkerSequence, path) -> None:
-    """Write ``markers`` to ``path`` (format from the extension), atomically."""
+    """Write ``markers`` to ``path`` (format from the extension), atomically.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+        Positions (T, M, 3) in metres, NaN where missing; each writer stores them in its
+        format's unit.
+    path : str or Path
+        ``.c3d``, ``.trc`` or ``.npz``.
+
+    Raises
+    ------
+    HandcapError
+        An extension handcap cannot write, or the file cannot be written.
+    """
     writer = MARKER_WRITERS[marker_suffix(path, write=True)]
     writer(markers, path)
 
@@ -119,7 +150,17 @@ def write_markers(markers: MarkerSequence, path) -> None:
 def read_points(path, *, units: str | None = None) -> PointCloudSequence:
     """Read unlabeled points: a points ``.npz``, or any marker file with its labels ignored.
 
-    ``units`` as for :func:`read_markers`.
+    Parameters
+    ----------
+    path : str or Path
+        A points ``.npz`` or any marker file :func:`read_markers` reads.
+    units : {"mm", "cm", "m"}, optional
+        The unit of the file's coordinates, as for :func:`read_markers`.
+
+    Returns
+    -------
+    PointCloudSequence
+        Points (K_t, 3) per frame, metres.
     """
     if Path(path).suffix.lower() == ".npz" and npz_kind(path) == "points":
         return read_points_npz(path, units=units)
@@ -127,7 +168,20 @@ def read_points(path, *, units: str | None = None) -> PointCloudSequence:
 
 
 def write_points(points: PointCloudSequence, path) -> None:
-    """Write unlabeled points as a ``.npz`` (NaN-padded ``points (T, K, 3)``, ``rate``)."""
+    """Write unlabeled points as a ``.npz`` (NaN-padded ``points (T, K, 3)``, ``rate``).
+
+    Parameters
+    ----------
+    points : PointCloudSequence
+        Points in metres, written as they are.
+    path : str or Path
+        Must end in ``.npz``.
+
+    Raises
+    ------
+    HandcapError
+        Another extension, or the file cannot be written.
+    """
     if Path(path).suffix.lower() != ".npz":
         raise HandcapError(f"{path}: unlabeled points are written as .npz")
     write_points_npz(points, path)
@@ -136,8 +190,21 @@ def write_points(points: PointCloudSequence, path) -> None:
 def convert(source, target, *, partial: bool = False, units: str | None = None) -> MarkerSequence:
     """Convert a marker file to another format; never writes over ``source``.
 
-    ``units`` overrides the unit of ``source`` (see :func:`read_markers`); the
-    markers written, with their warnings, are returned.
+    Parameters
+    ----------
+    source : str or Path
+        Any marker file :func:`read_markers` reads.
+    target : str or Path
+        ``.c3d``, ``.trc`` or ``.npz``; checked before reading (not ``source``, a writable folder).
+    partial : bool
+        C3D only: keep the complete frames of a truncated ``source`` (see :func:`read_markers`).
+    units : {"mm", "cm", "m"}, optional
+        Overrides the unit of ``source`` (see :func:`read_markers`).
+
+    Returns
+    -------
+    MarkerSequence
+        The markers written, metres, with their warnings.
     """
     check_output(target, source)
     markers = read_markers(source, partial=partial, units=units)

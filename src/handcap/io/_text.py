@@ -39,14 +39,42 @@ def read_text(path, what: str) -> tuple:
 
 
 def check_complete(text: str, path, what: str) -> None:
-    """Refuse a text file that stops in the middle of a line (a cut copy)."""
+    """Refuse a text file that stops in the middle of a line (a cut copy).
+
+    Parameters
+    ----------
+    text : str
+        The file's decoded text.
+    path : Path
+        For messages.
+    what : str
+        What the file is (``"the TRC file"``), for messages.
+
+    Raises
+    ------
+    HandcapError
+        ``text`` does not end with a line break.
+    """
     if not text.endswith(("\n", "\r")):
         raise HandcapError(f"{path}: {what} ends in the middle of a line, so it looks truncated; "
                            "copy or export it again (if it is complete, end it with a line break)")
 
 
 def data_rows(lines: list[str], sep: str) -> list[list[str]]:
-    """Split data lines into cells, dropping blank lines at the end only."""
+    """Split data lines into cells, dropping blank lines at the end only.
+
+    Parameters
+    ----------
+    lines : list of str
+        The data lines, without line breaks.
+    sep : str
+        Cell separator (a tab or a comma).
+
+    Returns
+    -------
+    list of list of str
+        One list of cells per line kept; cells are not stripped.
+    """
     end = len(lines)
     while end and not lines[end - 1].strip():
         end -= 1

@@ -76,6 +76,20 @@ def read_cameras_caliscope(path) -> CameraRig:
 
 
 def is_caliscope(document: dict) -> bool:
+    """Whether a parsed TOML document looks like caliscope's camera array.
+
+    True when it has a non-empty ``cameras`` table whose keys are all port numbers
+    (digit strings) and whose values are all tables; the cameras' fields are not checked.
+
+    Parameters
+    ----------
+    document : dict
+        A parsed TOML document.
+
+    Returns
+    -------
+    bool
+    """
     tables = document.get("cameras")
     return (isinstance(tables, dict) and bool(tables)
             and all(isinstance(key, str) and key.isdigit() and isinstance(value, dict)

@@ -139,6 +139,13 @@ def write_rig(rig: CameraRig, path) -> None:
     caliscope's TOML is written by :func:`write_cameras_caliscope`; QCA files
     are read only.
 
+    Parameters
+    ----------
+    rig : CameraRig
+        Intrinsics in pixels, rotations as Rodrigues vectors (radians), translations in metres.
+    path : str or Path
+        The extension picks the format.
+
     Raises
     ------
     HandcapError

@@ -11,6 +11,18 @@ from handcap.core.files import existing_file, load_npz
 def read_mesh(path, what: str = "mesh"):
     """A ``trimesh.Trimesh`` read from ``path`` as it stands (not processed), with one clear line on failure.
 
+    Parameters
+    ----------
+    path : str or Path
+        Any mesh format trimesh reads.
+    what : str
+        What the file should be, for the message.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Vertices (V, 3) in the file's own unit (no conversion here), faces (F, 3).
+
     Raises
     ------
     HandcapError

@@ -79,6 +79,14 @@ def npz_kind(path) -> str:
 
 
 def write_markers_npz(markers: MarkerSequence, path) -> None:
+    """Write a markers ``.npz``: ``positions`` (T, M, 3) metres, ``names``, ``rate`` (Hz), ``residuals`` if any.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+        Written as it is (metres, NaN where missing), warnings included.
+    path : str or Path
+    """
     arrays = {"kind": np.array("markers"), "positions": markers.positions,
               "names": _names(markers.names), "rate": np.array(markers.rate)}
     if markers.residuals is not None:
@@ -118,6 +126,13 @@ def read_markers_npz(path, *, units: str | None = None, hand=None) -> MarkerSequ
 
 
 def write_points_npz(points: PointCloudSequence, path) -> None:
+    """Write a points ``.npz``: NaN-padded ``points`` (T, K, 3) in metres and ``rate`` (Hz).
+
+    Parameters
+    ----------
+    points : PointCloudSequence
+    path : str or Path
+    """
     save_npz(path, {"kind": np.array("points"), "points": points.padded(), "rate": np.array(points.rate)})
 
 
@@ -126,6 +141,22 @@ def read_points_npz(path, *, units: str | None = None) -> PointCloudSequence:
 
     ``units`` gives the unit of ``points`` when it is not the contract's
     metres; the units are checked as for markers (:mod:`handcap.io._units`).
+
+    Parameters
+    ----------
+    path : str or Path
+    units : {"mm", "cm", "m"}, optional
+        The unit of the stored points; metres by default.
+
+    Returns
+    -------
+    PointCloudSequence
+        Points (K_t, 3) per frame, metres (rows with any NaN dropped).
+
+    Raises
+    ------
+    HandcapError
+        Not a points ``.npz``, entries of the wrong shape or type, or points that fit no length unit.
     """
     units = check_units(units)
     arrays = load_npz(path, ("points", "rate"), "point-cloud .npz file")
@@ -143,6 +174,14 @@ def read_points_npz(path, *, units: str | None = None) -> PointCloudSequence:
 
 
 def write_hand_motion(motion: HandMotion, path) -> None:
+    """Write a hand-motion ``.npz`` (File contract of DESIGN.md): every field of ``motion`` that is set.
+
+    Parameters
+    ----------
+    motion : HandMotion
+        Stored as it is: axis-angle in radians, ``transl``, ``joints`` and ``marker_fit`` in metres.
+    path : str or Path
+    """
     arrays = {"kind": np.array("hand_motion"), "betas": motion.betas,
               "global_orient": motion.global_orient, "hand_pose": motion.hand_pose,
               "transl": motion.transl, "rate": np.array(motion.rate), "side": np.array(motion.side),
@@ -154,6 +193,23 @@ def write_hand_motion(motion: HandMotion, path) -> None:
 
 
 def read_hand_motion(path) -> HandMotion:
+    """Read a hand-motion ``.npz`` written by :func:`write_hand_motion` (or with its keys).
+
+    Parameters
+    ----------
+    path : str or Path
+        Needs ``betas``, ``global_orient``, ``hand_pose``, ``transl`` and ``rate``.
+
+    Returns
+    -------
+    HandMotion
+        Radians and metres, as stored; ``side`` and ``model`` default to ``"right"`` and ``"openhand"``.
+
+    Raises
+    ------
+    HandcapError
+        Unreadable file, another ``kind``, missing entries, or entries of the wrong shape or type.
+    """
     arrays = load_npz(path, ("betas", "global_orient", "hand_pose", "transl", "rate"), "hand-motion .npz file")
     _check_kind(arrays, path, "hand_motion")
     try:
@@ -170,6 +226,15 @@ def read_hand_motion(path) -> HandMotion:
 
 
 def write_object_motion(motion: ObjectMotion, path) -> None:
+    """Write an object-motion ``.npz``: ``rotation`` (T, 3) radians, ``translation`` (T, 3) metres, and the rest.
+
+    Articulation states are stored as ``state_<key>`` entries.
+
+    Parameters
+    ----------
+    motion : ObjectMotion
+    path : str or Path
+    """
     arrays = {"kind": np.array("object_motion"), "rotation": motion.rotation,
               "translation": motion.translation, "rate": np.array(motion.rate),
               "name": np.array(motion.name), "marker_names": _names(motion.marker_names)}
@@ -181,6 +246,24 @@ def write_object_motion(motion: ObjectMotion, path) -> None:
 
 
 def read_object_motion(path) -> ObjectMotion:
+    """Read an object-motion ``.npz`` written by :func:`write_object_motion` (or with its keys).
+
+    Parameters
+    ----------
+    path : str or Path
+        Needs ``rotation``, ``translation`` and ``rate``.
+
+    Returns
+    -------
+    ObjectMotion
+        Rotation axis-angle in radians, translation and ``canonical`` in metres; ``state_<key>``
+        entries become ``state[key]``, as float64.
+
+    Raises
+    ------
+    HandcapError
+        Unreadable file, another ``kind``, missing entries, or entries of the wrong shape or type.
+    """
     arrays = load_npz(path, ("rotation", "translation", "rate"), "object-motion .npz file")
     _check_kind(arrays, path, "object_motion")
     try:

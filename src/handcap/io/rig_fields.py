@@ -15,6 +15,20 @@ ROTATION_TOLERANCE = 1e-6
 
 
 def camera_from_fields(where: str, **fields) -> Camera:
+    """``Camera(**fields)``, its refusal prefixed with ``where`` (the file and its entry).
+
+    Parameters
+    ----------
+    where : str
+        Place in the file, for messages (``"rig.toml: [cameras.0]"``).
+    **fields
+        The :class:`~handcap.core.cameras.Camera` fields: ``size`` pixels, ``matrix`` pixels,
+        ``rotation`` Rodrigues vector (radians), ``translation`` metres, world to camera.
+
+    Returns
+    -------
+    Camera
+    """
     try:
         return Camera(**fields)
     except HandcapError as err:
@@ -22,6 +36,25 @@ def camera_from_fields(where: str, **fields) -> Camera:
 
 
 def rig_from_cameras(path, cameras: list[Camera], what: str) -> CameraRig:
+    """A :class:`~handcap.core.cameras.CameraRig` of ``cameras``, its refusal prefixed with ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        For messages.
+    cameras : list of Camera
+    what : str
+        What the file should have held (``"[cameras.N] tables"``), for the message when ``cameras`` is empty.
+
+    Returns
+    -------
+    CameraRig
+
+    Raises
+    ------
+    HandcapError
+        No cameras, or the rig refuses them (repeated names, for one).
+    """
     if not cameras:
         raise HandcapError(f"{path}: no cameras; expected {what}")
     try:
@@ -31,7 +64,25 @@ def rig_from_cameras(path, cameras: list[Camera], what: str) -> CameraRig:
 
 
 def rotation_vector(matrix, where: str) -> np.ndarray:
-    """Rodrigues vector of a 3x3 rotation matrix, checked to be one."""
+    """Rodrigues vector of a 3x3 rotation matrix, checked to be one.
+
+    Parameters
+    ----------
+    matrix : array_like of shape (3, 3)
+        A rotation: finite, ``|R R^T - I| <=`` :data:`ROTATION_TOLERANCE`, determinant positive.
+    where : str
+        Place in the file, for messages.
+
+    Returns
+    -------
+    ndarray of shape (3,)
+        Axis-angle vector, radians.
+
+    Raises
+    ------
+    HandcapError
+        Not numbers, not 3x3, not finite, or not a rotation.
+    """
     try:
         matrix = np.asarray(matrix, dtype=np.float64)
     except (TypeError, ValueError):  # ragged rows
@@ -49,5 +100,19 @@ def rotation_vector(matrix, where: str) -> np.ndarray:
 
 
 def check_rig_to_write(rig, verb: str) -> None:
+    """Refuse anything but a :class:`~handcap.core.cameras.CameraRig` given to a writer.
+
+    Parameters
+    ----------
+    rig : object
+        What the writer was given.
+    verb : str
+        The writer's name, for the message.
+
+    Raises
+    ------
+    HandcapError
+        ``rig`` is not a CameraRig.
+    """
     if not isinstance(rig, CameraRig):
         raise HandcapError(f"{verb} needs a CameraRig, got {type(rig).__name__}")

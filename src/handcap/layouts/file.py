@@ -44,6 +44,7 @@ class LayoutMarker:
 
     @property
     def on_object(self) -> bool:
+        """Whether the marker sits on an object (segment ``object:NAME``) rather than the hand."""
         return self.segment.startswith("object:")
 
 
@@ -96,14 +97,17 @@ class MarkerLayout:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """Marker names (M,), in layout order."""
         return tuple(m.name for m in self.markers)
 
     @property
     def segments(self) -> tuple[str, ...]:
+        """Segment of each marker (M,), in layout order."""
         return tuple(m.segment for m in self.markers)
 
     @property
     def hand_markers(self) -> tuple[LayoutMarker, ...]:
+        """The markers on hand segments (object markers left out), in layout order."""
         return tuple(m for m in self.markers if not m.on_object)
 
     def __len__(self) -> int:
@@ -133,6 +137,15 @@ class MarkerLayout:
         return self if check_side(side) == self.side else self.mirrored()
 
     def to_toml(self) -> dict:
+        """The layout as a TOML document (a dict): its settings, then one ``markers`` table per marker.
+
+        Returns
+        -------
+        dict
+            ``name``, ``side``, ``marker_radius`` (metres), ``marker_kind``, ``rigid``, ``description``
+            when set, and ``markers``: {name: {``segment``, ``position`` (3 floats, metres, rounded to
+            1 micrometre) when known, ``patch`` when set}}.
+        """
         table = {"name": self.name, "side": self.side, "marker_radius": self.marker_radius,
                  "marker_kind": self.marker_kind, "rigid": list(self.rigid)}
         if self.description:
@@ -161,10 +174,31 @@ class MarkerLayout:
 
 
 def toml_key(key: str) -> str:
+    """``key`` as a TOML key: bare when it holds only ``_``, ``-`` and what :meth:`str.isalnum` accepts, else quoted.
+
+    Parameters
+    ----------
+    key : str
+
+    Returns
+    -------
+    str
+    """
     return key if key.replace("_", "a").replace("-", "a").isalnum() else toml_value(key)
 
 
 def toml_value(value) -> str:
+    """``value`` written as a TOML value on one line (lists inline, elements comma-separated).
+
+    Parameters
+    ----------
+    value : str, int, float, bool or list
+        Written by ``tomli_w``; lists are joined here so they stay on one line.
+
+    Returns
+    -------
+    str
+    """
     import tomli_w
     if isinstance(value, list):
         return "[" + ", ".join(toml_value(v) for v in value) + "]"

@@ -50,6 +50,18 @@ class BundleAdjustment:
 
 
 def view_rms(errors: np.ndarray) -> np.ndarray:
+    """Reprojection RMS of each camera over all its observations.
+
+    Parameters
+    ----------
+    errors : ndarray of shape (C, ...)
+        Reprojection errors, pixels, NaN where unobserved (e.g. (C, T, N)).
+
+    Returns
+    -------
+    ndarray of shape (C,)
+        Pixels; NaN for a camera with no observation.
+    """
     c_count = errors.shape[0]
     flat = errors.reshape(c_count, -1)
     seen = np.isfinite(flat)

@@ -128,7 +128,20 @@ class Detections:
                 f"{self.n_frames} frames at {self.rate:g} Hz)")
 
     def select_frames(self, start: int, stop: int) -> "Detections":
-        """The rows of frames ``start <= frame < stop``, frames renumbered from 0."""
+        """The rows of frames ``start <= frame < stop``, frames renumbered from 0.
+
+        Parameters
+        ----------
+        start : int
+            First frame kept (frame index).
+        stop : int
+            Frame index one past the last kept.
+
+        Returns
+        -------
+        Detections
+            Pixels unchanged; ``n_frames`` is ``min(stop, n_frames) - start`` (at least 0); same rate and source.
+        """
         keep = (self.frame >= start) & (self.frame < stop)
         return Detections(self.camera_names, self.marker_names, self.frame[keep] - start, self.camera[keep],
                           self.marker[keep], self.xy[keep], self.score[keep], self.rate,
@@ -174,7 +187,15 @@ def read_detections(path) -> Detections:
 
 
 def write_detections(detections: Detections, path) -> None:
-    """Write detections as an ``.npz`` (atomically; identical input, identical bytes)."""
+    """Write detections as an ``.npz`` (atomically; identical input, identical bytes).
+
+    Parameters
+    ----------
+    detections : Detections
+        Written with the keys of the File contract: ``xy`` (N, 2) distorted pixels, ``rate`` frames
+        per second, ``n_frames``; ``source`` is not stored.
+    path : str or Path
+    """
     save_npz(path, {"camera_names": np.array(detections.camera_names),
                     "marker_names": np.array(detections.marker_names), "frame": detections.frame,
                     "camera": detections.camera, "marker": detections.marker, "xy": detections.xy,

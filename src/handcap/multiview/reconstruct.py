@@ -330,6 +330,13 @@ def write_quality(result: TriangulatedMarkers, markers_path) -> Path:
     (inlier views), ``residual (T, M)`` (metres) and ``used (N,)`` (per
     detection row of the input, in its order: used as an inlier view).
 
+    Parameters
+    ----------
+    result : TriangulatedMarkers
+        The triangulation (pixels for ``error_px``, metres for ``residual``, frames per second for ``rate``).
+    markers_path : str or Path
+        The markers file it belongs to; it need not exist.
+
     Returns
     -------
     Path

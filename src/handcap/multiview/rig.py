@@ -67,6 +67,7 @@ class RigCalibration:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """Camera names (C,), in the rig's order."""
         return self.rig.names
 
     def summary(self) -> str:

@@ -117,8 +117,23 @@ def _solve(a, b, enough):
 
 
 def project_undistorted(x, projections):
-    """Undistorted pixels u, v (C, N) and depth-like z (C, N) of points x (3, N), metres, through projection
-    matrices (C, 3, 4)."""
+    """Undistorted pixels u, v (C, N) and depth-like z (C, N) of points x (3, N) through projection matrices.
+
+    Parameters
+    ----------
+    x : ndarray (3, N)
+        Points as columns, metres (world frame).
+    projections : ndarray (C, 3, 4)
+        Projection matrices from the world (metres) to undistorted pixels.
+
+    Returns
+    -------
+    u, v : ndarray (C, N)
+        Undistorted pixels; NaN or infinite where ``z`` is 0.
+    z : ndarray (C, N)
+        Third homogeneous coordinate: the depth in metres when a projection is ``K [R | t]``
+        (positive in front of the camera).
+    """
     # Written out rather than a matrix product: BLAS kernels may round differently with the
     # number of points, and a point's result must not depend on which block it was solved in.
     p = projections[:, :, :, None]  # (C, 3, 4, 1)
@@ -161,7 +176,20 @@ def triangulate_linear(pixels, projections, weights=None) -> np.ndarray:
 
 
 def project(points, projections) -> np.ndarray:
-    """Undistorted pixels (C, N, 2) of points (N, 3) in metres; NaN behind a camera."""
+    """Undistorted pixels (C, N, 2) of points (N, 3) in metres; NaN behind a camera.
+
+    Parameters
+    ----------
+    points : array_like (N, 3)
+        World points, metres.
+    projections : array_like (C, 3, 4)
+        Projection matrices from the world (metres) to undistorted pixels.
+
+    Returns
+    -------
+    ndarray (C, N, 2)
+        Undistorted pixels; NaN where the point is not in front of the camera (``z <= 0``) or is NaN.
+    """
     u, v, z = project_undistorted(np.asarray(points, np.float64).T, np.asarray(projections, np.float64))
     out = np.stack([u, v], axis=-1)
     out[~(z > 0)] = np.nan

@@ -158,6 +158,7 @@ class RigidTrack:
 
     @property
     def mean_residual(self) -> float:
+        """Mean distance of the inlier markers from their fitted positions over the take, metres (NaN if none)."""
         return float(np.nanmean(self.residuals)) if np.isfinite(self.residuals).any() else float("nan")
 
     def summary(self) -> str:

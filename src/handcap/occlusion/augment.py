@@ -91,6 +91,7 @@ class Augmentation:
 
     @property
     def per_sample(self) -> bool:
+        """Whether any per-sample augmentation is on (scale, rigid set, fingers or placement above 0)."""
         return any(v > 0 for v in (self.scale, self.rigid_deg, self.rigid_mm, self.finger_deg, self.placement_mm))
 
     def describe(self) -> str:
@@ -133,6 +134,18 @@ def finger_groups(layout, names) -> np.ndarray:
     """Finger of each marker (M,) int, -1 for the palm and the rigid set: from its segment's name.
 
     ``index_proximal`` and ``index_distal`` are one finger; ``palm`` and objects are none.
+
+    Parameters
+    ----------
+    layout : MarkerLayout
+        Gives each marker's segment and the rigid set.
+    names : sequence of str (M,)
+        Marker names, each in ``layout`` (another name raises ``KeyError``).
+
+    Returns
+    -------
+    ndarray (M,) int64
+        Group number per marker (fingers numbered in alphabetical order of their names), -1 for none.
     """
     segment = {m.name: m.segment for m in layout.markers}
     rigid = set(layout.rigid)
@@ -239,7 +252,24 @@ def time_warp(take: PosedTake, rng, speed=(0.6, 1.6)) -> PosedTake:
 
 
 def warped_copies(takes, augmentation: Augmentation, *, seed: int = 0) -> list:
-    """``augmentation.copies`` time-warped copies of every take (deterministic for the seed)."""
+    """``augmentation.copies`` time-warped copies of every take (deterministic for the seed).
+
+    Takes shorter than 3 frames are skipped.
+
+    Parameters
+    ----------
+    takes : sequence of PosedTake
+        Positions in metres, poses in radians.
+    augmentation : Augmentation
+        Its ``copies`` and ``speed`` are used.
+    seed : int
+        Seeds every copy's generator, with the take and copy numbers.
+
+    Returns
+    -------
+    list of PosedTake
+        Copies (:func:`time_warp`) take by take, same rate as their take.
+    """
     out = []
     for i, take in enumerate(takes):
         if len(take.positions) < 3:

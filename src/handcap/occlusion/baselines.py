@@ -56,7 +56,20 @@ def ac_weights(known, hidden, *, lam: float = AC_LAMBDA) -> np.ndarray:
 
 
 def ac_apply(weights, known) -> np.ndarray:
-    """Positions (..., K, 3) of hidden markers from the known ones (..., N, 3) and weights (..., K, N)."""
+    """Positions (..., K, 3) of hidden markers from the known ones (..., N, 3) and weights (..., K, N).
+
+    Parameters
+    ----------
+    weights : ndarray (..., K, N)
+        From :func:`ac_weights`.
+    known : ndarray (..., N, 3)
+        Positions of the visible markers on the current frame, metres (no NaN; an ndarray, not a list).
+
+    Returns
+    -------
+    ndarray (..., K, 3)
+        Metres.
+    """
     x = np.concatenate([known, np.ones(known.shape[:-1] + (1,))], axis=-1)
     return (weights @ x)[..., :3]
 

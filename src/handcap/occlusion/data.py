@@ -64,6 +64,7 @@ class PosedTake:
 
     @property
     def has_poses(self) -> bool:
+        """Whether the take carries its hand pose (``phi`` is set)."""
         return self.phi is not None
 
 
@@ -72,6 +73,20 @@ def marker_columns(take_names, names, source: str) -> list[int]:
 
     The same matching as :meth:`handcap.core.markers.MarkerSequence.index`, so
     ``train-occlusion`` and ``fill`` accept the same files (issue 14).
+
+    Parameters
+    ----------
+    take_names : sequence of str
+        The take's marker names, possibly prefixed (``Subject:name``).
+    names : sequence of str
+        The names wanted (a layout's), unprefixed or exact.
+    source : str
+        The take's file or name, for messages.
+
+    Returns
+    -------
+    list of int
+        Column of each of ``names`` in ``take_names``, in the order of ``names``.
 
     Raises
     ------

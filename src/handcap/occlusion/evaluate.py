@@ -246,7 +246,26 @@ FINGER_JOINTS = (2, 3, 5, 6, 8, 9, 11, 12, 14, 15, 16, 17, 18, 19, 20)
 
 
 def joints_from_pose(phi, global_orient, transl, betas, side: str) -> np.ndarray:
-    """The 21 joints (..., 21, 3) of the OpenHand in a pose, metres."""
+    """The 21 joints (..., 21, 3) of the OpenHand in a pose, metres.
+
+    Parameters
+    ----------
+    phi : ndarray (..., 27)
+        Anatomical angles, radians.
+    global_orient : ndarray (..., 3)
+        Axis-angle of the wrist, radians.
+    transl : ndarray (..., 3)
+        Translation, metres.
+    betas : ndarray (10,) or (..., 10)
+        Shape values.
+    side : {"right", "left"}
+        A new :class:`~handcap.hand.OpenHand` of this side is loaded on every call.
+
+    Returns
+    -------
+    ndarray (..., 21, 3)
+        Metres: 16 MANO joints, then the tips of thumb, index, middle, ring, pinky.
+    """
     return OpenHand(side).forward(betas, global_orient, transl=transl, phi=phi, vertices=False).joints
 
 

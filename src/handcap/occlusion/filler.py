@@ -260,6 +260,7 @@ class OcclusionFiller:
 
     @property
     def n_markers(self) -> int:
+        """Number of markers M the filler fills (its model's)."""
         return len(self.names)
 
     def reset(self) -> None:

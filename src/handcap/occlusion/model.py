@@ -59,6 +59,7 @@ class OcclusionModel:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """Marker names (M,) the model was trained on, in its column order."""
         return self.predictor.names
 
     def __repr__(self) -> str:

@@ -43,6 +43,7 @@ class Mlp:
 
     @property
     def sizes(self) -> tuple[int, ...]:
+        """Widths of the layers: inputs, then each layer's outputs."""
         return (self.weights[0].shape[0],) + tuple(w.shape[1] for w in self.weights)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
@@ -64,6 +65,23 @@ class Mlp:
 
     @classmethod
     def from_arrays(cls, arrays, prefix: str) -> "Mlp":
+        """The network stored by :meth:`arrays` (``{prefix}w0, {prefix}b0, ...``, read until a ``w`` is missing).
+
+        Parameters
+        ----------
+        arrays : mapping of str to ndarray
+            Weights (n_in, n_out) and biases (n_out,), kept in their stored precision.
+        prefix : str
+
+        Returns
+        -------
+        Mlp
+
+        Raises
+        ------
+        HandcapError
+            No layer under ``prefix``, layers that do not fit, or non-finite weights.
+        """
         weights, biases = [], []
         while f"{prefix}w{len(weights)}" in arrays:
             i = len(weights)
@@ -80,7 +98,20 @@ def _compact(a: np.ndarray) -> np.ndarray:
 
 
 def torch_mlp(sizes, dropout: float = 0.0):
-    """A torch ``Sequential`` with the layout of :class:`Mlp` (dropout after hidden layers)."""
+    """A torch ``Sequential`` with the layout of :class:`Mlp` (dropout after hidden layers).
+
+    Parameters
+    ----------
+    sizes : sequence of int
+        Widths: inputs, hidden layers, outputs (ReLU after each hidden layer, the last linear).
+    dropout : float
+        Dropout probability after each hidden ReLU; 0 adds none.
+
+    Returns
+    -------
+    torch.nn.Sequential
+        Freshly initialised, float32.
+    """
     import torch
 
     layers = []
@@ -103,8 +134,22 @@ def mlp_from_torch(module) -> Mlp:
 
 
 def weighted_mse(module, batch):
-    """Mean squared error of ``module`` on a batch ``(inputs, targets, weights)`` of float32 tensors;
-    ``weights`` multiplies the squared error element by element (zero where there is no target)."""
+    """Weighted mean squared error of ``module`` on a batch ``(inputs, targets, weights)`` of float32 tensors.
+
+    ``weights`` multiplies the squared error element by element (zero where there is no target).
+
+    Parameters
+    ----------
+    module : torch.nn.Module
+    batch : (Tensor (B, n_in), Tensor (B, n_out), Tensor (B, n_out))
+        Inputs, targets and weights.
+
+    Returns
+    -------
+    Tensor ()
+        Sum of weighted squared errors over the sum of the weights (at least 1), in the targets'
+        unit squared.
+    """
     inputs, targets, weights = batch
     return ((module(inputs) - targets) ** 2 * weights).sum() / weights.sum().clamp(min=1.0)
 

@@ -72,10 +72,24 @@ class MarkerPredictor:
 
     @property
     def n_markers(self) -> int:
+        """Number of markers M."""
         return len(self.names)
 
     def inputs(self, local, visible) -> np.ndarray:
-        """Network inputs (..., 3M [+ M]) from registered positions (..., M, 3) and visibility (..., M)."""
+        """Network inputs (..., 3M [+ M]) from registered positions (..., M, 3) and visibility (..., M).
+
+        Parameters
+        ----------
+        local : ndarray (..., M, 3)
+            Positions in the template frame, metres (anything where hidden, NaN included).
+        visible : ndarray (..., M) bool
+
+        Returns
+        -------
+        ndarray (..., 3M) or (..., 4M)
+            Standardised coordinates (no unit), 0 for hidden markers; then, with ``mask_input``,
+            the visibility as 0.0 / 1.0.
+        """
         x = np.where(visible[..., None], (local - self.mean) / self.scale, 0.0)
         x = x.reshape(x.shape[:-2] + (-1,))
         if self.mask_input:
@@ -83,12 +97,40 @@ class MarkerPredictor:
         return x
 
     def predict_local(self, local, visible) -> np.ndarray:
-        """Every marker (..., M, 3) in the template frame from the visible ones (NaN allowed where hidden)."""
+        """Every marker (..., M, 3) in the template frame from the visible ones (NaN allowed where hidden).
+
+        Parameters
+        ----------
+        local : ndarray (..., M, 3)
+            Registered positions, metres.
+        visible : ndarray (..., M) bool
+
+        Returns
+        -------
+        ndarray (..., M, 3)
+            The network's output for every marker (visible ones included), metres, template frame.
+        """
         out = self.net(self.inputs(local, visible))
         return out.reshape(out.shape[:-1] + (-1, 3)) * self.scale + self.mean
 
     def register(self, positions, visible):
-        """(rotation, centre, template_centre) of each frame; see :mod:`handcap.occlusion.register`."""
+        """(rotation, centre, template_centre) of each frame; see :mod:`handcap.occlusion.register`.
+
+        Parameters
+        ----------
+        positions : ndarray (..., M, 3)
+            Metres; ignored where not visible.
+        visible : ndarray (..., M) bool
+
+        Returns
+        -------
+        rotation : ndarray (..., 3, 3)
+        centre : ndarray (..., 3)
+            Metres.
+        template_centre : ndarray (..., 3)
+            Metres. All NaN-free only on frames with 3 or more visible markers (see
+            :func:`~handcap.occlusion.register.fit_registration`).
+        """
         return fit_registration(positions, visible, self.template, self.weights)
 
     def predict(self, positions, visible=None) -> np.ndarray:
@@ -109,12 +151,31 @@ class MarkerPredictor:
         return undo_registration(self.predict_local(local, visible), *pose)
 
     def arrays(self) -> dict:
+        """The predictor as ``.npz`` entries.
+
+        Returns
+        -------
+        dict of str to ndarray
+            ``ae_names`` (M,), ``ae_template`` (M, 3) metres, ``ae_weights`` (M,), ``ae_mean`` and
+            ``ae_scale`` (M, 3) metres, ``ae_mask_input`` and the network's ``ae_w<i>``, ``ae_b<i>``.
+        """
         return {"ae_names": np.array(self.names), "ae_template": self.template, "ae_weights": self.weights,
                 "ae_mean": self.mean, "ae_scale": self.scale, "ae_mask_input": np.array(self.mask_input),
                 **self.net.arrays("ae_")}
 
     @classmethod
     def from_arrays(cls, arrays) -> "MarkerPredictor":
+        """The predictor stored by :meth:`arrays`.
+
+        Parameters
+        ----------
+        arrays : mapping of str to ndarray
+            The ``ae_*`` entries.
+
+        Returns
+        -------
+        MarkerPredictor
+        """
         return cls(tuple(str(n) for n in arrays["ae_names"]), np.asarray(arrays["ae_template"], float),
                    np.asarray(arrays["ae_weights"], float), np.asarray(arrays["ae_mean"], float),
                    np.asarray(arrays["ae_scale"], float), Mlp.from_arrays(arrays, "ae_"),
@@ -302,10 +363,21 @@ def offset_consistent_loss(module, batch):
     discontinuity on its first frame: the truth there minus the network's output
     there. So what matters is how the output *moves* from the frame before the gap
     to a frame in it, not where it sits; a network trained only on single frames
-    learns where markers sit on the subjects it saw. The batch is ``(inputs before,
-    inputs later, targets before, targets later, weights, hidden)`` (standardised,
-    float32 tensors); ``hidden`` is 1 on the coordinates of the hidden markers.
+    learns where markers sit on the subjects it saw.
     Plus :data:`ABSOLUTE_WEIGHT` times the paper's weighted error on the later frame.
+
+    Parameters
+    ----------
+    module : torch.nn.Module
+    batch : tuple of 6 float32 Tensors
+        ``(inputs before, inputs later, targets before, targets later, weights, hidden)``: inputs
+        (B, n_in), the others (B, 3M), standardised (no unit); ``hidden`` is 1 on the coordinates
+        of the hidden markers.
+
+    Returns
+    -------
+    Tensor ()
+        Mean squared standardised error over the hidden coordinates, plus the weighted term.
     """
     x0, x1, y0, y1, w, hidden = batch
     out0, out1 = module(x0), module(x1)

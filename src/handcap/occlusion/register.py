@@ -66,10 +66,42 @@ def fit_registration(positions, visible, template, weights):
 
 
 def apply_registration(positions, rotation, centre, template_centre) -> np.ndarray:
-    """World positions (..., M, 3) to the template frame (see the module docstring)."""
+    """World positions (..., M, 3) to the template frame (see the module docstring).
+
+    Parameters
+    ----------
+    positions : ndarray (..., M, 3)
+        World, metres.
+    rotation : ndarray (..., 3, 3)
+    centre : ndarray (..., 3)
+        Metres.
+    template_centre : ndarray (..., 3)
+        Metres; the three from :func:`fit_registration`.
+
+    Returns
+    -------
+    ndarray (..., M, 3)
+        Template frame, metres (NaN on frames whose registration failed).
+    """
     return (positions - centre[..., None, :]) @ rotation + template_centre[..., None, :]
 
 
 def undo_registration(local, rotation, centre, template_centre) -> np.ndarray:
-    """Template-frame positions (..., M, 3) back to the world."""
+    """Template-frame positions (..., M, 3) back to the world.
+
+    Parameters
+    ----------
+    local : ndarray (..., M, 3)
+        Template frame, metres.
+    rotation : ndarray (..., 3, 3)
+    centre : ndarray (..., 3)
+        Metres.
+    template_centre : ndarray (..., 3)
+        Metres; the three from :func:`fit_registration`.
+
+    Returns
+    -------
+    ndarray (..., M, 3)
+        World, metres.
+    """
     return (local - template_centre[..., None, :]) @ np.swapaxes(rotation, -1, -2) + centre[..., None, :]

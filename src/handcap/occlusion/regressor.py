@@ -99,12 +99,32 @@ class JointRegressor:
         return outputs_to_world(out, rotation, centre, template_centre)
 
     def arrays(self) -> dict:
+        """The regressor as ``.npz`` entries.
+
+        Returns
+        -------
+        dict of str to ndarray
+            ``jr_names`` (M,), ``jr_template`` (M, 3) metres, ``jr_weights`` (M,), ``jr_mean`` and
+            ``jr_scale`` (M, 3) metres, ``jr_out_mean`` and ``jr_out_scale`` (36,), and the network's
+            ``jr_w<i>``, ``jr_b<i>``.
+        """
         return {"jr_names": np.array(self.names), "jr_template": self.template, "jr_weights": self.weights,
                 "jr_mean": self.mean, "jr_scale": self.scale, "jr_out_mean": self.out_mean,
                 "jr_out_scale": self.out_scale, **self.net.arrays("jr_")}
 
     @classmethod
     def from_arrays(cls, arrays) -> "JointRegressor":
+        """The regressor stored by :meth:`arrays`.
+
+        Parameters
+        ----------
+        arrays : mapping of str to ndarray
+            The ``jr_*`` entries.
+
+        Returns
+        -------
+        JointRegressor
+        """
         return cls(tuple(str(n) for n in arrays["jr_names"]),
                    *(np.asarray(arrays[f"jr_{k}"], float)
                      for k in ("template", "weights", "mean", "scale", "out_mean", "out_scale")),
@@ -112,7 +132,28 @@ class JointRegressor:
 
 
 def outputs_to_world(out, rotation, centre, template_centre):
-    """(phi, global_orient, transl) from raw outputs (..., 36) and the registration of their frames."""
+    """(phi, global_orient, transl) from raw outputs (..., 36) and the registration of their frames.
+
+    Parameters
+    ----------
+    out : ndarray (..., 36)
+        ``phi`` (27, radians), the wrist rotation's first two columns (6) and the wrist position
+        (3, metres), in the template frame.
+    rotation : ndarray (..., 3, 3)
+    centre : ndarray (..., 3)
+        Metres.
+    template_centre : ndarray (..., 3)
+        Metres; the registration of each frame (:func:`~handcap.occlusion.register.fit_registration`).
+
+    Returns
+    -------
+    phi : ndarray (..., 27)
+        Radians.
+    global_orient : ndarray (..., 3)
+        Axis-angle of the wrist in the world, radians.
+    transl : ndarray (..., 3)
+        Wrist position in the world, metres.
+    """
     phi = out[..., :N_PHI]
     local_rot = matrix_from_6d(out[..., N_PHI:N_PHI + 6])
     local_pos = out[..., N_PHI + 6:]
@@ -123,7 +164,30 @@ def outputs_to_world(out, rotation, centre, template_centre):
 
 
 def targets_in_frame(phi, global_orient, transl, rotation, centre, template_centre) -> np.ndarray:
-    """Raw outputs (..., 36) of a pose, its wrist pose expressed in the registered frame."""
+    """Raw outputs (..., 36) of a pose, its wrist pose expressed in the registered frame.
+
+    The inverse of :func:`outputs_to_world`.
+
+    Parameters
+    ----------
+    phi : ndarray (..., 27)
+        Radians.
+    global_orient : ndarray (..., 3)
+        Axis-angle of the wrist in the world, radians.
+    transl : ndarray (..., 3)
+        Wrist position in the world, metres.
+    rotation : ndarray (..., 3, 3)
+    centre : ndarray (..., 3)
+        Metres.
+    template_centre : ndarray (..., 3)
+        Metres; the registration of each frame.
+
+    Returns
+    -------
+    ndarray (..., 36)
+        ``phi`` (radians), the first two columns of the wrist rotation in the template frame,
+        and the wrist position there (metres).
+    """
     world_rot = matrix_from_axis_angle(global_orient)
     local_rot = np.swapaxes(rotation, -1, -2) @ world_rot
     local_pos = np.einsum("...ji,...j->...i", rotation, transl - centre) + template_centre
@@ -206,7 +270,25 @@ def train_joint_regressor(positions, phi, global_orient, transl, names, *, templ
 def joint_sensitivity(targets, *, pick, frames: int = 16, step: float = 1e-4) -> np.ndarray:
     """Mean squared displacement of the 21 joints per unit change of each raw output (36,), metres squared.
 
-    Finite differences of the OpenHand (average shape) at ``frames`` training poses drawn by ``pick``.
+    Finite differences of the right OpenHand (average shape) at ``frames`` training poses drawn by ``pick``.
+
+    Parameters
+    ----------
+    targets : ndarray (T, 36)
+        Raw outputs (:func:`targets_in_frame`): radians, rotation columns, metres.
+    pick : numpy Generator
+        Draws the poses (without replacement).
+    frames : int
+        Number of poses used (at most T).
+    step : float
+        Finite-difference step, in each output's unit.
+
+    Returns
+    -------
+    ndarray (36,)
+        Squared joint displacement per squared unit of each output (m^2/rad^2 for ``phi``,
+        m^2 per unit of the rotation columns, dimensionless for the wrist position), averaged
+        over the joints and the poses.
     """
 
     hand = OpenHand("right")

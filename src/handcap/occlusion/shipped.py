@@ -31,7 +31,29 @@ WEIGHTS = Path(__file__).parent / "weights"
 
 
 def build(layout: str, out: Path, *, subjects: int = SUBJECTS, epochs: int = EPOCHS, seed: int = SEED) -> str:
-    """Train and write one shipped model; returns its SHA-256."""
+    """Train and write one shipped model; returns its SHA-256.
+
+    Prints progress (takes, every tenth epoch, the file's size and digest) to standard output.
+
+    Parameters
+    ----------
+    layout : str
+        A shipped layout name.
+    out : Path
+        The model ``.npz`` to write.
+    subjects : int
+        Synthetic subjects; each does every motion of ``TRAIN_MOTIONS`` for
+        :data:`SECONDS_PER_MOTION` seconds.
+    epochs : int
+        Training epochs of the marker predictor and of the joint regressor.
+    seed : int
+        Seeds the synthetic takes and the training.
+
+    Returns
+    -------
+    str
+        SHA-256 of the file written, hexadecimal.
+    """
     start = time.perf_counter()
     takes = synthetic_hand_takes(layout, subjects=subjects, seconds_per_motion=SECONDS_PER_MOTION, seed=seed)
     frames = sum(len(t.positions) for t in takes)

@@ -39,6 +39,19 @@ def registration_weights(layout, names) -> np.ndarray:
     them is the hand's own frame; the finger markers still hold it when rigid ones
     are hidden. (Measured on the real glove: the 0.1 s cells of Table 3 improve by
     about 5 % over equal weights.)
+
+    Parameters
+    ----------
+    layout : MarkerLayout or None
+        Its ``rigid`` markers; None weighs every marker the same.
+    names : sequence of str (M,)
+        The model's markers.
+
+    Returns
+    -------
+    ndarray (M,)
+        :data:`RIGID_WEIGHT` for rigid markers, :data:`OTHER_WEIGHT` for the others; all ones when
+        fewer than 3 rigid markers are among ``names``.
     """
     rigid = set(layout.rigid) if layout is not None else set()
     if len(rigid & set(names)) < 3:
@@ -174,6 +187,20 @@ def training_summary(takes, copies, augmentation: Augmentation) -> dict:
     """How much data a model saw: takes, subjects, frames, augmented copies (for ``OcclusionModel.info``).
 
     A take's subject is its ``subject`` label; takes without one count as a subject each.
+
+    Parameters
+    ----------
+    takes : sequence of PosedTake
+        The training takes.
+    copies : sequence of PosedTake
+        Their time-warped copies.
+    augmentation : Augmentation
+
+    Returns
+    -------
+    dict
+        ``takes``, ``recorded_takes``, ``synthetic_takes``, ``subjects``, ``frames``, ``augmented_copies``,
+        ``augmented_frames`` (counts; frames are frames) and ``augmentation`` (one line of text).
     """
     labels = {t.subject if t.subject is not None else f"take {i}" for i, t in enumerate(takes)}
     synthetic = sum(t.synthetic for t in takes)

@@ -62,6 +62,22 @@ def smooth_rotations(rotvecs, rate: float, cutoff: float = 5.0, order: int = 2) 
     small, far from the 180-degree wrap), the increments are accumulated into a
     continuous rotation-vector path relative to the first frame, filtered, and
     mapped back.
+
+    Parameters
+    ----------
+    rotvecs : array_like (T, 3)
+        Axis-angle vectors, radians, finite (T >= 1).
+    rate : float
+        Frames per second.
+    cutoff : float
+        -3 dB frequency of the one-way filter, Hz.
+    order : int
+        Butterworth order of the one-way filter.
+
+    Returns
+    -------
+    ndarray (T, 3)
+        Axis-angle vectors, radians.
     """
     rotvecs = np.asarray(rotvecs, dtype=np.float64)
     rots = Rotation.from_rotvec(rotvecs)
@@ -100,9 +116,31 @@ def smooth_hand_motion(motion: HandMotion, hand=None, *, cutoff: float = 5.0, or
     """A hand motion low-passed: translation, global orientation and the 27 anatomical angles.
 
     ``hand_pose`` is rebuilt from the filtered angles (filtering axis-angle
-    vectors directly would not give anatomical motion); joints and
-    ``marker_fit`` are dropped (they no longer match) unless a ``hand`` model
-    is given to recompute the joints.
+    vectors directly would not give anatomical motion) and the joints are
+    recomputed with ``hand``; ``marker_names``, ``marker_fit``,
+    ``marker_residuals`` and ``warnings`` are not carried over.
+
+    Parameters
+    ----------
+    motion : HandMotion
+        With ``phi`` (radians); ``transl`` in metres.
+    hand : HandModel, optional
+        The motion's model; an :class:`~handcap.hand.OpenHand` of its side by default
+        (required for a MANO motion).
+    cutoff : float
+        -3 dB frequency of the one-way filter, Hz.
+    order : int
+        Butterworth order of the one-way filter.
+
+    Returns
+    -------
+    HandMotion
+        Same frames and rate; radians and metres.
+
+    Raises
+    ------
+    HandcapError
+        No ``phi``, a MANO motion without ``hand``, or a cutoff at or above the Nyquist frequency.
     """
     if motion.phi is None:
         raise HandcapError("smoothing needs the anatomical angles phi of the motion")
@@ -119,7 +157,25 @@ def smooth_hand_motion(motion: HandMotion, hand=None, *, cutoff: float = 5.0, or
 
 
 def smooth_object_motion(motion: ObjectMotion, *, cutoff: float = 5.0, order: int = 2) -> ObjectMotion:
-    """An object motion low-passed (translation and rotation); unsolved (NaN) frames stay NaN."""
+    """An object motion low-passed (translation and rotation); unsolved (NaN) frames stay NaN.
+
+    Each run of solved frames is filtered on its own; runs too short to filter are kept as they
+    are. ``warnings`` are not carried over.
+
+    Parameters
+    ----------
+    motion : ObjectMotion
+        Rotation axis-angle in radians, translation in metres.
+    cutoff : float
+        -3 dB frequency of the one-way filter, Hz.
+    order : int
+        Butterworth order of the one-way filter.
+
+    Returns
+    -------
+    ObjectMotion
+        Same frames, rate, name, markers, canonical shape and state.
+    """
     ok = np.isfinite(motion.rotation).all(axis=1)
     rotation = np.full_like(motion.rotation, np.nan)
     translation = lowpass(motion.translation, motion.rate, cutoff, order)

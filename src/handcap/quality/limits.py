@@ -55,7 +55,26 @@ MM = 1000.0  # millimetres per metre, for messages
 
 
 def listed(names: Sequence[str], values, unit: str = "mm", scale: float = MM, most: int = 4) -> str:
-    """``a (6.1 mm), b (5.5 mm) and 3 more``: the worst ``most`` entries first."""
+    """``a (6.1 mm), b (5.5 mm) and 3 more``: the worst ``most`` entries first.
+
+    Parameters
+    ----------
+    names : sequence of str (N,)
+        One per value.
+    values : sequence of float (N,)
+        In the caller's unit (metres by default); the largest are the worst.
+    unit : str
+        Unit printed after each value.
+    scale : float
+        Factor from the values' unit to ``unit`` (default millimetres per metre).
+    most : int
+        Entries shown.
+
+    Returns
+    -------
+    str
+        One line, values with one decimal.
+    """
     order = np.argsort(-np.asarray(values, dtype=np.float64), kind="stable")
     shown = [f"{names[i]} ({scale * values[i]:.1f} {unit})" for i in order[:most]]
     rest = len(order) - len(shown)
@@ -63,5 +82,20 @@ def listed(names: Sequence[str], values, unit: str = "mm", scale: float = MM, mo
 
 
 def default_names(names, count: int, prefix: str = "marker") -> list[str]:
+    """``names`` as a list when there are ``count`` of them, else ``"<prefix> 0"``, ``"<prefix> 1"``, ...
+
+    Parameters
+    ----------
+    names : sequence of str or None
+    count : int
+        Number of names needed.
+    prefix : str
+        Stem of the made-up names.
+
+    Returns
+    -------
+    list of str
+        ``count`` names.
+    """
     names = list(names) if names is not None else []
     return names if len(names) == count else [f"{prefix} {i}" for i in range(count)]

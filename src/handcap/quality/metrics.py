@@ -23,6 +23,18 @@ class Stat:
 
     @classmethod
     def of(cls, values) -> "Stat":
+        """Mean, standard deviation (population, ``ddof=0``) and count of the finite ``values``.
+
+        Parameters
+        ----------
+        values : array_like
+            Any shape and unit (flattened); NaN and infinities are left out.
+
+        Returns
+        -------
+        Stat
+            In the unit of ``values``; NaN mean and std with count 0 when none is finite.
+        """
         values = np.asarray(values, dtype=np.float64).ravel()
         values = values[np.isfinite(values)]
         if len(values) == 0:
@@ -30,6 +42,7 @@ class Stat:
         return cls(float(values.mean()), float(values.std()), int(len(values)))
 
     def mm(self) -> str:
+        """Mean ± standard deviation of a Stat in metres, printed in millimetres with two decimals."""
         return f"{1000 * self.mean:.2f} ± {1000 * self.std:.2f} mm"
 
 
@@ -192,8 +205,20 @@ def diversity_coherence(features, k: int = 5, seed: int = 0) -> tuple[float, flo
 
 
 def pose_features(joints, object_translation=None) -> np.ndarray:
-    """Per-frame features for :func:`diversity_coherence`: joints relative to the wrist,
-    plus the object's position relative to the wrist when given. Shape (T, D)."""
+    """Per-frame features for :func:`diversity_coherence`: joints relative to the wrist, and the object.
+
+    Parameters
+    ----------
+    joints : ndarray (T, J, 3)
+        Metres, joint 0 the wrist.
+    object_translation : ndarray (T, 3), optional
+        Object position, metres; appended relative to the wrist when given.
+
+    Returns
+    -------
+    ndarray (T, D)
+        Metres; D = 3 (J - 1), plus 3 with an object.
+    """
     joints = np.asarray(joints, dtype=np.float64)
     feats = [(joints[:, 1:] - joints[:, :1]).reshape(len(joints), -1)]
     if object_translation is not None:

@@ -34,5 +34,17 @@ class Step:
 
 
 def quality_line(warnings, prefix: str = "quality: ") -> str:
-    """``quality: N warning(s), see below`` or ``quality: no warnings``."""
+    """``quality: N warning(s), see below`` or ``quality: no warnings``.
+
+    Parameters
+    ----------
+    warnings : sized collection of str
+        Only its length is used.
+    prefix : str
+        Put before the text.
+
+    Returns
+    -------
+    str
+    """
     return prefix + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings")

@@ -67,6 +67,7 @@ class Motion:
 
 
 def fist_pose() -> np.ndarray:
+    """A closed fist (27,) radians: every finger fully flexed, the thumb across it."""
     phi = _pose(thumb_cmc_bend=45, thumb_cmc_spread=-15, thumb_cmc_twist=15, thumb_mcp_bend=35, thumb_ip_bend=45)
     for finger in FINGERS:
         phi = finger_flexion(phi, finger, 1.0)
@@ -197,10 +198,21 @@ def grasp_configuration(hand, obj, kind: str):
     object sits between the thumb and the index and middle fingertips, where a
     pinch of the object's width would put it; those three close on it.
 
+    Parameters
+    ----------
+    hand : HandModel
+        Posed at its average shape (``betas = 0``).
+    obj : SynthObject
+        Its ``size`` in metres sets where it is put.
+    kind : str
+        ``"power"``; anything else gives a precision grasp.
+
     Returns
     -------
     object2hand : ndarray (4, 4)
+        Object frame to hand-model frame, translation in metres.
     open_phi, grasp_phi : ndarray (27,)
+        Radians: the hand before closing, and closed until its fingers touch the object.
     """
     palmar = np.array([0.0, -1.0, 0.0])
     ulnar = np.array([0.0, 0.0, 1.0 if hand.is_right else -1.0])
@@ -236,7 +248,26 @@ def grasp_configuration(hand, obj, kind: str):
 
 
 def pinch_pose(hand, finger: str, start_phi, *, gap: float = 0.012) -> np.ndarray:
-    """Thumb and ``finger`` tips brought ``gap`` apart (pad to pad) by least squares."""
+    """Thumb and ``finger`` tips brought ``gap`` apart by least squares.
+
+    Only the thumb's and the finger's angles move, within :data:`PHI_LIMITS`, weakly pulled towards
+    ``start_phi``; the others keep their start values.
+
+    Parameters
+    ----------
+    hand : HandModel
+        Posed at its average shape.
+    finger : {"index", "middle", "ring", "pinky"}
+    start_phi : ndarray (27,)
+        Radians.
+    gap : float
+        Distance between the thumb's tip point and the finger's (joints 16 and 17-20), metres.
+
+    Returns
+    -------
+    ndarray (27,)
+        Radians.
+    """
     tips = {"index": 17, "middle": 18, "ring": 19, "pinky": 20}
     idx = [i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", finger + "_"))]
     lo, hi = PHI_LIMITS[idx, 0], PHI_LIMITS[idx, 1]

@@ -48,6 +48,7 @@ class SynthObject:
 
     @property
     def marker_names(self) -> tuple[str, ...]:
+        """Marker names ``<name>_0``, ``<name>_1``, ... (K,), in the order of ``marker_positions``."""
         return tuple(f"{self.name}_{i}" for i in range(len(self.marker_positions)))
 
     def signed_distance(self, points) -> np.ndarray:
@@ -85,6 +86,25 @@ def make_object(kind: str, *, seed: int = 0, scale: float = 1.0) -> SynthObject:
     ``cuboid`` 5 x 7 x 12 cm, ``cylinder`` 7 cm across and 12 cm long (a
     drinking glass), ``sphere`` 6 cm across (a ball), ``cube2x2`` a 5.6 cm
     2x2x2 puzzle cube made of eight 2.8 cm cubies.
+
+    Parameters
+    ----------
+    kind : str
+        One of :data:`OBJECTS`; also the object's name.
+    seed : int
+        Seeds where the markers go (12 on a box, 10 on the cylinder, 8 on the sphere).
+    scale : float
+        Size factor, 0.2 to 5 (the markers' 4 mm radius is not scaled).
+
+    Returns
+    -------
+    SynthObject
+        Mesh and markers in the object frame, metres.
+
+    Raises
+    ------
+    HandcapError
+        An unknown kind or a scale out of range.
     """
     if kind not in OBJECTS:
         raise HandcapError(f"unknown object {kind!r}; choose one of {', '.join(OBJECTS)}")

@@ -37,7 +37,27 @@ class View:
 
     @classmethod
     def looking_at(cls, target, eye, up=(0.0, 0.0, 1.0), *, size=(800, 600), fov_deg: float = 40.0) -> "View":
-        """A view from ``eye`` towards ``target`` (metres) with image up along ``up``."""
+        """A view from ``eye`` towards ``target`` (metres) with image up along ``up``.
+
+        Parameters
+        ----------
+        target : array_like (3,)
+            Point at the image centre, metres.
+        eye : array_like (3,)
+            Camera centre, metres.
+        up : array_like (3,)
+            World direction that appears upwards in the image (no unit; x is used when it is
+            parallel to the line of sight).
+        size : (int, int)
+            Image width and height, pixels.
+        fov_deg : float
+            Horizontal field of view, degrees.
+
+        Returns
+        -------
+        View
+            Focal length in pixels, translation in metres.
+        """
         target, eye, up = (np.asarray(v, dtype=np.float64) for v in (target, eye, up))
         forward = target - eye
         forward /= np.linalg.norm(forward)
@@ -121,7 +141,21 @@ def render(view: View, meshes=(), points=(), *, background=(255, 255, 255), supe
 
 
 def save_png(path, image) -> None:
-    """Write an RGB image as PNG (atomically)."""
+    """Write an RGB image as PNG (atomically).
+
+    Parameters
+    ----------
+    path : str or Path
+    image : ndarray of uint8, shape (height, width, 3)
+        RGB, as :func:`render` returns it.
+
+    Raises
+    ------
+    RuntimeError
+        OpenCV could not encode the image.
+    HandcapError
+        The file could not be written.
+    """
     ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     if not ok:
         raise RuntimeError("OpenCV could not encode the PNG")

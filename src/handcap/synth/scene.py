@@ -153,6 +153,7 @@ class SynthConfig:
 
     @property
     def object_kind(self) -> str | None:
+        """The object in the take (one of :data:`OBJECTS`), ``auto`` resolved by the motion; None for none."""
         kind = DEFAULT_OBJECT.get(self.motion) if self.object == "auto" else self.object
         return None if kind in (None, "none") else kind
 
@@ -218,6 +219,24 @@ def misplaced(layout, hand, sigma: float, rng):
 
     Shifts happen on the flat template and every marker is put back on the
     skin of its own segment (closest point), so it stays where a marker can be.
+    A patch (in a patch layout) moves as one piece and also turns about the
+    skin normal, by a normal angle of 3 degrees per millimetre of ``sigma``.
+
+    Parameters
+    ----------
+    layout : MarkerLayout
+        On ``hand``'s side, with a position (metres) for every hand marker.
+    hand : HandModel
+        Its average shape (``betas = 0``) is the template.
+    sigma : float
+        Standard deviation of the shift along the skin, metres (per tangential axis); 0 or less
+        returns ``layout`` unchanged.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    MarkerLayout
+        Same markers, hand marker positions moved (metres); object markers unchanged.
     """
     if sigma <= 0:
         return layout
@@ -379,6 +398,24 @@ def write_capture(capture: SynthCapture, folder) -> dict:
     """Write a capture folder (see the module docstring); returns the paths written.
 
     Files are written atomically; other files in the folder are left alone.
+
+    Parameters
+    ----------
+    capture : SynthCapture
+        Markers, points and truth in metres, detections in pixels.
+    folder : str or Path
+        Created (with its parents) if missing.
+
+    Returns
+    -------
+    dict of str to Path
+        ``markers.c3d``, ``markers.npz``, ``points.npz``, ``detections.npz``, ``cameras.toml``,
+        ``truth.npz`` and ``scene.toml``, each by its file name.
+
+    Raises
+    ------
+    HandcapError
+        ``folder`` exists and is not a folder, or a file cannot be written.
     """
     from pathlib import Path
 
