@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from handcap.core.errors import merge_warnings
+from handcap.core.errors import HandcapError, merge_warnings
 from handcap.hand import hand_model_from_options
 from handcap.io import atomic_output, check_output, read_hand_motion, read_markers
 from handcap.quality import plausibility as q
@@ -59,12 +59,32 @@ def metrics(motion, *, truth=None, markers=None, obj=None, object_mesh=None, att
 
 
 def motion_file_warnings(motion_path, markers_path=None) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The warnings stored in a hand motion file, and those plus the checks of the motion (and of its fit to the
-    markers it was solved from, when given), without repeats."""
+    """The warnings stored in a hand motion file, and those plus the checks of the motion, without repeats.
+
+    The checks include the fit to the markers the motion was solved from, when they are given and the
+    motion has its ``marker_fit``.
+
+    Parameters
+    ----------
+    motion_path : str or Path
+        A hand motion ``.npz``.
+    markers_path : str or Path, optional
+        The marker file it was solved from (metres once read); its frames must match the motion's.
+
+    Returns
+    -------
+    stored : tuple of str
+        The warnings in the file.
+    all : tuple of str
+        ``stored`` and the warnings of the checks, each once.
+    """
     motion = read_hand_motion(motion_path)
     found = q.motion_warnings(motion)
     if markers_path is not None and motion.marker_fit is not None:
         observed, _ = observed_markers(read_markers(markers_path), list(motion.marker_names))
+        if observed.shape[0] != motion.n_frames:
+            raise HandcapError(f"{markers_path} has {observed.shape[0]} frames and {motion_path} {motion.n_frames}: "
+                               f"give the markers the motion was solved from")
         found += q.residual_warnings(np.linalg.norm(motion.marker_fit - observed, axis=-1), names=motion.marker_names,
                                      what=f"MRE against {markers_path}")
     return motion.warnings, merge_warnings(motion.warnings, found)
