@@ -7,11 +7,12 @@ hypotheses, several hands, scoring and a corruption tool.
 """
 
 from handcap.labeling.corrupt import corrupt, move_rigid_set
-from handcap.labeling.frame import HandFrameFinder, RigidSet, objects_from_take
+from handcap.labeling.frame import HandFrameFinder
 from handcap.labeling.kalman import KalmanBatch, KalmanSettings
 from handcap.labeling.model import LabelingModel
 from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
+from handcap.labeling.rigid_set import RigidSet, objects_from_take
 from handcap.labeling.take import LabelResult, label_take
 from handcap.labeling.murty import k_best_assignments
 from handcap.labeling.score import LabelScore, score_labels

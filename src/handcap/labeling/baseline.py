@@ -33,6 +33,26 @@ class NearestNeighbourLabeler:
         self.missed = np.full(self.n_free, 1 << 30)
 
     def update(self, points, transform=None) -> np.ndarray:
+        """Label one frame, at once (no lag).
+
+        Parameters
+        ----------
+        points : ndarray (K, 3)
+            Unlabeled points of the frame, metres, any order (NaN rows are ignored).
+        transform : (ndarray (3, 3), ndarray (3,)), optional
+            The hand frame (``world = R @ local + t``, ``t`` in metres); required when the model
+            has no rigid markers.
+
+        Returns
+        -------
+        ndarray (K,) int
+            Per point, in the order given: an index into ``names``, or -1 for a point no label took.
+
+        Raises
+        ------
+        HandcapError
+            No ``transform`` for a model without rigid markers.
+        """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3) if np.size(points) else np.zeros((0, 3))
         valid = np.flatnonzero(~np.isnan(points).any(axis=1))
         pts = points[valid]
@@ -73,4 +93,5 @@ class NearestNeighbourLabeler:
         return labels
 
     def flush(self) -> list:
+        """End of a take: nothing is pending (every frame is decided in :meth:`update`), so an empty list."""
         return []

@@ -10,7 +10,8 @@ Kalman model, the points a frame's best hypothesis leaves without a
 spatially accepted label. A point that continues a chain of ``length``
 updates, each inside the gate of the chain's prediction, is kinematically
 consistent: the labeler may start a label's track on it (a birth), see
-:class:`handcap.labeling.OnlineLabeler` (``birth``).
+:class:`handcap.labeling.OnlineLabeler` (``birth``); :func:`birth_pairings`
+gives the label each such point would start.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ class PointChains:
 
     @property
     def length(self) -> np.ndarray:
+        """Points each chain has taken (its filter's updates), ndarray (C,) int."""
         return self._filters.age
 
     def match(self, world) -> np.ndarray:
@@ -129,3 +131,35 @@ class PointChains:
         self._filters = KalmanBatch(self.settings, 0)
         self._match = np.full(0, -1)
         self._predicted = None
+
+
+def birth_pairings(ll, chained, trackable, theta_min: float) -> np.ndarray:
+    """Pairings that would start a track: each point at the end of a long enough chain that no label accepts
+    spatially, with the label without a track that explains it best.
+
+    Parameters
+    ----------
+    ll : ndarray (F, K)
+        Spatial log-likelihood (per m^3) of each free label at each candidate point.
+    chained : ndarray (K,) bool
+        Points at the end of a chain of at least the labeler's ``birth`` updates (:meth:`PointChains.match`).
+    trackable : ndarray (F,) bool
+        Labels with a track (of the best hypothesis' filters): the others may take a born point.
+    theta_min : float
+        Least log-likelihood (per m^3) of a spatially accepted pairing.
+
+    Returns
+    -------
+    ndarray (F, K) bool
+        The pairings (at most one label per point).
+    """
+    free = ~trackable
+    born = np.zeros(ll.shape, dtype=bool)
+    if not free.any():
+        return born
+    k = np.flatnonzero(chained & (ll.max(axis=0) < theta_min))  # points no label accepts
+    if not len(k):
+        return born
+    which = np.flatnonzero(free)[np.argmax(ll[free][:, k], axis=0)]  # the best label without a track
+    born[which, k] = True
+    return born

@@ -52,6 +52,7 @@ class KalmanSettings:
 
     @property
     def transition(self) -> np.ndarray:
+        """State transition (3, 3) of one axis over one frame of ``dt`` seconds (position, velocity, acceleration)."""
         dt = self.dt
         return np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
 
@@ -72,6 +73,23 @@ class KalmanSettings:
         jerk density (10 to 10^8 m^2/s^5), and the pair whose one-step
         innovations are most likely wins (the innovation likelihood is the
         exact likelihood of the data under the model).
+
+        Parameters
+        ----------
+        positions : array_like of shape (T, M, 3)
+            Labeled trajectories, metres, NaN where missing.
+        rate : float
+            Frames per second.
+
+        Returns
+        -------
+        KalmanSettings
+            ``dt = 1 / rate`` seconds, the best ``jerk`` (m^2/s^5) and ``measurement`` (m^2).
+
+        Raises
+        ------
+        HandcapError
+            Fewer than 30 pairs of consecutive samples.
         """
         pos = np.asarray(positions, dtype=np.float64)
         dt = 1.0 / float(rate)
@@ -156,7 +174,15 @@ class KalmanBatch:
         self.missed = np.full(n, 1 << 30, dtype=np.int64)  # never seen
 
     def copy_from(self, other: "KalmanBatch", index) -> None:
-        """Replace every filter by ``other``'s filters ``index`` (B,)."""
+        """Replace every filter by ``other``'s filters ``index`` (B,).
+
+        Parameters
+        ----------
+        other : KalmanBatch
+            Filters with the same settings; not changed (its arrays are copied).
+        index : ndarray (B,) int
+            Filters of ``other`` to take; this batch then holds B filters.
+        """
         self.state = other.state[index].copy()
         self.cov = other.cov[index].copy()
         self.age = other.age[index].copy()
@@ -173,7 +199,20 @@ class KalmanBatch:
 
     @staticmethod
     def log_likelihood(residual, variance) -> np.ndarray:
-        """``log N(residual; 0, variance I3)`` for residuals (..., 3) and variances (...)."""
+        """``log N(residual; 0, variance I3)`` for residuals (..., 3) and variances (...).
+
+        Parameters
+        ----------
+        residual : ndarray (..., 3)
+            Innovation, metres.
+        variance : ndarray (...)
+            Per-axis innovation variance, m^2.
+
+        Returns
+        -------
+        ndarray (...)
+            Natural log of the density (density in 1/m^3).
+        """
         return -1.5 * np.log(2 * np.pi * variance) - 0.5 * (residual**2).sum(axis=-1) / variance
 
     def step(self, measured, predicted=None) -> None:
@@ -233,7 +272,15 @@ class KalmanBatch:
         return out
 
     def restart(self, which, positions) -> None:
-        """Start filters ``which`` (B,) bool afresh at ``positions`` (B, 3): zero velocity and acceleration."""
+        """Start filters ``which`` (B,) bool afresh at ``positions`` (B, 3): zero velocity and acceleration.
+
+        Parameters
+        ----------
+        which : ndarray (B,) bool
+            Filters to restart (age 1, missed 0).
+        positions : ndarray (B, 3)
+            Metres; only the rows of ``which`` are read.
+        """
         s = self.settings
         self.state[which] = 0.0
         self.state[which, 0] = positions[which]

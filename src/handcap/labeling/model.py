@@ -9,8 +9,8 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.files import load_npz, save_npz
 from handcap.core.markers import MarkerSequence
-from handcap.labeling.frame import RigidSet
 from handcap.labeling.kalman import KalmanSettings
+from handcap.labeling.rigid_set import RigidSet
 from handcap.labeling.spatial import SpatialModel
 from handcap.objects.rigid import canonical_from_markers, kabsch
 
@@ -37,6 +37,7 @@ class LabelingModel:
 
     @property
     def free_names(self) -> tuple:
+        """The labels that are not rigid markers, in output order (those of the spatial model)."""
         return self.spatial.names
 
     @classmethod
@@ -127,6 +128,15 @@ class LabelingModel:
         return cls(tuple(ordered), rigid_set, spatial, kalman)
 
     def save(self, path) -> None:
+        """Write the model as a ``.npz`` (kind ``labeling_model``): names, mixtures, Kalman settings, rigid set.
+
+        Only ``dt``, ``jerk`` and ``measurement`` of the Kalman settings are stored; the initial
+        velocity and acceleration variances are their defaults on :meth:`load`.
+
+        Parameters
+        ----------
+        path : str or Path
+        """
         data = {"kind": np.array("labeling_model"), "names": np.array(self.names), **self.spatial.to_arrays(),
                 "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
         if self.rigid is not None:
@@ -135,6 +145,22 @@ class LabelingModel:
 
     @classmethod
     def load(cls, path) -> "LabelingModel":
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        LabelingModel
+            Lengths in metres, Kalman ``dt`` in seconds.
+
+        Raises
+        ------
+        HandcapError
+            Unreadable file or a missing entry.
+        """
         data = load_npz(path, required=("names", "gmm_weights", "gmm_means", "gmm_precision_chol", "kalman"),
                         what="labeling model")
         dt, jerk, measurement = (float(v) for v in data["kalman"])
@@ -144,7 +170,24 @@ class LabelingModel:
 
 
 def rigid_transforms(canonical, positions):
-    """Kabsch per frame from labeled rigid markers (T, R, 3); frames with < 3 markers are not ok."""
+    """Kabsch per frame from labeled rigid markers (T, R, 3); frames with < 3 markers are not ok.
+
+    Parameters
+    ----------
+    canonical : ndarray (R, 3)
+        The rigid markers in the hand frame, metres.
+    positions : ndarray (T, R, 3)
+        The same markers in the world, metres, NaN where missing (missing ones get zero weight).
+
+    Returns
+    -------
+    rotation : ndarray (T, 3, 3)
+        ``world = rotation @ local + translation``; identity where not ok.
+    translation : ndarray (T, 3)
+        Metres; zero where not ok.
+    ok : ndarray (T,) bool
+        Frames with 3 or more markers seen.
+    """
     seen = ~np.isnan(positions[..., 0])
     ok = seen.sum(axis=1) >= 3
     rot = np.tile(np.eye(3), (len(positions), 1, 1))

@@ -64,7 +64,26 @@ class MultiHandLabeler:
         return sorted(set().union(*(h.lost_frames for h in self.hands)))
 
     def update(self, points, transform=None):
-        """Label one frame: as :meth:`OnlineLabeler.update`, with indices into :attr:`names`."""
+        """Label one frame: as :meth:`OnlineLabeler.update`, with indices into :attr:`names`.
+
+        Parameters
+        ----------
+        points : ndarray (K, 3)
+            Unlabeled points of the frame, metres, any order (NaN rows are ignored).
+        transform : None
+            Must be None: each hand is found by its own rigid markers.
+
+        Returns
+        -------
+        ndarray (K_d,) int or None
+            Labels of the frame decided now (``lag`` frames back), in the order its points were
+            given: an index into :attr:`names`, or -1; None while the first frames are still open.
+
+        Raises
+        ------
+        HandcapError
+            A ``transform`` was given.
+        """
         if transform is not None:
             raise HandcapError("several hands are found by their rigid markers; a transform cannot be given")
         points, valid = frame_points(points)

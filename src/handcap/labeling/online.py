@@ -19,6 +19,10 @@ Per frame:
    t is decided ``lag`` frames later (0: at once) by tracing back from the
    best hypothesis; offline, on the whole take.
 
+This module owns the stream: the labeler's state from frame to frame (hand
+frame, filters, trellis, open frames) and its decisions; the hypotheses of
+steps 3-4 and their scores are built in :mod:`handcap.labeling.hypotheses`.
+
 Beyond the paper: each frame also gets the assignment that is best for spatial
 and temporal evidence together given the best previous hypothesis (a tracking
 hypothesis; from every previous hypothesis labels no better on the real glove
@@ -41,11 +45,11 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.labeling.adapt import StreamAdaptation
-from handcap.labeling.birth import PointChains
+from handcap.labeling.birth import PointChains, birth_pairings
 from handcap.labeling.frame import HandFrameFinder
+from handcap.labeling.hypotheses import emission_scores, spatial_hypotheses, tracking_hypothesis, transition_scores
 from handcap.labeling.kalman import KalmanBatch
 from handcap.labeling.model import LabelingModel
-from handcap.labeling.murty import k_best_assignments
 from handcap.labeling.viterbi import backtrack, viterbi_step
 
 
@@ -153,7 +157,6 @@ class OnlineLabeler:
         self.names = model.names + tuple(n for o in self.objects for n in o.names)
         self._object_finders = [HandFrameFinder(o, max_hold=0) for o in self.objects]
         self._n_object_markers = sum(len(o.names) for o in self.objects)
-        self._rows = np.arange(len(model.free_names))
         self.n_hyp = int(hypotheses)
         self.lag = int(lag)
         self.theta_min = float(theta_min)
@@ -296,22 +299,26 @@ class OnlineLabeler:
             self._watch_frame()
             if self.tracking and len(world):
                 best = int(np.argmax(self._scores))
-                self._log_norm, self._at_gate = self._log_norm_all[best], self._at_gate_all[best]
                 if self._chains is not None:
                     chained = self._chains.match(world) >= self.birth
                     if chained.any() and self._adaptation is not None and self._adaptation.settled:
-                        self._born = self._births(chained, trackable[best])
-                extra = self._tracking_hypothesis(world, pred[best], var[best], trackable[best],
-                                                  trackable[best] & (self._unlikely[best] < self.max_unlikely))
+                        self._born = birth_pairings(self._last_ll, chained, trackable[best], self.theta_min)
+                extra = tracking_hypothesis(
+                    world, self._last_ll, pred[best], var[best], trackable[best],
+                    trackable[best] & (self._unlikely[best] < self.max_unlikely), self._log_norm_all[best],
+                    self._at_gate_all[best], theta_min=self.theta_min, occluded_score=self._occluded_score,
+                    jump_cost=self.jump_cost, born=self._born)
                 if not (hyps == extra).all(axis=1).any():
                     hyps = np.concatenate([hyps, extra])
-                    emission = np.append(emission, self._emission(extra))
+                    emission = np.append(emission, emission_scores(extra, self._last_ll, self.theta_min,
+                                                                   self._occluded_score, self._born))
         # Observed positions (N, F, 3) of every hypothesis. The filters track world positions: the hand
         # frame (spatial model) can be off when a back marker is missing, the points themselves are not.
         seen = hyps >= 0
         obs = np.full(hyps.shape + (3,), np.nan)
         obs[seen] = world[hyps[seen]]
-        transition = self._transitions(obs, pred, var, trackable)  # (N_prev, N)
+        transition = transition_scores(obs, pred, var, trackable, self._log_norm_all, self._at_gate_all, self.gate,
+                                       self.jump_cost)  # (N_prev, N)
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
         self._advance_filters(back, obs)
@@ -352,48 +359,12 @@ class OnlineLabeler:
             self._fit_level += 0.05 * (fit - self._fit_level)
 
     def _spatial_hypotheses(self, local, ll=None):
-        """The N best assignments (N, F) of candidate indices (-1: occluded) and their scores (N,)."""
-        n_free = self.n_free
+        """The N best assignments (N, F) of candidate indices (-1: occluded) and their scores (N,) of the points
+        ``local`` (K, 3) in the hand frame (:func:`spatial_hypotheses`); keeps their log-likelihoods (F, K)."""
         if ll is None:
-            ll = self.spatial.log_likelihood(local) if len(local) else np.zeros((n_free, 0))
-        cost = np.full((n_free, len(local) + n_free), np.inf)
-        cost[:, :len(local)] = np.where(ll >= self.theta_min, -ll, np.inf)
-        cost[self._rows, len(local) + self._rows] = -self._occluded_score
-        best = k_best_assignments(cost, self.n_hyp)
-        hyps = np.array([c for c, _ in best])
-        hyps = np.where(hyps < len(local), hyps, -1)
-        emission = -np.array([t for _, t in best])
+            ll = self.spatial.log_likelihood(local) if len(local) else np.zeros((self.n_free, 0))
         self._last_ll = ll
-        return hyps, emission
-
-    def _emission(self, hyps) -> np.ndarray:
-        """Spatial score of hypotheses (N, F): log-likelihood of each pairing, ``log(1/M)`` for a gap and
-        for a pairing below ``theta_min`` (the paper's filtered assignment), ``theta_min`` for a birth."""
-        ll = self._last_ll
-        f = np.arange(self.n_free)
-        values = np.where(hyps >= 0, ll[f, np.maximum(hyps, 0)] if ll.shape[1] else 0.0, self._occluded_score)
-        filtered = (hyps >= 0) & (values < self.theta_min)
-        values = np.where(filtered, self._occluded_score, values)
-        if self._born is not None:
-            born = filtered & self._born[f, np.maximum(hyps, 0)]
-            values = np.where(born, self.theta_min, values)
-        return values.sum(axis=1)
-
-    def _births(self, chained, trackable) -> np.ndarray:
-        """(F, K) pairings that would start a track: each point at the end of a long enough chain (K,) with
-        the label without a track (``trackable`` (F,) of the best hypothesis' filters) that explains it best, where
-        the spatial model filters every pairing of the point."""
-        ll = self._last_ll
-        free = ~trackable
-        born = np.zeros(ll.shape, dtype=bool)
-        if not free.any():
-            return born
-        k = np.flatnonzero(chained & (ll.max(axis=0) < self.theta_min))  # points no label accepts
-        if not len(k):
-            return born
-        which = np.flatnonzero(free)[np.argmax(ll[free][:, k], axis=0)]  # the best label without a track
-        born[which, k] = True
-        return born
+        return spatial_hypotheses(ll, self.n_hyp, self.theta_min, self._occluded_score)
 
     def _advance_chains(self, world, best) -> None:
         """Step the point chains with the points the best hypothesis (F,) left without a spatially accepted
@@ -403,46 +374,6 @@ class OnlineLabeler:
             f = np.flatnonzero(best >= 0)
             free[best[f]] = self._last_ll[f, best[f]] < self.theta_min
         self._chains.advance(world, free)
-
-    def _tracking_hypothesis(self, world, pred, var, trackable, vouch) -> np.ndarray:
-        """The assignment (1, F) best for spatial and temporal evidence together, given the best previous
-        hypothesis' filters: predictions ``pred`` (F, 3), variances ``var`` (F,), ``trackable`` (F,), and
-        ``vouch`` (F,): the tracks that may still carry their label onto a spatially filtered point."""
-        from scipy.optimize import linear_sum_assignment
-        n_free, k = self.n_free, len(world)
-        ll = self._last_ll
-        allowed = ll >= self.theta_min  # (F, K)
-        diff = world[None] - pred[:, None]
-        temporal = self._log_norm[:, None] - 0.5 * np.einsum("fkx,fkx->fk", diff, diff) / var[:, None]  # (F, K)
-        at_gate = self._at_gate  # (F,) of this hypothesis
-        # A pairing the spatial model filters out may still be made when the marker's own track
-        # vouches for it (a pose the training take did not cover); spatially it then scores as a gap.
-        track = trackable[:, None]
-        reward = np.where(allowed, ll, self._occluded_score) + track * np.maximum(temporal, at_gate[:, None]
-                                                                                    - self.jump_cost)
-        cost = np.full((n_free, k + n_free), np.inf)
-        ok = allowed | (vouch[:, None] & (temporal >= at_gate[:, None]))
-        if self._born is not None:  # a birth: no track to score it, spatially at theta_min (see ``birth``)
-            reward = np.where(self._born, self.theta_min, reward)
-            ok |= self._born
-        cost[:, :k] = np.where(ok, -reward, np.inf)
-        cost[self._rows, k + self._rows] = -self._occluded_score - trackable * at_gate
-        r, c = linear_sum_assignment(cost)
-        out = np.full((1, n_free), -1)
-        out[0, r] = np.where(c < k, c, -1)
-        return out
-
-    def _transitions(self, obs, pred, var, trackable) -> np.ndarray:
-        """Eq. 3 for every (previous, new) hypothesis pair: (N_prev, N)."""
-        residual = obs[None, :, :, :] - pred[:, None, :, :]  # (P, N, F, 3), NaN where occluded
-        squared = np.einsum("pnfx,pnfx->pnf", residual, residual) / var[:, None, :]
-        # A gap scores as a measurement at the gate; a measurement beyond the gate (a marker that jumped:
-        # real reconstructions do) costs a fixed jump_cost more than a gap, so strong spatial evidence can
-        # still keep it.
-        squared = np.where(np.isnan(squared), self.gate**2, squared)
-        ll = np.maximum(self._log_norm_all[:, None, :] - 0.5 * squared,
-                        (self._at_gate_all - self.jump_cost)[:, None, :])
-        return (ll * trackable[:, None, :]).sum(axis=-1)
 
     def _advance_filters(self, back, obs) -> None:
         """Filters of the new hypotheses: their predecessors' filters stepped with their observations."""
@@ -484,8 +415,24 @@ def frame_points(points):
 
 
 def find_objects(finders, points, n_markers):
-    """Each rigid object's markers among the points: (indices of the points left, (O,) point per object
-    label or -1)."""
+    """Each rigid object's markers among the points.
+
+    Parameters
+    ----------
+    finders : sequence of HandFrameFinder
+        One per rigid object, in the order of the object labels.
+    points : ndarray (K, 3)
+        The frame's points, metres.
+    n_markers : int
+        Object labels in all (the sum of the objects' marker counts).
+
+    Returns
+    -------
+    rest : ndarray (R,) int
+        Indices of the points that no object took.
+    object_points : ndarray (n_markers,) int
+        The point of every object label, -1 where not found.
+    """
     rest = np.arange(len(points))
     object_points = np.full(n_markers, -1)
     at = 0

@@ -56,6 +56,7 @@ class LabelScore:
 
     @property
     def instances(self) -> int:
+        """Number of (label, frame) instances scored: the four categories summed over every label."""
         return int(sum(getattr(self, c).sum() for c in CATEGORIES))
 
     def fraction(self, category: str) -> float:
@@ -87,6 +88,14 @@ class LabelScore:
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
+        """The score as plain numbers for JSON.
+
+        Returns
+        -------
+        dict
+            ``instances``; per category its count and ``<category>_percent`` (0..100);
+            ``per_marker``: {name: {category: count}}.
+        """
         out = {"instances": self.instances}
         for c in CATEGORIES:
             out[c] = int(getattr(self, c).sum())

@@ -125,11 +125,39 @@ class SpatialModel:
         return SpatialModel(self.names, self.weights, means, chol, self.log_norm)
 
     def to_arrays(self, prefix: str = "gmm_") -> dict:
+        """The mixtures as ``.npz`` entries (``log_norm`` is recomputed on reading).
+
+        Parameters
+        ----------
+        prefix : str
+            Put before each entry name.
+
+        Returns
+        -------
+        dict of str to ndarray
+            ``<prefix>names`` (M,), ``<prefix>weights`` (M, L), ``<prefix>means`` (M, L, 3) in metres
+            (hand frame) and ``<prefix>precision_chol`` (M, L, 3, 3) in 1/metres.
+        """
         return {f"{prefix}names": np.array(self.names), f"{prefix}weights": self.weights,
                 f"{prefix}means": self.means, f"{prefix}precision_chol": self.precision_chol}
 
     @classmethod
     def from_arrays(cls, data, prefix: str = "gmm_") -> "SpatialModel":
+        """The mixtures stored by :meth:`to_arrays`.
+
+        Parameters
+        ----------
+        data : mapping of str to ndarray
+            Holds ``<prefix>names`` (M,), ``<prefix>weights`` (M, L), ``<prefix>means`` (M, L, 3) in
+            metres (hand frame) and ``<prefix>precision_chol`` (M, L, 3, 3) in 1/metres.
+        prefix : str
+            Prefix of the entry names.
+
+        Returns
+        -------
+        SpatialModel
+            ``log_norm`` computed from the weights and Cholesky factors.
+        """
         weights = np.asarray(data[f"{prefix}weights"], dtype=np.float64)
         chols = np.asarray(data[f"{prefix}precision_chol"], dtype=np.float64)
         log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)

@@ -16,12 +16,13 @@ import numpy as np
 from handcap.core.errors import HandcapError, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.points import PointCloudSequence
-from handcap.labeling.adapt import adapt_means, largest_change, register_to_model, rigid_from_take
 from handcap.labeling.baseline import NearestNeighbourLabeler
-from handcap.labeling.frame import RigidSet
 from handcap.labeling.model import LabelingModel, rigid_transforms
 from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
+from handcap.labeling.realign import adapt_means, register_to_model
+from handcap.labeling.relearn import largest_change, rigid_from_take
+from handcap.labeling.rigid_set import RigidSet
 
 
 #: The offline second pass refits the spatial model only when the first pass's labels put the take's hand

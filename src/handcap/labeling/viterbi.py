@@ -39,6 +39,18 @@ def backtrack(backs, last: int) -> list[int]:
     """States of the best path, oldest first, from the backpointers of each later frame and the last state.
 
     ``backs[i]`` maps the states of frame i + 1 to those of frame i.
+
+    Parameters
+    ----------
+    backs : sequence of ndarray (N_t+1,) int
+        Backpointers of frames 1 .. F-1 (:func:`viterbi_step`'s ``back``), oldest first.
+    last : int
+        State of the last frame on the path.
+
+    Returns
+    -------
+    list of int
+        One state per frame, F in all, oldest first.
     """
     path = [int(last)]
     for back in reversed(backs):

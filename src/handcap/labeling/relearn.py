@@ -1,0 +1,198 @@
+"""Re-learning the rigid back-of-hand set's shape from an unlabelled take (issue 14).
+
+When the rigid markers' distances changed (a marker stuck back on a few
+millimetres away, another glove or subject), the trained :class:`RigidSet`
+no longer finds the hand frame. :func:`rigid_from_take` estimates the shape
+from the take itself: every frame's triangles of points whose distances are
+near the trained ones (within ``width``) are pooled; the triangle shape that
+recurs in most frames (within the trained tolerance) is the rigid set,
+re-learned. :func:`largest_change` measures how far a re-learned set is from
+the trained one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.labeling.frame import HandFrameFinder
+from handcap.labeling.realign import register_to_model
+from handcap.labeling.rigid_set import RigidSet
+from handcap.labeling.spatial import SpatialModel
+from handcap.objects.rigid import canonical_from_markers, kabsch
+
+
+def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = None, width: float = 0.01,
+                    min_share: float = 0.3, max_frames: int = 400) -> RigidSet | None:
+    """The rigid set's shape as an unlabelled take shows it, or None when no shape recurs.
+
+    Parameters
+    ----------
+    rigid : RigidSet
+        The trained set (its tolerance is kept: it is the within-take spread).
+    frames : sequence of ndarray (K, 3)
+        Unlabelled points per frame, metres.
+    spatial : SpatialModel, optional
+        The trained spatial model. Other markers rigid with the back of the hand
+        (a knuckle marker beside a back marker) make look-alike triangles that
+        recur as often as the set's own; with the model, the shape (the
+        trained one among them) in whose hand frame the other points fit the
+        model best wins. Without it, the recurring shape nearest the trained one.
+    width : float
+        How far (metres) each distance of the anchor triangle may be from the
+        trained one.
+    min_share : float
+        A shape must be seen in at least this share of the frames searched.
+    max_frames : int
+        Frames searched (evenly spread over the take).
+
+    Returns
+    -------
+    RigidSet or None
+        The re-learned set (possibly the trained one), its canonical positions
+        turned onto the trained ones (so the hand frame moves as little as
+        possible).
+    """
+    frames = [np.asarray(f, dtype=np.float64) for f in frames]
+    frames = [f[~np.isnan(f).any(axis=1)] for f in frames]
+    step = max(1, len(frames) // max_frames)
+    use = [f for f in frames[::step] if len(f) >= 3]
+    if len(use) < 3:
+        return None
+    candidates = _recurring_shapes(rigid, use, width, min_share)
+    if not candidates:
+        return None
+    if spatial is None:
+        return candidates[0]
+    every = candidates + [rigid]
+    fits = [_fit_in_frames(spatial, c, use) for c in every]
+    return every[int(np.argmax(fits))]
+
+
+def _anchor(canonical):
+    """The largest triangle (a, b, e) of a set and its side lengths (ab, ae, be)."""
+    c = canonical
+    n = len(c)
+    tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
+    area = np.linalg.norm(np.cross(c[tri[:, 1]] - c[tri[:, 0]], c[tri[:, 2]] - c[tri[:, 0]]), axis=1)
+    a, b, e = tri[int(np.argmax(area))]
+    sides = np.array([np.linalg.norm(c[a] - c[b]), np.linalg.norm(c[a] - c[e]), np.linalg.norm(c[b] - c[e])])
+    return (a, b, e), sides
+
+
+def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = 5) -> list:
+    """Shapes of the rigid set that recur in the frames ``use``: most frequent first (at most ``most``, each
+    seen in at least 80 % as many frames as the first), each a RigidSet."""
+    c, tol = rigid.canonical, rigid.tolerance
+    (a, b, e), trained = _anchor(c)
+    sides, owner, where = [], [], []
+    for t, pts in enumerate(use):
+        dist = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+        ok = ((np.abs(dist - trained[0]) < width)[:, :, None] & (np.abs(dist - trained[1]) < width)[:, None, :]
+              & (np.abs(dist - trained[2]) < width)[None, :, :])
+        found = np.argwhere(ok)
+        if not len(found):
+            continue
+        sides.append(np.stack([dist[found[:, 0], found[:, 1]], dist[found[:, 0], found[:, 2]],
+                               dist[found[:, 1], found[:, 2]]], axis=1))
+        owner.append(np.full(len(found), t))
+        where.append(found)
+    if not sides:
+        return []
+    sides, owner, where = np.concatenate(sides), np.concatenate(owner), np.concatenate(where)
+    # For every candidate shape, in how many frames a triangle of that shape (within the tolerance) appears.
+    probe = np.linspace(0, len(sides) - 1, min(len(sides), 300)).astype(int)
+    close = (np.abs(sides[probe][:, None] - sides[None]) < tol).all(axis=-1)  # (P, S)
+    frames_with = np.array([len(np.unique(owner[row])) for row in close])
+    if frames_with.max() < min_share * len(use):
+        return []
+    out, chosen = [], []
+    # Most frequent first; among shapes seen as often (a short stretch of frames, where fingers keep their
+    # shape too), the nearest the trained shape first.
+    offset = np.abs(sides[probe] - trained).max(axis=1)
+    for p in np.lexsort((offset, -frames_with)):
+        if frames_with[p] < 0.8 * frames_with.max() or len(out) == most:
+            break
+        shape = sides[probe[p]]
+        if any((np.abs(shape - other) < tol).all() for other in chosen):
+            continue
+        found = _shape_in_frames(rigid, use, sides, owner, where, shape, (a, b, e), width)
+        if found is not None:
+            chosen.append(shape)
+            out.append(found)
+    return out
+
+
+def _shape_in_frames(rigid, use, sides, owner, where, shape, anchor, width) -> RigidSet | None:
+    """The rigid set from the triangles of one shape, one per frame (and the other markers near their places)."""
+    c, tol = rigid.canonical, rigid.tolerance
+    n = len(c)
+    a, b, e = anchor
+    members = (np.abs(sides - shape) < tol).all(axis=-1)
+    err = np.abs(sides - shape).max(axis=1)
+    positions = np.full((len(use), n, 3), np.nan)
+    for t in np.unique(owner[members]):
+        rows = np.flatnonzero(members & (owner == t))
+        i, j, k = where[rows[np.argmin(err[rows])]]
+        pts = use[t]
+        positions[t, [a, b, e]] = pts[[i, j, k]]
+        if n > 3:  # the other markers: the point nearest where the trained shape puts them
+            rot, trans = kabsch(c[[a, b, e]], pts[[i, j, k]])
+            taken = {int(i), int(j), int(k)}
+            for r in range(n):
+                if r in (a, b, e):
+                    continue
+                d = np.linalg.norm(pts - (rot @ c[r] + trans), axis=1)
+                d[list(taken)] = np.inf
+                p = int(np.argmin(d))
+                if d[p] < width:
+                    positions[t, r] = pts[p]
+                    taken.add(p)
+    seen = ~np.isnan(positions[..., 0])
+    if (seen.sum(axis=1) >= 3).sum() < 3 or not seen.any(axis=0).all():
+        return None
+    new = canonical_from_markers(positions[seen.sum(axis=1) >= 3])
+    rot, trans = kabsch(new, c)
+    return RigidSet(rigid.names, new @ rot.T + trans, rigid.tolerance)
+
+
+def _fit_in_frames(spatial: SpatialModel, rigid: RigidSet, use, *, most: int = 20,
+                   floor: float = -2.0, iterations: int = 0) -> float:
+    """How well the other points of frames ``use`` fit the spatial model in the hand frame ``rigid`` gives
+    (after ``iterations`` of label-free registration; none by default: the candidates' shapes are turned onto
+    the trained one, and a registration lets a wrong frame fit too): the mean over points of the best label's
+    log-likelihood (at least ``floor``), frames without the set counting every point at the floor."""
+    finder = HandFrameFinder(rigid, max_hold=0)
+    local, missing = [], 0
+    for pts in use[:: max(1, len(use) // most)]:
+        finder.reset()
+        pose = finder.find(pts)
+        if pose is None or not pose.found:
+            missing += len(pts)
+            continue
+        others = np.delete(pts, pose.points[pose.points >= 0], axis=0)
+        local.append((others - pose.translation) @ pose.rotation)
+    if not local:
+        return -np.inf
+    local = np.concatenate(local)
+    rot, trans = register_to_model(spatial, local, iterations=iterations) if iterations else (np.eye(3), np.zeros(3))
+    ll = spatial.log_likelihood(local @ rot.T + trans)
+    best = np.maximum(ll.max(axis=0), floor)
+    return float((best.sum() + floor * missing) / (len(best) + missing))
+
+
+def largest_change(a: RigidSet, b: RigidSet) -> float:
+    """Largest difference between the two sets' marker distances.
+
+    Parameters
+    ----------
+    a, b : RigidSet
+        Two shapes of the same markers (same names, same order), canonical positions (R, 3) in metres.
+
+    Returns
+    -------
+    float
+        The largest change of a pairwise distance, metres.
+    """
+    i, j = np.triu_indices(len(a.names), 1)
+    return float(np.abs(np.linalg.norm(a.canonical[i] - a.canonical[j], axis=1)
+                        - np.linalg.norm(b.canonical[i] - b.canonical[j], axis=1)).max())
