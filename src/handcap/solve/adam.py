@@ -25,7 +25,7 @@ from handcap.core.rotations import matrix_from_euler_zyx
 from handcap.hand.anatomy import PHI_AXIS, PHI_JOINT
 from handcap.hand.kinematics import chain_transforms
 from handcap.solve.lm import Poses, unconstrained_angles
-from handcap.solve.markers import rigid_start
+from handcap.solve.rigid_start import rigid_start
 
 LEARNING_RATE = 0.002
 ITERATIONS = 400

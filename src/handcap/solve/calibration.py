@@ -149,6 +149,19 @@ def initial_attachment(layout, hand, betas) -> MarkerAttachment:
 
     The latter are only a start for the first poses: :func:`calibrate_attachment`
     then puts each where it was measured.
+
+    Parameters
+    ----------
+    layout : MarkerLayout
+        Mirrored to the hand's side if needed; positions in metres on the average hand.
+    hand : HandModel
+    betas : ndarray (10,)
+        Shape recorded on the attachment.
+
+    Returns
+    -------
+    MarkerAttachment
+        Offsets the layout's ``marker_radius``, metres.
     """
     layout = layout.for_side(hand.side)
     template = hand.forward().vertices
@@ -325,6 +338,21 @@ def rest_frame_medians(model, poses, target, observed) -> np.ndarray:
 
     Each marker's own segment (largest skinning weight) is undone:
     ``x = R (r - J) + P`` gives ``r = R^T (x - P) + J``.
+
+    Parameters
+    ----------
+    model : MarkerModel
+        Its rest joints (the current shape) give ``J``.
+    poses : Poses
+        ``transl`` (T, 3) metres, ``rot`` (T, 3, 3), ``phi`` (T, 27) radians.
+    target : ndarray (T, M, 3)
+        Observed markers, metres (NaN allowed where not ``observed``).
+    observed : ndarray (T, M) bool
+
+    Returns
+    -------
+    ndarray (M, 3)
+        Metres, rest pose; NaN for a marker never observed.
     """
     world_rot, world_pos, _ = model.kinematics(poses.transl, poses.rot, poses.phi)
     segment = np.argmax(model.marker_weights, axis=1)
@@ -344,6 +372,17 @@ def relaxation(attachment, hand) -> float:
     on the priors (an open hand), and once the fit stops improving (by 2 % a
     round) further rounds only drift the markers towards what makes the
     calibration frames look like the prior's flat hand, so they stop there.
+
+    Parameters
+    ----------
+    attachment : MarkerAttachment
+        A marker's segment is that of its triangle's first vertex.
+    hand : HandModel
+
+    Returns
+    -------
+    float
+        1.5 or 1.0 (no unit).
     """
     segment = hand.segment_of_vertex[hand.faces[attachment.triangles, 0]]
     counts = np.bincount(segment, minlength=16)

@@ -79,6 +79,7 @@ class Priors:
     rest_weight: float = 0.001
 
     def rest_phi(self) -> np.ndarray:
+        """The relaxed hand (27,) the weak pull draws towards, radians: ``rest``, else :func:`relaxed_pose`."""
         if self.rest is not None:
             return np.asarray(self.rest, dtype=np.float64)
         return relaxed_pose()
@@ -90,11 +91,37 @@ def robust_weights(norms, scale):
     A marker ``scale`` off counts half; a mislabelled marker 4 cm off (with the
     default 5 mm) pulls with the force of a 0.6 mm error, so it barely moves
     the hand.
+
+    Parameters
+    ----------
+    norms : ndarray (...)
+        Residual norms ``e``, metres.
+    scale : float
+        Scale of the loss, metres.
+
+    Returns
+    -------
+    ndarray (...)
+        Weights in (0, 1], no unit.
     """
     return 1.0 / (1.0 + (norms / scale) ** 2)
 
 
 def robust_cost(norms, scale):
+    """Cauchy (Lorentzian) loss ``0.5 scale^2 log(1 + (e / scale)^2)`` of residual norms.
+
+    Parameters
+    ----------
+    norms : ndarray (...)
+        Residual norms ``e``, metres.
+    scale : float
+        Scale of the loss, metres.
+
+    Returns
+    -------
+    ndarray (...)
+        Square metres; ``0.5 e^2`` for ``e`` much below ``scale``.
+    """
     return 0.5 * scale**2 * np.log1p((norms / scale) ** 2)
 
 
@@ -103,6 +130,24 @@ def prior_terms(phi, priors: Priors, held, free=None):
 
     ``free`` (T, 27) marks the angles no marker constrains now or did before:
     their PIP (IP) follows the MCP by the synergy prior.
+
+    Parameters
+    ----------
+    phi : ndarray (T, 27)
+        Anatomical angles, radians.
+    priors : Priors
+    held : ndarray (T, 27) bool
+        Angles held at their value: no coupling or rest pull on them (limits still apply).
+    free : ndarray (T, 27) bool, optional
+        Angles no marker constrains; without it the synergy prior is off.
+
+    Returns
+    -------
+    residuals : ndarray (T, R)
+        Metres (weights in metres per radian times radians); R = 63: limits (27), coupling (4),
+        synergy (5), rest pull (27).
+    jacobian : ndarray (T, R, 27)
+        Metres per radian.
     """
     n = phi.shape[0]
     low, high = priors.limits[:, 0], priors.limits[:, 1]
@@ -143,6 +188,16 @@ def unconstrained_angles(model, observed) -> np.ndarray:
 
     A marker sets the angles of the joints that carry at least
     :data:`CONSTRAINING_WEIGHT` of it.
+
+    Parameters
+    ----------
+    model : MarkerModel
+    observed : ndarray (T, M) bool
+        Markers seen in each frame.
+
+    Returns
+    -------
+    ndarray (T, 27) bool
     """
     carries = model._weights_below >= CONSTRAINING_WEIGHT  # (M, 16): marker m moves with joint j
     constrained = (observed[:, :, None] & carries[None]).any(axis=1)  # (T, 16)
@@ -155,6 +210,16 @@ def held_angles(model, observed) -> np.ndarray:
     Those unconstrained now (:func:`unconstrained_angles`) that markers did
     constrain in an earlier frame. Angles never constrained so far are not
     held: the anatomical priors set them (see :class:`Priors`).
+
+    Parameters
+    ----------
+    model : MarkerModel
+    observed : ndarray (T, M) bool
+        Markers seen in each frame, in time order (earlier rows count as before).
+
+    Returns
+    -------
+    ndarray (T, 27) bool
     """
     unconstrained = unconstrained_angles(model, observed)
     seen_before = np.logical_or.accumulate(~unconstrained, axis=0)
@@ -170,17 +235,53 @@ class Poses:
     phi: np.ndarray  # (T, 27)
 
     def copy(self) -> "Poses":
+        """A deep copy (new arrays)."""
         return Poses(self.transl.copy(), self.rot.copy(), self.phi.copy())
 
     def take(self, index) -> "Poses":
+        """The poses of frames ``index`` (fancy indices copy; a slice gives views of these arrays)."""
         return Poses(self.transl[index], self.rot[index], self.phi[index])
 
     def put(self, index, other: "Poses") -> None:
+        """Write ``other`` into frames ``index`` of these arrays, in place.
+
+        Parameters
+        ----------
+        index : int array, bool mask or slice
+            The frames to overwrite, T' of them.
+        other : Poses
+            T' frames: ``transl`` metres, ``rot`` rotation matrices, ``phi`` radians.
+        """
         self.transl[index], self.rot[index], self.phi[index] = other.transl, other.rot, other.phi
 
 
 def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, scale, free=None):
-    """Total cost per frame (T,), and the pieces the next step needs."""
+    """Total cost per frame (T,), and the pieces the next step needs.
+
+    Parameters
+    ----------
+    model : MarkerModel
+    poses : Poses
+        ``transl`` (T, 3) metres, ``rot`` (T, 3, 3), ``phi`` (T, 27) radians.
+    target : ndarray (T, M, 3)
+        Observed markers, metres (ignored where not ``observed``).
+    observed : ndarray (T, M) bool
+    held : ndarray (T, 27) bool
+        Held angles (see :func:`prior_terms`).
+    priors : Priors
+    scale : float
+        Scale of the Cauchy loss, metres.
+    free : ndarray (T, 27) bool, optional
+        Unconstrained angles, for the synergy prior.
+
+    Returns
+    -------
+    cost : ndarray (T,)
+        Robust marker cost plus half the squared prior residuals, square metres.
+    parts : tuple
+        ``(kin, resid (T, M, 3) metres, norms (T, M) metres, prior residuals (T, R) metres,
+        prior Jacobian (T, R, 27) metres per radian)``; ``kin`` is :meth:`MarkerModel.kinematics`.
+    """
     kin = model.kinematics(poses.transl, poses.rot, poses.phi)
     x = model.positions(poses.transl, poses.rot, poses.phi, kin=kin)
     resid = np.where(observed[..., None], x - target, 0.0)

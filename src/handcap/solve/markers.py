@@ -23,6 +23,10 @@ precomputed (rows, 64) matrix with the maps of all frames. The solver asks for
 ``J^T W J`` and ``J^T W r`` (:meth:`MarkerModel.normal_equations`), built from
 the few non-zero entries per marker in single precision, never the dense
 (3M x 33) Jacobian; :meth:`MarkerModel.jacobian` remains for checks and users.
+
+This module owns :class:`MarkerModel`. The angle and rotation maths it builds
+on is :mod:`handcap.solve.rotation_math`; the rigid initial pose of a take is
+:mod:`handcap.solve.rigid_start` (both re-exported here).
 """
 
 from __future__ import annotations
@@ -30,38 +34,17 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 
-from handcap.hand.anatomy import PARENTS, PHI_AXIS, PHI_JOINT
+from handcap.hand.anatomy import PHI_JOINT
 from handcap.hand.kinematics import chain_transforms
 from handcap.hand.model import HandModel
-from handcap.objects.rigid import kabsch
+from handcap.solve.rigid_start import rigid_start
+from handcap.solve.rotation_math import DESCENDANTS, cross, cross0, descendants, dof_axes, local_rotations
+
+# The rotation helpers and rigid_start live in their own modules and are re-exported here for existing callers.
+__all__ = ["DESCENDANTS", "MarkerModel", "N_PARAMS", "cross", "cross0", "descendants", "local_rotations",
+           "rigid_start"]
 
 N_PARAMS = 33  # translation 3, world rotation increment 3, phi 27
-
-
-def descendants() -> np.ndarray:
-    """(16, 16) matrix: entry [j, k] is 1 when segment k moves with joint j (k = j included)."""
-    out = np.eye(16)
-    for k in range(1, 16):
-        j = PARENTS[k]
-        while j >= 0:
-            out[j, k] = 1.0
-            j = PARENTS[j]
-    return out
-
-
-DESCENDANTS = descendants()
-
-
-def cross(a, b) -> np.ndarray:
-    """``a x b`` over the last axis (3); a few times faster than ``np.cross`` on small batches."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def cross0(a, b) -> np.ndarray:
-    """``a x b`` over the first axis (3, ...): for component-first arrays."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def _affine_columns(world_rot, world_pos, rest_joints) -> np.ndarray:
@@ -80,20 +63,6 @@ def _affine_rows(weights, points) -> np.ndarray:
     """Rows (N, 64) ``[w_j p, w_j]`` for points (N, 3) blended by segment weights (N, 16)."""
     aug = np.concatenate([points, np.ones((len(points), 1))], axis=1)  # (N, 4)
     return (weights[:, :, None] * aug[:, None, :]).reshape(len(points), 64)
-
-
-def local_rotations(phi, frames) -> np.ndarray:
-    """Joint rotations ``C E(phi) C^T`` (T, 15, 3, 3) from anatomical angles (T, 27)."""
-    angles = np.zeros(phi.shape[:-1] + (15, 3))
-    angles[..., PHI_JOINT - 1, PHI_AXIS] = phi
-    ct, cs, cb = (np.cos(angles[..., i]) for i in range(3))
-    st, ss, sb = (np.sin(angles[..., i]) for i in range(3))
-    # Rz(bend) Ry(spread) Rx(twist) written out (handcap.core.rotations.matrix_from_euler_zyx).
-    e = np.empty(phi.shape[:-1] + (15, 3, 3))
-    e[..., 0, 0], e[..., 0, 1], e[..., 0, 2] = cb * cs, cb * ss * st - sb * ct, cb * ss * ct + sb * st
-    e[..., 1, 0], e[..., 1, 1], e[..., 1, 2] = sb * cs, sb * ss * st + cb * ct, sb * ss * ct - cb * st
-    e[..., 2, 0], e[..., 2, 1], e[..., 2, 2] = -ss, cs * st, cs * ct
-    return frames @ e @ np.swapaxes(frames, -1, -2)
 
 
 class MarkerModel:
@@ -149,17 +118,54 @@ class MarkerModel:
 
     @property
     def n_markers(self) -> int:
+        """Number of markers M."""
         return len(self.rest_markers)
 
     def kinematics(self, transl, rot, phi):
-        """World rotations (T, 16, 3, 3), joint positions (T, 16, 3) and local rotations."""
+        """World rotations (T, 16, 3, 3), joint positions (T, 16, 3) and local rotations.
+
+        Parameters
+        ----------
+        transl : ndarray (T, 3)
+            Translation, metres.
+        rot : ndarray (T, 3, 3)
+            Global orientation (MANO ``global_orient`` as a matrix).
+        phi : ndarray (T, 27)
+            Anatomical angles, radians.
+
+        Returns
+        -------
+        world_rot : ndarray (T, 16, 3, 3)
+            World rotation of every segment.
+        world_pos : ndarray (T, 16, 3)
+            Posed joint positions, metres, ``transl`` included.
+        rotations : ndarray (T, 16, 3, 3)
+            Local rotations: ``rot``, then :func:`local_rotations`.
+        """
         local = local_rotations(phi, self.frames)
         rotations = np.concatenate([rot[:, None], local], axis=1)
         world_rot, world_pos = chain_transforms(rotations, self.rest_joints)
         return world_rot, world_pos + transl[:, None], rotations
 
     def positions(self, transl, rot, phi, *, kin=None) -> np.ndarray:
-        """Marker positions (T, M, 3) in metres, exact."""
+        """Marker positions (T, M, 3) in metres, exact.
+
+        Parameters
+        ----------
+        transl : ndarray (T, 3)
+            Translation, metres.
+        rot : ndarray (T, 3, 3)
+            Global orientation.
+        phi : ndarray (T, 27)
+            Anatomical angles, radians.
+        kin : tuple, optional
+            :meth:`kinematics` of the same pose, when the caller has it (the pose is then not read).
+
+        Returns
+        -------
+        ndarray (T, M, 3)
+            Metres.
+        """
         world_rot, world_pos, rotations = kin if kin is not None else self.kinematics(transl, rot, phi)
         n_frames = len(world_rot)
         if self.has_correctives:  # rest shape changes with the pose: blend the maps, then apply them
@@ -188,6 +194,24 @@ class MarkerModel:
         moves with the angle's joint are computed; the rest are zero. ``out``,
         if given, must hold zeros wherever this structure has none (a buffer
         filled by earlier calls qualifies); it is overwritten and returned.
+
+        Parameters
+        ----------
+        transl : ndarray (T, 3)
+            Translation, metres.
+        rot : ndarray (T, 3, 3)
+            Global orientation.
+        phi : ndarray (T, 27)
+            Anatomical angles, radians.
+        kin : tuple, optional
+            :meth:`kinematics` of the same pose (``transl`` still gives T).
+        out : ndarray (T, 3, M, 33), optional
+            Buffer to fill.
+
+        Returns
+        -------
+        ndarray (T, 3, M, 33)
+            No unit for the translation columns; metres per radian for the rotation and angle columns.
         """
         world_rot, world_pos, _ = kin if kin is not None else self.kinematics(transl, rot, phi)
         n_frames, m = len(transl), self.n_markers
@@ -347,53 +371,20 @@ class MarkerModel:
         return cache[dtype]
 
     def dof_axes(self, phi, world_rot) -> np.ndarray:
-        """World axis (T, 27, 3) of every anatomical angle (intrinsic z-y'-x'' Euler axes)."""
-        angles = np.zeros(phi.shape[:-1] + (15, 3))
-        angles[..., PHI_JOINT - 1, PHI_AXIS] = phi
-        bend, spread = angles[..., 2], angles[..., 1]
-        cb, sb, cs, ss = np.cos(bend), np.sin(bend), np.cos(spread), np.sin(spread)
-        zero, one = np.zeros_like(bend), np.ones_like(bend)
-        # Axes in the E frame: bend about z, spread about Rz(b) y, twist about Rz(b) Ry(s) x.
-        local = np.stack([np.stack([cb * cs, sb * cs, -ss], -1),          # twist
-                          np.stack([-sb, cb, zero], -1),                  # spread
-                          np.stack([zero, zero, one], -1)], -2)           # bend
-        # Into the parent's frame (mirrored frames turn the axis round), then the world.
-        in_parent = np.einsum("jab,tjkb->tjka", self.frames, local) * self.frame_sign[None, :, None, None]
-        parent_rot = world_rot[:, PARENTS[1:]]  # (T, 15, 3, 3)
-        world = np.einsum("tjab,tjkb->tjka", parent_rot, in_parent)  # (T, 15, 3 dofs, 3)
-        return world[:, PHI_JOINT - 1, PHI_AXIS]
+        """World axis (T, 27, 3) of every anatomical angle (intrinsic z-y'-x'' Euler axes).
 
+        :func:`handcap.solve.rotation_math.dof_axes` with this model's joint frames.
 
-def rigid_start(model: MarkerModel, target, observed, rest_phi) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-frame rotation and translation from the palm markers (Kabsch).
+        Parameters
+        ----------
+        phi : ndarray (T, 27)
+            Anatomical angles, radians.
+        world_rot : ndarray (T, 16, 3, 3)
+            World rotations of the segments (:meth:`kinematics`).
 
-    All markers are used where fewer than three palm markers are seen, or
-    where the palm markers do not span a plane on the model (2nd singular
-    value of their spread under 5 mm).
-
-    Returns rotation (T, 3, 3), translation (T, 3) and a (T,) mask of frames
-    where at least three markers made the alignment possible.
-    """
-    n = len(target)
-    rest = model.positions(np.zeros((1, 3)), np.eye(3)[None], rest_phi[None])[0]
-    palm = model.marker_weights[:, 0] > 0.9
-    if palm.sum() >= 3:
-        # Palm markers that (nearly) coincide on the model, as position-less markers do before a calibration
-        # has placed them, fix no rotation: align all markers then.
-        spread = np.linalg.svd(rest[palm] - rest[palm].mean(axis=0), compute_uv=False)
-        if spread[1] < 0.005:
-            palm = np.zeros_like(palm)
-    use_palm = (observed & palm).sum(axis=1) >= 3
-    weights = np.where(use_palm[:, None], observed & palm, observed).astype(float)
-    ok = weights.sum(axis=1) >= 3
-    src = np.broadcast_to(rest, target.shape)
-    tgt = np.where(observed[..., None], target, 0.0)
-    rot = np.tile(np.eye(3), (n, 1, 1))
-    trans = np.zeros((n, 3))
-    if ok.any():
-        r, t = kabsch(src[ok], tgt[ok], weights[ok])
-        rot[ok] = r
-        # Kabsch gives y = R x + t about the origin; the model turns about the wrist joint J0.
-        j0 = model.rest_joints[0]
-        trans[ok] = t + np.einsum("tij,j->ti", r, j0) - j0
-    return rot, trans, ok
+        Returns
+        -------
+        ndarray (T, 27, 3)
+            Unit vectors in the world.
+        """
+        return dof_axes(phi, world_rot, self.frames, self.frame_sign)

@@ -42,7 +42,8 @@ from handcap.hand import OpenHand
 from handcap.quality.filters import lowpass, smooth_rotations
 from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
-from handcap.solve.markers import MarkerModel, rigid_start
+from handcap.solve.markers import MarkerModel
+from handcap.solve.rigid_start import rigid_start
 
 METHODS = ("lm", "adam")
 #: A fit whose mean marker error exceeds this (metres) is implausible for a calibrated attachment: warned.
@@ -52,7 +53,19 @@ MRE_WARNING = MRE_LIMIT
 def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[str]]:
     """Positions (T, M, 3) of the named markers in ``markers`` (NaN columns for absent names).
 
-    Returns the array and the names found nowhere in the file.
+    Parameters
+    ----------
+    markers : MarkerSequence
+        Metres; names matched as :meth:`MarkerSequence.index` does (``Subject:`` prefixes allowed).
+    names : sequence of str (M,)
+        The markers wanted, in output order.
+
+    Returns
+    -------
+    positions : ndarray (T, M, 3)
+        Metres, NaN where missing or absent.
+    absent : list of str
+        The names found nowhere in the file (or matching several prefixed markers).
     """
     out = np.full((markers.n_frames, len(names), 3), np.nan)
     absent = []

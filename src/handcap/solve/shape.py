@@ -31,6 +31,17 @@ def hand_measurements(hand, betas=None) -> dict:
       (thumb excluded) within 4 mm of the mean MCP line;
     * ``<finger>_length``: MCP joint to fingertip (for the thumb, its MCP
       joint to its tip).
+
+    Parameters
+    ----------
+    hand : HandModel
+    betas : ndarray (10,), optional
+        Shape values; zeros (the average hand) by default.
+
+    Returns
+    -------
+    dict of str to float
+        The lengths of :data:`MEASUREMENTS`, metres (``hand_breadth`` NaN when no skin lies in the band).
     """
     betas = np.zeros(10) if betas is None else np.asarray(betas, dtype=np.float64)
     vertices, joints, tips = hand.rest(betas)
@@ -58,6 +69,25 @@ def betas_from_measurements(hand, prior: float = 0.01, **lengths) -> np.ndarray:
     Least squares on the relative length errors, with a pull of ``prior`` per
     unit towards the average hand, so values the measurements do not
     determine stay at zero.
+
+    Parameters
+    ----------
+    hand : HandModel
+    prior : float
+        Weight of each shape value's residual against the relative length errors (no unit).
+    **lengths : float
+        Measured lengths, metres, each between 5 mm and 0.5 m, named as in :data:`MEASUREMENTS`
+        (see :func:`hand_measurements` for their definitions).
+
+    Returns
+    -------
+    ndarray (10,)
+        Shape values, bounded to [-4, 4].
+
+    Raises
+    ------
+    HandcapError
+        An unknown name, no length, or a length that is not a hand length in metres.
 
     Examples
     --------
