@@ -167,7 +167,19 @@ class CameraRig:
         return np.stack([r[0] for r in results]), np.stack([r[1] for r in results])
 
     def undistort_pixels(self, pixels, *, normalised: bool = False) -> np.ndarray:
-        """Undistort each camera's pixels (C, N, 2); see :meth:`Camera.undistort_pixels`."""
+        """Undistort each camera's pixels (see :meth:`Camera.undistort_pixels`).
+
+        Parameters
+        ----------
+        pixels : array_like (C, N, 2)
+            Pixels in each camera's distorted image.
+        normalised : bool
+            Return normalised image coordinates (x/z, y/z) instead of pixels of the undistorted image.
+
+        Returns
+        -------
+        ndarray (C, N, 2)
+        """
         pixels = self._per_camera(pixels)
         return np.stack([camera.undistort_pixels(p, normalised=normalised)
                          for camera, p in zip(self.cameras, pixels)])
