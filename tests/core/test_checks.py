@@ -38,6 +38,8 @@ def test_arrays_come_back_as_float64_of_the_checked_shape():
     (checks.check_odd_window, (5,), "window must be an odd number of frames, at least 7"),
     (checks.check_cutoff, (10.0, 20.0, 2), "not below the Nyquist frequency 10 Hz"),
     (checks.check_cutoff, (5.0, 20.0, 9), "filter order must be an integer from 1 to 8"),
+    (checks.check_cutoff, (None, 20.0, 2), "filter cutoff must be a positive frequency in Hz, got None"),
+    (checks.check_cutoff, ("fast", 20.0, 2), "filter cutoff must be a positive frequency in Hz, got 'fast'"),
     (checks.check_positions, (np.zeros((4, 3)),), "positions must have shape (T, M, 3)"),
     (checks.check_vector, ([1, 2], 3, "t"), "t must have 3 values"),
     (checks.check_vector, ([1, np.inf, 2], 3, "t"), "t must be finite"),

@@ -3,7 +3,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from handcap import HandcapError
-from handcap.quality import lowpass, smooth_rotations
+from handcap.core.motion import HandMotion, ObjectMotion
+from handcap.quality import lowpass, smooth_hand_motion, smooth_object_motion, smooth_rotations
 
 
 def test_butterworth_passes_slow_and_stops_fast_motion_without_lag():
@@ -37,3 +38,17 @@ def test_rotations_through_180_degrees_do_not_flip():
     smooth = smooth_rotations(rotvecs, rate, cutoff=5.0)
     err = (Rotation.from_rotvec(smooth).inv() * Rotation.from_rotvec(rotvecs)).magnitude()
     assert err.max() < 1e-3
+
+
+def test_smoothing_keeps_the_warnings_of_the_motion():
+    # A smoothed implausible fit is still one: the warnings stored with the motion stay with it.
+    t = np.arange(60) / 50.0
+    phi = 0.2 * np.sin(2 * np.pi * t)[:, None] * np.ones(27)
+    motion = HandMotion(np.zeros(10), np.zeros((60, 3)), np.zeros((60, 45)), np.zeros((60, 3)), 50.0, phi=phi,
+                        warnings=("solve MRE of 1 marker(s) above 5 mm",))
+    smoothed = smooth_hand_motion(motion, cutoff=5.0)
+    assert smoothed.warnings == motion.warnings
+    assert np.abs(smoothed.phi - phi).max() < 0.05  # and it is smoothed, not the same motion
+    obj = ObjectMotion(np.zeros((60, 3)), np.c_[t, t, t], 50.0, warnings=("residual 9 mm",))
+    assert smooth_object_motion(obj, cutoff=5.0).warnings == ("residual 9 mm",)
+

@@ -281,6 +281,10 @@ def check_cutoff(cutoff, rate: float, order: int) -> float:
     """
     if not (isinstance(order, (int, np.integer)) and 1 <= order <= 8):
         raise HandcapError(f"filter order must be an integer from 1 to 8, got {order}")
+    try:
+        cutoff = float(cutoff)
+    except (TypeError, ValueError):
+        raise HandcapError(f"filter cutoff must be a positive frequency in Hz, got {cutoff!r}") from None
     if not (np.isfinite(cutoff) and cutoff > 0):
         raise HandcapError(f"filter cutoff must be a positive frequency in Hz, got {cutoff}")
     if cutoff >= rate / 2:

@@ -180,12 +180,21 @@ class MarkerAttachment:
         Parameters
         ----------
         names : sequence of str
-            Marker names, each one of ``marker_names`` (an unknown name raises ``ValueError``).
+            Marker names, each one of ``marker_names``.
 
         Returns
         -------
         MarkerAttachment
+
+        Raises
+        ------
+        HandcapError
+            A name the attachment does not hold (all of them named).
         """
+        unknown = [n for n in names if n not in self.marker_names]
+        if unknown:
+            raise HandcapError(f"the attachment has no marker {', '.join(map(repr, unknown))}; it holds "
+                               f"{', '.join(self.marker_names)}")
         idx = [self.marker_names.index(n) for n in names]
         return MarkerAttachment(tuple(names), self.triangles[idx], self.barycentric[idx], self.offset[idx],
                                 self.betas, self.model, self.side, self.warnings)

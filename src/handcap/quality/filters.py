@@ -117,8 +117,8 @@ def smooth_hand_motion(motion: HandMotion, hand=None, *, cutoff: float = 5.0, or
 
     ``hand_pose`` is rebuilt from the filtered angles (filtering axis-angle
     vectors directly would not give anatomical motion) and the joints are
-    recomputed with ``hand``; ``marker_names``, ``marker_fit``,
-    ``marker_residuals`` and ``warnings`` are not carried over.
+    recomputed with ``hand``; ``warnings`` are carried over (a smoothed implausible fit is still one), while
+    ``marker_names``, ``marker_fit`` and ``marker_residuals`` (of the unsmoothed poses) are not.
 
     Parameters
     ----------
@@ -153,14 +153,15 @@ def smooth_hand_motion(motion: HandMotion, hand=None, *, cutoff: float = 5.0, or
         hand = OpenHand(motion.side)
     hand_pose = hand.hand_pose_from_phi(phi)
     joints = hand.forward(motion.betas, orient, hand_pose, transl, vertices=False).joints
-    return HandMotion(motion.betas, orient, hand_pose, transl, motion.rate, motion.side, phi, motion.model, joints)
+    return HandMotion(motion.betas, orient, hand_pose, transl, motion.rate, motion.side, phi, motion.model, joints,
+                      warnings=motion.warnings)
 
 
 def smooth_object_motion(motion: ObjectMotion, *, cutoff: float = 5.0, order: int = 2) -> ObjectMotion:
     """An object motion low-passed (translation and rotation); unsolved (NaN) frames stay NaN.
 
     Each run of solved frames is filtered on its own; runs too short to filter are kept as they
-    are. ``warnings`` are not carried over.
+    are. ``warnings`` are carried over.
 
     Parameters
     ----------
@@ -174,7 +175,7 @@ def smooth_object_motion(motion: ObjectMotion, *, cutoff: float = 5.0, order: in
     Returns
     -------
     ObjectMotion
-        Same frames, rate, name, markers, canonical shape and state.
+        Same frames, rate, name, markers, canonical shape, state and warnings.
     """
     ok = np.isfinite(motion.rotation).all(axis=1)
     rotation = np.full_like(motion.rotation, np.nan)
@@ -186,4 +187,4 @@ def smooth_object_motion(motion: ObjectMotion, *, cutoff: float = 5.0, order: in
         else:
             rotation[start:stop] = motion.rotation[start:stop]
     return ObjectMotion(rotation, translation, motion.rate, motion.name, motion.marker_names, motion.canonical,
-                        motion.state)
+                        motion.state, warnings=motion.warnings)
