@@ -19,11 +19,15 @@ Placement rules (all distances in metres):
 * tips-5: the nail markers and the triad.
 * active-9: wrist, index base, pinky base (the alignment triad of the active
   glove), one on the middle of the back of the hand, five nails; 5 mm LEDs.
-* dense-patches: 19 patches of inner checkerboard corners at 5 mm pitch, one on
-  the back of every phalanx (3 columns across the finger, rows along it, kept
-  3-4 mm clear of the joints), two on the dorsum and two on the palm; a corner
-  is kept only where the skin moves rigidly with its segment (skinning weight
-  of that segment >= 0.8). 0.5 mm off the skin (a printed transfer on tape).
+* dense-patches: every corner of the 19 coded patches of one hand of
+  ``handcap pattern`` (``handcap.detect.session.HAND_PATCHES``, 5 mm squares):
+  a strip three squares wide on the back of every phalanx (rows along the
+  bone, centred between joints kept 3-4 mm clear, the tape wrapped around the
+  finger: the columns are arcs along the skin), two patches on the dorsum and
+  two on the palm. 0.5 mm off the skin (a printed transfer on tape). Each
+  patch reads unmirrored from outside the skin (its corner names follow the
+  pattern template: PATCH_rRcC). A corner is listed only where the skin moves
+  rigidly with its segment (skinning weight of that segment >= 0.8).
 """
 
 from __future__ import annotations
@@ -39,6 +43,8 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from handcap.hand import OpenHand  # noqa: E402
 from handcap.hand.anatomy import hand_axes  # noqa: E402
+from handcap.detect.pattern import PITCH, Patch, checker_tags  # noqa: E402
+from handcap.detect.session import HAND_PATCHES  # noqa: E402
 from handcap.layouts import LayoutMarker, MarkerLayout  # noqa: E402
 
 OUT = ROOT / "src" / "handcap" / "layouts"
@@ -60,12 +66,14 @@ class Surface:
         self.dorsal = -self.palmar
 
     def hit(self, origin, direction, segment: str, rigid: float = 0.0):
-        """First skin point along the ray that lies on ``segment`` (or None)."""
-        seg = self.hand.segment_id(segment)
+        """First skin point along the ray that lies on ``segment`` (or None); any segment when it is None."""
         locs, _, faces = self.mesh.ray.intersects_location(origin[None], direction[None] / np.linalg.norm(direction))
         if len(locs) == 0:
             return None
         order = np.argsort(np.linalg.norm(locs - origin, axis=1))
+        if segment is None:
+            return locs[order[0]]
+        seg = self.hand.segment_id(segment)
         first = faces[order[0]]
         # Most of the triangle on the segment (all of it where rigidity is asked for).
         if (self.face_segment[first] == seg).sum() < (3 if rigid else 2) or self.face_rigid[first] < rigid:
@@ -92,6 +100,21 @@ class Surface:
         side = np.cross(axis, back)
         origin = a + fraction * (b - a) + across * side
         return self.hit(origin, back, f"{finger}_{SEGMENTS[k]}", rigid)
+
+    def around_bone(self, finger: str, k: int, fraction: float, arc: float):
+        """Skin point of a tape wrapped around the phalanx: ``arc`` metres along the skin from the back's midline."""
+        a, b = self.bone(finger, k)
+        axis = (b - a) / np.linalg.norm(b - a)
+        back = self.back_direction(finger, k)
+        back = back - axis * (back @ axis)
+        back /= np.linalg.norm(back)
+        side = np.cross(axis, back)
+        origin = a + fraction * (b - a)
+        top = self.hit(origin, back, f"{finger}_{SEGMENTS[k]}")
+        if top is None:
+            return None
+        angle = arc / np.linalg.norm(top - origin)
+        return self.hit(origin, np.cos(angle) * back + np.sin(angle) * side, f"{finger}_{SEGMENTS[k]}", RIGID)
 
     def on_palm(self, x: float, z: float, palmar: bool = False, rigid: float = 0.0):
         origin = np.array([x, 0.0, z])
@@ -151,34 +174,54 @@ def active_9(s: Surface) -> MarkerLayout:
                         "sphere", "active LED glove: alignment triad, back of hand, five fingertips")
 
 
+def _unmirrored(grid: list, outward: np.ndarray) -> list:
+    """``grid`` (rows of points or None) with its columns reversed if needed, so the patch reads unmirrored.
+
+    Seen from outside the skin, columns run to the right and rows downwards, so column x row points into the skin.
+    """
+    found = [(r, c, np.asarray(p)) for r, row in enumerate(grid) for c, p in enumerate(row) if p is not None]
+    points = np.array([p for _, _, p in found])
+    rc = np.array([(r, c) for r, c, _ in found], dtype=float)
+    # Least-squares affine map (r, c) -> point: its columns are the row and column directions.
+    coef = np.linalg.lstsq(np.c_[rc, np.ones(len(rc))], points, rcond=None)[0]
+    dr, dc = coef[0], coef[1]
+    return [row[::-1] for row in grid] if np.cross(dc, dr) @ outward > 0 else grid
+
+
 def dense_patches(s: Surface) -> MarkerLayout:
-    pitch = 0.005
+    """Every corner of the hand patches of ``handcap.detect.session.HAND_PATCHES`` on the template hand."""
+    pitch = PITCH
     markers = []
     for finger in ("thumb", "index", "middle", "ring", "pinky"):
         for k in range(3):
             a, b = s.bone(finger, k)
             length = np.linalg.norm(b - a)
+            rows, cols, segment = HAND_PATCHES[f"{finger}_{SEGMENTS[k]}"]
             lo, hi = (0.004, length - 0.004) if k < 2 else (0.003, length - 0.005)
-            rows = np.arange(lo + (hi - lo) % pitch / 2, hi + 1e-9, pitch)
-            patch = f"{finger}_{SEGMENTS[k]}"
-            for r, along in enumerate(rows):
-                for c, across in enumerate((-pitch, 0.0, pitch)):
-                    p = s.on_bone(finger, k, along / length, across, rigid=RIGID)
-                    if p is not None:
-                        markers.append(LayoutMarker(f"{patch}_r{r}c{c}", patch, p, patch))
-    grids = {"dorsum_proximal": (np.arange(0.012, 0.043, pitch), False),
-             "dorsum_distal": (np.arange(0.047, 0.078, pitch), False),
-             "palm_proximal": (np.arange(0.020, 0.046, pitch), True),
-             "palm_distal": (np.arange(0.050, 0.071, pitch), True)}
-    for patch, (xs, palmar) in grids.items():
-        zs = np.arange(-0.020, 0.0251, pitch) if not palmar else np.arange(-0.015, 0.0251, pitch)
-        for r, x in enumerate(xs):
-            for c, z in enumerate(zs):
-                p = s.on_palm(x, z, palmar, rigid=RIGID)
-                if p is not None:
-                    markers.append(LayoutMarker(f"{patch}_r{r}c{c}", "palm", p, patch))
+            start = (lo + hi) / 2 - rows * pitch / 2
+            grid = [[s.around_bone(finger, k, (start + r * pitch) / length, (c - cols / 2) * pitch)
+                     for c in range(cols + 1)] for r in range(rows + 1)]
+            markers += _patch_markers(f"{finger}_{SEGMENTS[k]}", segment, _unmirrored(grid, s.back_direction(
+                finger, k)))
+    # Dorsum and palm: rows from the wrist towards the fingers (x), columns across the hand (z).
+    grids = {"dorsum_proximal": (0.012, -0.020, False), "dorsum_distal": (0.047, -0.020, False),
+             "palm_proximal": (0.020, -0.010, True), "palm_distal": (0.050, -0.015, True)}
+    for patch, (x0, z0, palmar) in grids.items():
+        rows, cols, segment = HAND_PATCHES[patch]
+        grid = [[s.on_palm(x0 + r * pitch, z0 + c * pitch, palmar, rigid=RIGID) for c in range(cols + 1)]
+                for r in range(rows + 1)]
+        markers += _patch_markers(patch, segment, _unmirrored(grid, s.palmar if palmar else s.dorsal))
     return MarkerLayout("dense-patches", "right", tuple(markers), (), 0.0005, "patch",
-                        "19 checkerboard patches (DexterCap), inner corners at 5 mm pitch")
+                        "19 coded checkerboard patches (DexterCap), every corner of handcap pattern's hand "
+                        "patches, 5 mm squares")
+
+
+def _patch_markers(name: str, segment: str, grid: list) -> list:
+    """Layout markers for the corners of one patch (vertices touching a white square) that lie on rigid skin."""
+    rows, cols = len(grid) - 1, len(grid[0]) - 1
+    patch = Patch(name, "right", segment, checker_tags(rows, cols, lambda: "00"))
+    return [LayoutMarker(patch.corner_name(int(r), int(c), owner=False), segment, grid[r][c], name)
+            for r, c in patch.vertices() if grid[r][c] is not None]
 
 
 def main() -> None:

@@ -14,6 +14,7 @@ from handcap.cli.layout import add_layout
 from handcap.cli.multiview import add_clean, add_multiview
 from handcap.cli.objects import add_objects
 from handcap.cli.occlusion import add_occlusion
+from handcap.cli.pattern import add_pattern
 from handcap.cli.solve import add_solve
 from handcap.cli.synth import add_synth
 from handcap import __version__
@@ -39,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_clean(verbs)
     add_calibrate(verbs)
     add_layout(verbs)
+    add_pattern(verbs)
     return parser
 
 

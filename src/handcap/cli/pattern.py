@@ -1,0 +1,43 @@
+"""``handcap pattern``: printable coded patches and their template."""
+
+from __future__ import annotations
+
+from handcap.detect.alphabet import ALPHABET
+from handcap.detect.session import HANDS, OBJECT_PATCHES
+from handcap.detect.sheet import PAPERS
+from handcap.steps import pattern as pattern_step
+
+
+def _list(text: str) -> tuple[str, ...]:
+    return tuple(t.strip() for t in text.split(",") if t.strip()) if text not in ("", "none") else ()
+
+
+def _cmd_pattern(a):
+    return pattern_step.pattern(a.out, hands=_list(a.hands), objects=_list(a.objects), alphabet=a.alphabet,
+                                pitch_mm=a.pitch, font=a.font, paper=a.paper, template=a.template,
+                                svg=not a.no_svg, force=a.force)
+
+
+def add_pattern(verbs) -> None:
+    p = verbs.add_parser("pattern", help="printable coded patches (PDF, SVG) and their template pattern.toml",
+                         description="Write the coded checkerboard patches of a capture session: 19 per hand "
+                                     "(knuckles, dorsum, palm) and the faces of its objects, every white square "
+                                     "with a two-glyph tag unique in the session (the first glyph underlined), "
+                                     "at exact physical size with a 50 mm scale bar; and pattern.toml, the "
+                                     "template that handcap detect and the layouts use.")
+    p.add_argument("--out", required=True, help="folder to write pattern.toml, pattern.pdf and pattern-N.svg into")
+    p.add_argument("--hands", default=",".join(HANDS), help="hands that wear patches: right,left, right, left or "
+                                                            "none (default %(default)s)")
+    p.add_argument("--objects", default=",".join(OBJECT_PATCHES),
+                   help=f"objects with patches, comma-separated from {', '.join(OBJECT_PATCHES)}, or none "
+                        "(default %(default)s)")
+    p.add_argument("--alphabet", default=ALPHABET, help="glyphs of the tags (default %(default)s; DexterCap's "
+                                                        "patches use 0123456789ACEFHPUY)")
+    p.add_argument("--pitch", type=float, default=5.0, help="side of a square, mm (default %(default)s)")
+    p.add_argument("--font", help="a bold monospace .ttf/.otf font for the glyphs (default: DejaVu Sans Mono Bold, "
+                                  "shipped with matplotlib)")
+    p.add_argument("--paper", choices=tuple(PAPERS), default="a4", help="page size (default %(default)s)")
+    p.add_argument("--template", help="print the patches of this pattern.toml instead of making a new template")
+    p.add_argument("--no-svg", action="store_true", help="write the PDF only")
+    p.add_argument("--force", action="store_true", help="write into a folder that already holds files")
+    p.set_defaults(run=_cmd_pattern)

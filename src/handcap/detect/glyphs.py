@@ -1,0 +1,186 @@
+"""The drawing of a coded patch: squares, glyph outlines and underlines, in millimetres.
+
+One geometry feeds the printable pages (:mod:`handcap.detect.sheet`) and the
+renderer's textures, so what is printed and what the detector is trained on
+are the same shapes. Glyph outlines come from a TrueType/OpenType font through
+matplotlib's text-to-path conversion; the default font is the DejaVu Sans Mono
+Bold that ships with matplotlib, so a pattern looks the same on every machine.
+
+The drawing frame of a patch: millimetres, ``x`` to the right and ``y``
+downwards, grid vertex ``(r, c)`` at ``(c * pitch, r * pitch)``. The black
+margin reaches half a square beyond the grid on every side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from matplotlib import get_data_path
+from matplotlib.font_manager import FontProperties
+from matplotlib.ft2font import FT2Font
+from matplotlib.path import Path as MplPath
+from matplotlib.textpath import TextPath
+from matplotlib.transforms import Affine2D
+
+from handcap.core.errors import HandcapError
+from handcap.detect.pattern import Patch
+
+#: matplotlib's own copy of DejaVu Sans Mono Bold (Bitstream Vera licence).
+DEFAULT_FONT = Path(get_data_path()) / "fonts" / "ttf" / "DejaVuSansMono-Bold.ttf"
+#: Glyph height (of ``H``) as a fraction of the square's side.
+CAP_HEIGHT = 0.46
+#: Top of the glyphs and the underline's top, fractions of the side from the square's top.
+GLYPH_TOP = 0.19
+UNDERLINE_TOP = 0.73
+UNDERLINE_THICKNESS = 0.07
+#: Black margin around a patch, squares.
+MARGIN = 0.5
+
+
+@dataclass(frozen=True)
+class Font:
+    """Glyph outlines of one font, scaled so that ``H`` is 1 high.
+
+    Attributes
+    ----------
+    path : Path
+        The font file.
+    name : str
+        Family and style, e.g. ``DejaVu Sans Mono Bold``.
+    advance : float
+        The widest advance of the alphabet's glyphs, in ``H`` heights.
+    """
+
+    path: Path
+    name: str
+    advance: float
+
+    def outline(self, ch: str) -> MplPath:
+        """The outline of glyph ``ch``, baseline at y = 0, y up, ``H`` 1 high.
+
+        Parameters
+        ----------
+        ch : str
+
+        Returns
+        -------
+        matplotlib.path.Path
+        """
+        return _outline(str(self.path), ch)
+
+
+@lru_cache(maxsize=64)
+def _outline(path: str, ch: str) -> MplPath:
+    prop = FontProperties(fname=path)
+    scale = 1.0 / _cap_height(path)
+    return TextPath((0, 0), ch, size=1.0, prop=prop).transformed(Affine2D().scale(scale))
+
+
+@lru_cache(maxsize=16)
+def _cap_height(path: str) -> float:
+    verts = TextPath((0, 0), "H", size=1.0, prop=FontProperties(fname=path)).vertices
+    return float(verts[:, 1].max() - verts[:, 1].min())
+
+
+def load_font(path=None, alphabet: str = "") -> Font:
+    """A font for patches: ``path`` (a .ttf/.otf file) or the default bold monospace.
+
+    Parameters
+    ----------
+    path : str, Path or None
+    alphabet : str
+        Glyphs that must have outlines in the font.
+
+    Returns
+    -------
+    Font
+
+    Raises
+    ------
+    HandcapError
+        A missing or unreadable font, or one without a glyph of ``alphabet``.
+    """
+    path = DEFAULT_FONT if path is None else Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no such font file; give a .ttf or .otf file")
+    try:
+        ft = FT2Font(str(path))
+        name = f"{ft.family_name} {ft.style_name}".replace(" Regular", "")
+        cap = _cap_height(str(path))
+    except (RuntimeError, OSError, ValueError) as err:
+        raise HandcapError(f"{path}: not a font file matplotlib can read ({err})") from None
+    if cap <= 0:
+        raise HandcapError(f"{path}: the font has no outline for 'H'; give a font with Latin capitals")
+    advance = 0.0
+    for ch in alphabet:
+        outline = _outline(str(path), ch)
+        if len(outline.vertices) == 0:
+            raise HandcapError(f"{path}: the font has no outline for glyph {ch!r}")
+        advance = max(advance, float(np.ptp(outline.vertices[:, 0])))
+    return Font(path, name, advance or 0.6 / 0.73)
+
+
+def square_ink(text: str, x0: float, y0: float, side: float, font: Font) -> list[MplPath]:
+    """The glyphs and underline of one white square, in the drawing frame (mm, y down).
+
+    Parameters
+    ----------
+    text : str
+        The tag, two glyphs.
+    x0, y0 : float
+        Top-left corner of the square, mm.
+    side : float
+        Side of the square, mm.
+    font : Font
+
+    Returns
+    -------
+    list of matplotlib.path.Path
+        One outline per glyph, then the underline (a rectangle under the first glyph).
+    """
+    height = CAP_HEIGHT * side
+    width = font.advance * height
+    gap = 0.06 * side
+    left = x0 + (side - 2 * width - gap) / 2
+    baseline = y0 + (GLYPH_TOP + CAP_HEIGHT) * side
+    out = []
+    for k, ch in enumerate(text):
+        outline = font.outline(ch)
+        xs = outline.vertices[:, 0]
+        shift = left + k * (width + gap) + (width - height * (xs.max() + xs.min())) / 2
+        out.append(outline.transformed(Affine2D().scale(height, -height).translate(shift, baseline)))
+    u0, u1 = y0 + UNDERLINE_TOP * side, y0 + (UNDERLINE_TOP + UNDERLINE_THICKNESS) * side
+    out.append(MplPath([(left, u0), (left + width, u0), (left + width, u1), (left, u1), (left, u0)], closed=True))
+    return out
+
+
+def patch_drawing(patch: Patch, pitch_mm: float, font: Font) -> tuple[tuple, list, list]:
+    """A patch's drawing in its own frame: the black backing, the white squares and the ink on them.
+
+    Parameters
+    ----------
+    patch : Patch
+    pitch_mm : float
+        Side of a square, mm.
+    font : Font
+
+    Returns
+    -------
+    backing : (x0, y0, x1, y1)
+        The black rectangle, margin included, mm.
+    white : list of (x0, y0, x1, y1)
+        White squares, mm.
+    ink : list of matplotlib.path.Path
+        Glyphs and underlines, mm.
+    """
+    m = MARGIN * pitch_mm
+    backing = (-m, -m, patch.cols * pitch_mm + m, patch.rows * pitch_mm + m)
+    white, ink = [], []
+    for text, r, c in patch.blocks():
+        x0, y0 = c * pitch_mm, r * pitch_mm
+        white.append((x0, y0, x0 + pitch_mm, y0 + pitch_mm))
+        ink += square_ink(text, x0, y0, pitch_mm, font)
+    return backing, white, ink
