@@ -22,7 +22,7 @@ from handcap.synth.cameras import cage_rig
 from handcap.synth.visibility import camera_visibility
 
 pytest.importorskip("moderngl", reason="the renderer needs moderngl (extra 'images')")
-from handcap.synth.images import ImageStyle, PatchRenderer  # noqa: E402
+from handcap.synth.images import MAX_VIEW_ANGLE, ImageStyle, PatchRenderer  # noqa: E402
 
 PATTERN = session_pattern(("right",), ())
 FONT = load_font(None, PATTERN.alphabet)
@@ -124,10 +124,49 @@ def test_visibility_agrees_with_ray_casting(gl_ok, posed):
         shots = [renderer.render(camera, vertices, grids, np.random.default_rng(k)) for k, camera in enumerate(rig)]
     finally:
         renderer.close()
-    # The same rule by exact ray casting: in the image, facing the camera within acos(0.2), no skin in between.
-    rays = camera_visibility(corners, rig, vertices, hand.faces, normals=normals, max_view_angle=np.arccos(0.2))
+    # The same rule by exact ray casting: in the image, facing the camera within 75 degrees, no skin in between.
+    rays = camera_visibility(corners, rig, vertices, hand.faces, normals=normals, max_view_angle=MAX_VIEW_ANGLE)
     rendered = np.array([shot.visible for shot in shots])
     assert rendered.sum() > 300 and rays.sum() > 300
     assert np.mean(rendered == rays) > 0.97
     for shot, camera in zip(shots, rig):
         assert np.allclose(shot.xy, camera.project(corners)[0])
+
+
+def test_synth_images_writes_frames_and_their_truth(gl_ok, tmp_path):
+    from handcap.cli import main
+    from handcap.detect import Pattern
+
+    args = ["synth", "--layout", "dense-patches", "--motion", "random", "--frames", "2", "--cameras", "3",
+            "--images", "--image-scale", "0.2", "--object", "none"]
+    assert main(args + ["--out", str(tmp_path / "a")]) == 0
+    assert main(args + ["--out", str(tmp_path / "b")]) == 0
+    truth = np.load(tmp_path / "a" / "image_truth.npz")
+    pattern = Pattern.load(tmp_path / "a" / "pattern.toml")
+    names = list(truth["marker_names"])
+    assert names == [n for p in pattern.patches for n in p.corner_names()]
+    assert truth["all_xy"].shape == (2, 3, len(names), 2) and truth["visible"].sum() == len(truth["frame"]) > 50
+    # Every visible tag's four corners are the template's corners of that tag, at their true pixels.
+    for k in range(0, len(truth["block_text"]), 7):
+        patch, r, c = pattern.locate(str(truth["block_text"][k]))
+        ids = [names.index(patch.corner_name(*v)) for v in patch.block_vertices(r, c)]
+        np.testing.assert_array_equal(truth["block_xy"][k],
+                                      truth["all_xy"][truth["block_frame"][k], truth["block_camera"][k], ids])
+    for cam in truth["camera_names"]:
+        for frame in range(2):
+            a = (tmp_path / "a" / "images" / cam / f"{frame:06d}.png").read_bytes()
+            assert a == (tmp_path / "b" / "images" / cam / f"{frame:06d}.png").read_bytes()  # same seed, same bytes
+            image = cv2.imread(str(tmp_path / "a" / "images" / cam / f"{frame:06d}.png"), cv2.IMREAD_UNCHANGED)
+            assert image.dtype == np.uint8 and image.shape == tuple(truth["image_size"][0][::-1])
+
+
+def test_synth_images_needs_a_patch_layout(tmp_path, capsys):
+    from handcap.cli import main
+
+    assert main(["synth", "--layout", "glove-13", "--motion", "random", "--frames", "2", "--cameras", "3",
+                 "--images", "--out", str(tmp_path / "x")]) == 2
+    assert "printed patches" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()  # refused before anything is written
+    assert main(["synth", "--layout", "dense-patches", "--images", "--image-scale", "3", "--out",
+                 str(tmp_path / "y")]) == 2
+    assert "--image-scale" in capsys.readouterr().err

@@ -16,7 +16,8 @@ def _cmd_synth(a):
     betas = None if a.betas is None else tuple(float(b) for b in a.betas.split(","))
     config = None if a.scene else SynthConfig(**{k: getattr(a, k) for k in _SETTINGS}, betas=betas,
                                               max_view_angle_deg=a.max_view_angle)
-    return synth.synth(a.out, config, scene=a.scene, force=a.force)
+    return synth.synth(a.out, config, scene=a.scene, force=a.force, images=a.images, image_scale=a.image_scale,
+                       image_style=a.image_style)
 
 
 def _cmd_demo(a):
@@ -54,6 +55,14 @@ def add_synth(verbs) -> None:
                    help="how far markers sit from their nominal layout spots, mm (default %(default)s)")
     p.add_argument("--subject-seed", type=int, default=None,
                    help="seed of the subject (hand shape, marker placement); share it between the takes of a session")
+    p.add_argument("--images", action="store_true",
+                   help="also film the patched hand from every camera: images/CAMERA/FRAME.png, image_truth.npz "
+                        "(every visible corner and tag) and pattern.toml (needs a patch layout and the extra "
+                        "'images')")
+    p.add_argument("--image-scale", type=float, default=1.0,
+                   help="image size relative to the cameras' (default %(default)s: 2448 x 2048)")
+    p.add_argument("--image-style", choices=("default", "clean"), default="default",
+                   help="default: blur, noise, exposure, glints and occluders drawn per image; clean: none")
     p.add_argument("--scene", help="take every setting from a scene.toml written by an earlier run")
     p.add_argument("--out", required=True, help="output folder (new or empty, unless --force)")
     p.add_argument("--force", action="store_true", help="write into --out even if it holds files (those of the "

@@ -5,14 +5,18 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from handcap.core.errors import HandcapError
 from handcap.demo import run_demo
 from handcap.io import check_output_folder
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
+from handcap.synth.filming import check_filmable, film_capture
+from handcap.synth.images import ImageStyle
 from handcap.synth.scene import SynthConfig, config_from_scene, synthesize, write_capture
 
 
-def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = False) -> Step:
+def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = False, images: bool = False,
+          image_scale: float = 1.0, image_style: str = "default") -> Step:
     """Make a synthetic capture and write it into the folder ``out`` (see :func:`handcap.synth.scene.synthesize`).
 
     Parameters
@@ -25,9 +29,19 @@ def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = F
         A scene.toml written by an earlier run: every setting is taken from it.
     force : bool
         Write into ``out`` even if it holds files (those of the same names are replaced).
+    images : bool
+        Also film the patched hand from every camera (:func:`handcap.synth.filming.film_capture`).
+    image_scale : float
+        Image size relative to the rig's cameras.
+    image_style : {'default', 'clean'}
+        The look: blur, noise, glints and occluders drawn per image, or none of them.
     """
     config = config_from_scene(scene) if scene else config or SynthConfig()
     check_output_folder(out, scene, force=force)
+    if image_style not in ("default", "clean"):
+        raise HandcapError(f"--image-style {image_style!r}: choose default or clean")
+    if images:
+        check_filmable(config, image_scale)
     capture = synthesize(config)
     warnings = q.marker_warnings(capture.markers, hand=capture.hand_motion.marker_names) + \
         q.motion_warnings(capture.hand_motion)
@@ -38,7 +52,13 @@ def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = F
     m = capture.markers
     line = q.summary(f"{out}: {capture.summary()}", {**q.marker_figures(m, hand=capture.hand_motion.marker_names),
                                                       **q.motion_figures(capture.hand_motion)}, m.warnings)
-    return Step((line,), m.warnings, (str(out),), capture)
+    lines = [line]
+    if images:
+        style = ImageStyle.clean() if image_style == "clean" else ImageStyle()
+        filmed = film_capture(capture, out, scale=image_scale, style=style)
+        lines.append(f"images: {filmed['images']} frames in {Path(out) / 'images'}, {filmed['visible']} visible "
+                     f"corners and {filmed['blocks']} visible tags in image_truth.npz, template pattern.toml")
+    return Step(tuple(lines), m.warnings, (str(out),), capture)
 
 
 def demo(out="demo-output") -> Step:

@@ -18,6 +18,7 @@ at column x, row y, pixel centres at integers (OpenCV's convention).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -26,77 +27,14 @@ import trimesh
 from handcap.core.errors import HandcapError
 from handcap.synth.textures import PatchAtlas
 
-_VERTEX = """
-#version 330
-uniform mat4 mvp;
-in vec3 in_pos;
-in vec3 in_normal;
-in vec2 in_uv;
-out vec3 v_pos;
-out vec3 v_normal;
-out vec2 v_uv;
-void main() {
-    v_pos = in_pos;
-    v_normal = in_normal;
-    v_uv = in_uv;
-    gl_Position = mvp * vec4(in_pos, 1.0);
-}
-"""
-_FRAGMENT = """
-#version 330
-uniform sampler2D atlas;
-uniform int textured;        // 1: printed patch, 0: skin or occluder
-uniform float albedo;        // base reflectance of skin / occluder
-uniform float grain;         // strength of the surface's procedural texture
-uniform float grain_scale;   // metres per texture cell
-uniform vec3 eye;
-uniform vec3 light_dir[2];
-uniform float light_power[2];
-uniform float ambient;
-uniform float shininess;
-uniform float specular;
-in vec3 v_pos;
-in vec3 v_normal;
-in vec2 v_uv;
-out vec4 colour;
-float hash(vec3 p) {
-    p = fract(p * 0.3183099 + vec3(0.71, 0.113, 0.419));
-    p *= 17.0;
-    return fract(p.x * p.y * p.z * (p.x + p.y + p.z));
-}
-float noise(vec3 x) {
-    vec3 i = floor(x);
-    vec3 f = fract(x);
-    f = f * f * (3.0 - 2.0 * f);
-    float a = mix(mix(hash(i), hash(i + vec3(1, 0, 0)), f.x),
-                  mix(hash(i + vec3(0, 1, 0)), hash(i + vec3(1, 1, 0)), f.x), f.y);
-    float b = mix(mix(hash(i + vec3(0, 0, 1)), hash(i + vec3(1, 0, 1)), f.x),
-                  mix(hash(i + vec3(0, 1, 1)), hash(i + vec3(1, 1, 1)), f.x), f.y);
-    return mix(a, b, f.z);
-}
-void main() {
-    vec3 n = normalize(v_normal);
-    vec3 view = normalize(eye - v_pos);
-    if (dot(n, view) < 0.0) n = -n;
-    float base;
-    float tex = noise(v_pos / grain_scale) * 0.6 + noise(v_pos / (0.27 * grain_scale)) * 0.4;
-    if (textured == 1) {
-        float ink = texture(atlas, v_uv).r;
-        base = mix(0.05, 0.88, ink) * (1.0 + grain * (tex - 0.5));
-    } else {
-        base = albedo * (1.0 + grain * (tex - 0.5));
-    }
-    float shade = ambient;
-    float shine = 0.0;
-    for (int k = 0; k < 2; k++) {
-        vec3 l = normalize(light_dir[k]);
-        shade += light_power[k] * max(dot(n, l), 0.0);
-        vec3 h = normalize(l + view);
-        shine += light_power[k] * pow(max(dot(n, h), 0.0), shininess);
-    }
-    colour = vec4(vec3(base * shade + specular * shine), 1.0);
-}
-"""
+#: The GLSL shaders (files beside this module): vertex positions through the projection; grey shading of
+#: printed patches (atlas texture) and skin (procedural grain), two lights, Lambert and Blinn-Phong glints.
+_SHADERS = Path(__file__).resolve().parent / "shaders"
+
+
+#: A printed corner seen more obliquely than this (radians from its normal) counts as not visible, as in
+#: :func:`handcap.synth.scene.synthesize` for patch layouts.
+MAX_VIEW_ANGLE = np.deg2rad(75.0)
 
 
 @dataclass(frozen=True)
@@ -151,7 +89,8 @@ class RenderedImage:
     xy : ndarray (N, 2)
         Pixels (distorted image) of the N corners, whether visible or not.
     visible : ndarray (N,) bool
-        In the image, facing the camera and not hidden.
+        In the image, facing the camera (within :data:`MAX_VIEW_ANGLE`) and not hidden at its pixel or
+        the 8 around it.
     """
 
     image: np.ndarray
@@ -183,17 +122,34 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
 
 
-def _random_blobs(camera, vertices: np.ndarray, rng, count: int) -> list:
-    """``count`` ellipsoids of 1-3 cm between the camera and the hand, over random parts of it."""
+def random_blobs(vertices, rng, count: int, towards=None) -> list:
+    """``count`` ellipsoids 1-3 cm across near the hand: occluders (a sleeve, the other hand, a tool).
+
+    Parameters
+    ----------
+    vertices : ndarray (V, 3)
+        The hand mesh, metres.
+    rng : numpy.random.Generator
+    count : int
+    towards : ndarray (3,), optional
+        A unit direction (to a camera) to move the blobs along, 3-12 cm off the skin; default: any
+        direction, 1-6 cm off.
+
+    Returns
+    -------
+    list of (ndarray (V, 3), ndarray (F, 3))
+    """
     sphere = trimesh.creation.icosphere(subdivisions=2)
-    centre = vertices.mean(axis=0)
+    vertices = np.asarray(vertices, dtype=np.float64)
     extent = np.ptp(vertices, axis=0).max() / 2
-    towards = camera.center - centre
-    towards /= np.linalg.norm(towards)
     blobs = []
     for _ in range(count):
         spot = vertices[rng.integers(len(vertices))] + rng.normal(0, 0.3 * extent, 3)
-        where = spot + towards * rng.uniform(0.03, 0.12)
+        if towards is None:
+            way = rng.normal(size=3)
+            where = spot + way / np.linalg.norm(way) * rng.uniform(0.01, 0.06)
+        else:
+            where = spot + np.asarray(towards) * rng.uniform(0.03, 0.12)
         radii = rng.uniform(0.01, 0.03, 3)
         blobs.append((np.asarray(sphere.vertices) * radii + where, np.asarray(sphere.faces)))
     return blobs
@@ -228,7 +184,8 @@ class PatchRenderer:
         self.faces = np.asarray(faces, dtype=np.int32)
         self.style = style or ImageStyle()
         self.ctx = _context()
-        self.program = self.ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
+        self.program = self.ctx.program(vertex_shader=(_SHADERS / "patch.vert").read_text(),
+                                        fragment_shader=(_SHADERS / "patch.frag").read_text())
         flipped = np.ascontiguousarray(atlas.image)
         self.texture = self.ctx.texture(flipped.shape[::-1], 1, flipped.tobytes())
         self.texture.build_mipmaps()
@@ -336,7 +293,9 @@ class PatchRenderer:
             dc = grid[ri, np.minimum(ci + 1, grid.shape[1] - 1)] - grid[ri, np.maximum(ci - 1, 0)]
             corner_normals.append(np.cross(dr, dc))
         if occluders is None:
-            occluders = _random_blobs(camera, vertices, rng, rng.integers(style.occluders[0], style.occluders[1] + 1))
+            towards = eye - vertices.mean(axis=0)
+            occluders = random_blobs(vertices, rng, int(rng.integers(style.occluders[0], style.occluders[1] + 1)),
+                                     towards / np.linalg.norm(towards))
         for occ_vertices, occ_faces in occluders:
             meshes.append((np.asarray(occ_vertices, np.float64), np.asarray(occ_faces, np.int32), None,
                            float(rng.uniform(0.15, 0.8))))
@@ -408,18 +367,39 @@ class PatchRenderer:
         u = matrix[0, 0] * cam[:, 0] / zc + matrix[0, 2]
         v = matrix[1, 1] * cam[:, 1] / zc + matrix[1, 2]
         ui, vi = np.clip(np.round(u).astype(int), 0, w - 1), np.clip(np.round(v).astype(int), 0, h - 1)
-        z_ndc = 2.0 * depth[vi, ui] - 1.0
+        # The nearest surface over the corner's 3 x 3 pixels: a corner at an occluding edge is not seen.
+        nearest = cv2.erode(depth, np.ones((3, 3), np.uint8))
+        z_ndc = 2.0 * nearest[vi, ui] - 1.0
         z_seen = 2.0 * far * near / ((far + near) - z_ndc * (far - near))
         normals = np.concatenate(corner_normals) if corner_normals else np.zeros((0, 3))
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-        facing = np.einsum("ij,ij->i", normals, eye - points) > 0.2 * np.linalg.norm(eye - points, axis=1)
+        cosine = np.einsum("ij,ij->i", normals, eye - points) / np.linalg.norm(eye - points, axis=1)
+        facing = cosine > np.cos(MAX_VIEW_ANGLE)
+        # The corner's own slanted patch spans this much depth over one pixel around it.
+        slope = np.sqrt(np.clip(1 - cosine ** 2, 0, 1)) / np.maximum(cosine, 0.1)
+        tolerance = 0.0015 + 1.5 * zc / matrix[0, 0] * slope
         wsz, hsz = camera.size
         inside = (xy[:, 0] >= 0) & (xy[:, 0] <= wsz - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= hsz - 1) & (zc > 0)
-        visible = inside & facing & (zc <= z_seen + 0.0015)
+        visible = inside & facing & (zc <= z_seen + tolerance)
 
         image = cv2.remap(render, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         image = self._camera_effects(image, rng)
         return RenderedImage(image, xy, visible)
+
+    def corner_points(self, corners) -> np.ndarray:
+        """The printed corners among the patch points given to :meth:`render`, in its truth order.
+
+        Parameters
+        ----------
+        corners : sequence of ndarray (n_rows, n_cols, 3)
+
+        Returns
+        -------
+        ndarray (N, 3)
+            Metres.
+        """
+        out = [np.asarray(g)[ri, ci] for g, (ri, ci) in zip(corners, self._corner_nodes)]
+        return np.concatenate(out) if out else np.zeros((0, 3))
 
     def _camera_effects(self, image: np.ndarray, rng) -> np.ndarray:
         style = self.style

@@ -1,0 +1,208 @@
+"""Film a synthetic capture: camera images of its patched hand, with the truth of every printed corner and tag.
+
+``handcap synth --images`` calls :func:`film_capture` after writing the
+capture: every camera of the rig films every frame (:mod:`handcap.synth.images`).
+The hand wears the patches of the session template (``pattern.toml``, written
+beside the images) at the places the layout gives; a held object is drawn as
+an occluder (its own patches come with the articulated-object work), and a
+few random blobs per frame hide parts of the hand from every camera alike.
+
+Files, in the capture folder:
+
+- ``images/CAMERA/FFFFFF.png``: 8-bit grayscale frames.
+- ``pattern.toml``: the template (tags and corner ids) of the patches drawn.
+- ``image_truth.npz``: the 2D detections File contract for what a perfect
+  detector would report, plus the rest of the truth: ``camera_names (C,)``,
+  ``marker_names (N,)`` (``right:PATCH_rRcC``), ``frame``, ``camera``,
+  ``marker``, ``xy`` (pixels, distorted image), ``score`` (ones) for every
+  visible corner; ``block_text (B,)``, ``block_frame``, ``block_camera``,
+  ``block_xy (B, 4, 2)`` (reading order, underline at the bottom) for every tag
+  whose four corners are visible; ``positions (T, N, 3)`` metres,
+  ``all_xy (T, C, N, 2)``, ``visible (T, C, N)``, ``rate``, ``image_size (C, 2)``.
+
+The printed corners follow the skin of the template layout's nominal spots
+(the capture's ``--placement-mm`` moves single markers; a printed patch is one
+piece of tape), so ``image_truth.npz`` and not ``truth.npz`` holds their truth.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+
+from handcap.core.cameras import Camera
+from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output, save_npz
+from handcap.detect.glyphs import load_font
+from handcap.detect.session import session_pattern
+from handcap.hand import OpenHand
+from handcap.layouts import load_layout
+from handcap.synth.decals import patch_skin
+from handcap.synth.images import ImageStyle, PatchRenderer, random_blobs
+from handcap.synth.objects import make_object
+from handcap.synth.textures import build_atlas
+
+
+def scaled_camera(camera: Camera, scale: float) -> Camera:
+    """The same camera with an image ``scale`` times as wide (a binned or smaller sensor).
+
+    Parameters
+    ----------
+    camera : Camera
+    scale : float
+        0 < scale <= 1 usually.
+
+    Returns
+    -------
+    Camera
+        Pixel centres stay at integers: ``c' = scale (c + 0.5) - 0.5``.
+    """
+    matrix = camera.matrix.copy()
+    matrix[0, 0] *= scale
+    matrix[1, 1] *= scale
+    matrix[0, 1] *= scale
+    matrix[0, 2] = scale * (matrix[0, 2] + 0.5) - 0.5
+    matrix[1, 2] = scale * (matrix[1, 2] + 0.5) - 0.5
+    size = (max(1, int(round(camera.size[0] * scale))), max(1, int(round(camera.size[1] * scale))))
+    return Camera(camera.name, size, matrix, camera.distortions, camera.rotation, camera.translation)
+
+
+def check_filmable(config, scale: float = 1.0):
+    """The capture's layout, if its hand can be filmed at ``scale``; else one clear error.
+
+    Parameters
+    ----------
+    config : SynthConfig
+    scale : float
+        Image size relative to the rig's cameras.
+
+    Returns
+    -------
+    MarkerLayout
+
+    Raises
+    ------
+    HandcapError
+        A layout that is not made of printed patches, or a scale out of 0.05 .. 1.
+    """
+    layout = load_layout(config.layout, side=config.side)
+    if layout.marker_kind != "patch":
+        raise HandcapError(f"--images films printed patches; layout {layout.name!r} has {layout.marker_kind} "
+                           "markers: use --layout dense-patches")
+    if not 0.05 <= scale <= 1.0:
+        raise HandcapError(f"--image-scale {scale}: give a factor from 0.05 to 1")
+    return layout
+
+
+def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | None = None,
+                 progress: bool | None = None) -> dict:
+    """Render every frame of ``capture`` from every camera into ``folder`` (see the module docstring).
+
+    Parameters
+    ----------
+    capture : SynthCapture
+        A capture made with a patch layout (``dense-patches`` or a layout of its kind).
+    folder : str or Path
+        The capture's folder.
+    scale : float
+        Image size relative to the rig's cameras (0.05 to 1).
+    style : ImageStyle, optional
+        The look of the images (default :class:`~handcap.synth.images.ImageStyle`).
+    progress : bool, optional
+        Show a progress bar (default: only on a terminal).
+
+    Returns
+    -------
+    dict
+        ``images`` (number written), ``visible`` (corner observations), ``blocks`` (tag observations) and
+        ``paths`` (the files written, by name).
+
+    Raises
+    ------
+    HandcapError
+        A layout that is not made of printed patches, or a scale out of range.
+    """
+    config = capture.config
+    layout = check_filmable(config, scale)
+    folder = Path(folder)
+    pattern = session_pattern((config.side,), ())
+    wanted = {m.patch for m in layout.markers if m.patch}
+    patches = tuple(p for p in pattern.patches if p.name in wanted)
+    if not patches:
+        raise HandcapError(f"layout {layout.name!r} names none of the patches of handcap pattern")
+    hand = OpenHand(config.side)
+    motion = capture.hand_motion
+    vertices = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
+    skin = patch_skin(layout, patches, hand, motion.betas)
+    grids = skin.grids(vertices, hand.faces)  # per patch (T, rows, cols, 3)
+    style = style or ImageStyle()
+    renderer = PatchRenderer(build_atlas(patches, load_font(None, pattern.alphabet)), hand.faces, style,
+                             coords=list(zip(skin.rows, skin.cols)))
+    cameras = [scaled_camera(c, scale) for c in capture.rig]
+    obj = None
+    if capture.object_motion is not None:
+        obj = make_object(capture.object_motion.name, seed=config.seed)
+    rng = np.random.default_rng(np.random.SeedSequence([config.seed, 16]))
+    n_frames, n_cams = len(vertices), len(cameras)
+    names = [f"{config.side}:{p.corner_name(int(r), int(c), owner=False)}" for p in patches for r, c in p.vertices()]
+    all_xy = np.zeros((n_frames, n_cams, len(names), 2))
+    visible = np.zeros((n_frames, n_cams, len(names)), bool)
+    positions = np.zeros((n_frames, len(names), 3))
+    paths = {}
+    hidden = None if progress is None else not progress
+    try:
+        with tqdm(total=n_frames * n_cams, desc="images", unit="image", disable=hidden, leave=False) as bar:
+            for t in range(n_frames):
+                frame_grids = [g[t] for g in grids]
+                occluders = random_blobs(vertices[t], rng, int(rng.integers(style.occluders[0],
+                                                                            style.occluders[1] + 1)))
+                if obj is not None:
+                    turn = Rotation.from_rotvec(capture.object_motion.rotation[t]).as_matrix()
+                    occluders.append((obj.vertices @ turn.T + capture.object_motion.translation[t], obj.faces))
+                for c, camera in enumerate(cameras):
+                    shot = renderer.render(camera, vertices[t], frame_grids, rng, occluders=occluders)
+                    all_xy[t, c], visible[t, c] = shot.xy, shot.visible
+                    path = folder / "images" / camera.name / f"{t:06d}.png"
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    ok, encoded = cv2.imencode(".png", shot.image)
+                    with atomic_output(path) as fh:
+                        fh.write(encoded.tobytes())
+                    bar.update()
+                positions[t] = renderer.corner_points(frame_grids)
+    finally:
+        renderer.close()
+    paths["pattern.toml"] = pattern.save(folder / "pattern.toml")
+    truth = _truth_arrays(patches, names, cameras, all_xy, visible, positions, config.rate)
+    paths["image_truth.npz"] = folder / "image_truth.npz"
+    save_npz(paths["image_truth.npz"], truth)
+    return {"images": n_frames * n_cams, "visible": int(visible.sum()), "blocks": len(truth["block_text"]),
+            "paths": paths}
+
+
+def _truth_arrays(patches, names, cameras, all_xy, visible, positions, rate) -> dict:
+    frame, camera, marker = np.nonzero(visible)
+    index = {n: k for k, n in enumerate(names)}
+    side = names[0].split(":", 1)[0]
+    texts, corners = [], []
+    for p in patches:
+        for text, r, c in p.blocks():
+            texts.append(text)
+            corners.append([index[f"{side}:{p.corner_name(vr, vc, owner=False)}"] for vr, vc in p.block_vertices(r, c)])
+    corners = np.array(corners, dtype=np.int64).reshape(-1, 4)
+    seen = visible[:, :, corners].all(axis=-1)  # (T, C, B)
+    b_frame, b_camera, b_index = np.nonzero(seen)
+    return {
+        "camera_names": np.array([c.name for c in cameras]), "marker_names": np.array(names),
+        "frame": frame, "camera": camera, "marker": marker, "xy": all_xy[frame, camera, marker],
+        "score": np.ones(len(frame)), "rate": np.array(float(rate)),
+        "block_text": np.array(texts)[b_index] if len(b_index) else np.zeros(0, "<U2"),
+        "block_frame": b_frame, "block_camera": b_camera,
+        "block_xy": all_xy[b_frame[:, None], b_camera[:, None], corners[b_index]],
+        "block_score": np.ones(len(b_index)),
+        "positions": positions, "all_xy": all_xy, "visible": visible,
+        "image_size": np.array([c.size for c in cameras]),
+    }
