@@ -1,0 +1,101 @@
+"""Speed and accuracy of the coded-patch corner detector (issue 16), measured in one run.
+
+Speed: seconds per 5 MP image (2448 x 2048, a full frame of the synthetic cage
+camera with the patched hand) on 2 cores, for the whole image and for the
+hand's region only (a box around the corners the previous frame found, as a
+tracker would give), against the issue's targets (<= 1 s, <= 0.3 s) and
+DexterCap's reported 5 s per frame for marker recognition on a GPU machine.
+Accuracy: the corner figures on held-out rendered scenes (recall and precision
+within 2 px, median and RMS error of the matched corners) against the issue's
+targets (recall >= 97 %, median <= 0.15 px, RMS <= 0.3 px).
+
+    .venv/bin/python benchmarks/detect.py [--weights FILE] [--scenes 20] [--repeats 3] [--threads 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--weights", help="corner network weights (default: the shipped ones)")
+    parser.add_argument("--scenes", type=int, default=20, help="held-out rendered scenes to score")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=99)
+    args = parser.parse_args()
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, str(args.threads))
+
+    import numpy as np
+    import torch
+
+    from handcap.detect.corners import detect_corners
+    from handcap.detect.scenes import SceneMaker
+    from handcap.detect.train import evaluate_corners, load_corner_net
+    from handcap.hand import OpenHand
+    from handcap.layouts import load_layout
+    from handcap.detect.session import session_pattern
+    from handcap.detect.glyphs import load_font
+    from handcap.synth.cameras import cage_rig
+    from handcap.synth.decals import patch_skin
+    from handcap.synth.images import ImageStyle, PatchRenderer
+    from handcap.synth.textures import build_atlas
+
+    torch.set_num_threads(args.threads)
+    net = load_corner_net(args.weights)
+    print(f"corner network: {net.flops_per_pixel() / 1000:.1f} kFLOP per pixel, "
+          f"{sum(p.numel() for p in net.parameters())} weights, {args.threads} threads")
+
+    # A full 5 MP frame of the patched hand.
+    hand = OpenHand("right")
+    pattern = session_pattern(("right",), ())
+    skin = patch_skin(load_layout("dense-patches"), pattern.patches, hand)
+    renderer = PatchRenderer(build_atlas(pattern.patches, load_font(None, pattern.alphabet)), hand.faces,
+                             ImageStyle(), coords=list(zip(skin.rows, skin.cols)))
+    rng = np.random.default_rng(args.seed)
+    phi = np.zeros((1, 27))
+    phi[0, 3:] = rng.uniform(0.0, 0.4, 24)
+    vertices = hand.forward(np.zeros(10), np.array([[0.0, 0.3, 0.2]]), hand.hand_pose_from_phi(phi),
+                            np.array([[0.0, 0.0, 1.0]])).vertices[0]
+    camera = cage_rig(12, target=(0.0, 0.0, 1.0), seed=3)[8]
+    shot = renderer.render(camera, vertices, skin.grids(vertices, hand.faces), rng)
+    renderer.close()
+    image = shot.image
+
+    def best(fn):
+        fn()
+        times = []
+        for _ in range(args.repeats):
+            start = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - start)
+        return min(times)
+
+    full = best(lambda: detect_corners(net, image))
+    xy = shot.xy[shot.visible]
+    lo = np.maximum(np.floor(xy.min(axis=0) - 40).astype(int) // 2 * 2, 0)
+    hi = np.minimum(np.ceil(xy.max(axis=0) + 40).astype(int), image.shape[::-1])
+    region = image[lo[1]:hi[1], lo[0]:hi[0]]
+    part = best(lambda: detect_corners(net, region))
+    print(f"full frame {image.shape[1]} x {image.shape[0]}: {full:.3f} s (target <= 1 s: {full / 1.0:.2f} of it; "
+          f"DexterCap ~5 s on a GPU machine: {5.0 / full:.1f}x faster)")
+    print(f"hand region {region.shape[1]} x {region.shape[0]} ({region.size / image.size:.0%} of the frame): "
+          f"{part:.3f} s (target <= 0.3 s: {part / 0.3:.2f} of it)")
+
+    maker = SceneMaker(args.seed)
+    try:
+        scenes = [maker.scene() for _ in range(args.scenes)]
+    finally:
+        maker.close()
+    score = evaluate_corners(net, scenes)
+    print(score.summary())
+    print(f"targets: recall >= 97 % ({100 * score.recall:.1f}), median <= 0.15 px ({score.median_px:.3f}), "
+          f"RMS <= 0.3 px ({score.rms_px:.3f})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,167 @@
+"""Block reader: the two glyphs of a white square and which of its corners is the tag's top-left.
+
+A block's four corners (in the image order of :mod:`handcap.detect.blocks`)
+map the square onto a 32 x 32 view (the square fills pixels 4..28, with a
+little of its black surround), the same whatever the perspective. A small
+convolutional network reads the view with three heads, as DexterCap's BlockNet
+(a ResNet-34) does: the first glyph, the second glyph (each one of
+:data:`GLYPHS` or "none"), and the rotation, the index of the tag's top-left
+among the four corners, or "not a block". It reads any alphabet drawn from
+:data:`GLYPHS`; :func:`read_blocks` keeps the glyphs of the alphabet in use, so a
+glyph that the alphabet lacks is never read.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from handcap.core.errors import HandcapError
+
+#: Every glyph the reader knows: digits, capitals and a few symbols of bold monospace fonts.
+GLYPHS = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ#%&+=@"
+NONE = len(GLYPHS)  # class of "no glyph" (a black square, or not a block)
+VIEW = 32
+_INSET = 4.0  # pixels of the view outside the square on every side
+
+
+class BlockReader(nn.Module):
+    """The reader network (see the module docstring).
+
+    Parameters
+    ----------
+    width : int
+        Channels of the first convolution; doubled after each pooling.
+    """
+
+    def __init__(self, width: int = 32):
+        super().__init__()
+        self.width = width
+        c1, c2, c3 = width, 2 * width, 3 * width
+        self.features = nn.Sequential(
+            nn.Conv2d(1, c1, 3, padding=1), nn.BatchNorm2d(c1), nn.ReLU(),
+            nn.Conv2d(c1, c1, 3, padding=1), nn.BatchNorm2d(c1), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(c1, c2, 3, padding=1), nn.BatchNorm2d(c2), nn.ReLU(),
+            nn.Conv2d(c2, c2, 3, padding=1), nn.BatchNorm2d(c2), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(c2, c3, 3, padding=1), nn.BatchNorm2d(c3), nn.ReLU(), nn.MaxPool2d(2),
+        )
+        self.hidden = nn.Linear(c3 * 16, 256)
+        self.first = nn.Linear(256, len(GLYPHS) + 1)
+        self.second = nn.Linear(256, len(GLYPHS) + 1)
+        self.turn = nn.Linear(256, 5)
+
+    def forward(self, views: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Logits of the first glyph, the second glyph and the rotation.
+
+        Parameters
+        ----------
+        views : Tensor (B, 1, 32, 32)
+            Normalised block views (:func:`block_views`).
+
+        Returns
+        -------
+        (Tensor (B, G + 1), Tensor (B, G + 1), Tensor (B, 5))
+            G = len(GLYPHS); the last glyph class is "none"; rotations 0-3, then "not a block".
+        """
+        x = self.features(views).flatten(1)
+        x = F.elu(self.hidden(x))
+        return self.first(x), self.second(x), self.turn(x)
+
+    def config(self) -> dict:
+        """The constructor's arguments."""
+        return {"width": self.width}
+
+
+def block_views(image: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """Each block's square, mapped from its four corners onto a 32 x 32 view and normalised.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        uint8 or float grey image.
+    quads : ndarray (B, 4, 2)
+        Corners in the order the rotation refers to, pixels.
+
+    Returns
+    -------
+    ndarray (B, 32, 32) float32
+        Zero median, unit 5-95 % spread per view.
+    """
+    img = np.asarray(image, dtype=np.float32)
+    square = np.array([[_INSET, _INSET], [VIEW - _INSET, _INSET], [VIEW - _INSET, VIEW - _INSET],
+                       [_INSET, VIEW - _INSET]], np.float32) - 0.5
+    views = np.zeros((len(quads), VIEW, VIEW), np.float32)
+    for k, quad in enumerate(np.asarray(quads, dtype=np.float32)):
+        h = cv2.getPerspectiveTransform(quad, square)
+        view = cv2.warpPerspective(img, h, (VIEW, VIEW), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        lo, mid, hi = np.percentile(view, (5, 50, 95))
+        views[k] = (view - mid) / max(hi - lo, 1e-3 * max(abs(hi), 1.0))
+    return views
+
+
+def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet: str, *, batch: int = 512):
+    """Read blocks: their tags in reading order and a confidence.
+
+    Parameters
+    ----------
+    net : BlockReader
+    image : ndarray (H, W)
+    quads : ndarray (B, 4, 2)
+        Corners in image order, pixels.
+    alphabet : str
+        Glyphs that may be read (each must be in :data:`GLYPHS`).
+
+    Returns
+    -------
+    text : ndarray (B,) str
+        Two glyphs, or "" where the reader sees no tag.
+    corners : ndarray (B, 4, 2)
+        The same corners in reading order (top-left, top-right, bottom-right, bottom-left).
+    rotation : ndarray (B,) int
+        Index of the tag's top-left among the given corners (-1 for no tag).
+    score : ndarray (B,)
+        Product of the three heads' probabilities.
+    """
+    unknown = [ch for ch in alphabet if ch not in GLYPHS]
+    if unknown:
+        raise HandcapError(f"the block reader knows no glyph {''.join(unknown)!r}; it reads {GLYPHS}")
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    allowed = np.array([GLYPHS.index(ch) for ch in alphabet])
+    texts, rotations, scores = [], [], []
+    net.eval()
+    with torch.inference_mode():
+        for start in range(0, len(quads), batch):
+            views = torch.from_numpy(block_views(image, quads[start:start + batch]))[:, None]
+            first, second, turn = (F.softmax(out, dim=1).numpy() for out in net(views))
+            p1, p2 = first[:, allowed], second[:, allowed]
+            i1, i2 = p1.argmax(axis=1), p2.argmax(axis=1)
+            rot = turn.argmax(axis=1)
+            score = p1.max(axis=1) * p2.max(axis=1) * turn.max(axis=1)
+            none = (rot == 4) | (first[:, NONE] > p1.max(axis=1)) | (second[:, NONE] > p2.max(axis=1))
+            texts += ["" if n else alphabet[a] + alphabet[b] for a, b, n in zip(i1, i2, none)]
+            rotations += np.where(none, -1, rot).tolist()
+            scores += np.where(none, 0.0, score).tolist()
+    rotations = np.array(rotations, dtype=int)
+    order = (np.arange(4)[None] + np.maximum(rotations, 0)[:, None]) % 4
+    corners = np.take_along_axis(quads, order[..., None], axis=1)
+    return np.array(texts, dtype="<U2"), corners, rotations, np.array(scores)
+
+
+def reader_loss(outputs, first: torch.Tensor, second: torch.Tensor, turn: torch.Tensor) -> torch.Tensor:
+    """Sum of the three cross-entropies.
+
+    Parameters
+    ----------
+    outputs : tuple of Tensor
+        :meth:`BlockReader.forward`'s logits.
+    first, second, turn : Tensor (B,) int
+        Class of each head.
+
+    Returns
+    -------
+    Tensor ()
+    """
+    return F.cross_entropy(outputs[0], first) + F.cross_entropy(outputs[1], second) + F.cross_entropy(outputs[2], turn)

@@ -1,0 +1,155 @@
+"""Training and test images of patched hands: random poses, cameras and looks, rendered with exact truth.
+
+Each scene is one image: the template hand in a random pose (angles drawn
+within the joint limits, a random shape and orientation) seen by a random
+camera of the synthetic cage (:func:`handcap.synth.cameras.cage_rig`) at a
+random sensor scale, with a random look (:class:`handcap.synth.images.ImageStyle`).
+The camera is cut down to the hand's part of its image (a shifted principal
+point: the same lens, fewer pixels to render), so a scene costs a fraction of a
+full frame. The truth is every visible corner and every tag whose four corners
+are visible.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.cameras import Camera
+from handcap.detect.glyphs import load_font
+from handcap.detect.session import session_pattern
+from handcap.hand import OpenHand
+from handcap.hand.anatomy import PHI_LIMITS
+from handcap.layouts import load_layout
+from handcap.synth.cameras import cage_rig
+from handcap.synth.decals import patch_skin
+from handcap.synth.images import ImageStyle, PatchRenderer
+from handcap.synth.textures import build_atlas
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One rendered image and its truth.
+
+    Attributes
+    ----------
+    image : ndarray (H, W) uint8
+    corners : ndarray (K, 2)
+        Visible corners, pixels.
+    corner_names : ndarray (K,) str
+    blocks : ndarray (B, 4, 2)
+        Visible tags' corners in reading order, pixels.
+    block_text : ndarray (B,) str
+    alphabet : str
+        Glyphs of the printed tags.
+    """
+
+    image: np.ndarray
+    corners: np.ndarray
+    corner_names: np.ndarray
+    blocks: np.ndarray
+    block_text: np.ndarray
+    alphabet: str
+
+
+class SceneMaker:
+    """Draws random scenes (see the module docstring).
+
+    Parameters
+    ----------
+    seed : int
+    scale : (float, float)
+        Range of the sensor size relative to the cage's 2448 x 2048 cameras.
+    style : ImageStyle, optional
+    font : str or Path, optional
+        Font of the glyphs (default: DejaVu Sans Mono Bold).
+    alphabet : str, optional
+        Glyphs of the tags (default: handcap's).
+    """
+
+    def __init__(self, seed: int = 0, *, scale=(0.5, 1.0), style: ImageStyle | None = None, font=None,
+                 alphabet: str | None = None):
+        self.rng = np.random.default_rng(seed)
+        self.scale = scale
+        self.hand = OpenHand("right")
+        kwargs = {} if alphabet is None else {"alphabet": alphabet}
+        pattern = session_pattern(("right",), (), **kwargs)
+        self.patches = pattern.patches
+        self.alphabet = pattern.alphabet
+        self.skin_layout = load_layout("dense-patches")
+        self.names = np.array([n for p in self.patches for n in p.corner_names()])
+        self.blocks_index, self.block_text = self._blocks()
+        glyphs = load_font(font, pattern.alphabet)
+        self._skins = {}
+        first = self._skin(tuple([0.0] * 10))  # the sample grid is the same for every shape
+        self.renderer = PatchRenderer(build_atlas(self.patches, glyphs), self.hand.faces, style or ImageStyle(),
+                                      coords=list(zip(first.rows, first.cols)))
+
+    def _blocks(self):
+        index = {n: k for k, n in enumerate(self.names)}
+        ids, texts = [], []
+        for p in self.patches:
+            for text, r, c in p.blocks():
+                ids.append([index[p.corner_name(*v)] for v in p.block_vertices(r, c)])
+                texts.append(text)
+        return np.array(ids), np.array(texts)
+
+    def close(self) -> None:
+        """Free the renderer."""
+        self.renderer.close()
+
+    def _skin(self, betas_key):
+        if betas_key not in self._skins:
+            self._skins[betas_key] = patch_skin(self.skin_layout, self.patches, self.hand, np.array(betas_key))
+        return self._skins[betas_key]
+
+    def scene(self) -> Scene:
+        """Draw and render one scene.
+
+        Returns
+        -------
+        Scene
+        """
+        rng = self.rng
+        # Up to 8 subjects, each made once (attaching the patches to a new shape is the slow part).
+        betas = tuple(np.round(rng.normal(0, 0.7, 10), 1).tolist()) if len(self._skins) < 9 else \
+            list(self._skins)[rng.integers(len(self._skins))]
+        skin = self._skin(betas)
+        lo, hi = PHI_LIMITS[:, 0], PHI_LIMITS[:, 1]
+        phi = (lo + rng.uniform(0.1, 0.9, len(lo)) * (hi - lo))[None]
+        orient = rng.normal(size=3)
+        orient *= rng.uniform(0, np.pi) / np.linalg.norm(orient)
+        transl = np.array([0.0, 0.0, 1.0]) + rng.normal(0, 0.08, 3)
+        out = self.hand.forward(np.array(betas), orient[None], self.hand.hand_pose_from_phi(phi), transl[None])
+        vertices = out.vertices[0]
+        grids = skin.grids(vertices, self.hand.faces)
+        rig = cage_rig(12, target=(0.0, 0.0, 1.0), seed=int(rng.integers(1 << 30)))
+        camera = _cut_to(rig[int(rng.integers(len(rig)))], vertices, rng.uniform(*self.scale), rng)
+        shot = self.renderer.render(camera, vertices, grids, rng)
+        seen = shot.visible
+        blocks = seen[self.blocks_index].all(axis=1)
+        return Scene(shot.image, shot.xy[seen], self.names[seen], shot.xy[self.blocks_index[blocks]],
+                     self.block_text[blocks], self.alphabet)
+
+
+def _cut_to(camera: Camera, vertices: np.ndarray, scale: float, rng, margin: int = 48) -> Camera:
+    """``camera`` at ``scale``, cut to the part of its image that shows ``vertices`` (plus a margin)."""
+    matrix = camera.matrix.copy()
+    matrix[:2] *= scale
+    matrix[0, 2] = scale * (camera.matrix[0, 2] + 0.5) - 0.5
+    matrix[1, 2] = scale * (camera.matrix[1, 2] + 0.5) - 0.5
+    size = (int(camera.size[0] * scale), int(camera.size[1] * scale))
+    full = Camera(camera.name, size, matrix, camera.distortions, camera.rotation, camera.translation)
+    xy, _ = full.project(vertices)
+    lo = np.floor(np.clip(xy.min(axis=0) - margin - rng.uniform(0, margin, 2), 0, None)).astype(int)
+    hi = np.ceil(np.minimum(xy.max(axis=0) + margin + rng.uniform(0, margin, 2), size)).astype(int)
+    lo -= lo % 2
+    width, height = max(64, hi[0] - lo[0]), max(64, hi[1] - lo[1])
+    width += width % 2
+    height += height % 2
+    cut = matrix.copy()
+    cut[0, 2] -= lo[0]
+    cut[1, 2] -= lo[1]
+    return Camera(camera.name, (int(width), int(height)), cut, camera.distortions, camera.rotation,
+                  camera.translation)

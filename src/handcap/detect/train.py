@@ -1,0 +1,551 @@
+"""Train the detector's networks from rendered images only: ``python -m handcap.detect.train``.
+
+Deterministic for a seed on the CPU (torch's deterministic algorithms, a fixed
+number of threads), so the shipped weights can be remade bit for bit::
+
+    python -m handcap.detect.train --scenes 600 --steps 4000 --seed 0 --out src/handcap/detect/weights/corners.npz
+
+Scenes come from :class:`handcap.detect.scenes.SceneMaker` (random poses, cameras,
+sensor scales and looks); the corner network learns from 96 x 96 crops of them,
+most of them around a visible corner, with JPEG artefacts on some. The test
+suite trains a tiny version for a few steps to show the code runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output
+from handcap.detect.alphabet import ALPHABET, DEXTERCAP_ALPHABET
+from handcap.detect.blocks import candidate_quads
+from handcap.detect.corners import CornerNet, corner_loss, detect_corners, normalise, targets
+from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks, reader_loss
+from handcap.detect.scenes import SceneMaker
+
+CROP = 96
+WEIGHTS = Path(__file__).resolve().parent / "weights"
+
+
+@dataclass(frozen=True)
+class CornerScore:
+    """How well corners are found, against the truth of rendered images.
+
+    Attributes
+    ----------
+    recall : float
+        Share of visible corners with a detection within ``match_px``.
+    precision : float
+        Share of detections within ``match_px`` of a visible corner.
+    median_px, rms_px : float
+        Error of the matched detections, pixels.
+    found, truth : int
+        Detections and visible corners.
+    """
+
+    recall: float
+    precision: float
+    median_px: float
+    rms_px: float
+    found: int
+    truth: int
+
+    def summary(self) -> str:
+        """One line of the figures."""
+        return (f"corners: recall {100 * self.recall:.1f} %, precision {100 * self.precision:.1f} % "
+                f"(within 2 px), error median {self.median_px:.3f} px, RMS {self.rms_px:.3f} px "
+                f"({self.found} found, {self.truth} visible)")
+
+
+def score_corners(found: np.ndarray, truth: np.ndarray, match_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Match detections to true corners one to one (nearest first, within ``match_px``).
+
+    Parameters
+    ----------
+    found : ndarray (K, 2)
+    truth : ndarray (N, 2)
+    match_px : float
+
+    Returns
+    -------
+    pairs : ndarray (P, 2) int
+        (detection, truth) index pairs.
+    error : ndarray (P,)
+        Pixels.
+    """
+    if len(found) == 0 or len(truth) == 0:
+        return np.zeros((0, 2), int), np.zeros(0)
+    d = np.linalg.norm(found[:, None] - truth[None], axis=-1)
+    order = np.argsort(d, axis=None)
+    used_f, used_t, pairs = set(), set(), []
+    for flat in order:
+        i, j = divmod(int(flat), d.shape[1])
+        if d[i, j] > match_px:
+            break
+        if i in used_f or j in used_t:
+            continue
+        used_f.add(i)
+        used_t.add(j)
+        pairs.append((i, j))
+    pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+    return pairs, d[pairs[:, 0], pairs[:, 1]]
+
+
+def evaluate_corners(net: CornerNet, scenes, threshold: float = 0.3) -> CornerScore:
+    """Detect the corners of rendered ``scenes`` and score them against their truth.
+
+    Parameters
+    ----------
+    net : CornerNet
+    scenes : sequence of Scene
+    threshold : float
+
+    Returns
+    -------
+    CornerScore
+    """
+    errors, found, truth = [], 0, 0
+    for scene in scenes:
+        xy, _ = detect_corners(net, scene.image, threshold=threshold)
+        _, err = score_corners(xy, scene.corners)
+        errors.append(err)
+        found += len(xy)
+        truth += len(scene.corners)
+    err = np.concatenate(errors) if errors else np.zeros(0)
+    matched = len(err)
+    return CornerScore(matched / max(truth, 1), matched / max(found, 1),
+                       float(np.median(err)) if matched else float("nan"),
+                       float(np.sqrt(np.mean(err ** 2))) if matched else float("nan"), found, truth)
+
+
+def crops(scenes, count: int, rng, size: int = CROP):
+    """Random training crops of the scenes: images (count, size, size) and their corners.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+    rng : numpy.random.Generator
+    size : int
+        Crop side (even).
+
+    Returns
+    -------
+    images : ndarray (count, size, size) float32
+        Normalised (:func:`handcap.detect.corners.normalise`).
+    corners : list of ndarray (K, 2)
+        Pixels in each crop.
+    """
+    images, corners = np.zeros((count, size, size), np.float32), []
+    for k in range(count):
+        scene = scenes[int(rng.integers(len(scenes)))]
+        h, w = scene.image.shape
+        if len(scene.corners) and rng.random() < 0.8:
+            centre = scene.corners[int(rng.integers(len(scene.corners)))] + rng.uniform(-size / 3, size / 3, 2)
+        else:
+            centre = rng.uniform([0, 0], [w, h])
+        x0 = int(np.clip(centre[0] - size / 2, 0, max(w - size, 0))) // 2 * 2
+        y0 = int(np.clip(centre[1] - size / 2, 0, max(h - size, 0))) // 2 * 2
+        crop = np.zeros((size, size), np.uint8)
+        part = scene.image[y0:y0 + size, x0:x0 + size]
+        crop[:part.shape[0], :part.shape[1]] = part
+        if rng.random() < 0.3:
+            ok, code = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(40, 95))])
+            crop = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+        images[k] = normalise(crop)
+        inside = scene.corners - [x0, y0]
+        keep = ((inside >= -0.5).all(axis=1) & (inside[:, 0] < part.shape[1] - 0.5)
+                & (inside[:, 1] < part.shape[0] - 0.5))
+        corners.append(inside[keep])
+    return images, corners
+
+
+def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, lr: float = 2e-3,
+                  net: CornerNet | None = None, progress: bool = False) -> CornerNet:
+    """Train the corner network on crops of rendered scenes (deterministic for a seed).
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    steps : int
+        Optimiser steps.
+    batch : int
+        Crops per step.
+    seed : int
+    lr : float
+        AdamW learning rate, decayed by a cosine to 5 % of it.
+    net : CornerNet, optional
+        Start from these weights (default: a new network).
+    progress : bool
+        Print the loss every 100 steps.
+
+    Returns
+    -------
+    CornerNet
+    """
+    if not scenes:
+        raise HandcapError("no scenes to train on")
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True)
+    rng = np.random.default_rng(seed)
+    net = net or CornerNet()
+    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=0.05 * lr)
+    net.train()
+    for step in range(steps):
+        images, corners = crops(scenes, batch, rng)
+        made = [targets(images.shape[1:], c) for c in corners]
+        heat = torch.from_numpy(np.stack([m[0] for m in made]))
+        offset = torch.from_numpy(np.stack([m[1] for m in made]))
+        near = torch.from_numpy(np.stack([m[2] for m in made]))
+        loss = corner_loss(net(torch.from_numpy(images)[:, None]), heat, offset, near)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        if progress and (step % 100 == 0 or step == steps - 1):
+            print(f"corners step {step:5d} loss {loss.item():.4f}", flush=True)
+    net.eval()
+    return net
+
+
+def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None):
+    """Training views for the block reader: true blocks turned at random, and quads that are not blocks.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+    rng : numpy.random.Generator
+    jitter : float
+        Corner noise, as a share of the block's side (detections are not exact).
+    negatives : list of ndarray (N, 4, 2), optional
+        Per scene, quads that are not blocks (default: made here, which is slow in a loop).
+
+    Returns
+    -------
+    views : ndarray (count, 32, 32) float32
+    first, second, turn : ndarray (count,) int
+        Classes of the three heads.
+    """
+    views = np.zeros((count, 32, 32), np.float32)
+    labels = np.zeros((3, count), np.int64)
+    negatives = [_negatives(scene) for scene in scenes] if negatives is None else negatives
+    for k in range(count):
+        pick = int(rng.integers(len(scenes)))
+        scene = scenes[pick]
+        if len(scene.blocks) and rng.random() < 0.7:
+            b = int(rng.integers(len(scene.blocks)))
+            reading = scene.blocks[b]
+            shift = int(rng.integers(4))
+            quad = np.roll(reading, -shift, axis=0)  # quad[j] = reading[(j + shift) % 4]
+            text = scene.block_text[b]
+            labels[:, k] = (GLYPHS.index(text[0]), GLYPHS.index(text[1]), (-shift) % 4)
+        else:
+            pool = negatives[pick]
+            if len(pool) and rng.random() < 0.8:
+                quad = pool[int(rng.integers(len(pool)))]
+            else:  # a random small quadrilateral anywhere
+                centre = rng.uniform([0, 0], scene.image.shape[::-1])
+                side = rng.uniform(5, 30)
+                quad = centre + side * (np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+                                        + rng.normal(0, 0.1, (4, 2)))
+            labels[:, k] = (NONE, NONE, 4)
+        side = np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).mean()
+        noisy = quad + rng.normal(0, jitter * side, quad.shape)
+        views[k] = block_views(_photometric(scene.image, noisy, rng), noisy[None])[0]
+    return views, labels[0], labels[1], labels[2]
+
+
+def _negatives(scene) -> np.ndarray:
+    """Quads of the scene's true corners that are not its white squares (black squares, odd shapes)."""
+    quads = candidate_quads(scene.corners)
+    truth = {frozenset(map(tuple, np.round(b, 4))) for b in scene.blocks}
+    pts = scene.corners[quads] if len(quads) else np.zeros((0, 4, 2))
+    return np.array([q for q in pts if frozenset(map(tuple, np.round(q, 4))) not in truth]).reshape(-1, 4, 2)
+
+
+def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:
+    """Sometimes JPEG artefacts around the quad (a phone photo), else the image as it is."""
+    if rng.random() >= 0.3:
+        return image
+    lo = np.clip(np.floor(quad.min(axis=0)).astype(int) - 24, 0, None) // 8 * 8
+    hi = np.clip(np.ceil(quad.max(axis=0)).astype(int) + 24, 0, image.shape[::-1])
+    out = image.copy()
+    part = np.ascontiguousarray(image[lo[1]:hi[1], lo[0]:hi[0]])
+    if part.size == 0:
+        return image
+    ok, code = cv2.imencode(".jpg", part, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 95))])
+    out[lo[1]:hi[1], lo[0]:hi[0]] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+    return out
+
+
+def train_reader(scenes, *, steps: int = 2000, batch: int = 64, seed: int = 0, lr: float = 2e-3,
+                 net: BlockReader | None = None, progress: bool = False) -> BlockReader:
+    """Train the block reader on views of rendered scenes (deterministic for a seed).
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    steps : int
+    batch : int
+    seed : int
+    lr : float
+        AdamW learning rate, decayed by a cosine to 5 % of it.
+    net : BlockReader, optional
+    progress : bool
+        Print the loss every 100 steps.
+
+    Returns
+    -------
+    BlockReader
+    """
+    if not scenes:
+        raise HandcapError("no scenes to train on")
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True)
+    rng = np.random.default_rng(seed)
+    net = net or BlockReader()
+    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=0.05 * lr)
+    negatives = [_negatives(scene) for scene in scenes]
+    net.train()
+    for step in range(steps):
+        views, first, second, turn = reader_samples(scenes, batch, rng, negatives=negatives)
+        loss = reader_loss(net(torch.from_numpy(views)[:, None]), torch.from_numpy(first),
+                           torch.from_numpy(second), torch.from_numpy(turn))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        if progress and (step % 100 == 0 or step == steps - 1):
+            print(f"reader step {step:5d} loss {loss.item():.4f}", flush=True)
+    net.eval()
+    return net
+
+
+def evaluate_reader(net: BlockReader, scenes, alphabet: str | None = None) -> dict:
+    """Read the true blocks of ``scenes`` (their corners given in a random turn): share right, wrong, unread.
+
+    Parameters
+    ----------
+    net : BlockReader
+    scenes : sequence of Scene
+    alphabet : str, optional
+        Glyphs to read (default: each scene's own alphabet).
+
+    Returns
+    -------
+    dict
+        ``right``, ``wrong``, ``unread`` (shares of the blocks), ``blocks`` (count).
+    """
+    rng = np.random.default_rng(0)
+    right = wrong = unread = 0
+    for scene in scenes:
+        if not len(scene.blocks):
+            continue
+        shifts = rng.integers(4, size=len(scene.blocks))
+        quads = np.array([np.roll(b, -s, axis=0) for b, s in zip(scene.blocks, shifts)])
+        text, corners, _, _ = read_blocks(net, scene.image, quads, alphabet or scene.alphabet)
+        ok_turn = np.abs(corners - scene.blocks).max(axis=(1, 2)) < 1e-9
+        read = text != ""
+        good = read & ok_turn & (text == scene.block_text)
+        right += int(good.sum())
+        wrong += int((read & ~good).sum())
+        unread += int((~read).sum())
+    total = max(right + wrong + unread, 1)
+    return {"right": right / total, "wrong": wrong / total, "unread": unread / total, "blocks": total}
+
+
+#: The networks that can be saved and loaded, by class name.
+NETWORKS = {"CornerNet": CornerNet, "BlockReader": BlockReader}
+#: Bold monospace fonts tried for training the reader (Debian's font packages; missing ones are skipped).
+FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
+         "/usr/share/fonts/truetype/freefont/FreeMonoBold.ttf",
+         "/usr/share/fonts/truetype/inconsolata/Inconsolata.otf",
+         "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf")
+
+
+def save_net(net, path, info: dict | None = None) -> None:
+    """Write a network's weights, class and configuration to an ``.npz`` (atomically).
+
+    Parameters
+    ----------
+    net : CornerNet or BlockReader
+    path : str or Path
+    info : dict, optional
+        Strings recorded with the weights (how they were made, their scores).
+    """
+    arrays = {f"w.{k}": v.detach().numpy() for k, v in net.state_dict().items()}
+    arrays["network"] = np.array(type(net).__name__)
+    arrays["config"] = np.array(json.dumps(net.config()))
+    for key, value in (info or {}).items():
+        arrays[f"info.{key}"] = np.array(str(value))
+    with atomic_output(path) as fh:
+        np.savez(fh, **arrays)
+
+
+def load_net(path, kind: str):
+    """The network of class ``kind`` saved at ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+    kind : {'CornerNet', 'BlockReader'}
+
+    Returns
+    -------
+    CornerNet or BlockReader
+        In evaluation mode.
+
+    Raises
+    ------
+    HandcapError
+        A missing file, or one that holds no such network.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no {kind} weights there; train them with python -m handcap.detect.train")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if str(data["network"]) != kind:
+                raise HandcapError(f"{path}: holds a {data['network']}, not a {kind}")
+            net = NETWORKS[kind](**json.loads(str(data["config"])))
+            state = {k[2:]: torch.from_numpy(data[k]) for k in data.files if k.startswith("w.")}
+        net.load_state_dict(state)
+    except (KeyError, ValueError, RuntimeError, TypeError, OSError) as err:
+        raise HandcapError(f"{path}: not {kind} weights ({err})") from None
+    net.eval()
+    return net
+
+
+def save_corner_net(net: CornerNet, path, info: dict | None = None) -> None:
+    """Write the corner network (see :func:`save_net`).
+
+    Parameters
+    ----------
+    net : CornerNet
+    path : str or Path
+    info : dict, optional
+    """
+    save_net(net, path, info)
+
+
+def load_corner_net(path=None) -> CornerNet:
+    """The corner network saved at ``path`` (default: the shipped weights).
+
+    Parameters
+    ----------
+    path : str, Path or None
+
+    Returns
+    -------
+    CornerNet
+    """
+    return load_net(WEIGHTS / "corners.npz" if path is None else path, "CornerNet")
+
+
+def load_reader(path=None) -> BlockReader:
+    """The block reader saved at ``path`` (default: the shipped weights).
+
+    Parameters
+    ----------
+    path : str, Path or None
+
+    Returns
+    -------
+    BlockReader
+    """
+    return load_net(WEIGHTS / "reader.npz" if path is None else path, "BlockReader")
+
+
+def reader_scenes(count: int, seed: int, fonts) -> list:
+    """Scenes for the reader: each font in turn, with handcap's, DexterCap's and random alphabets.
+
+    Parameters
+    ----------
+    count : int
+    seed : int
+    fonts : sequence of str or None
+        Font files (None: the default font).
+
+    Returns
+    -------
+    list of Scene
+    """
+    rng = np.random.default_rng(seed)
+    out, k = [], 0
+    per = max(1, count // (3 * len(fonts)))
+    while len(out) < count:
+        font = fonts[k % len(fonts)]
+        alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
+        alphabet = alphabets[(k // len(fonts)) % 3]
+        maker = SceneMaker(seed * 1000 + k, font=font, alphabet=alphabet, scale=(0.45, 1.0))
+        try:
+            out += [maker.scene() for _ in range(min(per, count - len(out)))]
+        finally:
+            maker.close()
+        k += 1
+    return out
+
+
+def main(argv=None) -> int:
+    """Render scenes, train the networks, score them on held-out scenes, write the weights."""
+    p = argparse.ArgumentParser(prog="python -m handcap.detect.train", description=__doc__.split("\n\n")[0])
+    p.add_argument("--what", choices=("corners", "reader", "all"), default="all")
+    p.add_argument("--scenes", type=int, default=600, help="rendered training scenes (default %(default)s)")
+    p.add_argument("--test-scenes", type=int, default=40, help="held-out scenes to score on (default %(default)s)")
+    p.add_argument("--steps", type=int, default=4000, help="optimiser steps (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s)")
+    p.add_argument("--out", default=str(WEIGHTS), help="folder for corners.npz and reader.npz (default: the "
+                                                       "shipped weights)")
+    a = p.parse_args(argv)
+    torch.set_num_threads(a.threads)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.time()
+    command = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --steps {a.steps} "
+               f"--seed {a.seed}")
+    if a.what in ("corners", "all"):
+        scenes = _scenes(a.scenes, a.seed)
+        tests = _scenes(a.test_scenes, a.seed + 1_000_003)
+        print(f"rendered {len(scenes)} + {len(tests)} scenes in {time.time() - started:.0f} s", flush=True)
+        net = train_corners(scenes, steps=a.steps, seed=a.seed, progress=True)
+        score = evaluate_corners(net, tests)
+        print(score.summary(), flush=True)
+        save_net(net, out / "corners.npz", {"source": command, "score": score.summary()})
+    if a.what in ("reader", "all"):
+        fonts = [None] + [f for f in FONTS if Path(f).is_file()]
+        held_out, trained = fonts[-1:], fonts[:-1] if len(fonts) > 1 else fonts
+        scenes = reader_scenes(a.scenes, a.seed, trained)
+        tests = reader_scenes(a.test_scenes, a.seed + 1_000_003, held_out)
+        print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
+        net = train_reader(scenes, steps=a.steps, seed=a.seed, progress=True)
+        score = {name: evaluate_reader(net, [t for t in tests if t.alphabet == alphabet])
+                 for name, alphabet in (("handcap", ALPHABET), ("dextercap", DEXTERCAP_ALPHABET))}
+        print(f"reader on the held-out font: {score}", flush=True)
+        save_net(net, out / "reader.npz", {"source": command, "score": json.dumps(score)})
+    print(f"wrote {out} ({time.time() - started:.0f} s in all)")
+    return 0
+
+
+def _scenes(count: int, seed: int) -> list:
+    maker = SceneMaker(seed)
+    try:
+        return [maker.scene() for _ in range(count)]
+    finally:
+        maker.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,74 @@
+"""Block assembly from corners: white squares found among the true corners of rendered patches, and the
+geometric gates on hand-made shapes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from handcap import HandcapError
+from handcap.detect.blocks import candidate_quads, white_blocks
+
+
+def _checkerboard(rows=4, cols=5, side=20, origin=(30, 30)):
+    """A bare checkerboard image (white where r + c is even) with a black margin, and its corners."""
+    h, w = rows * side + 2 * origin[1], cols * side + 2 * origin[0]
+    image = np.full((h, w), 200, np.uint8)
+    image[origin[1] - side // 2:origin[1] + rows * side + side // 2, origin[0] - side // 2:origin[0] + cols * side
+          + side // 2] = 20
+    for r in range(rows):
+        for c in range(cols):
+            if (r + c) % 2 == 0:
+                y, x = origin[1] + r * side, origin[0] + c * side
+                image[y:y + side, x:x + side] = 230
+    corners = np.array([(origin[0] + c * side - 0.5, origin[1] + r * side - 0.5)
+                        for r in range(rows + 1) for c in range(cols + 1)], float)
+    return image, corners
+
+
+def test_every_white_square_and_nothing_else_on_a_flat_board():
+    image, corners = _checkerboard()
+    quads = candidate_quads(corners)
+    blocks, contrast = white_blocks(image, corners, quads)
+    found = {frozenset(b) for b in blocks}
+    expected = {frozenset((r * 6 + c, r * 6 + c + 1, (r + 1) * 6 + c + 1, (r + 1) * 6 + c))
+                for r in range(4) for c in range(5) if (r + c) % 2 == 0}
+    assert found == expected and (contrast > 0.5).all()
+    # Corners come clockwise on screen from the top-left one.
+    for b in blocks:
+        p = corners[b]
+        assert np.argmin(p.sum(axis=1)) == 0 and p[1, 0] > p[0, 0] and p[2, 1] > p[1, 1]
+
+
+def test_gates_refuse_thin_and_crossed_shapes():
+    thin = np.array([[0, 0], [40, 0], [40, 2], [0, 2]], float)  # side ratio 20
+    assert len(candidate_quads(thin, min_side=1)) == 0
+    assert len(candidate_quads(np.zeros((3, 2)))) == 0
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
+    from handcap.detect.scenes import SceneMaker
+    try:
+        maker = SceneMaker(11, scale=(0.6, 1.0))
+    except HandcapError as err:
+        pytest.skip(f"no headless OpenGL here: {err}")
+    try:
+        return [maker.scene() for _ in range(3)]
+    finally:
+        maker.close()
+
+
+def test_white_squares_of_rendered_patches_from_their_true_corners(scenes):
+    truth_total = hits = false = 0
+    for scene in scenes:
+        blocks, _ = white_blocks(scene.image, scene.corners, candidate_quads(scene.corners))
+        index = {tuple(p): k for k, p in enumerate(np.round(scene.corners, 6))}
+        truth = {frozenset(index[tuple(p)] for p in np.round(b, 6)) for b in scene.blocks}
+        found = {frozenset(b) for b in blocks}
+        truth_total += len(truth)
+        hits += len(truth & found)
+        false += len(found - truth)
+    assert truth_total > 40
+    assert hits >= 0.8 * truth_total and false <= 0.15 * (hits + false)

@@ -1,0 +1,80 @@
+"""The block reader: views that turn with the corners, alphabet checks, a tiny training run, weights files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from handcap import HandcapError
+from handcap.detect.corners import CornerNet
+from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks
+from handcap.detect.train import load_reader, reader_samples, save_net, train_reader
+
+
+def _image():
+    rng = np.random.default_rng(0)
+    image = (rng.random((120, 160)) * 60).astype(np.uint8)
+    image[40:80, 60:100] = 220
+    image[50:60, 65:75] = 30  # a mark near the square's top-left, to tell the turns apart
+    return image, np.array([[59.5, 39.5], [99.5, 39.5], [99.5, 79.5], [59.5, 79.5]])
+
+
+def test_views_turn_with_the_corner_order():
+    image, quad = _image()
+    base = block_views(image, quad[None])[0]
+    assert base.shape == (32, 32) and base[11:15, 8:12].mean() < base[20:26, 20:26].mean() - 0.5  # the mark
+    for shift in range(1, 4):
+        turned = block_views(image, np.roll(quad, -shift, axis=0)[None])[0]
+        # Starting the corners one later turns the view a quarter counterclockwise.
+        np.testing.assert_allclose(turned, np.rot90(base, shift), atol=0.05)
+
+
+def test_read_blocks_refuses_glyphs_it_does_not_know():
+    image, quad = _image()
+    with pytest.raises(HandcapError, match="knows no glyph"):
+        read_blocks(BlockReader(), image, quad[None], "AB\u00e9")
+    text, corners, rotation, score = read_blocks(BlockReader(), image, quad[None], "0123456789")
+    assert corners.shape == (1, 4, 2) and rotation.shape == score.shape == (1,)
+    assert text[0] == "" or all(ch in "0123456789" for ch in text[0])
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
+    from handcap.detect.scenes import SceneMaker
+    try:
+        maker = SceneMaker(21, scale=(0.8, 1.0), alphabet="0123456789ACEFHPUY")
+    except HandcapError as err:
+        pytest.skip(f"no headless OpenGL here: {err}")
+    try:
+        return [maker.scene() for _ in range(2)]
+    finally:
+        maker.close()
+
+
+def test_samples_label_the_turn_and_the_glyphs(scenes):
+    views, first, second, turn = reader_samples(scenes, 64, np.random.default_rng(0))
+    tags = turn < 4
+    assert views.shape == (64, 32, 32) and 10 < tags.sum() < 64
+    assert (first[~tags] == NONE).all() and (second[~tags] == NONE).all()
+    assert set(GLYPHS[i] for i in first[tags]) <= set("0123456789ACEFHPUY")
+
+
+def test_a_few_reader_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
+    from handcap.detect.reader import reader_loss
+    views, *labels = reader_samples(scenes, 48, np.random.default_rng(5))
+    batch = [torch.from_numpy(x) for x in labels]
+    torch.manual_seed(0)
+    before = reader_loss(BlockReader().eval()(torch.from_numpy(views)[:, None]), *batch).item()
+    net = train_reader(scenes, steps=12, batch=24, seed=2)
+    after = reader_loss(net(torch.from_numpy(views)[:, None]), *batch).item()
+    assert after < 0.9 * before
+    again = train_reader(scenes, steps=12, batch=24, seed=2)
+    assert all(torch.equal(a, b) for a, b in zip(net.state_dict().values(), again.state_dict().values()))
+    save_net(net, tmp_path / "r.npz")
+    loaded = load_reader(tmp_path / "r.npz")
+    assert all(torch.equal(a, b) for a, b in zip(net.state_dict().values(), loaded.state_dict().values()))
+    save_net(CornerNet(), tmp_path / "c.npz")
+    with pytest.raises(HandcapError, match="not a BlockReader"):
+        load_reader(tmp_path / "c.npz")
