@@ -9,6 +9,7 @@ import warnings
 
 from handcap.cli.calibrate import add_calibrate
 from handcap.cli.convert import add_convert
+from handcap.cli.detect import add_detect
 from handcap.cli.label import add_label
 from handcap.cli.layout import add_layout
 from handcap.cli.multiview import add_clean, add_multiview
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_calibrate(verbs)
     add_layout(verbs)
     add_pattern(verbs)
+    add_detect(verbs)
     return parser
 
 

@@ -1,0 +1,31 @@
+"""``handcap detect``: camera images of coded patches to 2D detections."""
+
+from __future__ import annotations
+
+from handcap.steps import detect as detect_step
+
+
+def _cmd_detect(a):
+    return detect_step.detect(a.inputs, a.out, rig=a.rig, pattern=a.pattern, alphabet=a.alphabet, rate=a.rate,
+                              corner_weights=a.corner_weights, reader_weights=a.reader_weights,
+                              threshold=a.threshold)
+
+
+def add_detect(verbs) -> None:
+    p = verbs.add_parser("detect", help="find and name the corners of coded patches in images or videos",
+                         description="Corners (heatmap network), blocks (white squares between them), their tags "
+                                     "(reader network), a vote over the template's patches and the corner ids. "
+                                     "Each input is one camera: a folder of images, a video or an image, named "
+                                     "after the camera. Writes the 2D detections file that triangulate reads, "
+                                     "with one row per read block as well.")
+    p.add_argument("inputs", nargs="+", help="folders of images, videos or image files, one per camera")
+    p.add_argument("--out", required=True, help="detections file to write (.npz)")
+    p.add_argument("--rig", help="cameras file; the inputs must be named after its cameras")
+    p.add_argument("--pattern", help="the session's pattern.toml (handcap pattern): without it, blocks only")
+    p.add_argument("--alphabet", help="glyphs of the printed tags (default: the template's; DexterCap's patches: "
+                                      "0123456789ACEFHPUY)")
+    p.add_argument("--rate", type=float, help="frames per second (default 20, with a warning)")
+    p.add_argument("--threshold", type=float, default=0.3, help="least corner probability (default %(default)s)")
+    p.add_argument("--corner-weights", help="corner network weights instead of the shipped ones")
+    p.add_argument("--reader-weights", help="block reader weights instead of the shipped ones")
+    p.set_defaults(run=_cmd_detect)

@@ -1,0 +1,113 @@
+"""The coded-patch detector on one image: corners, blocks, tags, votes, named corners.
+
+:class:`Detector` chains the stages: the corner network
+(:mod:`~handcap.detect.corners`), block assembly (:mod:`~handcap.detect.blocks`),
+the block reader (:mod:`~handcap.detect.reader`) and, given a template,
+the vote over its patches and the corner names (:mod:`~handcap.detect.voting`).
+Without a template it reports blocks and their corners only (a single photo of
+patches from an unknown sheet).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.detect.alphabet import ALPHABET, check_alphabet
+from handcap.detect.blocks import candidate_quads, white_blocks
+from handcap.detect.corners import CornerNet, detect_corners
+from handcap.detect.pattern import Pattern
+from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
+from handcap.detect.voting import name_corners, vote
+
+#: Least reading confidence of a block kept without a template (with one, the vote decides).
+MIN_BLOCK_SCORE = 0.5
+
+
+@dataclass(frozen=True)
+class ImageDetections:
+    """What the detector found in one image.
+
+    Attributes
+    ----------
+    corners : ndarray (K, 2)
+        Every corner found, pixels.
+    corner_score : ndarray (K,)
+    names : ndarray (K,) object
+        Template name of each corner (``OWNER:PATCH_rRcC``), None where it has none.
+    block_text : ndarray (B,) str
+        Tags of the blocks kept (voted, with a template).
+    block_xy : ndarray (B, 4, 2)
+        Their corners in reading order (top-left, top-right, bottom-right, bottom-left), pixels.
+    block_score : ndarray (B,)
+    corrected : int
+        Readings the vote changed.
+    """
+
+    corners: np.ndarray
+    corner_score: np.ndarray
+    names: np.ndarray
+    block_text: np.ndarray
+    block_xy: np.ndarray
+    block_score: np.ndarray
+    corrected: int
+
+
+class Detector:
+    """Coded-patch detector (see the module docstring).
+
+    Parameters
+    ----------
+    corner_net : CornerNet
+    reader : BlockReader
+    pattern : Pattern, optional
+        The session's template; without it no corner gets a name.
+    alphabet : str, optional
+        Glyphs of the printed tags (default: the template's, else handcap's).
+    threshold : float
+        Least corner probability.
+    """
+
+    def __init__(self, corner_net: CornerNet, reader: BlockReader, pattern: Pattern | None = None,
+                 alphabet: str | None = None, threshold: float = 0.3):
+        self.corner_net, self.reader, self.pattern = corner_net, reader, pattern
+        if alphabet is None:
+            alphabet = pattern.alphabet if pattern is not None else ALPHABET
+        self.alphabet = check_alphabet(alphabet)
+        unknown = [ch for ch in self.alphabet if ch not in GLYPHS]
+        if unknown:
+            raise HandcapError(f"--alphabet: the reader knows no glyph {''.join(unknown)!r}; it reads {GLYPHS}")
+        if pattern is not None and set(pattern.alphabet) - set(self.alphabet):
+            raise HandcapError(f"--alphabet {self.alphabet!r} lacks glyphs of the template's alphabet "
+                               f"{pattern.alphabet!r}; leave --alphabet out to use the template's")
+        self.threshold = threshold
+
+    def image(self, image: np.ndarray) -> ImageDetections:
+        """Detect the patches of one grey image.
+
+        Parameters
+        ----------
+        image : ndarray (H, W) uint8
+
+        Returns
+        -------
+        ImageDetections
+        """
+        xy, cscore = detect_corners(self.corner_net, image, threshold=self.threshold)
+        quads, _ = white_blocks(image, xy, candidate_quads(xy))
+        text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet) if len(quads) \
+            else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
+        names = np.full(len(xy), None, dtype=object)
+        corrected = 0
+        if self.pattern is not None and len(quads):
+            tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore)
+            names = name_corners(self.pattern, quads, tags, turns, len(xy))
+            keep = tags != ""
+            order = (np.arange(4)[None] + np.maximum(turns, 0)[:, None]) % 4
+            reading = np.take_along_axis(xy[quads], order[..., None], axis=1)
+            text = tags
+        else:
+            keep = (text != "") & (bscore >= MIN_BLOCK_SCORE)
+        return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected)

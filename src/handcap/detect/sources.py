@@ -1,0 +1,176 @@
+"""Where the detector's frames come from: image files, folders of images, videos, one camera each.
+
+Each input path is one camera, named after it: a folder of images (its frames
+in file-name order, e.g. ``images/cam_0/000000.png`` as ``handcap synth
+--images`` writes), a video (its frames in order, read one at a time), or a
+single image (one frame). Frames are grey ``(H, W)`` uint8; colour images
+are converted. A file that cannot be decoded is one clear error naming it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from handcap.core.errors import HandcapError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
+
+
+@dataclass(frozen=True)
+class FrameSource:
+    """The frames of one camera.
+
+    Attributes
+    ----------
+    camera : str
+        Its name: the folder's or file's name without suffix.
+    path : Path
+    kind : str
+        ``folder``, ``video`` or ``image``.
+    files : tuple of Path
+        The images of a folder (or the single image).
+    """
+
+    camera: str
+    path: Path
+    kind: str
+    files: tuple = ()
+
+    def frames(self):
+        """Yield ``(frame_index, image)`` in order; images are grey uint8 ``(H, W)``.
+
+        Raises
+        ------
+        HandcapError
+            A file that cannot be decoded, or a video with no readable frame.
+        """
+        if self.kind == "video":
+            capture = cv2.VideoCapture(str(self.path))
+            if not capture.isOpened():
+                raise HandcapError(f"{self.path}: cannot be opened as a video (unknown format or damaged file)")
+            try:
+                index = 0
+                while True:
+                    ok, frame = capture.read()
+                    if not ok:
+                        break
+                    yield index, _grey(frame)
+                    index += 1
+            finally:
+                capture.release()
+            if index == 0:
+                raise HandcapError(f"{self.path}: no frame could be read from this video (empty or damaged)")
+            return
+        for index, file in enumerate(self.files):
+            yield index, read_image(file)
+
+    def fps(self) -> float | None:
+        """A video's frame rate as its header says (None for images, or when it does not say)."""
+        if self.kind != "video":
+            return None
+        capture = cv2.VideoCapture(str(self.path))
+        try:
+            fps = float(capture.get(cv2.CAP_PROP_FPS))
+        finally:
+            capture.release()
+        return fps if 0 < fps < 10000 else None
+
+    def count(self) -> int:
+        """Number of frames (a video's as its header says; 0 when it does not say)."""
+        if self.kind != "video":
+            return len(self.files)
+        capture = cv2.VideoCapture(str(self.path))
+        try:
+            return max(int(capture.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+        finally:
+            capture.release()
+
+
+def read_image(path) -> np.ndarray:
+    """One image file as grey uint8 ``(H, W)``.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+        16-bit images are scaled to 8 bits; colour is converted to grey.
+
+    Raises
+    ------
+    HandcapError
+        A missing file or one that does not decode as an image.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no such image file")
+    data = np.fromfile(path, dtype=np.uint8)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if image is None:
+        raise HandcapError(f"{path}: not an image that can be decoded (damaged, truncated or not an image)")
+    return _grey(image)
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    if image.dtype == np.uint16:
+        image = (image / 257.0).round().astype(np.uint8)
+    elif image.dtype != np.uint8:
+        image = np.clip(image, 0, 255).astype(np.uint8)
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
+    elif image.ndim == 3 and image.shape[2] == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    elif image.ndim == 3:
+        image = image[..., 0]
+    return np.ascontiguousarray(image)
+
+
+def frame_sources(paths) -> list[FrameSource]:
+    """One :class:`FrameSource` per input path.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Folders of images, videos or image files.
+
+    Returns
+    -------
+    list of FrameSource
+
+    Raises
+    ------
+    HandcapError
+        A missing path, a folder without images, a file of another kind, or two inputs with one camera name.
+    """
+    sources = []
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            files = tuple(sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()))
+            if not files:
+                raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
+            sources.append(FrameSource(path.name, path, "folder", files))
+        elif path.is_file():
+            suffix = path.suffix.lower()
+            if suffix in VIDEO_SUFFIXES:
+                sources.append(FrameSource(path.stem, path, "video"))
+            elif suffix in IMAGE_SUFFIXES:
+                sources.append(FrameSource(path.stem, path, "image", (path,)))
+            else:
+                raise HandcapError(f"{path}: not an image ({', '.join(IMAGE_SUFFIXES)}) or a video "
+                                   f"({', '.join(VIDEO_SUFFIXES)})")
+        else:
+            raise HandcapError(f"{path}: no such file or folder")
+    names = [s.camera for s in sources]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise HandcapError(f"two inputs are both camera {twice[0]!r}; give each camera's images a folder (or video) "
+                           "of its own name")
+    return sources

@@ -1,0 +1,140 @@
+"""Voting over the patch template: fix misread tags, then name every corner (DexterCap Sec. 3.2.4).
+
+Blocks that share an image corner are diagonal neighbours on a patch: if block
+A sits at square ``(r, c)`` and its corner ``k`` (reading order: top-left,
+top-right, bottom-right, bottom-left) is also a corner of block B, then B is
+the square across that corner, ``(r + 2 dr_k - 1, c + 2 dc_k - 1)``, and the
+shared corner is B's opposite corner ``(k + 2) % 4``. So every block that was
+read places, by a walk over the blocks it is connected to, every other block
+of its patch: its square (hence its tag) and its turn. Each read block casts
+one such vote for every block it reaches, itself included; a block takes the
+(tag, turn) with most votes, is dropped when the best is not ahead of the
+second, and a tag kept by two blocks of one image is dropped from both
+(DexterCap drops such pairs too). The corners of the blocks that remain are
+named from the template (``OWNER:PATCH_rRcC``); a corner given two different
+names by its blocks is dropped.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict, deque
+
+import numpy as np
+
+from handcap.detect.pattern import Pattern
+
+#: (row, column) of each reading-order corner of a square relative to its top-left vertex.
+STEP = ((0, 0), (0, 1), (1, 1), (1, 0))
+
+
+def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None):
+    """Vote over the template (see the module docstring).
+
+    Parameters
+    ----------
+    pattern : Pattern
+    quads : ndarray (B, 4) int
+        Each block's corner indices in image order (the order the rotations refer to).
+    text : sequence of str
+        Each block's reading ("" when unread).
+    rotation : ndarray (B,) int
+        Index of the tag's top-left among the block's corners (-1 when unread).
+    score : ndarray (B,), optional
+        Reading confidences; a vote weighs its seed's confidence (default 1).
+
+    Returns
+    -------
+    tags : ndarray (B,) str
+        The voted tag of each block, "" where it is dropped.
+    turns : ndarray (B,) int
+        The voted rotation (-1 where dropped).
+    changed : int
+        Blocks whose reading the vote corrected.
+    """
+    quads = np.asarray(quads, dtype=int).reshape(-1, 4)
+    n = len(quads)
+    weight = np.ones(n) if score is None else np.asarray(score, dtype=float)
+    by_corner = defaultdict(list)
+    for b, quad in enumerate(quads):
+        for p, corner in enumerate(quad):
+            by_corner[corner].append((b, p))
+    votes = [Counter() for _ in range(n)]
+    for seed in range(n):
+        located = pattern.locate(str(text[seed])) if text[seed] else None
+        if located is None or rotation[seed] < 0:
+            continue
+        patch, r0, c0 = located
+        placed = {seed: (r0, c0, int(rotation[seed]))}
+        queue = deque([seed])
+        while queue:
+            a = queue.popleft()
+            r, c, turn = placed[a]
+            for p, corner in enumerate(quads[a]):
+                k = (p - turn) % 4  # reading-order index of this corner in block a
+                dr, dc = STEP[k]
+                for b, q in by_corner[corner]:
+                    if b in placed:
+                        continue
+                    rb, cb = r + 2 * dr - 1, c + 2 * dc - 1
+                    if not (0 <= rb < patch.rows and 0 <= cb < patch.cols) or not patch.tags[rb][cb]:
+                        continue
+                    placed[b] = (rb, cb, (q - (k + 2)) % 4)
+                    queue.append(b)
+        for b, (r, c, turn) in placed.items():
+            votes[b][(patch.tags[r][c], turn)] += weight[seed]
+    tags = np.full(n, "", dtype="<U2")
+    turns = np.full(n, -1)
+    for b, counter in enumerate(votes):
+        ranked = counter.most_common(2)
+        if not ranked or (len(ranked) > 1 and ranked[1][1] >= ranked[0][1]):
+            continue
+        tags[b], turns[b] = ranked[0][0]
+    # A tag seen twice in one image: neither can be trusted.
+    seen = Counter(t for t in tags if t)
+    for b in range(n):
+        if tags[b] and seen[tags[b]] > 1:
+            tags[b], turns[b] = "", -1
+    changed = int(sum(1 for b in range(n) if tags[b] and text[b] and tags[b] != text[b]))
+    return tags, turns, changed
+
+
+def name_corners(pattern: Pattern, quads: np.ndarray, tags, turns, n_corners: int) -> np.ndarray:
+    """The template name of every image corner, from the voted blocks.
+
+    Parameters
+    ----------
+    pattern : Pattern
+    quads : ndarray (B, 4) int
+        Corner indices in image order.
+    tags : sequence of str
+        Voted tags ("" for none).
+    turns : ndarray (B,) int
+    n_corners : int
+        Corners in the image.
+
+    Returns
+    -------
+    ndarray (n_corners,) object
+        ``OWNER:PATCH_rRcC``, or None for a corner no block names or two blocks name differently.
+    """
+    names = np.full(n_corners, None, dtype=object)
+    conflict = np.zeros(n_corners, bool)
+    for quad, text, turn in zip(np.asarray(quads, dtype=int).reshape(-1, 4), tags, turns):
+        located = pattern.locate(str(text)) if text else None
+        if located is None or turn < 0:
+            continue
+        patch, r, c = located
+        for p, corner in enumerate(quad):
+            vr, vc = patch.block_vertices(r, c)[(p - turn) % 4]
+            name = patch.corner_name(vr, vc)
+            if names[corner] is None:
+                names[corner] = name
+            elif names[corner] != name:
+                conflict[corner] = True
+    names[conflict] = None
+    # One name on two image corners: neither is trusted.
+    count = Counter(n for n in names if n is not None)
+    for k, name in enumerate(names):
+        if name is not None and count[name] > 1:
+            names[k] = None
+    return names

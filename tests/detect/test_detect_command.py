@@ -1,0 +1,139 @@
+"""handcap detect: the file it writes, its inputs (folders, images, videos) and bad input.
+
+The networks here are untrained (their accuracy is measured by benchmarks/detect.py and the training
+command); these tests check the plumbing: cameras, frames, the detections contract, errors."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from handcap.cli import main
+from handcap.detect import session_pattern
+from handcap.detect.corners import CornerNet
+from handcap.detect.reader import BlockReader
+from handcap.detect.sources import frame_sources, read_image
+from handcap.detect.train import save_net
+from handcap import HandcapError
+
+
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("weights")
+    import torch
+    torch.manual_seed(0)
+    save_net(CornerNet(), folder / "c.npz")
+    save_net(BlockReader(), folder / "r.npz")
+    return ["--corner-weights", str(folder / "c.npz"), "--reader-weights", str(folder / "r.npz")]
+
+
+@pytest.fixture()
+def frames(tmp_path):
+    rng = np.random.default_rng(0)
+    for cam in ("cam_0", "cam_1"):
+        (tmp_path / cam).mkdir()
+        for t in range(2):
+            board = np.kron((np.indices((6, 8)).sum(axis=0) % 2) * 200 + 20, np.ones((16, 16))).astype(np.uint8)
+            image = np.full((160, 200), 90, np.uint8)
+            image[20:116, 30:158] = board
+            image = np.clip(image + rng.normal(0, 3, image.shape), 0, 255).astype(np.uint8)
+            cv2.imwrite(str(tmp_path / cam / f"{t:06d}.png"), image)
+    return tmp_path
+
+
+def test_detections_file_holds_the_contract(frames, weights, tmp_path, capsys):
+    pattern = tmp_path / "pattern.toml"
+    session_pattern(("right",), ()).save(pattern)
+    out = tmp_path / "det.npz"
+    assert main(["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--pattern", str(pattern), "--rate", "30",
+                 "--out", str(out), *weights]) == 0
+    data = np.load(out)
+    assert list(data["camera_names"]) == ["cam_0", "cam_1"] and float(data["rate"]) == 30.0
+    assert len(data["marker_names"]) == len(session_pattern(("right",), ()).corner_names())
+    n, b = len(data["frame"]), len(data["block_text"])
+    assert data["xy"].shape == (n, 2) and data["camera"].shape == data["marker"].shape == data["score"].shape == (n,)
+    assert data["block_xy"].shape == (b, 4, 2) and data["block_frame"].shape == data["block_camera"].shape == (b,)
+    assert "4 images from 2 camera(s)" in capsys.readouterr().out
+
+
+def test_without_a_template_blocks_only_and_a_warning(frames, weights, tmp_path, capsys):
+    out = tmp_path / "det.npz"
+    assert main(["detect", str(frames / "cam_0" / "000000.png"), "--out", str(out), *weights]) == 0
+    data = np.load(out)
+    assert len(data["marker_names"]) == 0 and len(data["frame"]) == 0
+    err = capsys.readouterr().err
+    assert "no template" in err and "20 Hz assumed" in err
+    assert any("no template" in w for w in data["warnings"])
+
+
+def test_videos_are_read_frame_by_frame(tmp_path):
+    path = tmp_path / "cam_9.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48), False)
+    if not writer.isOpened():
+        pytest.skip("OpenCV here writes no MJPG video")
+    for k in range(3):
+        writer.write(np.full((48, 64), 40 * k, np.uint8))
+    writer.release()
+    (source,) = frame_sources([path])
+    frames = list(source.frames())
+    assert source.camera == "cam_9" and [t for t, _ in frames] == [0, 1, 2] and frames[0][1].shape == (48, 64)
+    assert source.fps() == pytest.approx(25.0)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda d: (d / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(20)), "not an image that can be decoded"),
+    (lambda d: (d / "x.png").write_bytes(b""), "not an image"),
+    (lambda d: (d / "x.txt").write_text("hello"), "not an image"),
+    (lambda d: (d / "x.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(40)), "video"),
+])
+def test_bad_image_files_are_one_clear_error(tmp_path, weights, capsys, make, match):
+    make(tmp_path)
+    target = next(p for p in tmp_path.iterdir() if p.name.startswith("x."))
+    assert main(["detect", str(target), "--out", str(tmp_path / "d.npz"), *weights]) == 2
+    err = capsys.readouterr().err
+    assert match in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "d.npz").exists()
+
+
+def test_truncated_png_in_a_folder(frames, weights, tmp_path, capsys):
+    good = (frames / "cam_0" / "000001.png").read_bytes()
+    (frames / "cam_0" / "000001.png").write_bytes(good[: len(good) // 3])
+    assert main(["detect", str(frames / "cam_0"), "--out", str(tmp_path / "d.npz"), *weights]) == 2
+    assert "000001.png" in capsys.readouterr().err
+
+
+def test_other_bad_input(frames, weights, tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[cam_a]\nname = "cam_a"\nsize = [200, 160]\nmatrix = [[100, 0, 100], [0, 100, 80], [0, 0, 1]]\n'
+                   'distortions = [0, 0, 0, 0, 0]\nrotation = [0, 0, 0]\ntranslation = [0, 0, 1]\n')
+    pattern = tmp_path / "pattern.toml"
+    session_pattern(("right",), ()).save(pattern)
+    cases = [
+        (["detect", str(tmp_path / "empty"), "--out", str(tmp_path / "d.npz")], "holds no images"),
+        (["detect", str(tmp_path / "nowhere"), "--out", str(tmp_path / "d.npz")], "no such file"),
+        (["detect", str(frames / "cam_0"), "--out", str(tmp_path / "d.txt")], ".npz"),
+        (["detect", str(frames / "cam_0"), "--rig", str(rig), "--out", str(tmp_path / "d.npz")], "no camera 'cam_0'"),
+        (["detect", str(frames / "cam_0"), "--pattern", str(pattern), "--alphabet", "0123", "--out",
+          str(tmp_path / "d.npz")], "lacks glyphs"),
+        (["detect", str(frames / "cam_0"), "--alphabet", "0123\u00e9", "--out", str(tmp_path / "d.npz")], "knows no"),
+        # An input image as the output: refused (outputs are .npz) and left as it was.
+        (["detect", str(frames / "cam_0" / "000000.png"), "--out", str(frames / "cam_0" / "000000.png")], ".npz"),
+    ]
+    before = (frames / "cam_0" / "000000.png").read_bytes()
+    for args, match in cases:
+        assert main(args + weights) == 2, args
+        err = capsys.readouterr().err
+        assert match in err and len(err.strip().splitlines()) == 1, (args, err)
+    assert (frames / "cam_0" / "000000.png").read_bytes() == before
+
+
+def test_read_image_converts_colour_and_16_bit(tmp_path):
+    colour = np.zeros((10, 12, 3), np.uint8)
+    colour[..., 2] = 255
+    cv2.imwrite(str(tmp_path / "c.png"), colour)
+    cv2.imwrite(str(tmp_path / "d.png"), np.full((10, 12), 65535, np.uint16))
+    assert read_image(tmp_path / "c.png").shape == (10, 12) and read_image(tmp_path / "c.png")[0, 0] == 76
+    assert read_image(tmp_path / "d.png").dtype == np.uint8 and read_image(tmp_path / "d.png")[0, 0] == 255
+    with pytest.raises(HandcapError, match="no such image"):
+        read_image(tmp_path / "none.png")
