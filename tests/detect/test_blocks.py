@@ -4,9 +4,7 @@ geometric gates on hand-made shapes."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from handcap import HandcapError
 from handcap.detect.blocks import candidate_quads, white_blocks
 
 
@@ -44,20 +42,6 @@ def test_gates_refuse_thin_and_crossed_shapes():
     thin = np.array([[0, 0], [40, 0], [40, 2], [0, 2]], float)  # side ratio 20
     assert len(candidate_quads(thin, min_side=1)) == 0
     assert len(candidate_quads(np.zeros((3, 2)))) == 0
-
-
-@pytest.fixture(scope="module")
-def scenes():
-    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
-    from handcap.detect.scenes import SceneMaker
-    try:
-        maker = SceneMaker(11, scale=(0.6, 1.0))
-    except HandcapError as err:
-        pytest.skip(f"no headless OpenGL here: {err}")
-    try:
-        return [maker.scene() for _ in range(3)]
-    finally:
-        maker.close()
 
 
 def test_white_squares_of_rendered_patches_from_their_true_corners(scenes):

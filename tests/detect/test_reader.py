@@ -39,20 +39,6 @@ def test_read_blocks_refuses_glyphs_it_does_not_know():
     assert text[0] == "" or all(ch in "0123456789" for ch in text[0])
 
 
-@pytest.fixture(scope="module")
-def scenes():
-    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
-    from handcap.detect.scenes import SceneMaker
-    try:
-        maker = SceneMaker(21, scale=(0.8, 1.0), alphabet="0123456789ACEFHPUY")
-    except HandcapError as err:
-        pytest.skip(f"no headless OpenGL here: {err}")
-    try:
-        return [maker.scene() for _ in range(2)]
-    finally:
-        maker.close()
-
-
 def test_samples_label_the_turn_and_the_glyphs(scenes):
     views, first, second, turn = reader_samples(scenes, 64, np.random.default_rng(0))
     tags = turn < 4
@@ -69,7 +55,7 @@ def test_a_few_reader_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
     before = reader_loss(BlockReader().eval()(torch.from_numpy(views)[:, None]), *batch).item()
     net = train_reader(scenes, steps=12, batch=24, seed=2)
     after = reader_loss(net(torch.from_numpy(views)[:, None]), *batch).item()
-    assert after < 0.9 * before
+    assert after < 0.95 * before
     again = train_reader(scenes, steps=12, batch=24, seed=2)
     assert all(torch.equal(a, b) for a, b in zip(net.state_dict().values(), again.state_dict().values()))
     save_net(net, tmp_path / "r.npz")

@@ -25,15 +25,17 @@ import numpy as np
 import torch
 
 from handcap.core.errors import HandcapError
-from handcap.core.files import atomic_output
 from handcap.detect.alphabet import ALPHABET, DEXTERCAP_ALPHABET
 from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners, normalise, targets
+from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_corner_net, save_net
 from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks, reader_loss
 from handcap.detect.scenes import SceneMaker
 
 CROP = 96
-WEIGHTS = Path(__file__).resolve().parent / "weights"
+__all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "evaluate_reader", "load_corner_net",
+           "load_net", "load_reader", "main", "reader_samples", "reader_scenes", "save_corner_net", "save_net",
+           "score_corners", "train_corners", "train_reader"]
 
 
 @dataclass(frozen=True)
@@ -366,106 +368,11 @@ def evaluate_reader(net: BlockReader, scenes, alphabet: str | None = None) -> di
     return {"right": right / total, "wrong": wrong / total, "unread": unread / total, "blocks": total}
 
 
-#: The networks that can be saved and loaded, by class name.
-NETWORKS = {"CornerNet": CornerNet, "BlockReader": BlockReader}
 #: Bold monospace fonts tried for training the reader (Debian's font packages; missing ones are skipped).
 FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
          "/usr/share/fonts/truetype/freefont/FreeMonoBold.ttf",
          "/usr/share/fonts/truetype/inconsolata/Inconsolata.otf",
          "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf")
-
-
-def save_net(net, path, info: dict | None = None) -> None:
-    """Write a network's weights, class and configuration to an ``.npz`` (atomically).
-
-    Parameters
-    ----------
-    net : CornerNet or BlockReader
-    path : str or Path
-    info : dict, optional
-        Strings recorded with the weights (how they were made, their scores).
-    """
-    arrays = {f"w.{k}": v.detach().numpy() for k, v in net.state_dict().items()}
-    arrays["network"] = np.array(type(net).__name__)
-    arrays["config"] = np.array(json.dumps(net.config()))
-    for key, value in (info or {}).items():
-        arrays[f"info.{key}"] = np.array(str(value))
-    with atomic_output(path) as fh:
-        np.savez(fh, **arrays)
-
-
-def load_net(path, kind: str):
-    """The network of class ``kind`` saved at ``path``.
-
-    Parameters
-    ----------
-    path : str or Path
-    kind : {'CornerNet', 'BlockReader'}
-
-    Returns
-    -------
-    CornerNet or BlockReader
-        In evaluation mode.
-
-    Raises
-    ------
-    HandcapError
-        A missing file, or one that holds no such network.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise HandcapError(f"{path}: no {kind} weights there; train them with python -m handcap.detect.train")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if str(data["network"]) != kind:
-                raise HandcapError(f"{path}: holds a {data['network']}, not a {kind}")
-            net = NETWORKS[kind](**json.loads(str(data["config"])))
-            state = {k[2:]: torch.from_numpy(data[k]) for k in data.files if k.startswith("w.")}
-        net.load_state_dict(state)
-    except (KeyError, ValueError, RuntimeError, TypeError, OSError) as err:
-        raise HandcapError(f"{path}: not {kind} weights ({err})") from None
-    net.eval()
-    return net
-
-
-def save_corner_net(net: CornerNet, path, info: dict | None = None) -> None:
-    """Write the corner network (see :func:`save_net`).
-
-    Parameters
-    ----------
-    net : CornerNet
-    path : str or Path
-    info : dict, optional
-    """
-    save_net(net, path, info)
-
-
-def load_corner_net(path=None) -> CornerNet:
-    """The corner network saved at ``path`` (default: the shipped weights).
-
-    Parameters
-    ----------
-    path : str, Path or None
-
-    Returns
-    -------
-    CornerNet
-    """
-    return load_net(WEIGHTS / "corners.npz" if path is None else path, "CornerNet")
-
-
-def load_reader(path=None) -> BlockReader:
-    """The block reader saved at ``path`` (default: the shipped weights).
-
-    Parameters
-    ----------
-    path : str, Path or None
-
-    Returns
-    -------
-    BlockReader
-    """
-    return load_net(WEIGHTS / "reader.npz" if path is None else path, "BlockReader")
 
 
 def reader_scenes(count: int, seed: int, fonts) -> list:

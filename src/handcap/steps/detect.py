@@ -12,7 +12,7 @@ from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.detect.pattern import Pattern
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
-from handcap.detect.train import load_corner_net, load_reader
+from handcap.detect.networks import load_corner_net, load_reader
 from handcap.io import read_rig
 from handcap.steps.step import Step
 

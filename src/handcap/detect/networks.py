@@ -1,0 +1,117 @@
+"""Saved detector networks: write and read their weights (``.npz``: arrays, class, configuration, provenance).
+
+The shipped weights live in ``handcap/detect/weights/`` (``corners.npz``, ``reader.npz``), made by
+``python -m handcap.detect.train``; ``info.source`` in each file is the command that made it and
+``info.score`` what it measured on held-out rendered scenes.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output
+from handcap.detect.corners import CornerNet
+from handcap.detect.reader import BlockReader
+
+#: Folder of the shipped weights.
+WEIGHTS = Path(__file__).resolve().parent / "weights"
+#: The networks that can be saved and loaded, by class name.
+NETWORKS = {"CornerNet": CornerNet, "BlockReader": BlockReader}
+def save_net(net, path, info: dict | None = None) -> None:
+    """Write a network's weights, class and configuration to an ``.npz`` (atomically).
+
+    Parameters
+    ----------
+    net : CornerNet or BlockReader
+    path : str or Path
+    info : dict, optional
+        Strings recorded with the weights (how they were made, their scores).
+    """
+    arrays = {f"w.{k}": v.detach().numpy() for k, v in net.state_dict().items()}
+    arrays["network"] = np.array(type(net).__name__)
+    arrays["config"] = np.array(json.dumps(net.config()))
+    for key, value in (info or {}).items():
+        arrays[f"info.{key}"] = np.array(str(value))
+    with atomic_output(path) as fh:
+        np.savez(fh, **arrays)
+
+
+def load_net(path, kind: str):
+    """The network of class ``kind`` saved at ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+    kind : {'CornerNet', 'BlockReader'}
+
+    Returns
+    -------
+    CornerNet or BlockReader
+        In evaluation mode.
+
+    Raises
+    ------
+    HandcapError
+        A missing file, or one that holds no such network.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no {kind} weights there; train them with python -m handcap.detect.train")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if str(data["network"]) != kind:
+                raise HandcapError(f"{path}: holds a {data['network']}, not a {kind}")
+            net = NETWORKS[kind](**json.loads(str(data["config"])))
+            state = {k[2:]: torch.from_numpy(data[k]) for k in data.files if k.startswith("w.")}
+        net.load_state_dict(state)
+    except (KeyError, ValueError, RuntimeError, TypeError, OSError) as err:
+        raise HandcapError(f"{path}: not {kind} weights ({err})") from None
+    net.eval()
+    return net
+
+
+def save_corner_net(net: CornerNet, path, info: dict | None = None) -> None:
+    """Write the corner network (see :func:`save_net`).
+
+    Parameters
+    ----------
+    net : CornerNet
+    path : str or Path
+    info : dict, optional
+    """
+    save_net(net, path, info)
+
+
+def load_corner_net(path=None) -> CornerNet:
+    """The corner network saved at ``path`` (default: the shipped weights).
+
+    Parameters
+    ----------
+    path : str, Path or None
+
+    Returns
+    -------
+    CornerNet
+    """
+    return load_net(WEIGHTS / "corners.npz" if path is None else path, "CornerNet")
+
+
+def load_reader(path=None) -> BlockReader:
+    """The block reader saved at ``path`` (default: the shipped weights).
+
+    Parameters
+    ----------
+    path : str, Path or None
+
+    Returns
+    -------
+    BlockReader
+    """
+    return load_net(WEIGHTS / "reader.npz" if path is None else path, "BlockReader")
+
+
