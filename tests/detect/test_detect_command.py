@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from handcap.cli import main
-from handcap.detect import session_pattern
+from handcap.patterns import session_pattern
 from handcap.detect.corners import CornerNet
 from handcap.detect.reader import BlockReader
 from handcap.detect.sources import frame_sources, read_image

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from handcap.detect import session_pattern
+from handcap.patterns import session_pattern
 from handcap.detect.voting import name_corners, vote
 
 PATTERN = session_pattern(("right",), ("cube2x2",))

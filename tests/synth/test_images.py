@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from handcap.core.camera import Camera
-from handcap.detect import session_pattern
-from handcap.detect.glyphs import load_font
+from handcap.patterns import session_pattern
+from handcap.patterns.glyphs import load_font
 from handcap.hand import OpenHand
 from handcap.layouts import load_layout
 from handcap.synth.decals import patch_skin
@@ -135,7 +135,7 @@ def test_visibility_agrees_with_ray_casting(gl_ok, posed):
 
 def test_synth_images_writes_frames_and_their_truth(gl_ok, tmp_path):
     from handcap.cli import main
-    from handcap.detect import Pattern
+    from handcap.patterns import Pattern
 
     args = ["synth", "--layout", "dense-patches", "--motion", "random", "--frames", "2", "--cameras", "3",
             "--images", "--image-scale", "0.2", "--object", "none"]

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from handcap.detect.alphabet import ALPHABET
-from handcap.detect.session import HANDS, OBJECT_PATCHES
-from handcap.detect.sheet import PAPERS
+from handcap.patterns.alphabet import ALPHABET
+from handcap.patterns.session import HANDS, OBJECT_PATCHES
+from handcap.patterns.sheet import PAPERS
 from handcap.steps import pattern as pattern_step
 
 

@@ -1,14 +1,14 @@
-"""Coded-patch front end (DexterCap Sec. 3.1-3.3): printable patches, and their template.
+"""The coded-patch detector (DexterCap Sec. 3.2-3.3): from camera images to named 2D corners.
 
-:mod:`~handcap.detect.alphabet` holds the glyphs and tags, :mod:`~handcap.detect.pattern`
-the template (``pattern.toml``: every patch's tag grid and the corner ids it implies),
-:mod:`~handcap.detect.session` the patches of a session (two hands, objects, the 2x2x2
-cube) and :mod:`~handcap.detect.sheet` the printable SVG and PDF pages.
+:mod:`~handcap.detect.corners` (the corner heatmap network), :mod:`~handcap.detect.blocks`
+(white squares from corners), :mod:`~handcap.detect.reader` (the block reader network),
+:mod:`~handcap.detect.voting` (tags fixed over the template, corners named),
+:mod:`~handcap.detect.pipeline` (all of it on one image), :mod:`~handcap.detect.sources`
+(frames from folders, videos, images), :mod:`~handcap.detect.networks` (weights files) and
+:mod:`~handcap.detect.train` / :mod:`~handcap.detect.scenes` (training from rendered images).
+The patches themselves are :mod:`handcap.patterns`.
 """
 
-from handcap.detect.alphabet import ALPHABET, DEXTERCAP_ALPHABET, check_alphabet, tag, tag_count, tag_index
-from handcap.detect.pattern import PITCH, Patch, Pattern
-from handcap.detect.session import HAND_PATCHES, OBJECT_PATCHES, session_pattern
+from handcap.detect.pipeline import Detector, ImageDetections
 
-__all__ = ["ALPHABET", "DEXTERCAP_ALPHABET", "HAND_PATCHES", "OBJECT_PATCHES", "PITCH", "Patch", "Pattern",
-           "check_alphabet", "session_pattern", "tag", "tag_count", "tag_index"]
+__all__ = ["Detector", "ImageDetections"]

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.detect.alphabet import ALPHABET, check_alphabet
+from handcap.patterns.alphabet import ALPHABET, check_alphabet
 from handcap.detect.blocks import candidate_quads, white_blocks
 from handcap.detect.corners import CornerNet, detect_corners
-from handcap.detect.pattern import Pattern
+from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
 from handcap.detect.voting import name_corners, vote
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.cameras import Camera
-from handcap.detect.glyphs import load_font
-from handcap.detect.session import session_pattern
+from handcap.patterns.glyphs import load_font
+from handcap.patterns.session import session_pattern
 from handcap.hand import OpenHand
 from handcap.hand.anatomy import PHI_LIMITS
 from handcap.layouts import load_layout

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from handcap.core.errors import HandcapError
-from handcap.detect.alphabet import ALPHABET, DEXTERCAP_ALPHABET
+from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
 from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners, normalise, targets
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_corner_net, save_net

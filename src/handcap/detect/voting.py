@@ -21,7 +21,7 @@ from collections import Counter, defaultdict, deque
 
 import numpy as np
 
-from handcap.detect.pattern import Pattern
+from handcap.patterns.pattern import Pattern
 
 #: (row, column) of each reading-order corner of a square relative to its top-left vertex.
 STEP = ((0, 0), (0, 1), (1, 1), (1, 0))

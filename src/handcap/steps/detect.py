@@ -9,7 +9,7 @@ from tqdm import tqdm
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
-from handcap.detect.pattern import Pattern
+from handcap.patterns.pattern import Pattern
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
 from handcap.detect.networks import load_corner_net, load_reader

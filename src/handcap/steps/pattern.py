@@ -6,11 +6,11 @@ from pathlib import Path
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output_folder
-from handcap.detect.alphabet import ALPHABET
-from handcap.detect.glyphs import load_font
-from handcap.detect.pattern import Pattern
-from handcap.detect.session import HANDS, session_pattern
-from handcap.detect.sheet import write_sheets
+from handcap.patterns.alphabet import ALPHABET
+from handcap.patterns.glyphs import load_font
+from handcap.patterns.pattern import Pattern
+from handcap.patterns.session import HANDS, session_pattern
+from handcap.patterns.sheet import write_sheets
 from handcap.steps.step import Step
 
 DEFAULT_OBJECTS = ("cuboid", "cylinder", "sphere", "cube2x2")
@@ -27,7 +27,7 @@ def pattern(out, *, hands=HANDS, objects=DEFAULT_OBJECTS, alphabet: str = ALPHAB
     hands : sequence of {'right', 'left'}
         Hands that wear the 19 patches.
     objects : sequence of str
-        Objects whose faces carry patches (see :data:`handcap.detect.session.OBJECT_PATCHES`).
+        Objects whose faces carry patches (see :data:`handcap.patterns.session.OBJECT_PATCHES`).
     alphabet : str
         Glyphs of the tags.
     pitch_mm : float

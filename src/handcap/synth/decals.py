@@ -19,7 +19,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
-from handcap.detect.pattern import Patch
+from handcap.patterns.pattern import Patch
 from handcap.hand.attachment import MarkerAttachment
 from handcap.synth.textures import patch_grid
 

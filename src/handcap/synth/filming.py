@@ -37,8 +37,8 @@ from tqdm import tqdm
 from handcap.core.cameras import Camera
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output, save_npz
-from handcap.detect.glyphs import load_font
-from handcap.detect.session import session_pattern
+from handcap.patterns.glyphs import load_font
+from handcap.patterns.session import session_pattern
 from handcap.hand import OpenHand
 from handcap.layouts import load_layout
 from handcap.synth.decals import patch_skin

@@ -274,7 +274,7 @@ class PatchRenderer:
         Returns
         -------
         RenderedImage
-            Corner truth in the order of the patches' :meth:`~handcap.detect.pattern.Patch.vertices`.
+            Corner truth in the order of the patches' :meth:`~handcap.patterns.pattern.Patch.vertices`.
         """
         style = self.style
         matrix, size, map_x, map_y = self._render_camera(camera)

@@ -1,6 +1,6 @@
 """Textures of printed coded patches for the renderer, and each patch's surface through its corners.
 
-The texture of a patch is its printed drawing (:func:`handcap.detect.glyphs.patch_drawing`)
+The texture of a patch is its printed drawing (:func:`handcap.patterns.glyphs.patch_drawing`)
 rasterised with anti-aliasing; all patches of a body share one atlas. Grid vertex ``(r, c)``
 of a patch sits at atlas pixel ``origin + (c, r) * square`` (x right, y down), so a mesh
 through the corners, with those texture coordinates, shows the corners exactly where the
@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from handcap.detect.glyphs import MARGIN, Font, patch_drawing
-from handcap.detect.pattern import Patch
+from handcap.patterns.glyphs import MARGIN, Font, patch_drawing
+from handcap.patterns.pattern import Patch
 
 _SUPERSAMPLE = 8  # glyphs are drawn this much finer, then averaged down
 _SHIFT = 4  # cv2 fixed-point bits for polygon vertices

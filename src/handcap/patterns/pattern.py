@@ -29,7 +29,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output, read_toml
-from handcap.detect.alphabet import ALPHABET, check_alphabet
+from handcap.patterns.alphabet import ALPHABET, check_alphabet
 from handcap.layouts.file import toml_key, toml_value
 
 #: Default side of a square, metres (DexterCap's 5 mm corner pitch).

@@ -17,8 +17,8 @@ and the same session always gets the same tags.
 from __future__ import annotations
 
 from handcap.core.errors import HandcapError
-from handcap.detect.alphabet import ALPHABET, tag, tag_count
-from handcap.detect.pattern import PITCH, Patch, Pattern, checker_tags
+from handcap.patterns.alphabet import ALPHABET, tag, tag_count
+from handcap.patterns.pattern import PITCH, Patch, Pattern, checker_tags
 
 #: Square rows x columns of each hand patch, and its segment.
 HAND_PATCHES = {

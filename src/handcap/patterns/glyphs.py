@@ -1,6 +1,6 @@
 """The drawing of a coded patch: squares, glyph outlines and underlines, in millimetres.
 
-One geometry feeds the printable pages (:mod:`handcap.detect.sheet`) and the
+One geometry feeds the printable pages (:mod:`handcap.patterns.sheet`) and the
 renderer's textures, so what is printed and what the detector is trained on
 are the same shapes. Glyph outlines come from a TrueType/OpenType font through
 matplotlib's text-to-path conversion; the default font is the DejaVu Sans Mono
@@ -26,7 +26,7 @@ from matplotlib.textpath import TextPath
 from matplotlib.transforms import Affine2D
 
 from handcap.core.errors import HandcapError
-from handcap.detect.pattern import Patch
+from handcap.patterns.pattern import Patch
 
 #: matplotlib's own copy of DejaVu Sans Mono Bold (Bitstream Vera licence).
 DEFAULT_FONT = Path(get_data_path()) / "fonts" / "ttf" / "DejaVuSansMono-Bold.ttf"

@@ -21,8 +21,8 @@ from matplotlib.transforms import Affine2D
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
-from handcap.detect.glyphs import MARGIN, Font, patch_drawing
-from handcap.detect.pattern import Patch, Pattern
+from handcap.patterns.glyphs import MARGIN, Font, patch_drawing
+from handcap.patterns.pattern import Patch, Pattern
 
 #: Paper sizes, mm (width, height).
 PAPERS = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}

@@ -15,11 +15,11 @@ import pytest
 
 from handcap import HandcapError
 from handcap.cli import main
-from handcap.detect import (ALPHABET, DEXTERCAP_ALPHABET, HAND_PATCHES, Patch, Pattern, check_alphabet,
+from handcap.patterns import (ALPHABET, DEXTERCAP_ALPHABET, HAND_PATCHES, Patch, Pattern, check_alphabet,
                             session_pattern, tag, tag_count, tag_index)
-from handcap.detect.glyphs import load_font
-from handcap.detect.pattern import checker_tags
-from handcap.detect.sheet import write_sheets
+from handcap.patterns.glyphs import load_font
+from handcap.patterns.pattern import checker_tags
+from handcap.patterns.sheet import write_sheets
 from handcap.layouts import load_layout
 
 pdfium = pytest.importorskip("pypdfium2", reason="pypdfium2 (test extra) reads the PDF back")
