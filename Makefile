@@ -7,7 +7,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.handcap-installed
 
-.PHONY: demo test lint bench clean-venv asset occlusion-weights
+.PHONY: demo test lint bench clean-venv asset occlusion-weights detect-weights
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -40,6 +40,14 @@ asset: $(STAMP)
 # synthetic captures; deterministic, same bytes every time (about 6 minutes on 2 cores).
 occlusion-weights: $(STAMP)
 	$(BIN)/python tools/occlusion_weights.py
+
+# Retrain the coded-patch detector's networks (src/handcap/detect/weights/) from rendered images only;
+# deterministic for the seed, CPU. The reader trains over several bold monospace fonts from Debian's
+# packages (installed here when apt-get is at hand) and is scored on one it never saw.
+detect-weights: $(STAMP)
+	-command -v apt-get >/dev/null && apt-get install -y -q libegl1 libegl-mesa0 libgl1-mesa-dri fonts-liberation \
+		fonts-freefont-ttf fonts-inconsolata fonts-noto-mono >/dev/null
+	$(BIN)/python -m handcap.detect.train --what all --scenes 600 --steps 4000 --seed 0
 
 clean-venv:
 	rm -rf $(VENV)
