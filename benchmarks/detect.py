@@ -9,7 +9,7 @@ Accuracy: the corner figures on held-out rendered scenes (recall and precision
 within 2 px, median and RMS error of the matched corners) against the issue's
 targets (recall >= 97 %, median <= 0.15 px, RMS <= 0.3 px).
 
-    .venv/bin/python benchmarks/detect.py [--weights FILE] [--scenes 20] [--repeats 3] [--threads 2]
+    .venv/bin/python benchmarks/detect.py [--weights FILE] [--reader FILE] [--scenes 20] [--repeats 3] [--threads 2]
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import time
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--weights", help="corner network weights (default: the shipped ones)")
+    parser.add_argument("--reader", help="block reader weights (default: the shipped ones)")
     parser.add_argument("--scenes", type=int, default=20, help="held-out rendered scenes to score")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
@@ -35,11 +36,15 @@ def main() -> None:
 
     from handcap.detect.corners import detect_corners
     from handcap.detect.scenes import SceneMaker
-    from handcap.detect.train import evaluate_corners, load_corner_net
+    from handcap import HandcapError
+    from handcap.detect.networks import load_corner_net, load_reader
+    from handcap.detect.pipeline import Detector
+    from handcap.detect.reader import BlockReader
+    from handcap.detect.train import evaluate_corners
     from handcap.hand import OpenHand
     from handcap.layouts import load_layout
-    from handcap.detect.session import session_pattern
-    from handcap.detect.glyphs import load_font
+    from handcap.patterns.session import session_pattern
+    from handcap.patterns.glyphs import load_font
     from handcap.synth.cameras import cage_rig
     from handcap.synth.decals import patch_skin
     from handcap.synth.images import ImageStyle, PatchRenderer
@@ -76,6 +81,13 @@ def main() -> None:
         return min(times)
 
     full = best(lambda: detect_corners(net, image))
+    try:
+        reader = load_reader(args.reader)
+        reader_note = "shipped reader" if args.reader is None else args.reader
+    except HandcapError:
+        reader, reader_note = BlockReader().eval(), "untrained reader (no weights found): timing only"
+    detector = Detector(net, reader, pattern)
+    whole = best(lambda: detector.image(image))
     xy = shot.xy[shot.visible]
     lo = np.maximum(np.floor(xy.min(axis=0) - 40).astype(int) // 2 * 2, 0)
     hi = np.minimum(np.ceil(xy.max(axis=0) + 40).astype(int), image.shape[::-1])
@@ -83,8 +95,12 @@ def main() -> None:
     part = best(lambda: detect_corners(net, region))
     print(f"full frame {image.shape[1]} x {image.shape[0]}: {full:.3f} s (target <= 1 s: {full / 1.0:.2f} of it; "
           f"DexterCap ~5 s on a GPU machine: {5.0 / full:.1f}x faster)")
+    region_whole = best(lambda: detector.image(region))
     print(f"hand region {region.shape[1]} x {region.shape[0]} ({region.size / image.size:.0%} of the frame): "
-          f"{part:.3f} s (target <= 0.3 s: {part / 0.3:.2f} of it)")
+          f"corners {part:.3f} s (target <= 0.3 s: {part / 0.3:.2f} of it)")
+    print(f"whole detector (corners, blocks, reader, vote; {reader_note}): full frame {whole:.3f} s "
+          f"({whole / 1.0:.2f} of the 1 s target), hand region {region_whole:.3f} s "
+          f"({region_whole / 0.3:.2f} of 0.3 s)")
 
     maker = SceneMaker(args.seed)
     try:
