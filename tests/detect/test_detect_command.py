@@ -137,3 +137,11 @@ def test_read_image_converts_colour_and_16_bit(tmp_path):
     assert read_image(tmp_path / "d.png").dtype == np.uint8 and read_image(tmp_path / "d.png")[0, 0] == 255
     with pytest.raises(HandcapError, match="no such image"):
         read_image(tmp_path / "none.png")
+
+
+def test_the_shipped_networks_say_how_good_they_measured(frames, tmp_path, capsys):
+    out = tmp_path / "det.npz"
+    assert main(["detect", str(frames / "cam_0"), "--rate", "20", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "first training" in err and "corners.npz: corners: recall" in err and "reader on a font it never saw" in err
+    assert any("first training" in w for w in np.load(out)["warnings"])

@@ -192,19 +192,21 @@ def test_svg_pages_are_exact_size_and_pdf_bytes_repeat(tmp_path):
 
 def test_the_pattern_command(tmp_path, capsys):
     out = tmp_path / "sheets"
-    assert main(["pattern", "--out", str(out), "--hands", "right", "--objects", "cube2x2"]) == 0
+    assert main(["pattern", "--out", str(out), "--hands", "right", "--objects", "cube2x2", "--no-svg"]) == 0
     assert "43 patches" in capsys.readouterr().out
     pattern = Pattern.load(out / "pattern.toml")
     assert len(pattern.of_owner("right")) == 19 and len(pattern.of_owner("cube2x2")) == 24
-    assert (out / "pattern.pdf").stat().st_size > 0 and (out / "pattern-1.svg").exists()
+    assert (out / "pattern.pdf").stat().st_size > 0 and sorted(p.name for p in out.iterdir()) == ["pattern.pdf",
+                                                                                                  "pattern.toml"]
     before = (out / "pattern.toml").read_bytes()
     # Never over a folder with files, nor over its own template.
     assert main(["pattern", "--out", str(out)]) == 2
     assert main(["pattern", "--out", str(out), "--template", str(out / "pattern.toml"), "--force"]) == 2
     assert (out / "pattern.toml").read_bytes() == before
     again = tmp_path / "again"
-    assert main(["pattern", "--out", str(again), "--template", str(out / "pattern.toml"), "--no-svg"]) == 0
-    assert sorted(p.name for p in again.iterdir()) == ["pattern.pdf"]
+    assert main(["pattern", "--out", str(again), "--template", str(out / "pattern.toml"), "--objects", "none"]) == 0
+    assert sorted(p.name for p in again.iterdir())[:2] == ["pattern-1.svg", "pattern-2.svg"]
+    assert (again / "pattern.pdf").exists() and not (again / "pattern.toml").exists()
     err = capsys.readouterr().err
     assert "Traceback" not in err
 

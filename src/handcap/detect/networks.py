@@ -75,6 +75,23 @@ def load_net(path, kind: str):
     return net
 
 
+def shipped_notes() -> tuple[str, ...]:
+    """What the shipped weights measured when they were made (their ``info.score``), one line each.
+
+    Returns
+    -------
+    tuple of str
+    """
+    notes = []
+    for name in ("corners.npz", "reader.npz"):
+        path = WEIGHTS / name
+        if path.is_file():
+            with np.load(path, allow_pickle=False) as data:
+                if "info.score" in data.files:
+                    notes.append(f"{name}: {data['info.score']}")
+    return tuple(notes)
+
+
 def save_corner_net(net: CornerNet, path, info: dict | None = None) -> None:
     """Write the corner network (see :func:`save_net`).
 

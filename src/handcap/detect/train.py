@@ -14,7 +14,6 @@ suite trains a tiny version for a few steps to show the code runs.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from dataclasses import dataclass
@@ -421,8 +420,8 @@ def main(argv=None) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
-    command = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --steps {a.steps} "
-               f"--seed {a.seed}")
+    command = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
+               f"--steps {a.steps} --seed {a.seed}")
     if a.what in ("corners", "all"):
         scenes = _scenes(a.scenes, a.seed)
         tests = _scenes(a.test_scenes, a.seed + 1_000_003)
@@ -440,10 +439,30 @@ def main(argv=None) -> int:
         net = train_reader(scenes, steps=a.steps, seed=a.seed, progress=True)
         score = {name: evaluate_reader(net, [t for t in tests if t.alphabet == alphabet])
                  for name, alphabet in (("handcap", ALPHABET), ("dextercap", DEXTERCAP_ALPHABET))}
-        print(f"reader on the held-out font: {score}", flush=True)
-        save_net(net, out / "reader.npz", {"source": command, "score": json.dumps(score)})
+        line = reader_line(score, held_out[0])
+        print(line, flush=True)
+        save_net(net, out / "reader.npz", {"source": command, "score": line})
     print(f"wrote {out} ({time.time() - started:.0f} s in all)")
     return 0
+
+
+def reader_line(score: dict, font) -> str:
+    """One line of :func:`evaluate_reader` figures per alphabet, on the held-out ``font``.
+
+    Parameters
+    ----------
+    score : dict
+        Alphabet name -> :func:`evaluate_reader`'s dict.
+    font : str or None
+        The held-out font file (None: the default font).
+
+    Returns
+    -------
+    str
+    """
+    parts = [f"{name} alphabet {100 * s['right']:.1f} % right, {100 * s['wrong']:.1f} % wrong, "
+             f"{100 * s['unread']:.1f} % unread of {s['blocks']} tags" for name, s in score.items()]
+    return f"reader on a font it never saw ({Path(font).stem if font else 'default'}): " + "; ".join(parts)
 
 
 def _scenes(count: int, seed: int) -> list:
