@@ -63,10 +63,11 @@ def test_a_few_training_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path
     batch = [torch.from_numpy(np.stack([m[k] for m in made])) for k in range(3)]
     torch.manual_seed(0)
     before = corner_loss(CornerNet()(torch.from_numpy(images)[:, None]), *batch).item()
-    net = train_corners(scenes, steps=20, batch=8, seed=3)
+    net = train_corners(scenes, steps=14, batch=8, seed=3)
     after = corner_loss(net(torch.from_numpy(images)[:, None]), *batch).item()
-    assert after < 0.93 * before
-    again = train_corners(scenes, steps=20, batch=8, seed=3)
+    assert after < 0.95 * before
+    net = train_corners(scenes, steps=3, batch=4, seed=3)
+    again = train_corners(scenes, steps=3, batch=4, seed=3)
     for a, b in zip(net.state_dict().values(), again.state_dict().values()):
         assert torch.equal(a, b)  # deterministic for a seed
     save_corner_net(net, tmp_path / "c.npz", {"source": "test"})

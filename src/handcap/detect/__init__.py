@@ -6,9 +6,6 @@
 :mod:`~handcap.detect.pipeline` (all of it on one image), :mod:`~handcap.detect.sources`
 (frames from folders, videos, images), :mod:`~handcap.detect.networks` (weights files) and
 :mod:`~handcap.detect.train` / :mod:`~handcap.detect.scenes` (training from rendered images).
-The patches themselves are :mod:`handcap.patterns`.
+The patches themselves are :mod:`handcap.patterns`. The networks load torch, so this package
+imports nothing on its own: ``from handcap.detect.pipeline import Detector``.
 """
-
-from handcap.detect.pipeline import Detector, ImageDetections
-
-__all__ = ["Detector", "ImageDetections"]

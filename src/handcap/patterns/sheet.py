@@ -13,12 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from matplotlib import rc_context
-from matplotlib.backends.backend_pdf import PdfPages
-from matplotlib.figure import Figure
-from matplotlib.patches import PathPatch, Rectangle
-from matplotlib.transforms import Affine2D
-
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.patterns.glyphs import MARGIN, Font, patch_drawing
@@ -80,7 +74,11 @@ def layout_pages(pattern: Pattern, paper: str = "a4") -> list[Placement]:
     return placements
 
 
-def _page_figure(pattern: Pattern, placements, page: int, pages: int, font: Font, paper: str) -> Figure:
+def _page_figure(pattern: Pattern, placements, page: int, pages: int, font: Font, paper: str):
+    # matplotlib's figure and PDF machinery load here, not with the command line (half a second).
+    from matplotlib.figure import Figure
+    from matplotlib.patches import PathPatch, Rectangle
+
     width, height = PAPERS[paper]
     fig = Figure(figsize=(width / 25.4, height / 25.4))
     ax = fig.add_axes((0, 0, 1, 1))
@@ -116,6 +114,8 @@ def _page_figure(pattern: Pattern, placements, page: int, pages: int, font: Font
 
 
 def _shift(x, y):
+    from matplotlib.transforms import Affine2D
+
     return Affine2D().translate(x, y)
 
 
@@ -138,6 +138,9 @@ def write_sheets(pattern: Pattern, font: Font, pdf=None, svg_stem=None, *, paper
     list of Path
         The files written.
     """
+    from matplotlib import rc_context
+    from matplotlib.backends.backend_pdf import PdfPages
+
     placements = layout_pages(pattern, paper)
     pages = max(p.page for p in placements) + 1 if placements else 0
     figures = [_page_figure(pattern, [p for p in placements if p.page == k], k, pages, font, paper)

@@ -10,9 +10,7 @@ from tqdm import tqdm
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.pattern import Pattern
-from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
-from handcap.detect.networks import load_corner_net, load_reader, shipped_notes
 from handcap.io import read_rig
 from handcap.steps.step import Step
 
@@ -60,6 +58,10 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                "input folder or video after its camera")
         names = [n for n in cameras.names if n in names]
         sources = sorted(sources, key=lambda s: names.index(s.camera))
+    # The networks load torch (a second and a half): only when detecting, not with the command line.
+    from handcap.detect.networks import load_corner_net, load_reader, shipped_notes  # loads torch
+    from handcap.detect.pipeline import Detector  # loads torch
+
     detector = Detector(load_corner_net(corner_weights), load_reader(reader_weights), template, alphabet, threshold)
     warnings = []
     if corner_weights is None or reader_weights is None:
