@@ -20,7 +20,7 @@ Placement rules (all distances in metres):
 * active-9: wrist, index base, pinky base (the alignment triad of the active
   glove), one on the middle of the back of the hand, five nails; 5 mm LEDs.
 * dense-patches: every corner of the 19 coded patches of one hand of
-  ``handcap pattern`` (``handcap.detect.session.HAND_PATCHES``, 5 mm squares):
+  ``handcap pattern`` (``handcap.patterns.session.HAND_PATCHES``, 5 mm squares):
   a strip three squares wide on the back of every phalanx (rows along the
   bone, centred between joints kept 3-4 mm clear, the tape wrapped around the
   finger: the columns are arcs along the skin), two patches on the dorsum and
@@ -43,8 +43,8 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from handcap.hand import OpenHand  # noqa: E402
 from handcap.hand.anatomy import hand_axes  # noqa: E402
-from handcap.detect.pattern import PITCH, Patch, checker_tags  # noqa: E402
-from handcap.detect.session import HAND_PATCHES  # noqa: E402
+from handcap.patterns.pattern import PITCH, Patch, checker_tags  # noqa: E402
+from handcap.patterns.session import HAND_PATCHES  # noqa: E402
 from handcap.layouts import LayoutMarker, MarkerLayout  # noqa: E402
 
 OUT = ROOT / "src" / "handcap" / "layouts"
@@ -189,7 +189,7 @@ def _unmirrored(grid: list, outward: np.ndarray) -> list:
 
 
 def dense_patches(s: Surface) -> MarkerLayout:
-    """Every corner of the hand patches of ``handcap.detect.session.HAND_PATCHES`` on the template hand."""
+    """Every corner of the hand patches of ``handcap.patterns.session.HAND_PATCHES`` on the template hand."""
     pitch = PITCH
     markers = []
     for finger in ("thumb", "index", "middle", "ring", "pinky"):
