@@ -24,6 +24,7 @@ from handcap.hand.anatomy import PHI_LIMITS
 from handcap.layouts import load_layout
 from handcap.synth.cameras import cage_rig
 from handcap.synth.decals import patch_skin
+from handcap.synth.filming import scaled_camera
 from handcap.synth.images import ImageStyle, PatchRenderer
 from handcap.synth.textures import build_atlas
 
@@ -135,12 +136,8 @@ class SceneMaker:
 
 def _cut_to(camera: Camera, vertices: np.ndarray, scale: float, rng, margin: int = 48) -> Camera:
     """``camera`` at ``scale``, cut to the part of its image that shows ``vertices`` (plus a margin)."""
-    matrix = camera.matrix.copy()
-    matrix[:2] *= scale
-    matrix[0, 2] = scale * (camera.matrix[0, 2] + 0.5) - 0.5
-    matrix[1, 2] = scale * (camera.matrix[1, 2] + 0.5) - 0.5
-    size = (int(camera.size[0] * scale), int(camera.size[1] * scale))
-    full = Camera(camera.name, size, matrix, camera.distortions, camera.rotation, camera.translation)
+    full = scaled_camera(camera, scale)
+    matrix, size = full.matrix, full.size
     xy, _ = full.project(vertices)
     lo = np.floor(np.clip(xy.min(axis=0) - margin - rng.uniform(0, margin, 2), 0, None)).astype(int)
     hi = np.ceil(np.minimum(xy.max(axis=0) + margin + rng.uniform(0, margin, 2), size)).astype(int)

@@ -91,6 +91,33 @@ def _deterministic():
         torch.use_deterministic_algorithms(before)
 
 
+def _fit(make_net, batch_loss, scenes, *, steps: int, seed: int, lr: float, label: str, progress: bool):
+    """The training loop both networks share: AdamW with cosine decay, deterministic for a seed.
+
+    ``make_net()`` gives the network (after the seed is set, so its initial weights follow it) and
+    ``batch_loss(net, rng)`` the loss of one freshly drawn batch.
+    """
+    if not scenes:
+        raise HandcapError("no scenes to train on")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    net = make_net()
+    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=0.05 * lr)
+    net.train()
+    with _deterministic():
+        for step in range(steps):
+            loss = batch_loss(net, rng)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            if progress and (step % 100 == 0 or step == steps - 1):
+                print(f"{label} step {step:5d} loss {loss.item():.4f}", flush=True)
+    net.eval()
+    return net
+
+
 def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, lr: float = 2e-3,
                   net: CornerNet | None = None, progress: bool = False) -> CornerNet:
     """Train the corner network on crops of rendered scenes (deterministic for a seed).
@@ -114,34 +141,14 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
     -------
     CornerNet
     """
-    if not scenes:
-        raise HandcapError("no scenes to train on")
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    net = net or CornerNet()
-    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=0.05 * lr)
-    net.train()
-    with _deterministic():
-        _corner_steps(net, opt, sched, scenes, steps, batch, rng, progress)
-    net.eval()
-    return net
-
-
-def _corner_steps(net, opt, sched, scenes, steps, batch, rng, progress) -> None:
-    for step in range(steps):
+    def loss(model, rng):
         images, corners = crops(scenes, batch, rng)
         made = [targets(images.shape[1:], c) for c in corners]
-        heat = torch.from_numpy(np.stack([m[0] for m in made]))
-        offset = torch.from_numpy(np.stack([m[1] for m in made]))
-        near = torch.from_numpy(np.stack([m[2] for m in made]))
-        loss = corner_loss(net(torch.from_numpy(images)[:, None]), heat, offset, near)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        if progress and (step % 100 == 0 or step == steps - 1):
-            print(f"corners step {step:5d} loss {loss.item():.4f}", flush=True)
+        heat, offset, near = (torch.from_numpy(np.stack([m[k] for m in made])) for k in range(3))
+        return corner_loss(model(torch.from_numpy(images)[:, None]), heat, offset, near)
+
+    return _fit(lambda: net or CornerNet(), loss, scenes, steps=steps, seed=seed, lr=lr, label="corners",
+                progress=progress)
 
 
 def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None):
@@ -235,32 +242,15 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 64, seed: int = 0, l
     -------
     BlockReader
     """
-    if not scenes:
-        raise HandcapError("no scenes to train on")
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    net = net or BlockReader()
-    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=0.05 * lr)
     negatives = [_negatives(scene) for scene in scenes]
-    net.train()
-    with _deterministic():
-        _reader_steps(net, opt, sched, scenes, negatives, steps, batch, rng, progress)
-    net.eval()
-    return net
 
-
-def _reader_steps(net, opt, sched, scenes, negatives, steps, batch, rng, progress) -> None:
-    for step in range(steps):
+    def loss(model, rng):
         views, first, second, turn = reader_samples(scenes, batch, rng, negatives=negatives)
-        loss = reader_loss(net(torch.from_numpy(views)[:, None]), torch.from_numpy(first),
+        return reader_loss(model(torch.from_numpy(views)[:, None]), torch.from_numpy(first),
                            torch.from_numpy(second), torch.from_numpy(turn))
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        if progress and (step % 100 == 0 or step == steps - 1):
-            print(f"reader step {step:5d} loss {loss.item():.4f}", flush=True)
+
+    return _fit(lambda: net or BlockReader(), loss, scenes, steps=steps, seed=seed, lr=lr, label="reader",
+                progress=progress)
 
 
 #: Bold monospace fonts tried for training the reader (Debian's font packages; missing ones are skipped).
