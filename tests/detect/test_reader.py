@@ -65,3 +65,18 @@ def test_a_few_reader_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
     save_net(CornerNet(), tmp_path / "c.npz")
     with pytest.raises(HandcapError, match="not a BlockReader"):
         load_reader(tmp_path / "c.npz")
+
+
+def test_the_gate_keeps_at_most_the_allowed_share_of_wrong_readings():
+    from handcap.detect.evaluation import gate_for
+
+    rng = np.random.default_rng(0)
+    score = rng.uniform(0, 1, 5000)
+    outcome = np.where(rng.uniform(0, 1, 5000) < score ** 8, 1, -1)  # confident readings are mostly right
+    outcome[rng.uniform(0, 1, 5000) < 0.1] = 0  # unread ones do not count
+    gate = gate_for(outcome, score, max_wrong=0.01)
+    kept = (score >= gate) & (outcome != 0)
+    assert (outcome[kept] == -1).mean() <= 0.01
+    lower = (score >= np.max(score[score < gate])) & (outcome != 0)  # one reading more: too many wrong
+    assert (outcome[lower] == -1).mean() > 0.01 or lower.sum() == kept.sum() + 1
+    assert gate_for(np.array([-1, -1]), np.array([0.9, 0.8]), 0.001) == 1.0

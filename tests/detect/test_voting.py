@@ -72,3 +72,30 @@ def test_a_tag_read_twice_is_dropped_and_a_lone_block_keeps_its_reading():
     far = quads[:1] + 1000
     tags, _, _ = vote(PATTERN, np.r_[quads, far], np.r_[text, text[:1]], np.r_[turn, turn[:1]])
     assert tags[0] == "" and tags[-1] == ""
+
+
+def test_a_false_quad_sharing_a_corner_is_not_placed_when_pixels_are_given():
+    """A quad that shares one corner with a block but does not lie across it is no diagonal neighbour."""
+    patch = PATTERN.of_owner("right")[0]
+    (t0, r0, c0), (t1, r1, c1) = [b for b in patch.blocks() if b[1] == 0][:1] + \
+        [b for b in patch.blocks() if (b[1], b[2]) == (1, 1)][:1]
+    assert (r0, c0) == (0, 0)
+    # Image: grid vertex (r, c) at pixel (10 c, 10 r); block (0, 0) and its true neighbour (1, 1) share (1, 1).
+    xy = np.array([[0, 0], [10, 0], [10, 10], [0, 10], [20, 10], [20, 20], [10, 20],  # the two true blocks
+                   [14, 3], [13, 8]], float)  # two false corners: a quad (1,1)-(14,3)-... beside block 0
+    quads = np.array([[0, 1, 2, 3], [2, 4, 5, 6], [2, 1, 7, 8]])
+    text = np.array([t0, "", ""])
+    rotation = np.array([0, -1, -1])
+    tags, turns, _ = vote(PATTERN, quads, text, rotation)
+    # Without pixels the walk places the false quad at (1, 1) too: the tag is then seen twice, and both go.
+    assert list(tags) == [t0, "", ""]
+    tags, turns, _ = vote(PATTERN, quads, text, rotation, xy=xy)
+    assert list(tags) == [t0, t1, ""] and list(turns[:2]) == [0, 0]
+
+
+def test_a_lone_unsure_reading_is_not_trusted():
+    patch = PATTERN.of_owner("right")[0]
+    tag = patch.blocks()[0][0]
+    quads, text, rotation = np.array([[0, 1, 2, 3]]), np.array([tag]), np.array([0])
+    assert vote(PATTERN, quads, text, rotation, np.array([0.4]), min_support=0.5)[0][0] == ""
+    assert vote(PATTERN, quads, text, rotation, np.array([0.6]), min_support=0.5)[0][0] == tag

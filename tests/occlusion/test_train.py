@@ -177,10 +177,8 @@ def test_prefixed_names_train_the_same_model(small_take):
         train_occlusion_model([twice], "active-9", epochs=1)
 
 
-def test_cli_train_and_fill_accept_the_same_prefixed_file(tmp_path, small_take):
-    import subprocess
-    import sys
-
+def test_cli_train_and_fill_accept_the_same_prefixed_file(tmp_path, small_take, capsys):
+    from handcap.cli import main  # in-process, as the command line runs it (loads torch)
     from handcap.core.markers import MarkerSequence
     from handcap.io import read_markers, write_markers
 
@@ -188,37 +186,31 @@ def test_cli_train_and_fill_accept_the_same_prefixed_file(tmp_path, small_take):
     positions = small_take.positions.copy()
     positions[100:120, 5] = np.nan
     write_markers(MarkerSequence(positions, [f"Glove:{n}" for n in small_take.names], 100.0), take)
-    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", str(take), "--layout", "active-9",
-                        "--epochs", "1", "--out", str(model)], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    assert "saw 1 take(s) (1 recorded, 0 synthetic) of 1 subject(s), 400 frames" in r.stdout
-    assert "warning: the occlusion model was trained on 400 frames" in r.stderr
-    r = subprocess.run([sys.executable, "-m", "handcap.cli", "fill", str(take), "--model", str(model),
-                        "--out", str(out)], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    assert main(["train-occlusion", str(take), "--layout", "active-9", "--epochs", "1", "--out", str(model)]) == 0
+    r = capsys.readouterr()
+    assert "saw 1 take(s) (1 recorded, 0 synthetic) of 1 subject(s), 400 frames" in r.out
+    assert "warning: the occlusion model was trained on 400 frames" in r.err
+    assert main(["fill", str(take), "--model", str(model), "--out", str(out)]) == 0
     filled = read_markers(out)
     assert filled.names == tuple(f"Glove:{n}" for n in small_take.names)
     assert not np.isnan(filled.positions).any()
     assert np.abs(filled.positions[100:120, 5] - small_take.positions[100:120, 5]).max() < 0.03
 
 
-def test_cli_trains_on_synthetic_subjects_and_says_so(tmp_path):
+def test_cli_trains_on_synthetic_subjects_and_says_so(tmp_path, capsys):
     """``train-occlusion --synthetic 1 --augment --speed-copies 1``: no recorded take at all."""
-    import subprocess
-    import sys
+    from handcap.cli import main  # in-process, as the command line runs it (loads torch)
 
     out = tmp_path / "generic.npz"
-    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", "--synthetic", "1", "--augment",
-                        "--speed-copies", "1", "--layout", "active-9", "--epochs", "1", "--out", str(out)],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    assert "saw 9 take(s) (0 recorded, 9 synthetic) of 9 subject(s), 5400 frames; 9 augmented copies" in r.stdout
-    assert "augmentation: every sample: scale 12 %" in r.stdout and "1 time-warped copy per take" in r.stdout
+    assert main(["train-occlusion", "--synthetic", "1", "--augment", "--speed-copies", "1", "--layout", "active-9",
+                 "--epochs", "1", "--out", str(out)]) == 0
+    r = capsys.readouterr()
+    assert "saw 9 take(s) (0 recorded, 9 synthetic) of 9 subject(s), 5400 frames; 9 augmented copies" in r.out
+    assert "augmentation: every sample: scale 12 %" in r.out and "1 time-warped copy per take" in r.out
     info = OcclusionModel.load(out).info
     assert info["synthetic_takes"] == "9" and info["augmented_copies"] == "9"
-    r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", "--layout", "active-9",
-                        "--out", str(tmp_path / "none.npz")], capture_output=True, text=True)
-    assert r.returncode == 2 and "give takes to train on, or --synthetic" in r.stderr
+    assert main(["train-occlusion", "--layout", "active-9", "--out", str(tmp_path / "none.npz")]) == 2
+    assert "give takes to train on, or --synthetic" in capsys.readouterr().err
 
 
 def test_offset_consistent_loss_is_the_error_of_the_filled_gap():

@@ -104,3 +104,18 @@ def test_same_seed_same_bytes_and_smaller_rigs_are_prefixes(tmp_path):
 def test_rejects_bad_arguments(kwargs, match):
     with pytest.raises(HandcapError, match=match):
         cage_rig(**kwargs)
+
+
+def test_region_rig_sees_the_points_at_the_same_pixels_less_its_window():
+    from handcap.synth.filming import region_rig
+
+    rig = cage_rig(6, seed=2)
+    points = np.random.default_rng(0).normal([0.0, 0.0, 1.0], 0.05, (50, 3))
+    cut = region_rig(rig, points, margin=20)
+    for full, window in zip(rig, cut):
+        a, _ = full.project(points)
+        b, _ = window.project(points)
+        shift = a - b
+        assert np.allclose(shift, shift[0], atol=1e-9) and np.allclose(shift[0], 2 * np.round(shift[0] / 2))
+        assert (b >= 20 - 1e-6).all() and (b <= np.array(window.size) - 20 + 2).all()
+        assert window.size[0] < full.size[0] and window.size[1] < full.size[1]

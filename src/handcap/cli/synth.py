@@ -21,7 +21,9 @@ def _cmd_synth(a):
 
 
 def _cmd_demo(a):
-    return synth.demo(a.out)
+    if a.images:
+        return synth.demo_images(a.out or "demo-images")
+    return synth.demo(a.out or "demo-output")
 
 
 def add_synth(verbs) -> None:
@@ -72,5 +74,10 @@ def add_synth(verbs) -> None:
     p = verbs.add_parser("demo", help="run the main job on built-in data into demo-output/",
                          description="Synthetic DexterCap-style session -> marker calibration -> solve -> "
                                      "5 Hz smoothing -> metrics against the truth, written to demo-output/.")
-    p.add_argument("--out", default="demo-output")
+    p.add_argument("--out", help="output folder, rewritten on every run (default demo-output/, with --images "
+                                 "demo-images/)")
+    p.add_argument("--images", action="store_true",
+                   help="the path from pixels instead: render 13 cameras' images of the patched hand, detect the "
+                        "coded patches, triangulate, clean, calibrate and solve, each stage against the truth "
+                        "(a few minutes)")
     p.set_defaults(run=_cmd_demo)

@@ -106,8 +106,8 @@ def evaluate_corners(net: CornerNet, scenes, threshold: float = 0.3) -> CornerSc
                        float(np.sqrt(np.mean(err ** 2))) if matched else float("nan"), found, truth)
 
 
-def evaluate_reader(net: BlockReader, scenes, alphabet: str | None = None) -> dict:
-    """Read the true blocks of ``scenes`` (their corners given in a random turn): share right, wrong, unread.
+def reader_outcomes(net: BlockReader, scenes, alphabet: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Read the true blocks of ``scenes`` (their corners given in a random turn): right or not, and score.
 
     Parameters
     ----------
@@ -118,25 +118,93 @@ def evaluate_reader(net: BlockReader, scenes, alphabet: str | None = None) -> di
 
     Returns
     -------
-    dict
-        ``right``, ``wrong``, ``unread`` (shares of the blocks), ``blocks`` (count).
+    outcome : ndarray (B,) int
+        1 read right (tag and turn), -1 read wrong, 0 not read.
+    score : ndarray (B,)
+        The reader's confidence.
     """
     rng = np.random.default_rng(0)
-    right = wrong = unread = 0
+    outcome, scores = [np.zeros(0, int)], [np.zeros(0)]
     for scene in scenes:
         if not len(scene.blocks):
             continue
         shifts = rng.integers(4, size=len(scene.blocks))
         quads = np.array([np.roll(b, -s, axis=0) for b, s in zip(scene.blocks, shifts)])
-        text, corners, _, _ = read_blocks(net, scene.image, quads, alphabet or scene.alphabet)
+        text, corners, _, score = read_blocks(net, scene.image, quads, alphabet or scene.alphabet)
         ok_turn = np.abs(corners - scene.blocks).max(axis=(1, 2)) < 1e-9
         read = text != ""
         good = read & ok_turn & (text == scene.block_text)
-        right += int(good.sum())
-        wrong += int((read & ~good).sum())
-        unread += int((~read).sum())
-    total = max(right + wrong + unread, 1)
-    return {"right": right / total, "wrong": wrong / total, "unread": unread / total, "blocks": total}
+        outcome.append(np.where(good, 1, np.where(read, -1, 0)))
+        scores.append(score)
+    return np.concatenate(outcome), np.concatenate(scores)
+
+
+def evaluate_reader(net: BlockReader, scenes, alphabet: str | None = None, min_score: float = 0.0) -> dict:
+    """Read the true blocks of ``scenes``: share right, wrong, unread (below ``min_score`` counts as unread).
+
+    Parameters
+    ----------
+    net : BlockReader
+    scenes : sequence of Scene
+    alphabet : str, optional
+        Glyphs to read (default: each scene's own alphabet).
+    min_score : float
+        Least confidence of a reading that counts.
+
+    Returns
+    -------
+    dict
+        ``right``, ``wrong``, ``unread`` (shares of the blocks), ``blocks`` (count).
+    """
+    outcome, score = reader_outcomes(net, scenes, alphabet)
+    outcome = np.where(score >= min_score, outcome, 0)
+    total = max(len(outcome), 1)
+    return {"right": float((outcome == 1).sum() / total), "wrong": float((outcome == -1).sum() / total),
+            "unread": float((outcome == 0).sum() / total), "blocks": len(outcome)}
+
+
+def reader_gate(net: BlockReader, scenes, max_wrong: float = 0.001) -> float:
+    """The least confidence at which at most ``max_wrong`` of the readings kept are wrong.
+
+    Parameters
+    ----------
+    net : BlockReader
+    scenes : sequence of Scene
+        Validation scenes (not the training ones).
+    max_wrong : float
+        Share of wrong readings allowed among those kept.
+
+    Returns
+    -------
+    float
+        A score threshold in 0..1 (1.0 when no threshold keeps the wrong share that low).
+    """
+    return gate_for(*reader_outcomes(net, scenes), max_wrong=max_wrong)
+
+
+def gate_for(outcome: np.ndarray, score: np.ndarray, max_wrong: float = 0.001) -> float:
+    """The least score at which at most ``max_wrong`` of the readings at or above it are wrong.
+
+    Parameters
+    ----------
+    outcome : ndarray (B,) int
+        1 right, -1 wrong, 0 not read (:func:`reader_outcomes`).
+    score : ndarray (B,)
+    max_wrong : float
+
+    Returns
+    -------
+    float
+        1.0 when no score keeps the wrong share that low.
+    """
+    read = np.asarray(outcome) != 0
+    outcome, score = np.asarray(outcome)[read], np.asarray(score, dtype=float)[read]
+    order = np.argsort(-score, kind="stable")
+    wrong = np.cumsum(outcome[order] == -1) / np.arange(1, len(order) + 1)
+    # Cut only between different scores: all readings at the threshold are kept.
+    last_of_score = np.r_[score[order][1:] != score[order][:-1], True]
+    ok = np.flatnonzero((wrong <= max_wrong) & last_of_score)
+    return float(score[order][ok[-1]]) if len(ok) else 1.0
 
 
 def reader_line(score: dict, font) -> str:
@@ -155,6 +223,67 @@ def reader_line(score: dict, font) -> str:
     """
     parts = [f"{name} alphabet {100 * s['right']:.1f} % right, {100 * s['wrong']:.1f} % wrong, "
              f"{100 * s['unread']:.1f} % unread of {s['blocks']} tags" for name, s in score.items()]
-    return f"reader on a font it never saw ({Path(font).stem if font else 'default'}): " + "; ".join(parts)
+    return (f"reader on a font it never saw ({Path(font).stem if font else 'default'}), readings below its "
+            f"trusted confidence counted unread: " + "; ".join(parts))
 
 
+@dataclass(frozen=True)
+class DetectorScore:
+    """How well the whole detector reads rendered scenes, against their truth.
+
+    Attributes
+    ----------
+    blocks : int
+        Visible tags (all four corners visible).
+    read, wrong : int
+        Tags the detector reported, and those of them that are not at that tag's true corners (2 px).
+    named, misnamed : int
+        Corners the detector named, and those whose true position under that name is over 2 px away.
+    corners : int
+        Visible corners.
+    """
+
+    blocks: int
+    read: int
+    wrong: int
+    named: int
+    misnamed: int
+    corners: int
+
+    def summary(self) -> str:
+        """One line of the figures."""
+        right = self.read - self.wrong
+        return (f"tags: {100 * right / max(self.blocks, 1):.1f} % of {self.blocks} visible read right, "
+                f"{100 * self.wrong / max(self.read, 1):.2f} % of {self.read} read wrong; corners: "
+                f"{100 * (self.named - self.misnamed) / max(self.corners, 1):.1f} % of {self.corners} visible "
+                f"named, {100 * self.misnamed / max(self.named, 1):.2f} % of {self.named} named wrong")
+
+
+def evaluate_detector(detector, scenes, match_px: float = 2.0) -> DetectorScore:
+    """Run a :class:`~handcap.detect.pipeline.Detector` (with the scenes' template) and score its tags and names.
+
+    Parameters
+    ----------
+    detector : Detector
+    scenes : sequence of Scene
+    match_px : float
+        Largest distance of a right tag's corners, or a right name's corner, from the truth, pixels.
+
+    Returns
+    -------
+    DetectorScore
+    """
+    counts = np.zeros(6, int)
+    for scene in scenes:
+        found = detector.image(scene.image)
+        truth = scene.projected if scene.projected is not None else dict(zip(scene.corner_names, scene.corners))
+        located = [detector.pattern.locate(str(t)) for t in found.block_text]
+        wrong = 0
+        for place, xy in zip(located, found.block_xy):
+            names = [place[0].corner_name(*v) for v in place[0].block_vertices(*place[1:])] if place else []
+            wrong += not names or any(n not in truth or np.linalg.norm(truth[n] - p) > match_px
+                                      for n, p in zip(names, xy))
+        named = [(n, xy) for n, xy in zip(found.names, found.corners) if n is not None]
+        misnamed = sum(1 for n, xy in named if n not in truth or np.linalg.norm(truth[n] - xy) > match_px)
+        counts += (len(scene.blocks), len(found.block_text), wrong, len(named), misnamed, len(scene.corners))
+    return DetectorScore(*map(int, counts))

@@ -22,10 +22,6 @@ from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
 from handcap.detect.voting import name_corners, vote
 
-#: Least reading confidence of a block kept without a template (with one, the vote decides).
-MIN_BLOCK_SCORE = 0.5
-
-
 @dataclass(frozen=True)
 class ImageDetections:
     """What the detector found in one image.
@@ -102,12 +98,12 @@ class Detector:
         names = np.full(len(xy), None, dtype=object)
         corrected = 0
         if self.pattern is not None and len(quads):
-            tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore)
+            tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
             order = (np.arange(4)[None] + np.maximum(turns, 0)[:, None]) % 4
             reading = np.take_along_axis(xy[quads], order[..., None], axis=1)
             text = tags
         else:
-            keep = (text != "") & (bscore >= MIN_BLOCK_SCORE)
+            keep = (text != "") & (bscore >= self.reader.min_score)
         return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected)

@@ -35,11 +35,15 @@ class BlockReader(nn.Module):
     ----------
     width : int
         Channels of the first convolution; doubled after each pooling.
+    min_score : float
+        The least confidence of a reading to rely on by itself; training sets it from validation
+        scenes (:func:`handcap.detect.evaluation.reader_gate`) and saves it with the weights.
     """
 
-    def __init__(self, width: int = 32):
+    def __init__(self, width: int = 32, min_score: float = 0.5):
         super().__init__()
         self.width = width
+        self.min_score = float(min_score)
         c1, c2, c3 = width, 2 * width, 3 * width
         self.features = nn.Sequential(
             nn.Conv2d(1, c1, 3, padding=1), nn.BatchNorm2d(c1), nn.ReLU(),
@@ -72,7 +76,7 @@ class BlockReader(nn.Module):
 
     def config(self) -> dict:
         """The constructor's arguments."""
-        return {"width": self.width}
+        return {"width": self.width, "min_score": self.min_score}
 
 
 def block_views(image: np.ndarray, quads: np.ndarray) -> np.ndarray:

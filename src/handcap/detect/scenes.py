@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.cameras import Camera
-from handcap.patterns.glyphs import load_font
+from handcap.core.errors import HandcapError
+from handcap.patterns.glyphs import GlyphLayout, load_font
 from handcap.patterns.session import session_pattern
 from handcap.hand import OpenHand
 from handcap.hand.anatomy import PHI_LIMITS
@@ -26,6 +27,7 @@ from handcap.synth.cameras import cage_rig
 from handcap.synth.decals import patch_skin
 from handcap.synth.filming import scaled_camera
 from handcap.synth.images import ImageStyle, PatchRenderer
+from handcap.synth.pages import PageLook, PagePhotographer
 from handcap.synth.textures import build_atlas
 
 
@@ -44,6 +46,10 @@ class Scene:
     block_text : ndarray (B,) str
     alphabet : str
         Glyphs of the printed tags.
+    projected : dict, optional
+        Name -> pixels of every printed corner, hidden ones included (where the camera would see it):
+        a detection named so is right when it lies there, even if the truth calls it hidden (a
+        corner seen at a grazing angle, or at an occluder's edge).
     """
 
     image: np.ndarray
@@ -52,6 +58,7 @@ class Scene:
     blocks: np.ndarray
     block_text: np.ndarray
     alphabet: str
+    projected: dict | None = None
 
 
 class SceneMaker:
@@ -67,10 +74,12 @@ class SceneMaker:
         Font of the glyphs (default: DejaVu Sans Mono Bold).
     alphabet : str, optional
         Glyphs of the tags (default: handcap's).
+    layout : GlyphLayout, optional
+        Where the glyphs sit in a square (default: handcap's).
     """
 
     def __init__(self, seed: int = 0, *, scale=(0.5, 1.0), style: ImageStyle | None = None, font=None,
-                 alphabet: str | None = None):
+                 alphabet: str | None = None, layout: GlyphLayout | None = None):
         self.rng = np.random.default_rng(seed)
         self.scale = scale
         self.hand = OpenHand("right")
@@ -79,22 +88,12 @@ class SceneMaker:
         self.patches = pattern.patches
         self.alphabet = pattern.alphabet
         self.skin_layout = load_layout("dense-patches")
-        self.names = np.array([n for p in self.patches for n in p.corner_names()])
-        self.blocks_index, self.block_text = self._blocks()
+        self.names, self.blocks_index, self.block_text = _block_truth(self.patches)
         glyphs = load_font(font, pattern.alphabet)
         self._skins = {}
         first = self._skin(tuple([0.0] * 10))  # the sample grid is the same for every shape
-        self.renderer = PatchRenderer(build_atlas(self.patches, glyphs), self.hand.faces, style or ImageStyle(),
-                                      coords=list(zip(first.rows, first.cols)))
-
-    def _blocks(self):
-        index = {n: k for k, n in enumerate(self.names)}
-        ids, texts = [], []
-        for p in self.patches:
-            for text, r, c in p.blocks():
-                ids.append([index[p.corner_name(*v)] for v in p.block_vertices(r, c)])
-                texts.append(text)
-        return np.array(ids), np.array(texts)
+        self.renderer = PatchRenderer(build_atlas(self.patches, glyphs, layout=layout), self.hand.faces,
+                                      style or ImageStyle(), coords=list(zip(first.rows, first.cols)))
 
     def close(self) -> None:
         """Free the renderer."""
@@ -131,7 +130,66 @@ class SceneMaker:
         seen = shot.visible
         blocks = seen[self.blocks_index].all(axis=1)
         return Scene(shot.image, shot.xy[seen], self.names[seen], shot.xy[self.blocks_index[blocks]],
-                     self.block_text[blocks], self.alphabet)
+                     self.block_text[blocks], self.alphabet, dict(zip(self.names, shot.xy)))
+
+
+class PageMaker:
+    """Draws random photographs of a printed sheet of a session's patches, as scenes.
+
+    Parameters
+    ----------
+    seed : int
+    look : PageLook, optional
+    style : ImageStyle, optional
+    font : str or Path, optional
+        Font of the glyphs (default: DejaVu Sans Mono Bold).
+    alphabet : str, optional
+        Glyphs of the tags (default: handcap's). The sheet holds a whole session's patches, or one
+        hand's where the alphabet has too few tags for a session.
+    layout : GlyphLayout, optional
+        Where the glyphs sit in a square (default: handcap's).
+    """
+
+    def __init__(self, seed: int = 0, *, look: PageLook | None = None, style: ImageStyle | None = None,
+                 font=None, alphabet: str | None = None, layout: GlyphLayout | None = None):
+        self.rng = np.random.default_rng(seed)
+        kwargs = {} if alphabet is None else {"alphabet": alphabet}
+        try:
+            pattern = session_pattern(**kwargs)
+        except HandcapError:  # too few tags for a whole session
+            pattern = session_pattern(("right",), (), **kwargs)
+        self.alphabet = pattern.alphabet
+        self.names, self.blocks_index, self.block_text = _block_truth(pattern.patches)
+        atlas = build_atlas(pattern.patches, load_font(font, pattern.alphabet), square=48, layout=layout)
+        self.photographer = PagePhotographer(atlas, look, style)
+
+    def close(self) -> None:
+        """Nothing to free (the same interface as :class:`SceneMaker`)."""
+
+    def scene(self) -> Scene:
+        """Draw one photograph.
+
+        Returns
+        -------
+        Scene
+        """
+        shot = self.photographer.photograph(self.rng)
+        seen = shot.visible
+        blocks = seen[self.blocks_index].all(axis=1)
+        return Scene(shot.image, shot.xy[seen], self.names[seen], shot.xy[self.blocks_index[blocks]],
+                     self.block_text[blocks], self.alphabet, dict(zip(self.names, shot.xy)))
+
+
+def _block_truth(patches):
+    """Corner names (N,), each block's four corner indices in reading order (B, 4) and its tag (B,)."""
+    names = [n for p in patches for n in p.corner_names()]
+    index = {n: k for k, n in enumerate(names)}
+    ids, texts = [], []
+    for p in patches:
+        for text, r, c in p.blocks():
+            ids.append([index[p.corner_name(*v)] for v in p.block_vertices(r, c)])
+            texts.append(text)
+    return np.array(names), np.array(ids).reshape(-1, 4), np.array(texts)
 
 
 def _cut_to(camera: Camera, vertices: np.ndarray, scale: float, rng, margin: int = 48) -> Camera:

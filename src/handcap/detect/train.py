@@ -27,10 +27,12 @@ from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
 from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import CornerNet, corner_loss, normalise, targets
-from handcap.detect.evaluation import CornerScore, evaluate_corners, evaluate_reader, reader_line, score_corners
+from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
+                                       score_corners)
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_corner_net, save_net
 from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, reader_loss
-from handcap.detect.scenes import SceneMaker
+from handcap.detect.scenes import PageMaker, SceneMaker
+from handcap.patterns.glyphs import GlyphLayout
 
 CROP = 96
 __all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "evaluate_reader", "load_corner_net",
@@ -222,7 +224,7 @@ def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:
     return out
 
 
-def train_reader(scenes, *, steps: int = 2000, batch: int = 64, seed: int = 0, lr: float = 2e-3,
+def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, lr: float = 2e-3,
                  net: BlockReader | None = None, progress: bool = False) -> BlockReader:
     """Train the block reader on views of rendered scenes (deterministic for a seed).
 
@@ -260,8 +262,12 @@ FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
          "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf")
 
 
-def reader_scenes(count: int, seed: int, fonts) -> list:
-    """Scenes for the reader: each font in turn, with handcap's, DexterCap's and random alphabets.
+def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5) -> list:
+    """Scenes for the reader: hand renders and photographed sheets in each font, many alphabets and layouts.
+
+    Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
+    them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
+    photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
 
     Parameters
     ----------
@@ -269,24 +275,35 @@ def reader_scenes(count: int, seed: int, fonts) -> list:
     seed : int
     fonts : sequence of str or None
         Font files (None: the default font).
+    pages : float
+        Share of photographed sheets among the scenes.
 
     Returns
     -------
     list of Scene
     """
     rng = np.random.default_rng(seed)
-    out, k = [], 0
-    per = max(1, count // (3 * len(fonts)))
-    while len(out) < count:
-        font = fonts[k % len(fonts)]
-        alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
-        alphabet = alphabets[(k // len(fonts)) % 3]
-        maker = SceneMaker(seed * 1000 + k, font=font, alphabet=alphabet, scale=(0.45, 1.0))
-        try:
-            out += [maker.scene() for _ in range(min(per, count - len(out)))]
-        finally:
-            maker.close()
-        k += 1
+    n_pages = int(round(pages * count))
+    out = []
+    for kind, total, per in (("hand", count - n_pages, max(1, (count - n_pages) // (6 * len(fonts)))),
+                             ("page", n_pages, 10)):
+        made, k = 0, 0
+        while made < total:
+            font = fonts[k % len(fonts)]
+            alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
+            alphabet = alphabets[(k // len(fonts)) % 3]
+            layout = GlyphLayout.random(rng) if (k // (3 * len(fonts))) % 2 else None
+            make = SceneMaker if kind == "hand" else PageMaker
+            extra = {"scale": (0.45, 1.0)} if kind == "hand" else {}
+            maker = make(seed * 1000 + k + (0 if kind == "hand" else 500), font=font, alphabet=alphabet,
+                         layout=layout, **extra)
+            try:
+                batch = [maker.scene() for _ in range(min(per, total - made))]
+            finally:
+                maker.close()
+            out += batch
+            made += len(batch)
+            k += 1
     return out
 
 
@@ -297,6 +314,8 @@ def main(argv=None) -> int:
     p.add_argument("--scenes", type=int, default=600, help="rendered training scenes (default %(default)s)")
     p.add_argument("--test-scenes", type=int, default=40, help="held-out scenes to score on (default %(default)s)")
     p.add_argument("--steps", type=int, default=4000, help="optimiser steps (default %(default)s)")
+    p.add_argument("--pages", type=float, default=0.3,
+                   help="share of photographed sheets among the corner network's scenes (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s)")
     p.add_argument("--out", default=str(WEIGHTS), help="folder for corners.npz and reader.npz (default: the "
@@ -307,10 +326,10 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
     command = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
-               f"--steps {a.steps} --seed {a.seed}")
+               f"--steps {a.steps} --pages {a.pages} --seed {a.seed}")
     if a.what in ("corners", "all"):
-        scenes = _scenes(a.scenes, a.seed)
-        tests = _scenes(a.test_scenes, a.seed + 1_000_003)
+        scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
+        tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
         print(f"rendered {len(scenes)} + {len(tests)} scenes in {time.time() - started:.0f} s", flush=True)
         net = train_corners(scenes, steps=a.steps, seed=a.seed, progress=True)
         score = evaluate_corners(net, tests)
@@ -323,8 +342,13 @@ def main(argv=None) -> int:
         tests = reader_scenes(a.test_scenes, a.seed + 1_000_003, held_out)
         print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
         net = train_reader(scenes, steps=a.steps, seed=a.seed, progress=True)
-        score = {name: evaluate_reader(net, [t for t in tests if t.alphabet == alphabet])
-                 for name, alphabet in (("handcap", ALPHABET), ("dextercap", DEXTERCAP_ALPHABET))}
+        validation = reader_scenes(a.test_scenes, a.seed + 2_000_003, trained)
+        net.min_score = reader_gate(net, validation)
+        print(f"reader: trusted alone from confidence {net.min_score:.4f} (at most 0.1 % wrong on "
+              f"{len(validation)} validation scenes in the training fonts)", flush=True)
+        score = {name: evaluate_reader(net, [t for t in tests if t.alphabet == alphabet], min_score=gate)
+                 for name, alphabet in (("handcap", ALPHABET), ("dextercap", DEXTERCAP_ALPHABET))
+                 for gate in (net.min_score,)}
         line = reader_line(score, held_out[0])
         print(line, flush=True)
         save_net(net, out / "reader.npz", {"source": command, "score": line})
@@ -332,12 +356,36 @@ def main(argv=None) -> int:
     return 0
 
 
-def _scenes(count: int, seed: int) -> list:
+def corner_scenes(count: int, seed: int, *, pages: float = 0.0, fonts=(None,)) -> list:
+    """Scenes for the corner network: hand renders, and a share of photographed sheets.
+
+    Parameters
+    ----------
+    count : int
+    seed : int
+    pages : float
+        Share of photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet, each
+        in one of ``fonts`` with a random glyph layout).
+    fonts : sequence of str or None
+        Fonts of the sheets.
+
+    Returns
+    -------
+    list of Scene
+    """
+    n_pages = int(round(pages * count))
     maker = SceneMaker(seed)
     try:
-        return [maker.scene() for _ in range(count)]
+        out = [maker.scene() for _ in range(count - n_pages)]
     finally:
         maker.close()
+    rng = np.random.default_rng(seed + 7)
+    k = 0
+    while len(out) < count:
+        sheet = PageMaker(seed * 1000 + 500 + k, font=fonts[k % len(fonts)], layout=GlyphLayout.random(rng))
+        out += [sheet.scene() for _ in range(min(10, count - len(out)))]
+        k += 1
+    return out
 
 
 if __name__ == "__main__":

@@ -7,9 +7,10 @@ the square across that corner, ``(r + 2 dr_k - 1, c + 2 dc_k - 1)``, and the
 shared corner is B's opposite corner ``(k + 2) % 4``. So every block that was
 read places, by a walk over the blocks it is connected to, every other block
 of its patch: its square (hence its tag) and its turn. Each read block casts
-one such vote for every block it reaches, itself included; a block takes the
-(tag, turn) with most votes, is dropped when the best is not ahead of the
-second, and a tag kept by two blocks of one image is dropped from both
+one such vote, weighed by its confidence, for every block it reaches, itself
+included; a block takes the (tag, turn) with most votes, and is dropped when
+the best holds less than two thirds of the block's votes or weighs less than
+``min_support`` (a lone, unsure reading is not trusted), and a tag kept by two blocks of one image is dropped from both
 (DexterCap drops such pairs too). The corners of the blocks that remain are
 named from the template (``OWNER:PATCH_rRcC``); a corner given two different
 names by its blocks is dropped.
@@ -23,11 +24,13 @@ import numpy as np
 
 from handcap.patterns.pattern import Pattern
 
+#: Share of a block's votes the winning (tag, turn) must hold.
+MAJORITY = 2 / 3
 #: (row, column) of each reading-order corner of a square relative to its top-left vertex.
 STEP = ((0, 0), (0, 1), (1, 1), (1, 0))
 
 
-def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None):
+def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_support: float = 0.0, xy=None):
     """Vote over the template (see the module docstring).
 
     Parameters
@@ -41,6 +44,12 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None):
         Index of the tag's top-left among the block's corners (-1 when unread).
     score : ndarray (B,), optional
         Reading confidences; a vote weighs its seed's confidence (default 1).
+    min_support : float
+        Least total weight of the winning vote.
+    xy : ndarray (K, 2), optional
+        Image corners (pixels). Given, a walk steps only to a block that lies where a diagonal
+        neighbour must: its centre within a third of a side of the mirror image of the current block's
+        centre through the shared corner (a false quad that happens to share a corner is not placed).
 
     Returns
     -------
@@ -58,6 +67,10 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None):
     for b, quad in enumerate(quads):
         for p, corner in enumerate(quad):
             by_corner[corner].append((b, p))
+    if xy is not None:
+        pts = np.asarray(xy, dtype=float)[quads]
+        centre = pts.mean(axis=1)
+        side = np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=-1).mean(axis=1)
     votes = [Counter() for _ in range(n)]
     for seed in range(n):
         located = pattern.locate(str(text[seed])) if text[seed] else None
@@ -75,6 +88,10 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None):
                 for b, q in by_corner[corner]:
                     if b in placed:
                         continue
+                    if xy is not None:
+                        mirror = 2 * np.asarray(xy[corner], dtype=float) - centre[a]
+                        if np.linalg.norm(centre[b] - mirror) > (side[a] + side[b]) / 6:
+                            continue
                     rb, cb = r + 2 * dr - 1, c + 2 * dc - 1
                     if not (0 <= rb < patch.rows and 0 <= cb < patch.cols) or not patch.tags[rb][cb]:
                         continue
@@ -85,8 +102,8 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None):
     tags = np.full(n, "", dtype="<U2")
     turns = np.full(n, -1)
     for b, counter in enumerate(votes):
-        ranked = counter.most_common(2)
-        if not ranked or (len(ranked) > 1 and ranked[1][1] >= ranked[0][1]):
+        ranked = counter.most_common(1)
+        if not ranked or ranked[0][1] < min_support or ranked[0][1] < MAJORITY * sum(counter.values()):
             continue
         tags[b], turns[b] = ranked[0][0]
     # A tag seen twice in one image: neither can be trusted.

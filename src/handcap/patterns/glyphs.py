@@ -41,6 +41,49 @@ MARGIN = 0.5
 
 
 @dataclass(frozen=True)
+class GlyphLayout:
+    """Where the glyphs and the underline sit in a white square, fractions of its side.
+
+    handcap prints with the defaults; other generators place them otherwise (DexterCap's, for
+    one, has taller glyphs and a lower underline), and the reader is trained on many layouts.
+
+    Attributes
+    ----------
+    cap_height : float
+        Glyph height (of ``H``).
+    glyph_top : float
+        Top of the glyphs, from the square's top.
+    underline_top, underline_thickness : float
+    gap : float
+        Space between the two glyphs.
+    """
+
+    cap_height: float = CAP_HEIGHT
+    glyph_top: float = GLYPH_TOP
+    underline_top: float = UNDERLINE_TOP
+    underline_thickness: float = UNDERLINE_THICKNESS
+    gap: float = 0.06
+
+    @classmethod
+    def random(cls, rng) -> "GlyphLayout":
+        """A random layout that fits the square (glyphs 0.36-0.58 high, the underline below them).
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        GlyphLayout
+        """
+        cap = rng.uniform(0.36, 0.58)
+        thick = rng.uniform(0.04, 0.1)
+        below = rng.uniform(0.03, 0.1)  # from the glyphs' foot to the underline
+        top = rng.uniform(0.08, max(0.09, 0.95 - cap - below - thick))
+        return cls(cap, top, top + cap + below, thick, rng.uniform(0.02, 0.1))
+
+
+@dataclass(frozen=True)
 class Font:
     """Glyph outlines of one font, scaled so that ``H`` is 1 high.
 
@@ -123,7 +166,8 @@ def load_font(path=None, alphabet: str = "") -> Font:
     return Font(path, name, advance or 0.6 / 0.73)
 
 
-def square_ink(text: str, x0: float, y0: float, side: float, font: Font) -> list[MplPath]:
+def square_ink(text: str, x0: float, y0: float, side: float, font: Font,
+               layout: GlyphLayout | None = None) -> list[MplPath]:
     """The glyphs and underline of one white square, in the drawing frame (mm, y down).
 
     Parameters
@@ -135,29 +179,35 @@ def square_ink(text: str, x0: float, y0: float, side: float, font: Font) -> list
     side : float
         Side of the square, mm.
     font : Font
+    layout : GlyphLayout, optional
+        Default: handcap's own.
 
     Returns
     -------
     list of matplotlib.path.Path
         One outline per glyph, then the underline (a rectangle under the first glyph).
     """
-    height = CAP_HEIGHT * side
-    width = font.advance * height
-    gap = 0.06 * side
+    layout = layout or GlyphLayout()
+    height = layout.cap_height * side
+    gap = layout.gap * side
+    width = min(font.advance * height, (0.92 * side - gap) / 2)  # wide fonts are squeezed to fit
     left = x0 + (side - 2 * width - gap) / 2
-    baseline = y0 + (GLYPH_TOP + CAP_HEIGHT) * side
+    baseline = y0 + (layout.glyph_top + layout.cap_height) * side
     out = []
     for k, ch in enumerate(text):
         outline = font.outline(ch)
         xs = outline.vertices[:, 0]
-        shift = left + k * (width + gap) + (width - height * (xs.max() + xs.min())) / 2
-        out.append(outline.transformed(Affine2D().scale(height, -height).translate(shift, baseline)))
-    u0, u1 = y0 + UNDERLINE_TOP * side, y0 + (UNDERLINE_TOP + UNDERLINE_THICKNESS) * side
+        squeeze = min(1.0, width / (font.advance * height))
+        shift = left + k * (width + gap) + (width - squeeze * height * (xs.max() + xs.min())) / 2
+        out.append(outline.transformed(Affine2D().scale(squeeze * height, -height).translate(shift, baseline)))
+    u0 = y0 + layout.underline_top * side
+    u1 = u0 + layout.underline_thickness * side
     out.append(MplPath([(left, u0), (left + width, u0), (left + width, u1), (left, u1), (left, u0)], closed=True))
     return out
 
 
-def patch_drawing(patch: Patch, pitch_mm: float, font: Font) -> tuple[tuple, list, list]:
+def patch_drawing(patch: Patch, pitch_mm: float, font: Font,
+                  layout: GlyphLayout | None = None) -> tuple[tuple, list, list]:
     """A patch's drawing in its own frame: the black backing, the white squares and the ink on them.
 
     Parameters
@@ -166,6 +216,8 @@ def patch_drawing(patch: Patch, pitch_mm: float, font: Font) -> tuple[tuple, lis
     pitch_mm : float
         Side of a square, mm.
     font : Font
+    layout : GlyphLayout, optional
+        Default: handcap's own.
 
     Returns
     -------
@@ -182,5 +234,5 @@ def patch_drawing(patch: Patch, pitch_mm: float, font: Font) -> tuple[tuple, lis
     for text, r, c in patch.blocks():
         x0, y0 = c * pitch_mm, r * pitch_mm
         white.append((x0, y0, x0 + pitch_mm, y0 + pitch_mm))
-        ink += square_ink(text, x0, y0, pitch_mm, font)
+        ink += square_ink(text, x0, y0, pitch_mm, font, layout)
     return backing, white, ink

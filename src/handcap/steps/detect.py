@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
@@ -78,50 +77,17 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             warnings.append(f"frame rate not given (--rate): {DEFAULT_RATE:g} Hz assumed")
     elif not 0 < rate < 100000:
         raise HandcapError(f"--rate {rate}: give frames per second, more than 0")
+    from handcap.detect.capture import detect_capture  # loads torch
+
     marker_names = template.corner_names() if template is not None else []
-    index = {n: k for k, n in enumerate(marker_names)}
-    rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
-    blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
-    images = empty = corrected = 0
-    hidden = None if progress is None else not progress
-    with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
-              leave=False) as bar:
-        for c, source in enumerate(sources):
-            for t, image in source.frames():
-                found = detector.image(image)
-                images += 1
-                empty += len(found.corners) == 0
-                corrected += found.corrected
-                named = [k for k, n in enumerate(found.names) if n is not None and n in index]
-                rows["frame"] += [t] * len(named)
-                rows["camera"] += [c] * len(named)
-                rows["marker"] += [index[found.names[k]] for k in named]
-                rows["xy"] += [found.corners[k] for k in named]
-                rows["score"] += [found.corner_score[k] for k in named]
-                blocks["block_text"] += list(found.block_text)
-                blocks["block_frame"] += [t] * len(found.block_text)
-                blocks["block_camera"] += [c] * len(found.block_text)
-                blocks["block_xy"] += list(found.block_xy)
-                blocks["block_score"] += list(found.block_score)
-                bar.update()
-    if empty:
-        warnings.append(f"no corner found in {empty} of {images} images (no patches in view, or not in focus)")
-    if images and not blocks["block_text"]:
+    run = detect_capture(detector, sources, marker_names, rate, progress=progress)
+    images, corrected = run.images, run.corrected
+    if run.empty:
+        warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
+    if images and not len(run.arrays["block_text"]):
         warnings.append("no tag was read in any image: wrong --alphabet, patches too small in the images, or not "
                         "coded patches")
-    arrays = {
-        "camera_names": np.array(names), "marker_names": np.array(marker_names, dtype=str),
-        "frame": np.array(rows["frame"], dtype=np.int64), "camera": np.array(rows["camera"], dtype=np.int64),
-        "marker": np.array(rows["marker"], dtype=np.int64),
-        "xy": np.array(rows["xy"], dtype=np.float64).reshape(-1, 2),
-        "score": np.array(rows["score"], dtype=np.float64), "rate": np.array(float(rate)),
-        "block_text": np.array(blocks["block_text"], dtype="<U2"),
-        "block_frame": np.array(blocks["block_frame"], dtype=np.int64),
-        "block_camera": np.array(blocks["block_camera"], dtype=np.int64),
-        "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
-        "block_score": np.array(blocks["block_score"], dtype=np.float64),
-        **warnings_entry(warnings),
-    }
+    arrays = {**run.arrays, "camera_names": np.array(names), **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else ""))

@@ -74,3 +74,16 @@ def demo(out="demo-output") -> Step:
               + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings")]
     lines += [f"  {path.relative_to(out) if path.is_relative_to(out) else path}" for path in files]
     return Step(tuple(lines), warnings, tuple(map(str, files)), summary)
+
+
+def demo_images(out="demo-images") -> Step:
+    """Run :func:`handcap.demo_images.run_image_demo` into ``out`` (rewritten on every run) and summarise it."""
+    from handcap.demo_images import run_image_demo  # loads torch (the detector's networks)
+
+    check_output_folder(out, force=True)  # the demo's folder is rewritten on every run
+    summary = run_image_demo(out)
+    warnings = tuple(summary["warnings"])
+    lines = [f"{key:40s} {value}" for key, value in summary.items() if key not in ("files", "warnings")]
+    lines.append(f"\nwrote {len(summary['files'])} files to {out}/ (figures in {out}/summary.txt); "
+                 + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
+    return Step(tuple(lines), warnings, tuple(summary["files"]), summary)

@@ -34,6 +34,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from handcap.core.camera_rig import CameraRig
 from handcap.core.cameras import Camera
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output, save_npz
@@ -69,6 +70,39 @@ def scaled_camera(camera: Camera, scale: float) -> Camera:
     matrix[1, 2] = scale * (matrix[1, 2] + 0.5) - 0.5
     size = (max(1, int(round(camera.size[0] * scale))), max(1, int(round(camera.size[1] * scale))))
     return Camera(camera.name, size, matrix, camera.distortions, camera.rotation, camera.translation)
+
+
+def region_rig(rig, points, margin: int = 64):
+    """The rig's cameras reading out only the part of their sensor that sees ``points`` (a region of interest).
+
+    Machine-vision cameras can read out a window of their sensor; the same lens with a shifted
+    principal point and fewer pixels sees the hand exactly as the full frame does, for a fraction
+    of the rendering and detection time.
+
+    Parameters
+    ----------
+    rig : CameraRig
+    points : ndarray (N, 3)
+        Metres; every camera's window holds their projections plus ``margin``.
+    margin : int
+        Pixels on every side.
+
+    Returns
+    -------
+    CameraRig
+        Same names, poses, lenses and distortions; window corners on even pixels.
+    """
+    cut = []
+    for camera in rig:
+        xy, _ = camera.project(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        lo = np.clip(np.floor(np.nanmin(xy, axis=0)) - margin, 0, None).astype(int) // 2 * 2
+        hi = np.minimum(np.ceil(np.nanmax(xy, axis=0)) + margin, camera.size).astype(int)
+        size = np.maximum(hi - lo, 64) // 2 * 2
+        matrix = camera.matrix.copy()
+        matrix[:2, 2] -= lo
+        cut.append(Camera(camera.name, (int(size[0]), int(size[1])), matrix, camera.distortions, camera.rotation,
+                          camera.translation))
+    return CameraRig(cut)
 
 
 def check_filmable(config, scale: float = 1.0):

@@ -383,7 +383,7 @@ class PatchRenderer:
         visible = inside & facing & (zc <= z_seen + tolerance)
 
         image = cv2.remap(render, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        image = self._camera_effects(image, rng)
+        image = camera_effects(image, self.style, rng)
         return RenderedImage(image, xy, visible)
 
     def corner_points(self, corners) -> np.ndarray:
@@ -401,21 +401,35 @@ class PatchRenderer:
         out = [np.asarray(g)[ri, ci] for g, (ri, ci) in zip(corners, self._corner_nodes)]
         return np.concatenate(out) if out else np.zeros((0, 3))
 
-    def _camera_effects(self, image: np.ndarray, rng) -> np.ndarray:
-        style = self.style
-        sigma = rng.uniform(*style.blur_sigma)
-        if sigma > 0.05:
-            image = cv2.GaussianBlur(image, (0, 0), sigma)
-        length = rng.uniform(*style.motion_px)
-        if length > 0.5:
-            size = int(np.ceil(length)) | 1
-            kernel = np.zeros((size, size), np.float32)
-            kernel[size // 2, :] = 1.0
-            turn = cv2.getRotationMatrix2D((size / 2 - 0.5, size / 2 - 0.5), rng.uniform(0, 180), 1.0)
-            kernel = cv2.warpAffine(kernel, turn, (size, size))
-            image = cv2.filter2D(image, -1, kernel / kernel.sum())
-        image = np.clip(image * rng.uniform(*style.gain), 0, 1) ** rng.uniform(*style.gamma)
-        level = image * 255.0
-        noise = rng.normal(0, 1, image.shape) * np.sqrt(style.shot_noise ** 2 * level
-                                                        + rng.uniform(*style.read_noise) ** 2)
-        return np.clip(np.round(level + noise), 0, 255).astype(np.uint8)
+
+def camera_effects(image: np.ndarray, style: ImageStyle, rng) -> np.ndarray:
+    """What a camera does to a clean picture: defocus and motion blur, exposure, gamma, noise, 8 bits.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) float32
+        Linear grey levels 0..1.
+    style : ImageStyle
+        Ranges each effect's strength is drawn from.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+    """
+    sigma = rng.uniform(*style.blur_sigma)
+    if sigma > 0.05:
+        image = cv2.GaussianBlur(image, (0, 0), sigma)
+    length = rng.uniform(*style.motion_px)
+    if length > 0.5:
+        size = int(np.ceil(length)) | 1
+        kernel = np.zeros((size, size), np.float32)
+        kernel[size // 2, :] = 1.0
+        turn = cv2.getRotationMatrix2D((size / 2 - 0.5, size / 2 - 0.5), rng.uniform(0, 180), 1.0)
+        kernel = cv2.warpAffine(kernel, turn, (size, size))
+        image = cv2.filter2D(image, -1, kernel / kernel.sum())
+    image = np.clip(image * rng.uniform(*style.gain), 0, 1) ** rng.uniform(*style.gamma)
+    level = image * 255.0
+    noise = rng.normal(0, 1, image.shape) * np.sqrt(style.shot_noise ** 2 * level
+                                                    + rng.uniform(*style.read_noise) ** 2)
+    return np.clip(np.round(level + noise), 0, 255).astype(np.uint8)

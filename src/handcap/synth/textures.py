@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from handcap.patterns.glyphs import MARGIN, Font, patch_drawing
+from handcap.patterns.glyphs import MARGIN, Font, GlyphLayout, patch_drawing
 from handcap.patterns.pattern import Patch
 
 _SUPERSAMPLE = 8  # glyphs are drawn this much finer, then averaged down
@@ -61,7 +61,8 @@ class PatchAtlas:
         return np.stack([x / w, y / h], axis=-1)
 
 
-def patch_texture(patch: Patch, font: Font, square: int = 48, *, ink: bool = True) -> np.ndarray:
+def patch_texture(patch: Patch, font: Font, square: int = 48, *, ink: bool = True,
+                  layout: GlyphLayout | None = None) -> np.ndarray:
     """One patch drawn at ``square`` pixels per square, its black margin included.
 
     Parameters
@@ -72,6 +73,8 @@ def patch_texture(patch: Patch, font: Font, square: int = 48, *, ink: bool = Tru
         Pixels per square.
     ink : bool
         Draw the glyphs and underlines (False: the bare checkerboard).
+    layout : GlyphLayout, optional
+        Where the glyphs sit in a square (default: handcap's).
 
     Returns
     -------
@@ -79,7 +82,7 @@ def patch_texture(patch: Patch, font: Font, square: int = 48, *, ink: bool = Tru
         Grid vertex (0, 0) at ``(MARGIN * square, MARGIN * square)`` counted from the image's top-left
         edge (OpenGL's texel convention: pixel ``i`` spans ``[i, i + 1)``).
     """
-    backing, white, glyphs = patch_drawing(patch, 1.0, font)  # drawing unit: one square
+    backing, white, glyphs = patch_drawing(patch, 1.0, font, layout)  # drawing unit: one square
     offset = -backing[0]
     w = int(round((backing[2] - backing[0]) * square))
     h = int(round((backing[3] - backing[1]) * square))
@@ -106,7 +109,8 @@ def _coverage(lo: float, hi: float, n: int) -> np.ndarray:
     return np.clip(np.minimum(edges + 1, hi) - np.maximum(edges, lo), 0.0, 1.0)
 
 
-def build_atlas(patches, font: Font, square: int = 48, width: int = 2048, *, ink: bool = True) -> PatchAtlas:
+def build_atlas(patches, font: Font, square: int = 48, width: int = 2048, *, ink: bool = True,
+                layout: GlyphLayout | None = None) -> PatchAtlas:
     """All ``patches`` in one atlas, packed in shelves.
 
     Parameters
@@ -119,12 +123,14 @@ def build_atlas(patches, font: Font, square: int = 48, width: int = 2048, *, ink
         Atlas width, pixels (its height follows).
     ink : bool
         Draw the glyphs (False: bare checkerboards, e.g. to check corner geometry).
+    layout : GlyphLayout, optional
+        Where the glyphs sit in a square (default: handcap's).
 
     Returns
     -------
     PatchAtlas
     """
-    tiles = [patch_texture(p, font, square, ink=ink) for p in patches]
+    tiles = [patch_texture(p, font, square, ink=ink, layout=layout) for p in patches]
     gap = 4
     x = y = shelf = 0
     places = []

@@ -1,0 +1,192 @@
+"""``handcap demo --images``: the whole DexterCap path from pixels, on rendered takes with their truth.
+
+1. Synthesize a calibration take (open hand, slowly turned) and a grasp take of
+   one subject wearing the ``dense-patches`` layout, seen by 13 cameras, and
+   render every frame of every camera (:func:`handcap.synth.filming.film_capture`).
+   The cameras read out the window of their 5 MP sensor that holds the hand
+   (:func:`~handcap.synth.filming.region_rig`): the same lens and pixels, a
+   fraction of the rendering and detection time.
+2. Detect the coded patches in every image with the shipped networks and the
+   takes' template (:mod:`handcap.detect`).
+3. Triangulate the named corners (RANSAC over views), clean them, calibrate the
+   marker attachment on the calibration take and solve the grasp take.
+4. Measure each stage against the truth: corners named per image and their
+   pixel error, triangulated corners (mm), reprojection (px), calibration and
+   solve marker residuals (MRE, mm), joint error (mm).
+
+Writes into the output folder (rewritten on every run): ``calibration/`` and
+``take/``, each with ``cameras.toml``, ``images/CAM/FRAME.png``,
+``image_truth.npz``, ``pattern.toml``, ``detections.npz`` (from the images),
+``triangulated.c3d``, ``cleaned.c3d`` and ``truth.npz`` (the true hand motion);
+``attachment.npz``, ``motion.npz`` and ``summary.json``/``summary.txt`` beside them.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from handcap.core.files import atomic_output, save_npz
+from handcap.demo import file_stamps, written_since
+from handcap.detect.capture import detect_capture
+from handcap.detect.networks import load_corner_net, load_reader
+from handcap.detect.pipeline import Detector
+from handcap.detect.sources import frame_sources
+from handcap.io import write_hand_motion, write_markers
+from handcap.layouts import load_layout
+from handcap.multiview import clean_markers, read_detections, triangulate_detections
+from handcap.patterns.pattern import Pattern
+from handcap.quality import plausibility as q
+from handcap.solve import calibrate_attachment, solve_hand
+from handcap.synth.config import SynthConfig
+from handcap.synth.filming import film_capture, region_rig
+from handcap.synth.scene import synthesize
+
+#: The two takes, one subject, 13 cameras at 4 Hz: 8 frames of calibration, 11 of the grasp (its shortest: 2.5 s).
+IMAGE_DEMO_CONFIGS = {
+    "calibration": SynthConfig(layout="dense-patches", motion="calibration", frames=8, rate=4.0, seed=8,
+                               subject_seed=21, cameras=13, min_views=3, object="none"),
+    "take": SynthConfig(layout="dense-patches", motion="grasp", frames=11, rate=4.0, seed=7, subject_seed=21,
+                        cameras=13, min_views=3),
+}
+
+
+def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = None) -> dict:
+    """Run the demo into ``out`` (see the module docstring); returns its summary.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder; created if needed, files already there are written over.
+    configs : dict, optional
+        ``{"calibration": SynthConfig, "take": SynthConfig}`` (default :data:`IMAGE_DEMO_CONFIGS`).
+    progress : bool, optional
+        Progress bars (default: only on a terminal).
+
+    Returns
+    -------
+    dict
+        Figures per stage (keys name their unit: ``_mm``, ``_px``, ``_fraction``, ``_seconds``),
+        ``warnings`` (list of str) and ``files`` (the paths written).
+    """
+    out = Path(out)
+    before = file_stamps(out)
+    configs = configs or IMAGE_DEMO_CONFIGS
+    detector = None
+    summary, warnings, cleaned, captures = {}, [], {}, {}
+    for key, config in configs.items():
+        folder = out / key
+        folder.mkdir(parents=True, exist_ok=True)
+        capture = synthesize(config, progress=progress)
+        hand_points = capture.truth["positions"][:, :len(capture.hand_motion.marker_names)]
+        capture = replace(capture, rig=region_rig(capture.rig, hand_points[np.isfinite(hand_points).all(axis=-1)]))
+        captures[key] = capture
+        capture.rig.save(folder / "cameras.toml")
+        write_hand_motion(capture.hand_motion, folder / "truth.npz")
+        start = time.perf_counter()
+        film_capture(capture, folder, progress=progress)
+        summary[f"{key}_render_seconds"] = round(time.perf_counter() - start, 1)
+        pattern = Pattern.load(folder / "pattern.toml")
+        if detector is None:
+            detector = Detector(load_corner_net(), load_reader(), pattern)
+        detector.pattern = pattern
+        sources = frame_sources([folder / "images" / c.name for c in capture.rig])
+        start = time.perf_counter()
+        run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=progress)
+        seconds = time.perf_counter() - start
+        save_npz(folder / "detections.npz", run.arrays)
+        summary.update(_detection_figures(key, run, folder / "image_truth.npz", seconds))
+        triangulated = triangulate_detections(read_detections(folder / "detections.npz"), capture.rig,
+                                              min_views=config.min_views, progress=progress)
+        found = q.triangulation_warnings(triangulated.error_px, triangulated.views, threshold_px=5.0,
+                                         used=triangulated.used)
+        # The template names its corners OWNER:PATCH_rRcC; the layout names them PATCH_rRcC.
+        markers = triangulated.to_markers()
+        markers = markers.renamed([n.split(":", 1)[-1] for n in markers.names])
+        write_markers(q.attach(markers, found), folder / "triangulated.c3d")
+        layout = load_layout(config.layout)
+        cleaned[key], _ = clean_markers(markers, layout)
+        write_markers(cleaned[key], folder / "cleaned.c3d")
+        warnings += found
+        summary.update(_triangulation_figures(key, triangulated, folder / "image_truth.npz"))
+    # Calibrate the markers the images showed; say how many were never found.
+    full = load_layout(configs["calibration"].layout)
+    calib = cleaned["calibration"]
+    seen = set(np.array(calib.names)[np.isfinite(calib.positions).all(axis=-1).any(axis=0)])
+    kept = tuple(m for m in full.markers if m.name in seen)
+    layout = replace(full, markers=kept, rigid=tuple(r for r in full.rigid if r in seen))
+    summary["calibrated_markers"] = f"{len(kept)} of {len(full.names)}"
+    if len(kept) < len(full.names):
+        warnings.append(f"{len(full.names) - len(kept)} of the layout's {len(full.names)} corners were never "
+                        "triangulated in the calibration take; the solve uses the other ones")
+    calibrated = calibrate_attachment(cleaned["calibration"], layout)
+    attachment = q.attach(calibrated.attachment, q.residual_warnings(calibrated.residuals,
+                                                                     names=calibrated.attachment.marker_names,
+                                                                     what="calibration MRE"))
+    attachment.save(out / "attachment.npz")
+    warnings += list(attachment.warnings)
+    summary["calibration_mre_mm"] = round(1000 * calibrated.mre, 3)
+    motion = solve_hand(cleaned["take"], calibrated.attachment, filter_cutoff=None, progress=progress)
+    motion = q.attach(motion, q.motion_warnings(motion))
+    write_hand_motion(motion, out / "motion.npz")
+    warnings += list(motion.warnings)
+    fit = motion.marker_fit - cleaned["take"].select(motion.marker_names).positions
+    summary["solve_mre_mm"] = round(1000 * float(np.nanmean(np.linalg.norm(fit, axis=-1))), 3)
+    truth = captures["take"].hand_motion
+    summary["joint_error_mm"] = round(1000 * float(np.nanmean(np.linalg.norm(motion.joints - truth.joints, axis=-1))),
+                                      3)
+    summary["warnings"] = list(dict.fromkeys(warnings))
+    with atomic_output(out / "summary.json", "w") as fh:
+        json.dump(summary, fh, indent=2)
+    with atomic_output(out / "summary.txt", "w") as fh:
+        fh.write("\n".join(f"{k:34s} {v}" for k, v in summary.items()) + "\n")
+    summary["files"] = written_since(out, before)
+    return summary
+
+
+def _detection_figures(key: str, run, truth_path, seconds: float) -> dict:
+    """Named corners of the detector against the image truth: share found, share misnamed, pixel error."""
+    truth = np.load(truth_path)
+    names = list(truth["marker_names"])
+    where = {(int(f), int(c), names[int(m)]): xy for f, c, m, xy in zip(truth["frame"], truth["camera"],
+                                                                          truth["marker"], truth["xy"])}
+    every = truth["all_xy"]  # (T, C, N, 2), hidden corners included
+    index = {n: k for k, n in enumerate(names)}
+    a = run.arrays
+    detected = [str(a["marker_names"][m]) for m in a["marker"]]
+    true_xy = np.array([every[f, c, index[n]] if n in index else (np.nan, np.nan)
+                        for f, c, n in zip(a["frame"], a["camera"], detected)]).reshape(-1, 2)
+    error = np.linalg.norm(a["xy"] - true_xy, axis=1)
+    right = error <= 2.0
+    return {
+        f"{key}_images": run.images,
+        f"{key}_detect_seconds_per_image": round(seconds / max(run.images, 1), 3),
+        f"{key}_visible_corners": len(where),
+        f"{key}_named_corners": int(len(error)),
+        f"{key}_named_right_of_visible_fraction": round(float(right.sum() / max(len(where), 1)), 4),
+        f"{key}_misnamed_fraction": round(float((~right).sum() / max(len(error), 1)), 4),
+        f"{key}_corner_error_median_px": round(float(np.median(error[right])), 3) if right.any() else None,
+        f"{key}_read_tags": int(len(a["block_text"])),
+        f"{key}_visible_tags": int(len(truth["block_text"])),
+    }
+
+
+def _triangulation_figures(key: str, triangulated, truth_path) -> dict:
+    """Triangulated corners against the true 3D corners (same names), and the reprojection error."""
+    truth = np.load(truth_path)
+    index = {n: k for k, n in enumerate(truth["marker_names"])}
+    columns = [index.get(n, -1) for n in triangulated.names]
+    true = np.where(np.array(columns)[None, :, None] >= 0, truth["positions"][:, columns], np.nan)
+    error = np.linalg.norm(triangulated.positions - true, axis=-1) * 1000
+    found = np.isfinite(error)
+    return {
+        f"{key}_triangulated_marker_frames": int(found.sum()),
+        f"{key}_triangulation_median_mm": round(float(np.median(error[found])), 3) if found.any() else None,
+        f"{key}_triangulation_p95_mm": round(float(np.percentile(error[found], 95)), 3) if found.any() else None,
+        f"{key}_reprojection_median_px": round(float(np.nanmedian(triangulated.error_px)), 3)
+        if np.isfinite(triangulated.error_px).any() else None,
+    }
