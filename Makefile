@@ -47,7 +47,11 @@ occlusion-weights: $(STAMP)
 detect-weights: $(STAMP)
 	-command -v apt-get >/dev/null && apt-get install -y -q libegl1 libegl-mesa0 libgl1-mesa-dri fonts-liberation \
 		fonts-freefont-ttf fonts-inconsolata fonts-noto-mono >/dev/null
-	$(BIN)/python -m handcap.detect.train --what all --scenes 600 --steps 4000 --seed 0
+	# The shipped weights, bit for bit (one torch thread each; the two can run side by side, ~45 min on 2 cores).
+	$(BIN)/python -m handcap.detect.train --what corners --scenes 500 --test-scenes 40 --steps 6000 --pages 0.3 \
+		--threads 1 --seed 0
+	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 4000 --threads 1 \
+		--seed 0
 
 clean-venv:
 	rm -rf $(VENV)

@@ -109,7 +109,10 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         markers = markers.renamed([n.split(":", 1)[-1] for n in markers.names])
         write_markers(q.attach(markers, found), folder / "triangulated.c3d")
         layout = load_layout(config.layout)
-        cleaned[key], _ = clean_markers(markers, layout)
+        # Four frames a second: a finger moves too far between frames to interpolate over a gap, so only the
+        # rigid fill (from patch-mates seen in the same frame) fills, over at most 1.5 s.
+        cleaned[key], _ = clean_markers(markers, layout, max_linear_frames=0, max_spline_frames=0,
+                                        max_rigid_frames=int(1.5 * config.rate))
         write_markers(cleaned[key], folder / "cleaned.c3d")
         warnings += found
         summary.update(_triangulation_figures(key, triangulated, folder / "image_truth.npz"))

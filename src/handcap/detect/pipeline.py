@@ -20,7 +20,7 @@ from handcap.detect.blocks import candidate_quads, white_blocks
 from handcap.detect.corners import CornerNet, detect_corners
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
-from handcap.detect.voting import name_corners, vote
+from handcap.detect.voting import misfits, name_corners, vote
 
 @dataclass(frozen=True)
 class ImageDetections:
@@ -99,6 +99,8 @@ class Detector:
         corrected = 0
         if self.pattern is not None and len(quads):
             tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
+            drop = misfits(self.pattern, quads, tags, turns, xy)
+            tags[drop], turns[drop] = "", -1
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
             order = (np.arange(4)[None] + np.maximum(turns, 0)[:, None]) % 4

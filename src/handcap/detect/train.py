@@ -1,14 +1,16 @@
 """Train the detector's networks from rendered images only: ``python -m handcap.detect.train``.
 
 Deterministic for a seed on the CPU (torch's deterministic algorithms, a fixed
-number of threads), so the shipped weights can be remade bit for bit::
-
-    python -m handcap.detect.train --scenes 600 --steps 4000 --seed 0 --out src/handcap/detect/weights/corners.npz
+number of threads), so the shipped weights can be remade bit for bit (``make
+detect-weights`` holds the two commands that made them).
 
 Scenes come from :class:`handcap.detect.scenes.SceneMaker` (random poses, cameras,
-sensor scales and looks); the corner network learns from 96 x 96 crops of them,
-most of them around a visible corner, with JPEG artefacts on some. The test
-suite trains a tiny version for a few steps to show the code runs.
+sensor scales and looks) and :class:`~handcap.detect.scenes.PageMaker`
+(photographed printed sheets); the corner network learns from 96 x 96 crops of
+them, most of them around a visible corner, with JPEG artefacts on some; the
+reader from views of their blocks in several fonts, alphabets and glyph
+layouts, and its confidence gate is set on validation scenes. The test suite
+trains a tiny version for a few steps to show the code runs.
 """
 
 from __future__ import annotations

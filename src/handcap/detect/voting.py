@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections import Counter, defaultdict, deque
 
+import cv2
 import numpy as np
 
 from handcap.patterns.pattern import Pattern
@@ -155,3 +156,62 @@ def name_corners(pattern: Pattern, quads: np.ndarray, tags, turns, n_corners: in
         if name is not None and count[name] > 1:
             names[k] = None
     return names
+
+
+#: Largest median distance, in sides of the block, at which a block's corners put its patch-mates' corners.
+MAX_MISFIT = 0.3
+
+
+def misfits(pattern: Pattern, quads: np.ndarray, tags, turns, xy: np.ndarray) -> np.ndarray:
+    """Voted blocks whose corners disagree with their patch-mates': one corner is likely a false detection.
+
+    Each voted block's four corners give a homography from its patch's grid to the image; it must
+    put the corners of the other voted blocks of its patch within two squares of it near where they
+    were found (the median distance at most :data:`MAX_MISFIT` of the block's side). A block with a
+    false corner (a detection beside the true, missed one) bends that map and misplaces all of them,
+    while a true block misplaces at most the one false corner of a neighbour. Blocks with fewer than
+    two such corners to compare are not judged.
+
+    Parameters
+    ----------
+    pattern : Pattern
+    quads : ndarray (B, 4) int
+        Corner indices in image order.
+    tags : sequence of str
+        Voted tags ("" for none).
+    turns : ndarray (B,) int
+    xy : ndarray (K, 2)
+        Image corners, pixels.
+
+    Returns
+    -------
+    ndarray (B,) bool
+        True for a block to drop.
+    """
+    quads = np.asarray(quads, dtype=int).reshape(-1, 4)
+    xy = np.asarray(xy, dtype=np.float64)
+    placed = {}
+    for b, (tag, turn) in enumerate(zip(tags, turns)):
+        located = pattern.locate(str(tag)) if tag else None
+        if located is None or turn < 0:
+            continue
+        patch, r, c = located
+        grid = np.array([(vc, vr) for vr, vc in patch.block_vertices(r, c)], np.float64)
+        image = xy[quads[b][(np.arange(4) + turn) % 4]]
+        placed[b] = (patch.key, r, c, grid, image, quads[b][(np.arange(4) + turn) % 4])
+    bad = np.zeros(len(quads), bool)
+    for b, (key, r, c, grid, image, ids) in placed.items():
+        mates = [m for a, m in placed.items() if a != b and m[0] == key and abs(m[1] - r) <= 2 and abs(m[2] - c) <= 2]
+        if not mates:
+            continue
+        g = np.concatenate([m[3] for m in mates])
+        p = np.concatenate([m[4] for m in mates])
+        own = np.isin(np.concatenate([m[5] for m in mates]), ids)
+        g, p = g[~own], p[~own]
+        if len(g) < 2:
+            continue
+        h = cv2.getPerspectiveTransform(grid.astype(np.float32), image.astype(np.float32))
+        guess = cv2.perspectiveTransform(g[None].astype(np.float64), h)[0]
+        side = np.linalg.norm(np.roll(image, -1, axis=0) - image, axis=1).mean()
+        bad[b] = np.median(np.linalg.norm(guess - p, axis=1)) > MAX_MISFIT * side
+    return bad

@@ -163,7 +163,8 @@ def triangulation_warnings(error_px, views, *, threshold_px: float, used=None, m
         used = np.asarray(used, dtype=bool)
         rejected = 1 - used.mean() if used.size else 0.0
         if rejected > 0.25:
-            out.append(f"{100 * rejected:.0f} % of the detections were rejected as outliers (plausible: <= 25 %)")
+            out.append(f"{100 * rejected:.0f} % of the detections were rejected, as outliers or as views of markers "
+                       f"too few cameras saw (plausible: <= 25 %)")
     return out
 
 
