@@ -22,6 +22,18 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
+@pytest.fixture(scope="session")
+def gl_ok():
+    """Skip, saying why, where the renderer cannot run: no moderngl (extra 'images') or no headless OpenGL."""
+    pytest.importorskip("moderngl", reason="the renderer needs moderngl (extra 'images')")
+    from handcap import HandcapError
+    from handcap.synth.images import _context
+    try:
+        _context().release()
+    except HandcapError as err:
+        pytest.skip(f"no headless OpenGL here: {err}")
+
+
 # Tests that read ../shared/data carry the ``realdata`` marker (``-m "not realdata"`` leaves them out), and with
 # HANDCAP_REQUIRE_REALDATA set (.ci/run sets it) a run in which none of them ran fails: a CI that skipped them all,
 # for a moved folder or a mistyped path, would otherwise pass without ever reading a real recording.

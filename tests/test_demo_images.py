@@ -12,15 +12,6 @@ from handcap.synth.config import SynthConfig
 pytest.importorskip("moderngl", reason="the demo renders its images with moderngl (extra 'images')")
 
 
-@pytest.fixture(scope="module")
-def gl_ok():
-    from handcap import HandcapError
-    from handcap.synth.images import _context
-    try:
-        _context().release()
-    except HandcapError as err:
-        pytest.skip(f"no headless OpenGL here: {err}")
-
 
 def test_demo_from_images_runs_every_stage_and_scores_it(gl_ok, tmp_path, monkeypatch, capsys):
     import handcap.demo_images as demo_images  # loads torch

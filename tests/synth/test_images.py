@@ -28,15 +28,6 @@ PATTERN = session_pattern(("right",), ())
 FONT = load_font(None, PATTERN.alphabet)
 
 
-@pytest.fixture(scope="module")
-def gl_ok():
-    from handcap import HandcapError
-    from handcap.synth.images import _context
-    try:
-        _context().release()
-    except HandcapError as err:
-        pytest.skip(f"no headless OpenGL here: {err}")
-
 
 def test_texture_edges_lie_where_the_grid_says():
     patch = PATTERN.patch("right:dorsum_proximal")
