@@ -9,7 +9,7 @@ import torch
 
 from handcap import HandcapError
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners, find_corners, targets
-from handcap.detect.train import crops, load_corner_net, save_corner_net, score_corners, train_corners
+from handcap.detect.train import crops, load_corner_net, save_net, score_corners, train_corners
 
 
 def test_targets_decode_back_to_the_corners():
@@ -70,7 +70,7 @@ def test_a_few_training_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path
     again = train_corners(scenes, steps=3, batch=4, seed=3)
     for a, b in zip(net.state_dict().values(), again.state_dict().values()):
         assert torch.equal(a, b)  # deterministic for a seed
-    save_corner_net(net, tmp_path / "c.npz", {"source": "test"})
+    save_net(net, tmp_path / "c.npz", {"source": "test"})
     loaded = load_corner_net(tmp_path / "c.npz")
     for a, b in zip(net.state_dict().values(), loaded.state_dict().values()):
         assert torch.equal(a, b)

@@ -92,18 +92,6 @@ def shipped_notes() -> tuple[str, ...]:
     return tuple(notes)
 
 
-def save_corner_net(net: CornerNet, path, info: dict | None = None) -> None:
-    """Write the corner network (see :func:`save_net`).
-
-    Parameters
-    ----------
-    net : CornerNet
-    path : str or Path
-    info : dict, optional
-    """
-    save_net(net, path, info)
-
-
 def load_corner_net(path=None) -> CornerNet:
     """The corner network saved at ``path`` (default: the shipped weights).
 

@@ -31,14 +31,14 @@ from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import CornerNet, corner_loss, normalise, targets
 from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
                                        score_corners)
-from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_corner_net, save_net
+from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
 from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, reader_loss
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
 
 CROP = 96
 __all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "evaluate_reader", "load_corner_net",
-           "load_net", "load_reader", "main", "reader_samples", "reader_scenes", "save_corner_net", "save_net",
+           "load_net", "load_reader", "main", "reader_samples", "reader_scenes", "save_net",
            "score_corners", "train_corners", "train_reader"]
 
 

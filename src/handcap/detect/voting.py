@@ -190,7 +190,7 @@ def misfits(pattern: Pattern, quads: np.ndarray, tags, turns, xy: np.ndarray) ->
     """
     quads = np.asarray(quads, dtype=int).reshape(-1, 4)
     xy = np.asarray(xy, dtype=np.float64)
-    placed = {}
+    placed, by_patch = {}, defaultdict(list)
     for b, (tag, turn) in enumerate(zip(tags, turns)):
         located = pattern.locate(str(tag)) if tag else None
         if located is None or turn < 0:
@@ -199,9 +199,11 @@ def misfits(pattern: Pattern, quads: np.ndarray, tags, turns, xy: np.ndarray) ->
         grid = np.array([(vc, vr) for vr, vc in patch.block_vertices(r, c)], np.float64)
         image = xy[quads[b][(np.arange(4) + turn) % 4]]
         placed[b] = (patch.key, r, c, grid, image, quads[b][(np.arange(4) + turn) % 4])
+        by_patch[patch.key].append(b)
     bad = np.zeros(len(quads), bool)
     for b, (key, r, c, grid, image, ids) in placed.items():
-        mates = [m for a, m in placed.items() if a != b and m[0] == key and abs(m[1] - r) <= 2 and abs(m[2] - c) <= 2]
+        mates = [placed[a] for a in by_patch[key]
+                 if a != b and abs(placed[a][1] - r) <= 2 and abs(placed[a][2] - c) <= 2]
         if not mates:
             continue
         g = np.concatenate([m[3] for m in mates])

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.pattern import Pattern
@@ -87,7 +85,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     if images and not len(run.arrays["block_text"]):
         warnings.append("no tag was read in any image: wrong --alphabet, patches too small in the images, or not "
                         "coded patches")
-    arrays = {**run.arrays, "camera_names": np.array(names), **warnings_entry(warnings)}
+    arrays = {**run.arrays, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else ""))
