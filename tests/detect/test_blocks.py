@@ -3,9 +3,10 @@ geometric gates on hand-made shapes."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
-from handcap.detect.blocks import candidate_quads, white_blocks
+from handcap.detect.blocks import candidate_quads, unit_square_homographies, white_blocks
 
 
 def _checkerboard(rows=4, cols=5, side=20, origin=(30, 30)):
@@ -56,3 +57,15 @@ def test_white_squares_of_rendered_patches_from_their_true_corners(scenes):
         false += len(found - truth)
     assert truth_total > 40
     assert hits >= 0.8 * truth_total and false <= 0.15 * (hits + false)
+
+
+def test_unit_square_homographies_match_opencv():
+    rng = np.random.default_rng(4)
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    quads = 50 + 30 * (square[None] + rng.normal(0, 0.15, (40, 4, 2)))  # convex, perspective-like
+    homs = unit_square_homographies(quads)
+    for quad, hom in zip(quads, homs):
+        ref = cv2.getPerspectiveTransform(square.astype(np.float32), quad.astype(np.float32))
+        np.testing.assert_allclose(hom, ref / ref[2, 2], rtol=1e-4, atol=1e-6)
+        mapped = np.c_[square, np.ones(4)] @ hom.T
+        np.testing.assert_allclose(mapped[:, :2] / mapped[:, 2:], quad, atol=1e-9)

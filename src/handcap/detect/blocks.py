@@ -78,19 +78,19 @@ def _empty(xy: np.ndarray, quads: np.ndarray, tree) -> np.ndarray:
     pts = xy[quads]
     centre = pts.mean(axis=1)
     reach = np.linalg.norm(pts - centre[:, None], axis=2).max(axis=1)
-    keep = np.ones(len(quads), bool)
-    for q, near in enumerate(tree.query_ball_point(centre, reach * 1.05)):
-        others = [k for k in near if k not in quads[q]]
-        if not others:
-            continue
-        # Shrink the quad by 15 % towards its centre: a point inside that is a corner of a larger shape.
-        poly = centre[q] + 0.85 * (pts[q] - centre[q])
-        p = xy[others]
-        edges = np.roll(poly, -1, axis=0) - poly
-        rel = p[:, None] - poly[None]
-        cross = edges[None, :, 0] * rel[..., 1] - edges[None, :, 1] * rel[..., 0]
-        keep[q] = not ((cross > 0).all(axis=1) | (cross < 0).all(axis=1)).any()
-    return keep
+    near = tree.query_ball_point(centre, reach * 1.05)
+    counts = np.fromiter(map(len, near), int, len(quads))
+    q = np.repeat(np.arange(len(quads)), counts)
+    p = np.fromiter((k for ks in near for k in ks), int, counts.sum())
+    other = (quads[q] != p[:, None]).all(axis=1)
+    q, p = q[other], p[other]
+    # Shrink each quad by 15 % towards its centre: a point inside that is a corner of a larger shape.
+    poly = centre[q, None] + 0.85 * (pts[q] - centre[q, None])
+    edges = np.roll(poly, -1, axis=1) - poly
+    rel = xy[p, None] - poly
+    cross = edges[..., 0] * rel[..., 1] - edges[..., 1] * rel[..., 0]
+    inside = (cross > 0).all(axis=1) | (cross < 0).all(axis=1)
+    return np.bincount(q[inside], minlength=len(quads)) == 0
 
 
 def _ordered(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
@@ -148,13 +148,11 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     lo, hi = np.percentile(img[::4, ::4], (5, 95))
     spread = max(hi - lo, 1.0)
     pts = xy[quads].astype(np.float64)
-    # Unit square -> quad homographies, vectorised (the 4-point DLT has a closed form via cv2 per quad).
-    unit = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
-    homs = np.array([cv2.getPerspectiveTransform(unit, p.astype(np.float32)) for p in pts])
+    homs = unit_square_homographies(pts)
     def sample(us, vs):
         gu, gv = np.meshgrid(us, vs)
         h = np.c_[gu.ravel(), gv.ravel(), np.ones(gu.size)]
-        p = np.einsum("qij,nj->qni", homs, h)
+        p = np.matmul(h[None], homs.transpose(0, 2, 1))
         p = p[..., :2] / p[..., 2:3]
         x = np.clip(np.round(p[..., 0]).astype(int), 0, img.shape[1] - 1)
         y = np.clip(np.round(p[..., 1]).astype(int), 0, img.shape[0] - 1)
@@ -173,12 +171,53 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     pts = xy[quads]
     sides = np.linalg.norm(np.roll(pts, -1, axis=1) - pts, axis=2)
     score = contrast * sides.min(axis=1) / sides.max(axis=1)
-    chosen = []
-    for q in np.argsort(-score, kind="stable"):
-        poly = pts[q].astype(np.float32)
-        area = abs(cv2.contourArea(poly))
-        if all(cv2.intersectConvexConvex(poly, pts[c].astype(np.float32))[0] <= 0.1 * area for c in chosen
-               if np.abs(pts[c].mean(axis=0) - pts[q].mean(axis=0)).max() < sides[q].max() + sides[c].max()):
-            chosen.append(q)
-    chosen = np.sort(np.array(chosen, dtype=int))
+    chosen = _suppress(pts, sides.max(axis=1), score)
     return quads[chosen], contrast[chosen]
+
+
+def unit_square_homographies(pts: np.ndarray) -> np.ndarray:
+    """The homographies taking the unit square's corners (0,0), (1,0), (1,1), (0,1) to each quad's.
+
+    Parameters
+    ----------
+    pts : ndarray (Q, 4, 2)
+
+    Returns
+    -------
+    ndarray (Q, 3, 3)
+        Scaled so that the last entry is 1 (Heckbert's closed form for a square, vectorised).
+    """
+    p = np.asarray(pts, dtype=np.float64)
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = (p[:, k].T for k in range(4))
+    sx, sy = x0 - x1 + x2 - x3, y0 - y1 + y2 - y3
+    dx1, dx2, dy1, dy2 = x1 - x2, x3 - x2, y1 - y2, y3 - y2
+    den = dx1 * dy2 - dx2 * dy1
+    den = np.where(np.abs(den) < 1e-12, 1e-12, den)
+    g = (sx * dy2 - dx2 * sy) / den
+    h = (dx1 * sy - sx * dy1) / den
+    one = np.ones_like(g)
+    return np.stack([np.stack([x1 - x0 + g * x1, x3 - x0 + h * x3, x0], axis=1),
+                     np.stack([y1 - y0 + g * y1, y3 - y0 + h * y3, y0], axis=1),
+                     np.stack([g, h, one], axis=1)], axis=1)
+
+
+def _suppress(pts: np.ndarray, reach: np.ndarray, score: np.ndarray) -> np.ndarray:
+    """Greedy non-maximum suppression of overlapping convex quads, best score first: kept indices, sorted."""
+    centre = pts.mean(axis=1)
+    pairs = cKDTree(centre).query_pairs(2 * float(reach.max()) if len(reach) else 0.0, output_type="ndarray")
+    if len(pairs):
+        close = np.abs(centre[pairs[:, 0]] - centre[pairs[:, 1]]).max(axis=1) < reach[pairs].sum(axis=1)
+        pairs = pairs[close]
+    poly = pts.astype(np.float32)
+    area = np.abs([cv2.contourArea(p) for p in poly])
+    overlap = np.array([cv2.intersectConvexConvex(poly[a], poly[b])[0] for a, b in pairs]).reshape(-1)
+    beats = {}  # quad -> the quads that overlap it by more than a tenth of its area
+    for (a, b), inter in zip(pairs, overlap):
+        if inter > 0.1 * area[a]:
+            beats.setdefault(a, []).append(b)
+        if inter > 0.1 * area[b]:
+            beats.setdefault(b, []).append(a)
+    kept = np.zeros(len(pts), bool)
+    for q in np.argsort(-score, kind="stable"):
+        kept[q] = not kept[beats.get(q, [])].any()
+    return np.flatnonzero(kept)

@@ -205,7 +205,7 @@ def find_corners(heatmap: np.ndarray, offsets: np.ndarray, threshold: float = 0.
     return xy, heatmap[i, j]
 
 
-def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3, tile: int = 1024,
+def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3, tile: int = 512,
                    halo: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Run the corner network over a whole image, in tiles with a halo, and return its corners.
 
@@ -216,7 +216,8 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
         uint8 or float grey image.
     threshold : float
     tile : int
-        Tile side, pixels (even); memory grows with its square.
+        Tile side, pixels (even); memory grows with its square (512 is the fastest on a laptop CPU: the
+        tile stays in cache).
     halo : int
         Context kept around each tile and dropped from its output (more than half the receptive field).
 
@@ -234,13 +235,15 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     img = np.pad(img, ((0, ph), (0, pw)), mode="edge")
     heat = np.zeros((img.shape[0] // 2, img.shape[1] // 2), np.float32)
     offs = np.zeros((2,) + heat.shape, np.float32)
-    net.eval()
+    # Channels-last convolutions run about a third faster on the CPU (measured in benchmarks/detect.py).
+    net.eval().to(memory_format=torch.channels_last)
     with torch.inference_mode():
         for y0 in range(0, img.shape[0], tile):
             for x0 in range(0, img.shape[1], tile):
                 ya, xa = max(0, y0 - halo), max(0, x0 - halo)
                 yb, xb = min(img.shape[0], y0 + tile + halo), min(img.shape[1], x0 + tile + halo)
-                out = net(torch.from_numpy(np.ascontiguousarray(img[ya:yb, xa:xb]))[None, None])[0].numpy()
+                part = torch.from_numpy(np.ascontiguousarray(img[ya:yb, xa:xb]))[None, None]
+                out = net(part.contiguous(memory_format=torch.channels_last))[0].contiguous().numpy()
                 cy0, cx0 = (y0 - ya) // 2, (x0 - xa) // 2
                 ch = min(tile, img.shape[0] - y0) // 2
                 cw = min(tile, img.shape[1] - x0) // 2
