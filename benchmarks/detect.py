@@ -6,14 +6,16 @@ hand's region only (a box around the corners the previous frame found, as a
 tracker would give), against the issue's targets (<= 1 s, <= 0.3 s) and
 DexterCap's reported 5 s per frame for marker recognition on a GPU machine.
 Accuracy: the corner figures on held-out rendered scenes (recall and precision
-within 2 px, median and RMS error of the matched corners) against the issue's
+within 2 px, median and RMS error of the matched corners), from the corner
+network alone and refined by the refiner network, against the issue's
 targets (recall >= 97 %, median <= 0.15 px, RMS <= 0.3 px); the whole
 detector's tags and corner names on held-out hand scenes (full-size cameras)
 and on photographs of a printed sheet in a font the reader never saw (Noto Sans
 Mono Bold), against the targets (tags read right >= 99.5 %, corners with a
 wrong id <= 0.1 %, a page's tags read >= 99.9 %).
 
-    .venv/bin/python benchmarks/detect.py [--weights FILE] [--reader FILE] [--scenes 20] [--repeats 3] [--threads 2]
+    .venv/bin/python benchmarks/detect.py [--weights FILE] [--refiner FILE] [--reader FILE] [--scenes 20]
+        [--repeats 3] [--threads 2]
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import time
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--weights", help="corner network weights (default: the shipped ones)")
+    parser.add_argument("--refiner", help="corner refiner weights (default: the shipped ones)")
     parser.add_argument("--reader", help="block reader weights (default: the shipped ones)")
     parser.add_argument("--scenes", type=int, default=20, help="held-out rendered scenes to score")
     parser.add_argument("--repeats", type=int, default=3)
@@ -41,7 +44,8 @@ def main() -> None:
     from handcap.detect.corners import detect_corners
     from handcap.detect.scenes import SceneMaker
     from handcap import HandcapError
-    from handcap.detect.networks import load_corner_net, load_reader
+    from handcap.detect.networks import load_corner_net, load_reader, load_refiner
+    from handcap.detect.refine import locate_corners
     from handcap.detect.pipeline import Detector
     from handcap.detect.reader import BlockReader
     from handcap.detect.train import evaluate_corners
@@ -56,6 +60,7 @@ def main() -> None:
 
     torch.set_num_threads(args.threads)
     net = load_corner_net(args.weights)
+    refiner = load_refiner(args.refiner)
     print(f"corner network: {net.flops_per_pixel() / 1000:.1f} kFLOP per pixel, "
           f"{sum(p.numel() for p in net.parameters())} weights, {args.threads} threads")
 
@@ -90,18 +95,22 @@ def main() -> None:
         reader_note = "shipped reader" if args.reader is None else args.reader
     except HandcapError:
         reader, reader_note = BlockReader().eval(), "untrained reader (no weights found): timing only"
-    detector = Detector(net, reader, pattern)
+    detector = Detector(net, reader, pattern, refiner=refiner)
     whole = best(lambda: detector.image(image))
     xy = shot.xy[shot.visible]
     lo = np.maximum(np.floor(xy.min(axis=0) - 40).astype(int) // 2 * 2, 0)
     hi = np.minimum(np.ceil(xy.max(axis=0) + 40).astype(int), image.shape[::-1])
     region = image[lo[1]:hi[1], lo[0]:hi[0]]
     part = best(lambda: detect_corners(net, region))
+    refined_full = best(lambda: locate_corners(net, refiner, image))
+    refined_part = best(lambda: locate_corners(net, refiner, region))
     print(f"full frame {image.shape[1]} x {image.shape[0]}: {full:.3f} s (target <= 1 s: {full / 1.0:.2f} of it; "
           f"DexterCap ~5 s on a GPU machine: {5.0 / full:.1f}x faster)")
     region_whole = best(lambda: detector.image(region))
     print(f"hand region {region.shape[1]} x {region.shape[0]} ({region.size / image.size:.0%} of the frame): "
           f"corners {part:.3f} s (target <= 0.3 s: {part / 0.3:.2f} of it)")
+    print(f"corners refined (network down to its candidates, then the refiner): full frame {refined_full:.3f} s, "
+          f"hand region {refined_part:.3f} s")
     print(f"whole detector (corners, blocks, reader, vote; {reader_note}): full frame {whole:.3f} s "
           f"({whole / 1.0:.2f} of the 1 s target), hand region {region_whole:.3f} s "
           f"({region_whole / 0.3:.2f} of 0.3 s)")
@@ -111,8 +120,9 @@ def main() -> None:
         scenes = [maker.scene() for _ in range(args.scenes)]
     finally:
         maker.close()
-    score = evaluate_corners(net, scenes)
-    print(score.summary())
+    print("corner network alone: " + evaluate_corners(net, scenes).summary())
+    score = evaluate_corners(net, scenes, refiner=refiner)
+    print("refined: " + score.summary())
     print(f"targets: recall >= 97 % ({100 * score.recall:.1f}), median <= 0.15 px ({score.median_px:.3f}), "
           f"RMS <= 0.3 px ({score.rms_px:.3f})")
 
@@ -126,14 +136,15 @@ def main() -> None:
     finally:
         maker.close()
     print(f"hand scenes, full-size cameras, {reader_note}: "
-          + evaluate_detector(Detector(net, reader, pattern), hands).summary())
+          + evaluate_detector(Detector(net, reader, pattern, refiner=refiner), hands).summary())
     noto = "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf"
     font = noto if os.path.isfile(noto) else None
     sheet = PageMaker(args.seed + 2, font=font, look=PageLook(square_px=(20.0, 40.0), tilt_deg=(0.0, 30.0),
                                                               curl=(0.0, 0.5), occluders=(0, 0), glint=0.0))
     pages = [sheet.scene() for _ in range(args.scenes)]
+    sheet_score = evaluate_detector(Detector(net, reader, session_pattern(), refiner=refiner), pages)
     print(f"photographed sheet ({'Noto Sans Mono Bold' if font else 'default font'}, squares 20-40 px, tilt <= 30 "
-          f"deg, no occluder): " + evaluate_detector(Detector(net, reader, session_pattern()), pages).summary())
+          f"deg, no occluder): " + sheet_score.summary())
 
 
 if __name__ == "__main__":

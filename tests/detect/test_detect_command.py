@@ -13,6 +13,7 @@ from handcap.cli import main
 from handcap.patterns import session_pattern
 from handcap.detect.corners import CornerNet
 from handcap.detect.reader import BlockReader
+from handcap.detect.refine import CornerRefiner
 from handcap.detect.sources import frame_sources, read_image
 from handcap.detect.train import save_net
 from handcap import HandcapError
@@ -25,7 +26,9 @@ def weights(tmp_path_factory):
     torch.manual_seed(0)
     save_net(CornerNet(), folder / "c.npz")
     save_net(BlockReader(), folder / "r.npz")
-    return ["--corner-weights", str(folder / "c.npz"), "--reader-weights", str(folder / "r.npz")]
+    save_net(CornerRefiner(), folder / "f.npz")
+    return ["--corner-weights", str(folder / "c.npz"), "--reader-weights", str(folder / "r.npz"),
+            "--refiner-weights", str(folder / "f.npz")]
 
 
 @pytest.fixture()
@@ -59,7 +62,7 @@ def test_detections_file_holds_the_contract(frames, weights, tmp_path, capsys):
 
 def test_without_a_template_blocks_only_and_a_warning(frames, weights, tmp_path, capsys):
     out = tmp_path / "det.npz"
-    assert main(["detect", str(frames / "cam_0" / "000000.png"), "--out", str(out), *weights]) == 0
+    assert main(["detect", str(frames / "cam_0" / "000000.png"), "--out", str(out), "--no-refine", *weights]) == 0
     data = np.load(out)
     assert len(data["marker_names"]) == 0 and len(data["frame"]) == 0
     err = capsys.readouterr().err
@@ -117,6 +120,7 @@ def test_other_bad_input(frames, weights, tmp_path, capsys):
         (["detect", str(frames / "cam_0"), "--pattern", str(pattern), "--alphabet", "0123", "--out",
           str(tmp_path / "d.npz")], "lacks glyphs"),
         (["detect", str(frames / "cam_0"), "--alphabet", "0123\u00e9", "--out", str(tmp_path / "d.npz")], "knows no"),
+        (["detect", str(frames / "cam_0"), "--threshold", "1.5", "--out", str(tmp_path / "d.npz")], "between 0 and 1"),
         # An input image as the output: refused (outputs are .npz) and left as it was.
         (["detect", str(frames / "cam_0" / "000000.png"), "--out", str(frames / "cam_0" / "000000.png")], ".npz"),
     ]

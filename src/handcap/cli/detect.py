@@ -8,12 +8,13 @@ from handcap.steps import detect as detect_step
 def _cmd_detect(a):
     return detect_step.detect(a.inputs, a.out, rig=a.rig, pattern=a.pattern, alphabet=a.alphabet, rate=a.rate,
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
-                              threshold=a.threshold)
+                              refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold)
 
 
 def add_detect(verbs) -> None:
     p = verbs.add_parser("detect", help="find and name the corners of coded patches in images or videos",
-                         description="Corners (heatmap network), blocks (white squares between them), their tags "
+                         description="Corners (heatmap network, then a refiner network on full-resolution "
+                                     "crops), blocks (white squares between them), their tags "
                                      "(reader network), a vote over the template's patches and the corner ids. "
                                      "Each input is one camera: a folder of images, a video or an image, named "
                                      "after the camera. Writes the 2D detections file that triangulate reads, "
@@ -25,7 +26,10 @@ def add_detect(verbs) -> None:
     p.add_argument("--alphabet", help="glyphs of the printed tags (default: the template's; DexterCap's patches: "
                                       "0123456789ACEFHPUY)")
     p.add_argument("--rate", type=float, help="frames per second (default 20, with a warning)")
-    p.add_argument("--threshold", type=float, default=0.3, help="least corner probability (default %(default)s)")
+    p.add_argument("--threshold", type=float, help="least corner probability (default 0.5 from the refiner, 0.3 "
+                                                   "from the corner network with --no-refine)")
+    p.add_argument("--no-refine", action="store_true", help="keep the corner network's positions (no refiner)")
     p.add_argument("--corner-weights", help="corner network weights instead of the shipped ones")
+    p.add_argument("--refiner-weights", help="corner refiner weights instead of the shipped ones")
     p.add_argument("--reader-weights", help="block reader weights instead of the shipped ones")
     p.set_defaults(run=_cmd_detect)

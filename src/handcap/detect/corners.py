@@ -25,6 +25,8 @@ from torch.nn import functional as F
 
 from handcap.core.errors import HandcapError
 
+#: Least corner probability kept, by default.
+THRESHOLD = 0.3
 #: Largest offset from a cell centre the head can give, pixels of the input.
 MAX_OFFSET = 1.5
 

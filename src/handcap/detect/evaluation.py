@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from handcap.detect.corners import CornerNet, detect_corners
+from handcap.detect.corners import CornerNet
+from handcap.detect.refine import locate_corners
 from handcap.detect.reader import BlockReader, read_blocks
 
 
@@ -79,14 +80,18 @@ def score_corners(found: np.ndarray, truth: np.ndarray, match_px: float = 2.0) -
     return pairs, d[pairs[:, 0], pairs[:, 1]]
 
 
-def evaluate_corners(net: CornerNet, scenes, threshold: float = 0.3) -> CornerScore:
+def evaluate_corners(net: CornerNet, scenes, threshold: float | None = None, refiner=None) -> CornerScore:
     """Detect the corners of rendered ``scenes`` and score them against their truth.
 
     Parameters
     ----------
     net : CornerNet
     scenes : sequence of Scene
-    threshold : float
+    threshold : float, optional
+        Least corner probability: the refiner's when there is one (default 0.5), else the corner
+        network's (default 0.3).
+    refiner : CornerRefiner, optional
+        Refine the corner network's candidates (:func:`~handcap.detect.refine.locate_corners`).
 
     Returns
     -------
@@ -94,7 +99,7 @@ def evaluate_corners(net: CornerNet, scenes, threshold: float = 0.3) -> CornerSc
     """
     errors, found, truth = [], 0, 0
     for scene in scenes:
-        xy, _ = detect_corners(net, scene.image, threshold=threshold)
+        xy, _ = locate_corners(net, refiner, scene.image, threshold)
         _, err = score_corners(xy, scene.corners)
         errors.append(err)
         found += len(xy)

@@ -1,6 +1,6 @@
 """Saved detector networks: write and read their weights (``.npz``: arrays, class, configuration, provenance).
 
-The shipped weights live in ``handcap/detect/weights/`` (``corners.npz``, ``reader.npz``), made by
+The shipped weights live in ``handcap/detect/weights/`` (``corners.npz``, ``refiner.npz``, ``reader.npz``), made by
 ``python -m handcap.detect.train``; ``info.source`` in each file is the command that made it and
 ``info.score`` what it measured on held-out rendered scenes.
 """
@@ -17,17 +17,18 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.detect.corners import CornerNet
 from handcap.detect.reader import BlockReader
+from handcap.detect.refine import CornerRefiner
 
 #: Folder of the shipped weights.
 WEIGHTS = Path(__file__).resolve().parent / "weights"
 #: The networks that can be saved and loaded, by class name.
-NETWORKS = {"CornerNet": CornerNet, "BlockReader": BlockReader}
+NETWORKS = {"CornerNet": CornerNet, "CornerRefiner": CornerRefiner, "BlockReader": BlockReader}
 def save_net(net, path, info: dict | None = None) -> None:
     """Write a network's weights, class and configuration to an ``.npz`` (atomically).
 
     Parameters
     ----------
-    net : CornerNet or BlockReader
+    net : CornerNet, CornerRefiner or BlockReader
     path : str or Path
     info : dict, optional
         Strings recorded with the weights (how they were made, their scores).
@@ -47,11 +48,11 @@ def load_net(path, kind: str):
     Parameters
     ----------
     path : str or Path
-    kind : {'CornerNet', 'BlockReader'}
+    kind : {'CornerNet', 'CornerRefiner', 'BlockReader'}
 
     Returns
     -------
-    CornerNet or BlockReader
+    CornerNet, CornerRefiner or BlockReader
         In evaluation mode.
 
     Raises
@@ -83,7 +84,7 @@ def shipped_notes() -> tuple[str, ...]:
     tuple of str
     """
     notes = []
-    for name in ("corners.npz", "reader.npz"):
+    for name in ("corners.npz", "refiner.npz", "reader.npz"):
         path = WEIGHTS / name
         if path.is_file():
             with np.load(path, allow_pickle=False) as data:
@@ -120,3 +121,17 @@ def load_reader(path=None) -> BlockReader:
     return load_net(WEIGHTS / "reader.npz" if path is None else path, "BlockReader")
 
 
+
+
+def load_refiner(path=None) -> CornerRefiner:
+    """The corner refiner saved at ``path`` (default: the shipped weights).
+
+    Parameters
+    ----------
+    path : str, Path or None
+
+    Returns
+    -------
+    CornerRefiner
+    """
+    return load_net(WEIGHTS / "refiner.npz" if path is None else path, "CornerRefiner")

@@ -1,7 +1,8 @@
 """The coded-patch detector on one image: corners, blocks, tags, votes, named corners.
 
 :class:`Detector` chains the stages: the corner network
-(:mod:`~handcap.detect.corners`), block assembly (:mod:`~handcap.detect.blocks`),
+(:mod:`~handcap.detect.corners`), the sub-pixel refiner that also turns away
+false candidates (:mod:`~handcap.detect.refine`), block assembly (:mod:`~handcap.detect.blocks`),
 the block reader (:mod:`~handcap.detect.reader`) and, given a template,
 the vote over its patches and the corner names (:mod:`~handcap.detect.voting`).
 Without a template it reports blocks and their corners only (a single photo of
@@ -17,9 +18,10 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, check_alphabet
 from handcap.detect.blocks import candidate_quads, white_blocks
-from handcap.detect.corners import CornerNet, detect_corners
+from handcap.detect.corners import CornerNet
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
+from handcap.detect.refine import CornerRefiner, locate_corners
 from handcap.detect.voting import misfits, name_corners, vote
 
 @dataclass(frozen=True)
@@ -62,13 +64,16 @@ class Detector:
         The session's template; without it no corner gets a name.
     alphabet : str, optional
         Glyphs of the printed tags (default: the template's, else handcap's).
-    threshold : float
-        Least corner probability.
+    threshold : float, optional
+        Least corner probability: the refiner's when there is one (default 0.5), else the corner
+        network's (default 0.3).
+    refiner : CornerRefiner, optional
+        Sub-pixel refinement of the corners (without it, the corner network's positions).
     """
 
     def __init__(self, corner_net: CornerNet, reader: BlockReader, pattern: Pattern | None = None,
-                 alphabet: str | None = None, threshold: float = 0.3):
-        self.corner_net, self.reader, self.pattern = corner_net, reader, pattern
+                 alphabet: str | None = None, threshold: float | None = None, refiner: CornerRefiner | None = None):
+        self.corner_net, self.reader, self.pattern, self.refiner = corner_net, reader, pattern, refiner
         if alphabet is None:
             alphabet = pattern.alphabet if pattern is not None else ALPHABET
         self.alphabet = check_alphabet(alphabet)
@@ -91,7 +96,7 @@ class Detector:
         -------
         ImageDetections
         """
-        xy, cscore = detect_corners(self.corner_net, image, threshold=self.threshold)
+        xy, cscore = locate_corners(self.corner_net, self.refiner, image, self.threshold)
         quads, _ = white_blocks(image, xy, candidate_quads(xy))
         text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet) if len(quads) \
             else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))

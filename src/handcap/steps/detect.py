@@ -15,7 +15,8 @@ DEFAULT_RATE = 20.0  # DexterCap's cameras; said in a warning when assumed
 
 
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
-           corner_weights=None, reader_weights=None, threshold: float = 0.3, progress: bool | None = None) -> Step:
+           corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
+           threshold: float | None = None, progress: bool | None = None) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -33,10 +34,12 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Glyphs of the printed tags (default: the template's, else handcap's).
     rate : float, optional
         Frames per second (default: a video's own, else 20 with a warning).
-    corner_weights, reader_weights : str, Path or None
+    corner_weights, reader_weights, refiner_weights : str, Path or None
         Networks to use instead of the shipped ones.
-    threshold : float
-        Least corner probability.
+    refine : bool
+        Refine the corners to a fraction of a pixel (and turn away false ones) with the refiner network.
+    threshold : float, optional
+        Least corner probability: the refiner's (default 0.5), or the corner network's without it (0.3).
     progress : bool, optional
         Progress bar (default: on a terminal).
     """
@@ -56,12 +59,15 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         names = [n for n in cameras.names if n in names]
         sources = sorted(sources, key=lambda s: names.index(s.camera))
     # The networks load torch (a second and a half): only when detecting, not with the command line.
-    from handcap.detect.networks import load_corner_net, load_reader, shipped_notes  # loads torch
+    from handcap.detect.networks import load_corner_net, load_reader, load_refiner, shipped_notes  # loads torch
     from handcap.detect.pipeline import Detector  # loads torch
 
-    detector = Detector(load_corner_net(corner_weights), load_reader(reader_weights), template, alphabet, threshold)
+    if threshold is not None and not 0.0 < threshold < 1.0:
+        raise HandcapError(f"--threshold {threshold}: give a probability between 0 and 1")
+    detector = Detector(load_corner_net(corner_weights), load_reader(reader_weights), template, alphabet, threshold,
+                        load_refiner(refiner_weights) if refine else None)
     warnings = []
-    if corner_weights is None or reader_weights is None:
+    if corner_weights is None or reader_weights is None or (refine and refiner_weights is None):
         # Issue 16: the shipped networks are short of the targets; say how good they measured, every time.
         warnings.append("the shipped detector networks are short of handcap's targets (corner recall >= 97 %, "
                         "median error <= 0.15 px); as measured on held-out rendered images: "

@@ -1,0 +1,79 @@
+"""The corner refiner: crops, merging of duplicates, training samples, a tiny training run, and the shipped
+weights against the truth of rendered scenes (they must place corners closer than the corner network alone)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from handcap.detect.evaluation import score_corners
+from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
+from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, locate_corners, refiner_loss,
+                                   refiner_samples)
+from handcap.detect.train import false_candidates, save_net, train_refiner
+
+
+def test_crops_are_the_pixels_around_each_centre_normalised():
+    image = (np.random.default_rng(0).random((40, 50)) * 255).astype(np.uint8)
+    centres = np.array([[20, 15], [0, 0], [49, 39], [3, 37]])
+    crops = crops_at(image, centres)
+    assert crops.shape == (4, 2 * RADIUS + 1, 2 * RADIUS + 1)
+    raw = image[15 - RADIUS:15 + RADIUS + 1, 20 - RADIUS:20 + RADIUS + 1] / 255.0
+    lo, mid, hi = np.percentile(raw, (5, 50, 95))
+    np.testing.assert_allclose(crops[0], (raw - mid) / (hi - lo), atol=1e-5)
+    # At the border the image is mirrored: the crop at (0, 0) is symmetric about its centre row and column.
+    np.testing.assert_array_equal(crops[1], crops[1][::-1, ::-1])
+
+
+def test_merging_keeps_the_best_of_each_cluster():
+    xy = np.array([[10.0, 10.0], [10.5, 10.0], [11.2, 10.0], [30.0, 30.0], [30.2, 30.3]])
+    score = np.array([0.6, 0.9, 0.8, 0.7, 0.5])
+    kept, kept_score = _merge(xy, score)
+    # 10.5 beats both of its neighbours; 11.2 is 0.7 from it, 10.0 is 0.5 from it; 30.0 beats 30.2.
+    np.testing.assert_array_equal(kept, [[10.5, 10.0], [30.0, 30.0]])
+    np.testing.assert_array_equal(kept_score, [0.9, 0.7])
+
+
+def test_samples_point_at_the_corners_whatever_the_turn(scenes):
+    rng = np.random.default_rng(1)
+    negatives = [np.zeros((0, 2)) for _ in scenes]
+    crops, is_corner, offset = refiner_samples(scenes, 400, rng, negatives)
+    assert crops.shape == (400, 17, 17) and 0.4 < is_corner.mean() < 0.8
+    pos = is_corner > 0.5
+    assert (np.linalg.norm(offset[pos], axis=1) <= 1.5 + 0.71).all()
+    assert (offset[~pos] == 0).all()
+
+
+def test_a_few_training_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
+    net = load_corner_net()
+    negatives = [false_candidates(net, s) for s in scenes]
+    assert all(len(n) for n in negatives)
+    crops, is_corner, offset = refiner_samples(scenes, 64, np.random.default_rng(5), negatives)
+    batch = (torch.from_numpy(crops)[:, None], torch.from_numpy(is_corner), torch.from_numpy(offset))
+    torch.manual_seed(0)
+    before = refiner_loss(CornerRefiner()(batch[0]), *batch[1:]).item()
+    refiner = train_refiner(scenes, net, steps=150, batch=128, seed=2, lr=4e-3)
+    with torch.no_grad():
+        after = refiner_loss(refiner(batch[0]), *batch[1:]).item()
+    assert after < 0.75 * before, (before, after)
+    refiner = train_refiner(scenes, net, steps=3, batch=8, seed=2)
+    again = train_refiner(scenes, net, steps=3, batch=8, seed=2)
+    for a, b in zip(refiner.state_dict().values(), again.state_dict().values()):
+        assert torch.equal(a, b)
+    save_net(refiner, tmp_path / "r.npz")
+    for a, b in zip(refiner.state_dict().values(), load_refiner(tmp_path / "r.npz").state_dict().values()):
+        assert torch.equal(a, b)
+
+
+@pytest.mark.skipif(not (WEIGHTS / "refiner.npz").is_file(), reason="no shipped refiner weights")
+def test_shipped_refiner_places_corners_closer_than_the_network_alone(scenes):
+    net, refiner = load_corner_net(), load_refiner()
+    alone, refined = [], []
+    for scene in scenes:
+        for found, out in ((locate_corners(net, None, scene.image)[0], alone),
+                           (locate_corners(net, refiner, scene.image)[0], refined)):
+            out.append(score_corners(found, scene.corners)[1])
+    alone, refined = np.concatenate(alone), np.concatenate(refined)
+    assert len(refined) >= 0.95 * len(alone)  # about as many corners found
+    assert np.median(refined) < 0.8 * np.median(alone) and np.median(refined) < 0.25
