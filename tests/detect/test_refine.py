@@ -9,7 +9,8 @@ import torch
 
 from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
-from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, locate_corners, refiner_loss,
+from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, locate_corners, refine_corners,
+                                   refiner_loss,
                                    refiner_samples)
 from handcap.detect.train import false_candidates, save_net, train_refiner
 
@@ -77,3 +78,14 @@ def test_shipped_refiner_places_corners_closer_than_the_network_alone(scenes):
     alone, refined = np.concatenate(alone), np.concatenate(refined)
     assert len(refined) >= 0.95 * len(alone)  # about as many corners found
     assert np.median(refined) < 0.8 * np.median(alone) and np.median(refined) < 0.25
+
+
+@pytest.mark.skipif(not (WEIGHTS / "refiner.npz").is_file(), reason="no shipped refiner weights")
+def test_no_corner_where_an_edge_meets_the_image_border():
+    # Black and white squares cut by the left edge: the mirrored crop there looks like a corner.
+    image = np.full((96, 96), 30, np.uint8)
+    image[16:40, 0:24] = 220
+    image[40:64, 24:48] = 220
+    refiner = load_refiner()
+    xy, _ = refine_corners(refiner, image, np.array([[0.0, 40.0], [1.0, 16.0], [23.5, 39.5]]), min_score=0.0)
+    assert len(xy) == 1 and np.linalg.norm(xy[0] - [23.5, 39.5]) < 0.5

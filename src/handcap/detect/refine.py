@@ -40,6 +40,9 @@ MAX_SHIFT = 2.0
 CANDIDATES = 0.1
 #: Least refiner probability of a corner kept, by default.
 REFINED_THRESHOLD = 0.5
+#: Corners closer than this to the image's edge are dropped, pixels: an edge that meets the border looks
+#: like a corner there (the crop is mirrored beyond it), and the true corner may lie outside.
+BORDER = 2.0
 #: Candidates closer than this after refinement are one corner (the better scored is kept), pixels.
 MERGE_PX = 1.0
 
@@ -102,15 +105,19 @@ def crops_at(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
     ndarray (N, 17, 17) float32
         See :func:`normalise_crops`.
     """
-    img = np.asarray(image, dtype=np.float32)
-    if image.dtype == np.uint8:
-        img = img / 255.0
-    padded = np.pad(img, RADIUS, mode="reflect")
-    span = np.arange(2 * RADIUS + 1)
+    img = np.asarray(image)
+    span = np.arange(-RADIUS, RADIUS + 1)
     c = np.asarray(centres, dtype=int).reshape(-1, 2)
-    rows = np.clip(c[:, 1], -RADIUS, img.shape[0] - 1 + RADIUS)[:, None, None] + span[None, :, None]
-    cols = np.clip(c[:, 0], -RADIUS, img.shape[1] - 1 + RADIUS)[:, None, None] + span[None, None, :]
-    return normalise_crops(padded[np.clip(rows, 0, padded.shape[0] - 1), np.clip(cols, 0, padded.shape[1] - 1)])
+    rows = _mirror(c[:, 1, None] + span[None], img.shape[0])
+    cols = _mirror(c[:, 0, None] + span[None], img.shape[1])
+    return normalise_crops(img[rows[:, :, None], cols[:, None, :]])
+
+
+def _mirror(index: np.ndarray, n: int) -> np.ndarray:
+    """Indices reflected into ``0 .. n - 1`` (the edge pixel not repeated, as numpy's "reflect" pad)."""
+    period = 2 * (n - 1) if n > 1 else 1
+    folded = np.mod(index, period)
+    return np.where(folded > n - 1, period - folded, folded).clip(0, n - 1)
 
 
 def normalise_crops(crops: np.ndarray) -> np.ndarray:
@@ -153,7 +160,8 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
     Returns
     -------
     xy : ndarray (K', 2)
-        Refined corners, pixels; candidates that end within :data:`MERGE_PX` of a better one are dropped.
+        Refined corners, pixels; candidates that end within :data:`MERGE_PX` of a better one, or within
+        :data:`BORDER` of the image's edge, are dropped.
     score : ndarray (K',)
         The refiner's probability of each.
     """
@@ -170,7 +178,9 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
     out = np.concatenate(outs).astype(np.float64)
     score = 1.0 / (1.0 + np.exp(-out[:, 0]))
     refined = centres + out[:, 1:]
-    keep = score >= min_score
+    h, w = np.asarray(image).shape[:2]
+    inside = (refined >= BORDER).all(axis=1) & (refined[:, 0] <= w - 1 - BORDER) & (refined[:, 1] <= h - 1 - BORDER)
+    keep = (score >= min_score) & inside
     refined, score = refined[keep], score[keep]
     return _merge(refined, score)
 
@@ -307,8 +317,5 @@ def _window(image: np.ndarray, centre: np.ndarray) -> np.ndarray:
     h, w = image.shape
     if RADIUS <= x < w - RADIUS and RADIUS <= y < h - RADIUS:
         return image[y - RADIUS:y + RADIUS + 1, x - RADIUS:x + RADIUS + 1]
-    rows = np.abs(np.arange(y - RADIUS, y + RADIUS + 1))
-    cols = np.abs(np.arange(x - RADIUS, x + RADIUS + 1))
-    rows = np.where(rows > h - 1, 2 * (h - 1) - rows, rows).clip(0, h - 1)
-    cols = np.where(cols > w - 1, 2 * (w - 1) - cols, cols).clip(0, w - 1)
-    return image[np.ix_(rows, cols)]
+    span = np.arange(-RADIUS, RADIUS + 1)
+    return image[np.ix_(_mirror(y + span, h), _mirror(x + span, w))]

@@ -160,14 +160,18 @@ def name_corners(pattern: Pattern, quads: np.ndarray, tags, turns, n_corners: in
 
 #: Largest median distance, in sides of the block, at which a block's corners put its patch-mates' corners.
 MAX_MISFIT = 0.3
+#: Patch-mates compared: the nearest ring only, squares away in rows plus columns (the diagonal neighbours
+#: and those two squares along a row or column); farther ones bend away with the skin (on hands, comparing
+#: up to two rows and two columns away dropped a third of the right blocks).
+REACH = 2
 
 
 def misfits(pattern: Pattern, quads: np.ndarray, tags, turns, xy: np.ndarray) -> np.ndarray:
     """Voted blocks whose corners disagree with their patch-mates': one corner is likely a false detection.
 
     Each voted block's four corners give a homography from its patch's grid to the image; it must
-    put the corners of the other voted blocks of its patch within two squares of it near where they
-    were found (the median distance at most :data:`MAX_MISFIT` of the block's side). A block with a
+    put the corners of the other voted blocks of its patch within :data:`REACH` squares of it near where
+    they were found (the median distance at most :data:`MAX_MISFIT` of the block's side). A block with a
     false corner (a detection beside the true, missed one) bends that map and misplaces all of them,
     while a true block misplaces at most the one false corner of a neighbour. Blocks with fewer than
     two such corners to compare are not judged.
@@ -203,7 +207,7 @@ def misfits(pattern: Pattern, quads: np.ndarray, tags, turns, xy: np.ndarray) ->
     bad = np.zeros(len(quads), bool)
     for b, (key, r, c, grid, image, ids) in placed.items():
         mates = [placed[a] for a in by_patch[key]
-                 if a != b and abs(placed[a][1] - r) <= 2 and abs(placed[a][2] - c) <= 2]
+                 if a != b and abs(placed[a][1] - r) + abs(placed[a][2] - c) <= REACH]
         if not mates:
             continue
         g = np.concatenate([m[3] for m in mates])
