@@ -47,14 +47,17 @@ occlusion-weights: $(STAMP)
 detect-weights: $(STAMP)
 	-command -v apt-get >/dev/null && apt-get install -y -q libegl1 libegl-mesa0 libgl1-mesa-dri fonts-liberation \
 		fonts-freefont-ttf fonts-inconsolata fonts-noto-mono >/dev/null
-	# The shipped weights, bit for bit (one torch thread for the corners and the reader, which can run side by
-	# side, ~45 min on 2 cores; the refiner after the corners, two threads, ~15 min).
+	# The shipped weights, bit for bit (one torch thread for the corners and the reader's first run, which can
+	# run side by side, ~45 min on 2 cores; the refiner after the corners, two threads, ~15 min).
 	$(BIN)/python -m handcap.detect.train --what corners --scenes 500 --test-scenes 40 --steps 6000 --pages 0.3 \
 		--threads 1 --seed 0
 	$(BIN)/python -m handcap.detect.train --what refiner --scenes 500 --test-scenes 40 --steps 12000 --pages 0.3 \
 		--threads 2 --seed 0
 	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 4000 --threads 1 \
 		--seed 0
+	# ... then 2000 more steps for the reader on 600 new scenes (seed 1), from the weights just made (~15 min).
+	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 2000 --threads 2 \
+		--seed 1 --init src/handcap/detect/weights/reader.npz
 
 clean-venv:
 	rm -rf $(VENV)

@@ -10,8 +10,7 @@ import torch
 from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
 from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, locate_corners, refine_corners,
-                                   refiner_loss,
-                                   refiner_samples)
+                                   refiner_loss, refiner_samples)
 from handcap.detect.train import false_candidates, save_net, train_refiner
 
 
@@ -89,3 +88,21 @@ def test_no_corner_where_an_edge_meets_the_image_border():
     refiner = load_refiner()
     xy, _ = refine_corners(refiner, image, np.array([[0.0, 40.0], [1.0, 16.0], [23.5, 39.5]]), min_score=0.0)
     assert len(xy) == 1 and np.linalg.norm(xy[0] - [23.5, 39.5]) < 0.5
+
+
+def test_training_command_writes_weights_and_starts_from_others(scenes, tmp_path, capsys):
+    from handcap import HandcapError
+    from handcap.detect.train import main
+    out = tmp_path / "w"
+    assert main(["--what", "refiner", "--scenes", "3", "--test-scenes", "1", "--steps", "2", "--out", str(out)]) == 0
+    first = load_refiner(out / "refiner.npz")
+    assert main(["--what", "refiner", "--scenes", "3", "--test-scenes", "1", "--steps", "2", "--seed", "1",
+                 "--init", str(out / "refiner.npz"), "--out", str(tmp_path / "again")]) == 0
+    second = load_refiner(tmp_path / "again" / "refiner.npz")
+    # Two small steps from the first weights stay near them; a new start would be far off.
+    moved = max((a - b).abs().max().item() for a, b in zip(first.state_dict().values(), second.state_dict().values()))
+    assert 0 < moved < 0.05
+    with np.load(tmp_path / "again" / "refiner.npz") as data:
+        assert "--init" in str(data["info.source"]) and "corners:" in str(data["info.score"])
+    with pytest.raises(HandcapError, match="--what"):
+        main(["--what", "all", "--init", str(out / "refiner.npz"), "--out", str(tmp_path / "x")])

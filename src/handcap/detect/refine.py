@@ -142,7 +142,7 @@ def normalise_crops(crops: np.ndarray) -> np.ndarray:
     return ((out - mid[:, None, None]) / spread[:, None, None]).astype(np.float32)
 
 
-def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min_score: float = 0.5,
+def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min_score: float = REFINED_THRESHOLD,
                    batch: int = 4096) -> tuple[np.ndarray, np.ndarray]:
     """Refine candidate corners and keep those the refiner believes, one per corner.
 

@@ -383,6 +383,7 @@ def main(argv=None) -> int:
     p.add_argument("--pages", type=float, default=0.3,
                    help="share of photographed sheets among the corner network's scenes (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--init", help="start the network from these weights (.npz) instead of new ones")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s)")
     p.add_argument("--out", default=str(WEIGHTS), help="folder for corners.npz, refiner.npz and reader.npz "
                                                        "(default: the shipped weights)")
@@ -392,12 +393,16 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
     command = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
-               f"--steps {a.steps} --pages {a.pages} --seed {a.seed}")
+               f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
+    if a.init and a.what == "all":
+        raise HandcapError("--init starts one network: name it with --what")
+    init = load_net(a.init, {"corners": "CornerNet", "refiner": "CornerRefiner", "reader": "BlockReader"}[a.what]) \
+        if a.init else None
     if a.what in ("corners", "all"):
         scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
         tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
         print(f"rendered {len(scenes)} + {len(tests)} scenes in {time.time() - started:.0f} s", flush=True)
-        net = train_corners(scenes, steps=a.steps, seed=a.seed, progress=True)
+        net = train_corners(scenes, steps=a.steps, seed=a.seed, net=init, progress=True)
         score = evaluate_corners(net, tests)
         print(score.summary(), flush=True)
         save_net(net, out / "corners.npz", {"source": command, "score": score.summary()})
@@ -405,7 +410,7 @@ def main(argv=None) -> int:
         corner_net = load_corner_net(out / "corners.npz" if (out / "corners.npz").is_file() else None)
         scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
         tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
-        net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, progress=True)
+        net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, net=init, progress=True)
         score = evaluate_corners(corner_net, tests, refiner=net)
         print(score.summary(), flush=True)
         save_net(net, out / "refiner.npz", {"source": command, "score": score.summary()})
@@ -415,7 +420,7 @@ def main(argv=None) -> int:
         scenes = reader_scenes(a.scenes, a.seed, trained)
         tests = reader_scenes(a.test_scenes, a.seed + 1_000_003, held_out)
         print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
-        net = train_reader(scenes, steps=a.steps, seed=a.seed, progress=True)
+        net = train_reader(scenes, steps=a.steps, seed=a.seed, net=init, progress=True)
         validation = reader_scenes(a.test_scenes, a.seed + 2_000_003, trained)
         net.min_score = reader_gate(net, validation)
         print(f"reader: trusted alone from confidence {net.min_score:.4f} (at most 0.1 % wrong on "
