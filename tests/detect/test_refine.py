@@ -11,7 +11,8 @@ from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
 from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, locate_corners, refine_corners,
                                    refiner_loss, refiner_samples)
-from handcap.detect.train import false_candidates, save_net, train_refiner
+from handcap.detect.refine import false_candidates
+from handcap.detect.train import save_net, train_refiner
 
 
 def test_crops_are_the_pixels_around_each_centre_normalised():

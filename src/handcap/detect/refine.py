@@ -234,6 +234,34 @@ def _merge(xy: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return xy[keep], score[keep]
 
 
+def false_candidates(corner_net: CornerNet, scene, threshold: float = 0.05, far: float = 3.0) -> np.ndarray:
+    """The corner network's candidates in a scene that are no printed corner: (N, 2) pixels.
+
+    A candidate counts as false when it lies over ``far`` pixels from every printed corner, hidden
+    ones included (a corner the truth calls hidden may still show at a grazing angle). The threshold
+    is below the detector's (:data:`CANDIDATES`): more, and harder, negatives.
+
+    Parameters
+    ----------
+    corner_net : CornerNet
+    scene : Scene
+    threshold : float
+        Least corner probability of a candidate.
+    far : float
+        Least distance from every printed corner, pixels.
+
+    Returns
+    -------
+    ndarray (N, 2)
+    """
+    xy, _ = detect_corners(corner_net, scene.image, threshold=threshold)
+    printed = np.array(list(scene.projected.values())) if scene.projected else scene.corners
+    if len(xy) == 0 or len(printed) == 0:
+        return xy
+    distance, _ = cKDTree(printed).query(xy)
+    return xy[distance > far]
+
+
 def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5):
     """Training crops: true corners seen from a nearby pixel, and candidates that are no corner.
 

@@ -25,17 +25,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 
 from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
 from handcap.detect.blocks import candidate_quads
-from handcap.detect.corners import CornerNet, corner_loss, detect_corners, normalise, targets
+from handcap.detect.corners import CornerNet, corner_loss, normalise, targets
 from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
                                        score_corners)
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
 from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, reader_loss
-from handcap.detect.refine import CornerRefiner, refiner_loss, refiner_samples
+from handcap.detect.refine import CornerRefiner, false_candidates, refiner_loss, refiner_samples
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
 
@@ -189,34 +188,6 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
 
     return _fit(lambda: net or CornerRefiner(), loss, scenes, steps=steps, seed=seed, lr=lr, label="refiner",
                 progress=progress)
-
-
-def false_candidates(corner_net: CornerNet, scene, threshold: float = 0.05, far: float = 3.0) -> np.ndarray:
-    """The corner network's candidates in a scene that are no printed corner: (N, 2) pixels.
-
-    A candidate counts as false when it lies over ``far`` pixels from every printed corner, hidden
-    ones included (a corner the truth calls hidden may still show at a grazing angle). The threshold
-    is below the detector's (:data:`~handcap.detect.refine.CANDIDATES`): more, and harder, negatives.
-
-    Parameters
-    ----------
-    corner_net : CornerNet
-    scene : Scene
-    threshold : float
-        Least corner probability of a candidate.
-    far : float
-        Least distance from every printed corner, pixels.
-
-    Returns
-    -------
-    ndarray (N, 2)
-    """
-    xy, _ = detect_corners(corner_net, scene.image, threshold=threshold)
-    printed = np.array(list(scene.projected.values())) if scene.projected else scene.corners
-    if len(xy) == 0 or len(printed) == 0:
-        return xy
-    distance, _ = cKDTree(printed).query(xy)
-    return xy[distance > far]
 
 
 def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None):
