@@ -9,9 +9,8 @@ import torch
 
 from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
-from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, locate_corners, refine_corners,
-                                   refiner_loss, refiner_samples)
-from handcap.detect.refine import false_candidates
+from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, false_candidates, locate_corners,
+                                   refine_corners, refiner_loss, refiner_samples)
 from handcap.detect.train import save_net, train_refiner
 
 
