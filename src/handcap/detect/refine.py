@@ -105,12 +105,16 @@ def crops_at(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
     ndarray (N, 17, 17) float32
         See :func:`normalise_crops`.
     """
-    img = np.asarray(image)
+    return normalise_crops(_gather(np.asarray(image), centres))
+
+
+def _gather(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """The raw (N, 17, 17) pixels around each centre (x, y), the image mirrored beyond its border."""
     span = np.arange(-RADIUS, RADIUS + 1)
     c = np.asarray(centres, dtype=int).reshape(-1, 2)
-    rows = _mirror(c[:, 1, None] + span[None], img.shape[0])
-    cols = _mirror(c[:, 0, None] + span[None], img.shape[1])
-    return normalise_crops(img[rows[:, :, None], cols[:, None, :]])
+    rows = _mirror(c[:, 1, None] + span[None], image.shape[0])
+    cols = _mirror(c[:, 0, None] + span[None], image.shape[1])
+    return image[rows[:, :, None], cols[:, None, :]]
 
 
 def _mirror(index: np.ndarray, n: int) -> np.ndarray:
@@ -304,7 +308,7 @@ def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5):
                 j = int(np.argmin(gap))
                 if gap[j] <= shift:
                     label[k], offset[k] = 1.0, scene.corners[j] - centre
-        raw[k] = _window(scene.image, centre)
+        raw[k] = _gather(scene.image, centre)[0]
         if rng.random() < 0.3:  # a phone photo's JPEG artefacts
             ok, code = cv2.imencode(".jpg", raw[k], [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(40, 95))])
             raw[k] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
@@ -338,12 +342,3 @@ def refiner_loss(output: torch.Tensor, is_corner: torch.Tensor, offset: torch.Te
     l1 = (output[pos, 1:] - offset[pos]).abs().sum(dim=1).mean() if pos.any() else output.sum() * 0
     return bce + l1
 
-
-def _window(image: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """The 17 x 17 pixels of a uint8 ``image`` around ``centre`` (x, y), mirrored beyond its border."""
-    x, y = int(centre[0]), int(centre[1])
-    h, w = image.shape
-    if RADIUS <= x < w - RADIUS and RADIUS <= y < h - RADIUS:
-        return image[y - RADIUS:y + RADIUS + 1, x - RADIUS:x + RADIUS + 1]
-    span = np.arange(-RADIUS, RADIUS + 1)
-    return image[np.ix_(_mirror(y + span, h), _mirror(x + span, w))]
