@@ -26,6 +26,14 @@ MIN_ANGLE, MAX_ANGLE = np.deg2rad(36.0), np.deg2rad(144.0)
 MAX_SIDE_RATIO, MAX_DIAGONAL_RATIO = 4.0, 2.5
 #: Least contrast between a block's inside and the squares around it, as a share of the image's spread.
 MIN_CONTRAST = 0.15
+#: Least step across each side, between strips just inside and just outside it (a share of the spread): half
+#: the least contrast. A quad with a false corner has a side that leaves the printed edge, and the strips
+#: along it both fall on one colour.
+MIN_STEP = MIN_CONTRAST / 2
+#: Where the side strips lie, in sides of the block from the side (inside and, mirrored, outside).
+STRIP = (0.06, 0.18)
+#: The two halves of a side whose steps are tested apart, in sides of the block along it.
+HALVES = ((0.12, 0.45), (0.55, 0.88))
 
 
 def candidate_quads(xy: np.ndarray, min_side: float = 3.0) -> np.ndarray:
@@ -127,7 +135,10 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     The inside is sampled on a 5 x 5 grid of the quad's central part (in the
     projective frame of its corners; the median, so glyph ink does not count);
     the outside on strips just across its four sides (a black neighbour, or
-    the half-square black margin at a patch's edge).
+    the half-square black margin at a patch's edge). Each side must also be a
+    printed edge: a strip just inside it brighter than one just outside it by
+    :data:`MIN_STEP` (a quad with one false corner, beside the true one or at
+    an occluding contour, has a side that runs through one colour).
 
     Parameters
     ----------
@@ -153,10 +164,11 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
         gu, gv = np.meshgrid(us, vs)
         h = np.c_[gu.ravel(), gv.ravel(), np.ones(gu.size)]
         p = np.matmul(h[None], homs.transpose(0, 2, 1))
-        p = p[..., :2] / p[..., 2:3]
-        x = np.clip(np.round(p[..., 0]).astype(int), 0, img.shape[1] - 1)
-        y = np.clip(np.round(p[..., 1]).astype(int), 0, img.shape[0] - 1)
-        return np.median(img[y, x], axis=1)
+        p = (p[..., :2] / p[..., 2:3]).astype(np.float32)
+        if len(p) == 0:
+            return np.zeros(0, np.float32)
+        return np.median(cv2.remap(img, p[..., 0], p[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE),
+                         axis=1)
 
     middle, before, after = np.linspace(0.3, 0.7, 5), np.linspace(-0.4, -0.1, 3), np.linspace(1.1, 1.4, 3)
     inside = sample(middle, middle)
@@ -165,6 +177,15 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
                     axis=0)
     contrast = (inside - around) / spread
     keep = contrast >= MIN_CONTRAST
+    quads, contrast, homs = quads[keep], contrast[keep], homs[keep]
+    near = np.linspace(*STRIP, 3)
+    step = np.full(len(quads), np.inf)
+    for half in HALVES:  # each half of each side on its own: a false corner bends the half next to it most
+        edge = np.linspace(*half, 4)
+        inner = np.array([sample(near, edge), sample(edge, near), sample(1 - near, edge), sample(edge, 1 - near)])
+        outer = np.array([sample(-near, edge), sample(edge, -near), sample(1 + near, edge), sample(edge, 1 + near)])
+        step = np.minimum(step, ((inner - outer) / spread).min(axis=0))
+    keep = step >= MIN_STEP
     quads, contrast = quads[keep], contrast[keep]
     # White squares of a checkerboard never overlap: keep the best of overlapping quads (contrast times
     # how square they are), as a non-maximum suppression.
