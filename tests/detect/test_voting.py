@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.patterns import session_pattern
-from handcap.detect.voting import name_corners, vote
+from handcap.detect.voting import name_corners, unconfirmed, vote
 
 PATTERN = session_pattern(("right",), ("cube2x2",))
 
@@ -99,3 +99,30 @@ def test_a_lone_unsure_reading_is_not_trusted():
     quads, text, rotation = np.array([[0, 1, 2, 3]]), np.array([tag]), np.array([0])
     assert vote(PATTERN, quads, text, rotation, np.array([0.4]), min_support=0.5)[0][0] == ""
     assert vote(PATTERN, quads, text, rotation, np.array([0.6]), min_support=0.5)[0][0] == tag
+
+
+def test_unconfirmed_blocks_must_be_parallelograms():
+    # A flat 4 x 4 board, 20 px squares, slightly sheared (a parallelogram view): the white squares (r + c even)
+    # share their inner corners with their diagonal neighbours.
+    grid = np.array([(c, r) for r in range(5) for c in range(5)], float)
+    xy = grid @ np.array([[20.0, 3.0], [4.0, 18.0]]) + 50.0
+    quads = np.array([(r * 5 + c, r * 5 + c + 1, (r + 1) * 5 + c + 1, (r + 1) * 5 + c)
+                      for r in range(4) for c in range(4) if (r + c) % 2 == 0])
+    tags = np.array(["AB"] * len(quads))
+    assert not unconfirmed(quads, tags, xy).any()
+    # A false corner 3 px off (15 % of a side) on the board's outer corner, which only one block uses: that
+    # block goes.
+    moved = xy.copy()
+    moved[0] += (3.0, 0.0)
+    assert list(np.flatnonzero(unconfirmed(quads, tags, moved))) == [0]
+    # The same shift on the corner that the blocks at (0, 0) and (1, 1) share: (1, 1) has all four corners
+    # confirmed by its neighbours and stays; (0, 0), with its outer corners unconfirmed, goes.
+    inner = xy.copy()
+    inner[6] += (3.0, 0.0)
+    assert list(np.flatnonzero(unconfirmed(quads, tags, inner))) == [0]
+    # A 1 px shift keeps the shape within the bound.
+    slight = xy.copy()
+    slight[0] += (1.0, 0.0)
+    assert not unconfirmed(quads, tags, slight).any()
+    # Blocks not voted are never dropped.
+    assert not unconfirmed(quads, np.array([""] * len(quads)), moved).any()

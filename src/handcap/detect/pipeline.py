@@ -22,7 +22,7 @@ from handcap.detect.corners import CornerNet
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
 from handcap.detect.refine import CornerRefiner, locate_corners
-from handcap.detect.voting import misfits, name_corners, vote
+from handcap.detect.voting import name_corners, unconfirmed, vote
 
 @dataclass(frozen=True)
 class ImageDetections:
@@ -104,7 +104,7 @@ class Detector:
         corrected = 0
         if self.pattern is not None and len(quads):
             tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
-            drop = misfits(self.pattern, quads, tags, turns, xy)
+            drop = unconfirmed(quads, tags, xy)
             tags[drop], turns[drop] = "", -1
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
