@@ -53,6 +53,12 @@ detect-weights: $(STAMP)
 		--threads 1 --seed 0
 	$(BIN)/python -m handcap.detect.train --what refiner --scenes 500 --test-scenes 40 --steps 12000 --pages 0.3 \
 		--threads 2 --seed 0
+	# ... then 4000 more steps for the corner network on 500 new scenes (seed 1, ~25 min on one thread), and
+	# 4000 for the refiner on the new network's candidates (~7 min).
+	$(BIN)/python -m handcap.detect.train --what corners --scenes 500 --test-scenes 40 --steps 4000 --pages 0.3 \
+		--threads 1 --seed 1 --init src/handcap/detect/weights/corners.npz
+	$(BIN)/python -m handcap.detect.train --what refiner --scenes 500 --test-scenes 40 --steps 4000 --pages 0.3 \
+		--threads 2 --seed 1 --init src/handcap/detect/weights/refiner.npz
 	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 4000 --threads 1 \
 		--seed 0
 	# ... then 2000 more steps for the reader on 600 new scenes (seed 1), from the weights just made (~15 min).
