@@ -127,7 +127,7 @@ def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet
     rotation : ndarray (B,) int
         Index of the tag's top-left among the given corners (-1 for no tag).
     score : ndarray (B,)
-        Product of the three heads' probabilities.
+        Product of the three heads' probabilities, each glyph head's over ``alphabet`` and "no tag" only.
     """
     unknown = [ch for ch in alphabet if ch not in GLYPHS]
     if unknown:
@@ -140,6 +140,11 @@ def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet
         for start in range(0, len(quads), batch):
             views = torch.from_numpy(block_views(image, quads[start:start + batch]))[:, None]
             first, second, turn = (F.softmax(out, dim=1).numpy() for out in net(views))
+            # Only the printed alphabet (and "no tag") can be there: each glyph head's probabilities are
+            # renormalised over those, so mass on a look-alike glyph of another alphabet does not count
+            # as doubt about this one.
+            first = first / (first[:, allowed].sum(axis=1) + first[:, NONE])[:, None]
+            second = second / (second[:, allowed].sum(axis=1) + second[:, NONE])[:, None]
             p1, p2 = first[:, allowed], second[:, allowed]
             i1, i2 = p1.argmax(axis=1), p2.argmax(axis=1)
             rot = turn.argmax(axis=1)
