@@ -242,8 +242,13 @@ class DetectorScore:
         Visible tags (all four corners visible).
     read, wrong : int
         Tags the detector reported, and those of them that are not at that tag's true corners (2 px).
+    right : int
+        Visible tags reported at their true corners (a tag with a corner the truth calls hidden, read
+        right, is neither wrong nor counted here).
     named, misnamed : int
         Corners the detector named, and those whose true position under that name is over 2 px away.
+    named_right : int
+        Visible corners named right.
     corners : int
         Visible corners.
     """
@@ -251,16 +256,17 @@ class DetectorScore:
     blocks: int
     read: int
     wrong: int
+    right: int
     named: int
     misnamed: int
+    named_right: int
     corners: int
 
     def summary(self) -> str:
         """One line of the figures."""
-        right = self.read - self.wrong
-        return (f"tags: {100 * right / max(self.blocks, 1):.1f} % of {self.blocks} visible read right, "
+        return (f"tags: {100 * self.right / max(self.blocks, 1):.1f} % of {self.blocks} visible read right, "
                 f"{100 * self.wrong / max(self.read, 1):.2f} % of {self.read} read wrong; corners: "
-                f"{100 * (self.named - self.misnamed) / max(self.corners, 1):.1f} % of {self.corners} visible "
+                f"{100 * self.named_right / max(self.corners, 1):.1f} % of {self.corners} visible "
                 f"named, {100 * self.misnamed / max(self.named, 1):.2f} % of {self.named} named wrong")
 
 
@@ -278,17 +284,22 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0) -> DetectorScore:
     -------
     DetectorScore
     """
-    counts = np.zeros(6, int)
+    counts = np.zeros(8, int)
     for scene in scenes:
         found = detector.image(scene.image)
         truth = scene.projected if scene.projected is not None else dict(zip(scene.corner_names, scene.corners))
-        located = [detector.pattern.locate(str(t)) for t in found.block_text]
-        wrong = 0
-        for place, xy in zip(located, found.block_xy):
+        visible = set(scene.block_text)
+        wrong = right = 0
+        for tag, xy in zip(found.block_text, found.block_xy):
+            place = detector.pattern.locate(str(tag))
             names = [place[0].corner_name(*v) for v in place[0].block_vertices(*place[1:])] if place else []
-            wrong += not names or any(n not in truth or np.linalg.norm(truth[n] - p) > match_px
-                                      for n, p in zip(names, xy))
+            bad = not names or any(n not in truth or np.linalg.norm(truth[n] - p) > match_px for n, p in zip(names, xy))
+            wrong += bad
+            right += not bad and str(tag) in visible
         named = [(n, xy) for n, xy in zip(found.names, found.corners) if n is not None]
-        misnamed = sum(1 for n, xy in named if n not in truth or np.linalg.norm(truth[n] - xy) > match_px)
-        counts += (len(scene.blocks), len(found.block_text), wrong, len(named), misnamed, len(scene.corners))
+        bad = [n not in truth or np.linalg.norm(truth[n] - xy) > match_px for n, xy in named]
+        seen = set(scene.corner_names)
+        named_right = sum(1 for (n, _), b in zip(named, bad) if not b and n in seen)
+        counts += (len(scene.blocks), len(found.block_text), wrong, right, len(named), sum(bad), named_right,
+                   len(scene.corners))
     return DetectorScore(*map(int, counts))
