@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from handcap import HandcapError
+from handcap.detect import corners
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners, find_corners, targets
 from handcap.detect.train import crops, load_corner_net, save_net, score_corners, train_corners
 
@@ -39,6 +40,26 @@ def test_the_network_is_light_and_tiles_give_the_same_corners():
     tiled = detect_corners(net, image, threshold=0.0, tile=128, halo=64)
     assert len(one[0]) > 100
     np.testing.assert_allclose(np.sort(one[0], axis=0), np.sort(tiled[0], axis=0), atol=1e-4)
+
+
+def test_the_network_runs_only_where_there_is_contrast(scenes, monkeypatch):
+    # A rendered hand pasted into the corner of a large frame of plain, noisy backdrop: the backdrop's cells
+    # are quiet, the hand's are not, and the shipped network finds the same corners as when run everywhere.
+    net = load_corner_net()
+    rng = np.random.default_rng(2)
+    frame = np.clip(rng.normal(90, 2.0, (1200, 1600)), 0, 255).astype(np.uint8)
+    hand = scenes[0].image
+    frame[:hand.shape[0], :hand.shape[1]] = hand
+    busy = corners._contrast_cells(corners.normalise(frame))
+    cells = corners.CELL
+    assert busy[:hand.shape[0] // cells, :hand.shape[1] // cells].mean() > 0.3
+    assert not busy[-(-hand.shape[0] // cells) + 1:, :].any() and not busy[:, -(-hand.shape[1] // cells) + 1:].any()
+    skipped = detect_corners(net, frame, threshold=0.1)
+    monkeypatch.setattr(corners, "MIN_RANGE", -1.0)
+    everywhere = detect_corners(net, frame, threshold=0.1)
+    near = score_corners(everywhere[0], scenes[0].corners)[0][:, 0]
+    assert len(near) > 20
+    assert score_corners(skipped[0], everywhere[0][near], match_px=1e-3)[0].shape[0] == len(near)
 
 
 def test_bad_images_are_one_clear_error():

@@ -18,6 +18,7 @@ Coordinates: pixel ``(x, y)`` at column x, row y, centres at integers. Cell
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import torch
 from torch import nn
@@ -235,6 +236,7 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     h, w = img.shape
     ph, pw = (-h) % 2, (-w) % 2
     img = np.pad(img, ((0, ph), (0, pw)), mode="edge")
+    busy = _contrast_cells(img)
     heat = np.zeros((img.shape[0] // 2, img.shape[1] // 2), np.float32)
     offs = np.zeros((2,) + heat.shape, np.float32)
     # Channels-last convolutions run about a third faster on the CPU (measured in benchmarks/detect.py).
@@ -244,6 +246,8 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
             for x0 in range(0, img.shape[1], tile):
                 ya, xa = max(0, y0 - halo), max(0, x0 - halo)
                 yb, xb = min(img.shape[0], y0 + tile + halo), min(img.shape[1], x0 + tile + halo)
+                if not busy[ya // CELL:-(-yb // CELL), xa // CELL:-(-xb // CELL)].any():
+                    continue  # no contrast a printed corner needs: its heatmap stays 0
                 part = torch.from_numpy(np.ascontiguousarray(img[ya:yb, xa:xb]))[None, None]
                 out = net(part.contiguous(memory_format=torch.channels_last))[0].contiguous().numpy()
                 cy0, cx0 = (y0 - ya) // 2, (x0 - xa) // 2
@@ -254,6 +258,29 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     xy, score = find_corners(heat, offs, threshold)
     keep = (xy[:, 0] <= w - 0.5) & (xy[:, 1] <= h - 0.5)
     return xy[keep], score[keep]
+
+
+#: Side of the cells whose grey range decides where the network runs, pixels.
+CELL = 32
+#: Least grey range of a cell (max - min of its 4 x 4 means, in the normalised image: a share of the image's 5-95 %
+#: spread) where a printed corner can be: the least contrast the block stage accepts between a white square and
+#: its black neighbours (:data:`handcap.detect.blocks.MIN_CONTRAST`). On rendered hands every corner's cell had
+#: twice that; a plain backdrop has a fraction of it.
+MIN_RANGE = 0.15
+
+
+def _contrast_cells(img: np.ndarray) -> np.ndarray:
+    """Which :data:`CELL`-pixel cells of a normalised image have a grey range of at least :data:`MIN_RANGE`.
+
+    The range is taken over 4 x 4 pixel means (sensor noise averages out; a printed square of 8 pixels or more
+    keeps its grey). Returns a bool array of ceil(H / CELL) x ceil(W / CELL) cells.
+    """
+    h, w = img.shape
+    ch, cw = -(-h // CELL), -(-w // CELL)
+    padded = np.pad(img, ((0, ch * CELL - h), (0, cw * CELL - w)), mode="edge")
+    small = cv2.resize(padded, (cw * CELL // 4, ch * CELL // 4), interpolation=cv2.INTER_AREA)
+    cells = small.reshape(ch, CELL // 4, cw, CELL // 4)
+    return cells.max(axis=(1, 3)) - cells.min(axis=(1, 3)) >= MIN_RANGE
 
 
 def _sigmoid(x: np.ndarray) -> np.ndarray:
