@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from handcap import HandcapError
 from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
 from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, false_candidates, locate_corners,
@@ -91,7 +92,6 @@ def test_no_corner_where_an_edge_meets_the_image_border():
 
 
 def test_training_command_writes_weights_and_starts_from_others(scenes, tmp_path, capsys):
-    from handcap import HandcapError
     from handcap.detect.train import main
     out = tmp_path / "w"
     assert main(["--what", "refiner", "--scenes", "3", "--test-scenes", "1", "--steps", "2", "--out", str(out)]) == 0
@@ -106,3 +106,17 @@ def test_training_command_writes_weights_and_starts_from_others(scenes, tmp_path
         assert "--init" in str(data["info.source"]) and "corners:" in str(data["info.score"])
     with pytest.raises(HandcapError, match="--what"):
         main(["--what", "all", "--init", str(out / "refiner.npz"), "--out", str(tmp_path / "x")])
+
+
+def test_views_are_turned_back_before_they_are_averaged(scenes):
+    # Each view's offset is turned back into the image's frame before the average: turned back wrongly
+    # (a sign or an axis), the mean of eight views would land far from the corner, not nearer than one view.
+    net = load_refiner()
+    scene = scenes[0]
+    one, p1 = refine_corners(net, scene.image, scene.corners + 0.3, min_score=0.0, views=1)
+    eight, p8 = refine_corners(net, scene.image, scene.corners + 0.3, min_score=0.0, views=8)
+    e1 = score_corners(one, scene.corners, match_px=1.0)[1]
+    e8 = score_corners(eight, scene.corners, match_px=1.0)[1]
+    assert len(e8) >= len(e1) > 20 and np.median(e8) <= np.median(e1) + 0.01
+    with pytest.raises(HandcapError):
+        refine_corners(net, scene.image, scene.corners, views=9)
