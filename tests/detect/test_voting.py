@@ -101,6 +101,28 @@ def test_a_lone_unsure_reading_is_not_trusted():
     assert vote(PATTERN, quads, text, rotation, np.array([0.6]), min_support=0.5)[0][0] == tag
 
 
+def test_the_two_squares_of_a_one_row_patch_confirm_each_other():
+    # A 1 x 3 patch (a fingertip's) has two white squares that share no corner. Each read alone below the
+    # trusted confidence is dropped; given the pixels, each is found where the other's corners put the square
+    # two along the row, so their readings add up. A reading that does not match the template there, or a
+    # block that lies elsewhere, is no confirmation.
+    patch = next(p for p in PATTERN.patches if p.rows == 1 and p.cols == 3)
+    (tag_a, _, ca), (tag_b, _, cb) = patch.blocks()
+    assert (ca, cb) == (0, 2)
+    xy = np.array([(c, r) for r in range(2) for c in range(4)], float) @ np.array([[24.0, 2.0], [-3.0, 22.0]])
+    xy += (80.0, 60.0)
+    quads = np.array([[0, 1, 5, 4], [2, 3, 7, 6]])  # image order = reading order (the patch upright)
+    rotation, score = np.array([0, 0]), np.array([0.6, 0.6])
+    text = np.array([tag_a, tag_b])
+    assert list(vote(PATTERN, quads, text, rotation, score, min_support=0.9)[0]) == ["", ""]
+    assert list(vote(PATTERN, quads, text, rotation, score, min_support=0.9, xy=xy)[0]) == [tag_a, tag_b]
+    wrong = np.array([tag_a, tag_a])
+    assert list(vote(PATTERN, quads, wrong, rotation, score, min_support=0.9, xy=xy)[0]) == ["", ""]
+    far = xy.copy()
+    far[[2, 3, 6, 7]] += (30.0, 0.0)  # the second square a whole square further along
+    assert list(vote(PATTERN, quads, text, rotation, score, min_support=0.9, xy=far)[0]) == ["", ""]
+
+
 def test_unconfirmed_blocks_must_be_parallelograms():
     # A flat 4 x 4 board, 20 px squares, slightly sheared (a parallelogram view): the white squares (r + c even)
     # share their inner corners with their diagonal neighbours.

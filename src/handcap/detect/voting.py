@@ -4,7 +4,8 @@ Blocks that share an image corner are diagonal neighbours on a patch: if block
 A sits at square ``(r, c)`` and its corner ``k`` (reading order: top-left,
 top-right, bottom-right, bottom-left) is also a corner of block B, then B is
 the square across that corner, ``(r + 2 dr_k - 1, c + 2 dc_k - 1)``, and the
-shared corner is B's opposite corner ``(k + 2) % 4``. So every block that was
+shared corner is B's opposite corner ``(k + 2) % 4`` (with pixels given, blocks two
+squares along a row or column are also reached, to confirm their own readings). So every block that was
 read places, by a walk over the blocks it is connected to, every other block
 of its patch: its square (hence its tag) and its turn. Each read block casts
 one such vote, weighed by its confidence, for every block it reaches, itself
@@ -23,7 +24,9 @@ from __future__ import annotations
 from collections import Counter, defaultdict, deque
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from handcap.detect.blocks import unit_square_homographies
 from handcap.patterns.pattern import Pattern
 
 #: Share of a block's votes the winning (tag, turn) must hold.
@@ -52,6 +55,10 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
         Image corners (pixels). Given, a walk steps only to a block that lies where a diagonal
         neighbour must: its centre within a third of a side of the mirror image of the current block's
         centre through the shared corner (a false quad that happens to share a corner is not placed).
+        It also steps to the white squares two squares along the current block's row and column, which
+        share no corner with it, where the block's own corners put them (:func:`_along`), when they
+        were read as the tag and turn the template gives there: the two squares of a 1 x 3 patch, or
+        a block whose diagonal neighbours were not found, confirm each other.
 
     Returns
     -------
@@ -73,6 +80,7 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
         pts = np.asarray(xy, dtype=float)[quads]
         centre = pts.mean(axis=1)
         side = np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=-1).mean(axis=1)
+        along = _along(pts, centre, side)
     votes = [Counter() for _ in range(n)]
     for seed in range(n):
         located = pattern.locate(str(text[seed])) if text[seed] else None
@@ -99,6 +107,14 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
                         continue
                     placed[b] = (rb, cb, (q - (k + 2)) % 4)
                     queue.append(b)
+            for (dr, dc), (b, turn_b) in (along(a, turn) if xy is not None else {}).items():
+                rb, cb = r + dr, c + dc
+                if b in placed or not (0 <= rb < patch.rows and 0 <= cb < patch.cols) or not patch.tags[rb][cb]:
+                    continue
+                if text[b] != patch.tags[rb][cb] or rotation[b] != turn_b:
+                    continue  # a step that crosses no shared corner only confirms a reading, never makes one
+                placed[b] = (rb, cb, turn_b)
+                queue.append(b)
         for b, (r, c, turn) in placed.items():
             votes[b][(patch.tags[r][c], turn)] += weight[seed]
     tags = np.full(n, "", dtype="<U2")
@@ -115,6 +131,48 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
             tags[b], turns[b] = "", -1
     changed = int(sum(1 for b in range(n) if tags[b] and text[b] and tags[b] != text[b]))
     return tags, turns, changed
+
+
+#: Squares of the patch grid two along a block's row or column: (rows, columns) from it.
+ALONG = ((0, 2), (0, -2), (2, 0), (-2, 0))
+
+
+def _along(pts: np.ndarray, centre: np.ndarray, side: np.ndarray):
+    """For the walk of :func:`vote`: the blocks two squares along a block's row and column, and their turns.
+
+    Block ``a`` read with turn ``t`` (its reading-order corners ``pts[a][(arange(4) + t) % 4]``) maps its
+    square's grid to the image by the homography of its four corners; the blocks at ``ALONG`` must lie
+    where it maps those squares: centre within a third of a side, and each corner within half a side
+    (which also gives their turn).
+
+    Returns a function ``(a, t) -> {(dr, dc): (b, turn_b)}``.
+    """
+    tree = cKDTree(centre)
+    unit = np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+    seen = {}
+
+    def found(a: int, turn: int) -> dict:
+        if (a, turn) not in seen:
+            seen[(a, turn)] = _look(a, turn)
+        return seen[(a, turn)]
+
+    def _look(a: int, turn: int) -> dict:
+        reading = pts[a][(np.arange(4) + turn) % 4]
+        h = unit_square_homographies(reading[None])[0]
+        out = {}
+        for dr, dc in ALONG:
+            grid = np.c_[unit + (dc, dr), np.ones(4)] @ h.T
+            guess = grid[:, :2] / grid[:, 2:]
+            distance, b = tree.query(guess.mean(axis=0))
+            if b == a or distance > (side[a] + side[b]) / 6:
+                continue
+            gap = [np.linalg.norm(pts[b][(np.arange(4) + k) % 4] - guess, axis=1).max() for k in range(4)]
+            k = int(np.argmin(gap))
+            if gap[k] <= (side[a] + side[b]) / 4:
+                out[(dr, dc)] = (int(b), k)
+        return out
+
+    return found
 
 
 def name_corners(pattern: Pattern, quads: np.ndarray, tags, turns, n_corners: int) -> np.ndarray:
