@@ -120,3 +120,12 @@ def test_views_are_turned_back_before_they_are_averaged(scenes):
     assert len(e8) >= len(e1) > 20 and np.median(e8) <= np.median(e1) + 0.01
     with pytest.raises(HandcapError):
         refine_corners(net, scene.image, scene.corners, views=9)
+
+
+def test_candidates_that_are_no_corner_give_none_and_no_error():
+    # Candidates on pure noise: the first view turns them all away before the other views (nothing to look
+    # at again), and the result is empty, not an error.
+    noise = np.random.default_rng(0).integers(0, 255, (120, 160)).astype(np.uint8)
+    xy = np.random.default_rng(1).uniform(10, 100, (40, 2))
+    found, score = refine_corners(load_refiner(), noise, xy, min_score=0.99)
+    assert found.shape == (0, 2) and score.shape == (0,)

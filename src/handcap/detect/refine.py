@@ -206,6 +206,8 @@ def _look(net: CornerRefiner, image: np.ndarray, centres: np.ndarray, views: int
 
     Returns the probability of a corner (N,) and its position (N, 2), pixels.
     """
+    if len(centres) == 0:
+        return np.zeros(0), np.zeros((0, 2))
     crops = crops_at(image, centres)
     seen = []
     for view in range(views):

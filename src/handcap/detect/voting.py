@@ -153,10 +153,10 @@ def _along(pts: np.ndarray, centre: np.ndarray, side: np.ndarray):
 
     def found(a: int, turn: int) -> dict:
         if (a, turn) not in seen:
-            seen[(a, turn)] = _look(a, turn)
+            seen[(a, turn)] = search(a, turn)
         return seen[(a, turn)]
 
-    def _look(a: int, turn: int) -> dict:
+    def search(a: int, turn: int) -> dict:
         reading = pts[a][(np.arange(4) + turn) % 4]
         h = unit_square_homographies(reading[None])[0]
         out = {}
