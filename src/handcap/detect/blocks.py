@@ -160,21 +160,11 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     spread = max(hi - lo, 1.0)
     pts = xy[quads].astype(np.float64)
     homs = unit_square_homographies(pts)
-    def sample(us, vs):
-        gu, gv = np.meshgrid(us, vs)
-        h = np.c_[gu.ravel(), gv.ravel(), np.ones(gu.size)]
-        p = np.matmul(h[None], homs.transpose(0, 2, 1))
-        p = (p[..., :2] / p[..., 2:3]).astype(np.float32)
-        if len(p) == 0:
-            return np.zeros(0, np.float32)
-        return np.median(cv2.remap(img, p[..., 0], p[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE),
-                         axis=1)
-
     middle, before, after = np.linspace(0.3, 0.7, 5), np.linspace(-0.4, -0.1, 3), np.linspace(1.1, 1.4, 3)
-    inside = sample(middle, middle)
+    inside = _sample(img, homs, middle, middle)
     # Just across each side: the black neighbour, or the black margin (half a square) at a patch's edge.
-    around = np.max([sample(before, middle), sample(after, middle), sample(middle, before), sample(middle, after)],
-                    axis=0)
+    around = np.max([_sample(img, homs, u, v) for u, v in
+                     ((before, middle), (after, middle), (middle, before), (middle, after))], axis=0)
     contrast = (inside - around) / spread
     keep = contrast >= MIN_CONTRAST
     quads, contrast, homs = quads[keep], contrast[keep], homs[keep]
@@ -182,8 +172,10 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     step = np.full(len(quads), np.inf)
     for half in HALVES:  # each half of each side on its own: a false corner bends the half next to it most
         edge = np.linspace(*half, 4)
-        inner = np.array([sample(near, edge), sample(edge, near), sample(1 - near, edge), sample(edge, 1 - near)])
-        outer = np.array([sample(-near, edge), sample(edge, -near), sample(1 + near, edge), sample(edge, 1 + near)])
+        inner = np.array([_sample(img, homs, u, v) for u, v in
+                          ((near, edge), (edge, near), (1 - near, edge), (edge, 1 - near))])
+        outer = np.array([_sample(img, homs, u, v) for u, v in
+                          ((-near, edge), (edge, -near), (1 + near, edge), (edge, 1 + near))])
         step = np.minimum(step, ((inner - outer) / spread).min(axis=0))
     keep = step >= MIN_STEP
     quads, contrast = quads[keep], contrast[keep]
@@ -194,6 +186,17 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     score = contrast * sides.min(axis=1) / sides.max(axis=1)
     chosen = _suppress(pts, sides.max(axis=1), score)
     return quads[chosen], contrast[chosen]
+
+
+def _sample(img: np.ndarray, homs: np.ndarray, us: np.ndarray, vs: np.ndarray) -> np.ndarray:
+    """Median grey of each quad over the grid ``us`` x ``vs`` of its unit square (bilinear): (Q,)."""
+    if len(homs) == 0:
+        return np.zeros(0, np.float32)
+    gu, gv = np.meshgrid(us, vs)
+    h = np.c_[gu.ravel(), gv.ravel(), np.ones(gu.size)]
+    p = np.matmul(h[None], homs.transpose(0, 2, 1))
+    p = (p[..., :2] / p[..., 2:3]).astype(np.float32)
+    return np.median(cv2.remap(img, p[..., 0], p[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), axis=1)
 
 
 def unit_square_homographies(pts: np.ndarray) -> np.ndarray:

@@ -121,8 +121,6 @@ def load_reader(path=None) -> BlockReader:
     return load_net(WEIGHTS / "reader.npz" if path is None else path, "BlockReader")
 
 
-
-
 def load_refiner(path=None) -> CornerRefiner:
     """The corner refiner saved at ``path`` (default: the shipped weights).
 
