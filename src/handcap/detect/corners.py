@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.special import expit
 import torch
 from torch import nn
 from torch.nn import functional as F
@@ -253,7 +254,7 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
                 cy0, cx0 = (y0 - ya) // 2, (x0 - xa) // 2
                 ch = min(tile, img.shape[0] - y0) // 2
                 cw = min(tile, img.shape[1] - x0) // 2
-                heat[y0 // 2:y0 // 2 + ch, x0 // 2:x0 // 2 + cw] = _sigmoid(out[0, cy0:cy0 + ch, cx0:cx0 + cw])
+                heat[y0 // 2:y0 // 2 + ch, x0 // 2:x0 // 2 + cw] = expit(out[0, cy0:cy0 + ch, cx0:cx0 + cw])
                 offs[:, y0 // 2:y0 // 2 + ch, x0 // 2:x0 // 2 + cw] = out[1:, cy0:cy0 + ch, cx0:cx0 + cw]
     xy, score = find_corners(heat, offs, threshold)
     keep = (xy[:, 0] <= w - 0.5) & (xy[:, 1] <= h - 0.5)
@@ -281,7 +282,3 @@ def _contrast_cells(img: np.ndarray) -> np.ndarray:
     small = cv2.resize(padded, (cw * CELL // 4, ch * CELL // 4), interpolation=cv2.INTER_AREA)
     cells = small.reshape(ch, CELL // 4, cw, CELL // 4)
     return cells.max(axis=(1, 3)) - cells.min(axis=(1, 3)) >= MIN_RANGE
-
-
-def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 1.0 / (1.0 + np.exp(-x))

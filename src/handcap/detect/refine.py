@@ -28,11 +28,12 @@ import cv2
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
+from scipy.special import expit
 from torch import nn
 from torch.nn import functional as F
 
 from handcap.core.errors import HandcapError
-from handcap.detect.corners import THRESHOLD, CornerNet, _sigmoid, detect_corners
+from handcap.detect.corners import THRESHOLD, CornerNet, detect_corners
 
 #: Crop half-size: crops are ``2 * RADIUS + 1`` pixels square.
 RADIUS = 8
@@ -187,10 +188,10 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
     logit, offset = _views(net, image, centres, range(1), batch)
     seen = np.ones(len(xy))
     if views > 1:  # the other views only where one view leaves a chance (most candidates are far from it)
-        near = np.flatnonzero(_sigmoid(logit) >= PRESCREEN * min_score)
+        near = np.flatnonzero(expit(logit) >= PRESCREEN * min_score)
         more = _views(net, image, centres[near], range(1, views), batch)
         logit[near], offset[near], seen[near] = logit[near] + more[0], offset[near] + more[1], views
-    score, refined = _sigmoid(logit / seen), centres + offset / seen[:, None]
+    score, refined = expit(logit / seen), centres + offset / seen[:, None]
     # A corner that lies nearer another pixel than the crop's centre is looked at again from that pixel
     # (the refiner is surest near the centre); its probability stays the first look's. On held-out rendered
     # hands this took the RMS error from 0.343 to 0.327 px.
