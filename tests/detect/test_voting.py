@@ -148,3 +148,9 @@ def test_unconfirmed_blocks_must_be_parallelograms():
     assert not unconfirmed(quads, tags, slight).any()
     # Blocks not voted are never dropped.
     assert not unconfirmed(quads, np.array([""] * len(quads)), moved).any()
+    # A block whose own reading the reader trusts is kept whatever its shape; the others are still tested.
+    trusted = np.zeros(len(quads), bool)
+    trusted[0] = True
+    assert not unconfirmed(quads, tags, moved, trusted).any()
+    trusted[:] = [False] + [True] * (len(quads) - 1)
+    assert list(np.flatnonzero(unconfirmed(quads, tags, moved, trusted))) == [0]
