@@ -64,6 +64,17 @@ def test_gates_refuse_thin_and_crossed_shapes():
     assert len(candidate_quads(np.zeros((3, 2)))) == 0
 
 
+def test_a_square_seen_along_its_diagonal_is_a_candidate():
+    # A square foreshortened along one diagonal is a rhombus: at 40 degrees (inside the 36-144 degree gate) its
+    # diagonals are in a ratio of 1 / tan(20 deg) = 2.75, which DexterCap's 2.5 refused; at 30 degrees the angle gate
+    # refuses it.
+    for angle, found in ((40.0, 1), (30.0, 0)):
+        half = np.deg2rad(angle) / 2
+        rhombus = np.array([[0, 0], [20 * np.cos(half), 20 * np.sin(half)], [40 * np.cos(half), 0],
+                            [20 * np.cos(half), -20 * np.sin(half)]]) + 50
+        assert len(candidate_quads(rhombus)) == found
+
+
 def test_white_squares_of_rendered_patches_from_their_true_corners(scenes):
     truth_total = hits = false = 0
     for scene in scenes:
