@@ -65,14 +65,31 @@ def test_gates_refuse_thin_and_crossed_shapes():
 
 
 def test_a_square_seen_along_its_diagonal_is_a_candidate():
-    # A square foreshortened along one diagonal is a rhombus: at 40 degrees (inside the 36-144 degree gate) its
-    # diagonals are in a ratio of 1 / tan(20 deg) = 2.75, which DexterCap's 2.5 refused; at 30 degrees the angle gate
-    # refuses it.
-    for angle, found in ((40.0, 1), (30.0, 0)):
+    # A square foreshortened along one diagonal is a rhombus: at 30 degrees (inside the 25-155 degree gate) its
+    # diagonals are in a ratio of 1 / tan(15 deg) = 3.7, which DexterCap's gates (36 degrees, ratio 2.5) refused;
+    # at 20 degrees the angle gate refuses it.
+    for angle, found in ((30.0, 1), (20.0, 0)):
         half = np.deg2rad(angle) / 2
         rhombus = np.array([[0, 0], [20 * np.cos(half), 20 * np.sin(half)], [40 * np.cos(half), 0],
                             [20 * np.cos(half), -20 * np.sin(half)]]) + 50
         assert len(candidate_quads(rhombus)) == found
+
+
+def test_a_weak_corner_inside_a_square_does_not_hide_it():
+    # A glyph's corner that passed the refiner weakly, inside a white square: the square is still a candidate.
+    # The crossing at the middle of a 2 x 2 quad is strong, so the quad that spans four squares is not.
+    image, corners = _checkerboard()
+    square = (2 * 6 + 2, 2 * 6 + 3, 3 * 6 + 3, 3 * 6 + 2)
+    glyph = np.vstack([corners, corners[list(square)].mean(axis=0) + (2.0, -3.0)])
+    score = np.r_[np.full(len(corners), 0.99), 0.6]
+    assert frozenset(square) not in {frozenset(q) for q in candidate_quads(glyph)}
+    assert frozenset(square) in {frozenset(q) for q in candidate_quads(glyph, score=score)}
+    blocks, _ = white_blocks(image, glyph, candidate_quads(glyph, score=score))
+    assert frozenset(square) in {frozenset(q) for q in blocks}
+    four = frozenset((2 * 6 + 2, 2 * 6 + 4, 4 * 6 + 4, 4 * 6 + 2))
+    assert four not in {frozenset(q) for q in candidate_quads(glyph, score=score)}
+    score[3 * 6 + 3] = 0.6  # the crossing itself weak: the 2 x 2 quad passes the geometry
+    assert four in {frozenset(q) for q in candidate_quads(glyph, score=score)}
 
 
 def test_white_squares_of_rendered_patches_from_their_true_corners(scenes):

@@ -56,7 +56,8 @@ def test_misreads_are_corrected_by_their_patch_mates():
     tags, turns, changed = vote(PATTERN, quads, noisy_text, noisy_turn)
     kept = tags != ""
     assert bad.sum() > 10 and changed > 0
-    assert kept.mean() > 0.97  # patches of one or two blocks cannot outvote a misread
+    assert kept[noisy_text != ""].mean() > 0.97  # patches of one or two blocks cannot outvote a misread
+    assert not kept[noisy_text == ""].any()  # a quad the reader saw no tag in is never placed
     assert (tags[kept] == text[kept]).all() and (turns[kept] == turn[kept]).all()
     names = name_corners(PATTERN, quads, tags, turns, len(truth))
     named = np.array([n is not None for n in names])
@@ -84,13 +85,16 @@ def test_a_false_quad_sharing_a_corner_is_not_placed_when_pixels_are_given():
     xy = np.array([[0, 0], [10, 0], [10, 10], [0, 10], [20, 10], [20, 20], [10, 20],  # the two true blocks
                    [14, 3], [13, 8]], float)  # two false corners: a quad (1,1)-(14,3)-... beside block 0
     quads = np.array([[0, 1, 2, 3], [2, 4, 5, 6], [2, 1, 7, 8]])
-    text = np.array([t0, "", ""])
-    rotation = np.array([0, -1, -1])
+    text = np.array([t0, "ZZ", "ZZ"])  # the other two misread (as no tag of the template)
+    rotation = np.array([0, 1, 2])
     tags, turns, _ = vote(PATTERN, quads, text, rotation)
     # Without pixels the walk places the false quad at (1, 1) too: the tag is then seen twice, and both go.
     assert list(tags) == [t0, "", ""]
     tags, turns, _ = vote(PATTERN, quads, text, rotation, xy=xy)
     assert list(tags) == [t0, t1, ""] and list(turns[:2]) == [0, 0]
+    # A quad the reader saw no tag in is not placed, even where it lies right.
+    tags, _, _ = vote(PATTERN, quads, np.array([t0, "", "ZZ"]), rotation, xy=xy)
+    assert list(tags) == [t0, "", ""]
 
 
 def test_a_lone_unsure_reading_is_not_trusted():

@@ -1,16 +1,17 @@
 """From corners to blocks: the white squares of a patch as quadrilaterals of four detected corners.
 
-A geometric and photometric test instead of DexterCap's EdgeNet (a ResNet-34
-run on every pair of corners): every corner proposes parallelograms with two of
-its nearest neighbours, the fourth corner must be a detection near where the
-parallelogram puts it, the quadrilateral must be convex with sides and
-diagonals of similar lengths (DexterCap's gates, inner angles 36-144 degrees and
-side ratio <= 4, but diagonals in a ratio up to the 3.1 of a rhombus at the least
-angle where DexterCap stops at 2.5: a square seen obliquely along its diagonal is
-such a rhombus), and its inside must be brighter than the squares across its
-four sides (a white square between black ones). Each block's corners come in a
-fixed image order (clockwise on screen from the one nearest the top-left); the
-reader then says which of them is the tag's top-left.
+A geometric and photometric test instead of DexterCap's EdgeNet (a ResNet-34 run
+on every pair of corners): every corner proposes parallelograms with two of its
+nearest neighbours, the fourth corner must be a detection near where the
+parallelogram puts it, the quadrilateral must be convex with sides and diagonals
+of similar lengths (DexterCap's gates are inner angles 36-144 degrees, side
+ratio <= 4 and diagonal ratio <= 2.5; here the angles may reach 25-155 degrees
+and the diagonals the ratio of a rhombus at that angle: a square seen obliquely
+along its diagonal is such a rhombus), no strong corner may lie inside it, and
+its inside must be brighter than the squares across its four sides (a white
+square between black ones). Each block's corners come in a fixed image order
+(clockwise on screen from the one nearest the top-left); the reader then says
+which of them is the tag's top-left.
 """
 
 from __future__ import annotations
@@ -23,11 +24,15 @@ from scipy.spatial import cKDTree
 NEIGHBOURS = 12
 #: The fourth corner must lie within this fraction of the shorter side from where the parallelogram puts it.
 CLOSE = 0.5
-MIN_ANGLE, MAX_ANGLE = np.deg2rad(36.0), np.deg2rad(144.0)
+#: Inner angles (DexterCap: 36-144 degrees; on rendered hands the wider gate reads 1-2 % more tags, none wrong).
+MIN_ANGLE, MAX_ANGLE = np.deg2rad(25.0), np.deg2rad(155.0)
 MAX_SIDE_RATIO = 4.0
-#: The diagonals of a rhombus with the least inner angle: a square foreshortened along its diagonal (2.5 in DexterCap
-#: dropped such blocks that the angle gate lets through; on rendered hands, 0.5-1.2 % more tags read, none wrong).
+#: The diagonals of a rhombus with the least inner angle: a square foreshortened along its diagonal.
 MAX_DIAGONAL_RATIO = 1.0 / np.tan(MIN_ANGLE / 2)
+#: Least score of a corner inside a quad that makes it more than one square. The grid corners inside a quad
+#: spanning several squares are clean crossings; a weaker one inside a white square is a glyph's corner that
+#: passed the refiner, and must not hide the square.
+INSIDE_SCORE = 0.7
 #: Least contrast between a block's inside and the squares around it, as a share of the image's spread.
 MIN_CONTRAST = 0.15
 #: Least step across each side, between strips just inside and just outside it (a share of the spread): half
@@ -40,8 +45,8 @@ STRIP = (0.06, 0.18)
 HALVES = ((0.12, 0.45), (0.55, 0.88))
 
 
-def candidate_quads(xy: np.ndarray, min_side: float = 3.0) -> np.ndarray:
-    """Quadrilaterals of detected corners that pass the geometric gates.
+def candidate_quads(xy: np.ndarray, min_side: float = 3.0, score: np.ndarray | None = None) -> np.ndarray:
+    """Quadrilaterals of detected corners that pass the geometric gates and hold no other strong corner.
 
     Parameters
     ----------
@@ -49,6 +54,9 @@ def candidate_quads(xy: np.ndarray, min_side: float = 3.0) -> np.ndarray:
         Corners, pixels.
     min_side : float
         Shortest side allowed, pixels.
+    score : ndarray (K,), optional
+        Corner probabilities: a corner below :data:`INSIDE_SCORE` inside a quad does not refuse it
+        (default: every corner counts).
 
     Returns
     -------
@@ -82,11 +90,12 @@ def candidate_quads(xy: np.ndarray, min_side: float = 3.0) -> np.ndarray:
         return np.zeros((0, 4), int)
     quads = _ordered(xy, quads)
     quads = np.unique(quads[_convex_and_gated(xy[quads])], axis=0)
-    return quads[_empty(xy, quads, tree)]
+    strong = np.ones(len(xy), bool) if score is None else np.asarray(score) >= INSIDE_SCORE
+    return quads[_empty(xy, quads, tree, strong)]
 
 
-def _empty(xy: np.ndarray, quads: np.ndarray, tree) -> np.ndarray:
-    """Quads with no other corner inside them or on their sides (one square, not two or four): (Q,) bool."""
+def _empty(xy: np.ndarray, quads: np.ndarray, tree, strong: np.ndarray) -> np.ndarray:
+    """Quads with no other ``strong`` corner inside them (one square, not two or four): (Q,) bool."""
     pts = xy[quads]
     centre = pts.mean(axis=1)
     reach = np.linalg.norm(pts - centre[:, None], axis=2).max(axis=1)
@@ -94,7 +103,7 @@ def _empty(xy: np.ndarray, quads: np.ndarray, tree) -> np.ndarray:
     counts = np.fromiter(map(len, near), int, len(quads))
     q = np.repeat(np.arange(len(quads)), counts)
     p = np.fromiter((k for ks in near for k in ks), int, counts.sum())
-    other = (quads[q] != p[:, None]).all(axis=1)
+    other = (quads[q] != p[:, None]).all(axis=1) & strong[p]
     q, p = q[other], p[other]
     # Shrink each quad by 15 % towards its centre: a point inside that is a corner of a larger shape.
     poly = centre[q, None] + 0.85 * (pts[q] - centre[q, None])

@@ -97,7 +97,7 @@ class Detector:
         ImageDetections
         """
         xy, cscore = locate_corners(self.corner_net, self.refiner, image, self.threshold)
-        quads, _ = white_blocks(image, xy, candidate_quads(xy))
+        quads, _ = white_blocks(image, xy, candidate_quads(xy, score=cscore))
         text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet) if len(quads) \
             else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
         names = np.full(len(xy), None, dtype=object)

@@ -7,7 +7,8 @@ the square across that corner, ``(r + 2 dr_k - 1, c + 2 dc_k - 1)``, and the
 shared corner is B's opposite corner ``(k + 2) % 4`` (with pixels given, blocks two
 squares along a row or column are also reached, to confirm their own readings). So every block that was
 read places, by a walk over the blocks it is connected to, every other block
-of its patch: its square (hence its tag) and its turn. Each read block casts
+of its patch that the reader saw a tag in (right or not; a quad it saw none in
+is often one shifted over a black square): its square (hence its tag) and its turn. Each read block casts
 one such vote, weighed by its confidence, for every block it reaches, itself
 included; a block takes the (tag, turn) with most votes, and is dropped when
 the best holds less than two thirds of the block's votes or weighs less than
@@ -96,8 +97,8 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
                 k = (p - turn) % 4  # reading-order index of this corner in block a
                 dr, dc = STEP[k]
                 for b, q in by_corner[corner]:
-                    if b in placed:
-                        continue
+                    if b in placed or not text[b]:
+                        continue  # a quad the reader saw no tag in is not placed (a shifted quad over a black square)
                     if xy is not None:
                         mirror = 2 * np.asarray(xy[corner], dtype=float) - centre[a]
                         if np.linalg.norm(centre[b] - mirror) > (side[a] + side[b]) / 6:
