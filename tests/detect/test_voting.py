@@ -158,3 +158,10 @@ def test_unconfirmed_blocks_must_be_parallelograms():
     assert not unconfirmed(quads, tags, moved, trusted).any()
     trusted[:] = [False] + [True] * (len(quads) - 1)
     assert list(np.flatnonzero(unconfirmed(quads, tags, moved, trusted))) == [0]
+    # A weak corner that only one voted block uses drops that block whatever its shape and reading; a weak
+    # corner two voted blocks share does not.
+    score = np.full(len(xy), 0.99)
+    score[0] = 0.6
+    assert list(np.flatnonzero(unconfirmed(quads, tags, xy, np.ones(len(quads), bool), score))) == [0]
+    score[0], score[6] = 0.99, 0.6
+    assert not unconfirmed(quads, tags, xy, np.ones(len(quads), bool), score).any()

@@ -105,7 +105,7 @@ class Detector:
         if self.pattern is not None and len(quads):
             tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
             trusted = (bscore >= self.reader.min_score) & (text == tags) & (rotation == turns)
-            drop = unconfirmed(quads, tags, xy, trusted)
+            drop = unconfirmed(quads, tags, xy, trusted, cscore)
             tags[drop], turns[drop] = "", -1
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
