@@ -165,3 +165,9 @@ def test_unconfirmed_blocks_must_be_parallelograms():
     assert list(np.flatnonzero(unconfirmed(quads, tags, xy, np.ones(len(quads), bool), score))) == [0]
     score[0], score[6] = 0.99, 0.6
     assert not unconfirmed(quads, tags, xy, np.ones(len(quads), bool), score).any()
+    # A trusted reading vouches for the shape only when the block's lone corners are sure: with the bent
+    # block's moved corner at 0.8 (above the weak bound) it goes again.
+    score[6] = 0.99
+    assert not unconfirmed(quads, tags, moved, np.ones(len(quads), bool), score).any()
+    score[0] = 0.8
+    assert list(np.flatnonzero(unconfirmed(quads, tags, moved, np.ones(len(quads), bool), score))) == [0]

@@ -225,6 +225,8 @@ MAX_DEFECT = 0.12
 #: Least probability of a corner that only one voted block uses: a weaker one is most often a silhouette or an
 #: occluder's edge crossing the block's side a few pixels from its hidden corner.
 MIN_LONE_SCORE = 0.7
+#: Least probability of each lone corner of a block whose shape a trusted reading vouches for.
+TRUSTED_CORNER_SCORE = 0.9
 
 
 def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=None) -> np.ndarray:
@@ -240,7 +242,9 @@ def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=Non
     the right blocks because the skin bends over two squares.) A block whose own reading is ``trusted``
     is kept whatever its shape: the reader saw the square through exactly these four corners, and a
     corner a few pixels off shows it part of a black square or of the background (on rendered hands, a
-    reading trusted by itself keeps about 40 % of the right blocks this test would drop, and no more wrong ones).
+    reading trusted by itself keeps about 40 % of the right blocks this test would drop, and no more wrong ones;
+    in the demo's 13-camera take, where blur leaves corners less sure, it also let 2 % wrong ones through, so its
+    lone corners must score :data:`TRUSTED_CORNER_SCORE`).
     With corner ``score`` given, a block is also dropped, whatever its shape and reading, when a corner
     that no other voted block uses scored below :data:`MIN_LONE_SCORE`: an occluder's edge crossing the
     block's side two or three pixels from its hidden corner makes such a weak corner and only a slightly
@@ -275,9 +279,10 @@ def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=Non
     side = np.linalg.norm(np.roll(pts, -1, axis=1) - pts, axis=2).mean(axis=1)
     defect = np.linalg.norm(pts[:, 0] - pts[:, 1] + pts[:, 2] - pts[:, 3], axis=1) / np.maximum(side, 1e-9)
     drop = voted & ~confirmed & (defect > MAX_DEFECT)
+    lone = uses[quads] <= 1
+    corner_score = np.ones(quads.shape) if score is None else np.asarray(score, dtype=np.float64)[quads]
     if trusted is not None:
-        drop &= ~np.asarray(trusted, bool).reshape(-1)
-    if score is not None:
-        weak = (uses[quads] <= 1) & (np.asarray(score, dtype=np.float64)[quads] < MIN_LONE_SCORE)
-        drop |= voted & weak.any(axis=1)
+        sure = (~lone | (corner_score >= TRUSTED_CORNER_SCORE)).all(axis=1)
+        drop &= ~(np.asarray(trusted, bool).reshape(-1) & sure)
+    drop |= voted & (lone & (corner_score < MIN_LONE_SCORE)).any(axis=1)
     return drop
