@@ -12,6 +12,7 @@ from handcap.cli.convert import add_convert
 from handcap.cli.detect import add_detect
 from handcap.cli.label import add_label
 from handcap.cli.layout import add_layout
+from handcap.cli.markerless import add_markerless
 from handcap.cli.multiview import add_clean, add_multiview
 from handcap.cli.objects import add_objects
 from handcap.cli.occlusion import add_occlusion
@@ -43,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_layout(verbs)
     add_pattern(verbs)
     add_detect(verbs)
+    add_markerless(verbs)
     return parser
 
 

@@ -11,7 +11,8 @@ from handcap.steps import multiview
 
 def _cmd_triangulate(a):
     return multiview.triangulate(a.detections, a.cameras, a.out, min_views=a.min_views, threshold_px=a.threshold_px,
-                                 chunk_frames=a.chunk_frames, scheduler=a.scheduler, workers=a.workers, units=a.units)
+                                 chunk_frames=a.chunk_frames, scheduler=a.scheduler, workers=a.workers, units=a.units,
+                                 handedness=not a.no_handedness_repair)
 
 
 def _cmd_clean(a):
@@ -38,8 +39,12 @@ def add_multiview(verbs) -> None:
     p.add_argument("--cameras", required=True, help="calibrated rig (.toml anipose or caliscope, .yml/.xml OpenCV, "
                                                     ".qca.txt Qualisys)")
     p.add_argument("--min-views", type=int, default=3, help="inlier views a marker needs (default %(default)s)")
-    p.add_argument("--threshold-px", type=float, default=5.0,
-                   help="reprojection error of an inlier view, pixels (default %(default)s)")
+    p.add_argument("--threshold-px", type=float, default=None,
+                   help="reprojection error of an inlier view, pixels (default 5 for markers, 12 for hand "
+                        "keypoints)")
+    p.add_argument("--no-handedness-repair", action="store_true",
+                   help="hand keypoints: trust each view's left/right labels instead of deciding them by agreement "
+                        "between the views")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler, e.g. tcp://HOST:8786 (default: local "
                                                         "processes)")
     p.add_argument("--workers", type=int, help="local processes (default: chosen by the size of the take: a small "
@@ -47,6 +52,7 @@ def add_multiview(verbs) -> None:
     p.add_argument("--chunk-frames", type=int, help="frames per block of work (default: split evenly)")
     p.add_argument("--out", required=True, help="markers (.c3d .trc .npz)")
     add_units(p, "the camera file's positions (translations)")
+    p.add_argument("--rig-units", dest="units", choices=("mm", "cm", "m"), help="the same as --units")
     p.set_defaults(run=_cmd_triangulate)
 
 

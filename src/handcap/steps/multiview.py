@@ -7,15 +7,21 @@ import time
 from handcap.io import check_not_input, marker_suffix, read_markers, write_markers
 from handcap.io.camera_formats import read_rig
 from handcap.layouts import load_layout
+from handcap.markerless import repair_handedness
+from handcap.markerless.keypoints import is_keypoints
 from handcap.multiview import merge_detections, quality_path, read_detections, triangulate_detections, write_quality
 from handcap.multiview import clean as cleaning
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
 
+#: Default inlier threshold for 2D hand keypoints, pixels: a detector's keypoints are typically 2-5 px off on a
+#: full-HD image, and a view three times further off is another hand or a wrong keypoint.
+KEYPOINT_THRESHOLD_PX = 12.0
 
-def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: float = 5.0,
+
+def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: float | None = None,
                 chunk_frames: int | None = None, scheduler=None, workers: int | None = None,
-                units: str | None = None) -> Step:
+                units: str | None = None, handedness: bool = True) -> Step:
     """3D markers from the 2D detections of calibrated cameras (see
     :func:`handcap.multiview.triangulate_detections`); per-marker quality beside them (``OUT_STEM.triangulation.npz``).
 
@@ -29,12 +35,17 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
         Markers to write (.c3d .trc .npz).
     min_views : int
         Inlier views a marker needs.
-    threshold_px : float
-        Reprojection error of an inlier view, pixels.
+    threshold_px : float or None
+        Reprojection error of an inlier view, pixels (default 5, and :data:`KEYPOINT_THRESHOLD_PX` for hand
+        keypoints: detectors place them a few pixels off).
     chunk_frames, scheduler, workers
         Frames per block of work; a Dask scheduler address; local processes (see :mod:`handcap.parallel`).
     units : {'mm', 'cm', 'm'} or None
         Unit of the camera file's translations, overriding what it says.
+    handedness : bool
+        For 2D hand keypoints (every marker name a keypoint name, see :mod:`handcap.markerless.keypoints`):
+        first decide which candidate hand of each camera and frame is which hand by agreement between the
+        views (:func:`handcap.markerless.repair_handedness`), as detectors swap left and right.
     """
     detections = list(detections)
     check_not_input(out, cameras, *detections)
@@ -42,6 +53,14 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     merged = merge_detections([read_detections(path) for path in detections])
     rig = read_rig(cameras, units=units)
     start = time.perf_counter()
+    lines = []
+    keypoints = is_keypoints(merged.marker_names)
+    if threshold_px is None:
+        threshold_px = KEYPOINT_THRESHOLD_PX if keypoints else 5.0
+    if handedness and keypoints:
+        repair = repair_handedness(merged, rig)
+        merged = repair.detections
+        lines.append(repair.summary())
     result = triangulate_detections(merged, rig, min_views=min_views, threshold_px=threshold_px,
                                     chunk_frames=chunk_frames, scheduler=scheduler, workers=workers)
     seconds = time.perf_counter() - start
@@ -54,7 +73,7 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     line = q.summary(f"{out}: {result.summary()}, {s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} "
                      f"marker-frames/s; per-marker errors and view counts in {quality}",
                      q.marker_figures(markers), markers.warnings)
-    return Step((line,), markers.warnings, (str(out), str(quality)), result)
+    return Step((*lines, line), markers.warnings, (str(out), str(quality)), result)
 
 
 def clean(path, out, *, layout: str | None = None, radius: float | None = None, window: int = cleaning.WINDOW,

@@ -1,0 +1,60 @@
+"""``handcap keypoints import`` and ``fit-keypoints``."""
+
+from __future__ import annotations
+
+from handcap.cli.common import add_hand_model, add_units, names_arg
+from handcap.markerless import FORMATS
+from handcap.markerless.fit import ROBUST_SCALE
+from handcap.steps import markerless
+
+
+def _cmd_keypoints_import(a):
+    cameras = names_arg([a.cameras]) if a.cameras else None
+    return markerless.keypoints_import(a.inputs, a.format, a.out, rate=a.rate, cameras=cameras)
+
+
+def _cmd_fit_keypoints(a):
+    return markerless.fit_keypoints(a.input, a.out, label=a.hand, side=a.side, fit_shape=not a.no_shape,
+                                    robust_scale=a.robust_mm / 1000, filter_cutoff=a.filter_cutoff, units=a.units,
+                                    hand_model=a.hand_model, mano_dir=a.mano_dir)
+
+
+def add_markerless(verbs) -> None:
+    p = verbs.add_parser("keypoints", help="2D hand keypoints: import those of other tools",
+                         description="import: MediaPipe arrays (.npy), OpenPose JSON folders or COCO keypoint "
+                                     "files to handcap's 2D detections file (marker names LABEL:wrist ... in the "
+                                     "usual 21-point order), which triangulate reads. One input per camera; "
+                                     "several inputs of one camera (a file per handedness label) are its "
+                                     "candidate hands.")
+    what = p.add_subparsers(dest="what", metavar="WHAT")
+    what.required = True
+    q = what.add_parser("import", help="keypoint files of another tool to a 2D detections file",
+                        description="mediapipe-npy: arrays (C, T, 21, 2|3) or (T, 21, 2|3) in pixels, negative for "
+                                    "missing, the label from the file name (left/right). openpose-json: a folder "
+                                    "of *_keypoints.json per camera. coco-json: a COCO keypoint file (or mmpose "
+                                    "results) per camera, COCO-WholeBody hands included.")
+    q.add_argument("inputs", nargs="+", help="keypoint files or folders")
+    q.add_argument("--format", required=True, choices=FORMATS, help="the inputs' format")
+    q.add_argument("--rate", type=float, required=True, help="frames per second of the videos")
+    q.add_argument("--cameras", help="camera names, comma-separated: one per input (mediapipe-npy: one per row of "
+                                     "the camera axis, the same in every file); default: from the inputs' names")
+    q.add_argument("--out", required=True, help="2D detections file to write (.npz)")
+    q.set_defaults(run=_cmd_keypoints_import)
+
+    p = verbs.add_parser("fit-keypoints", help="hand motion (pose and shape) from 3D hand keypoints",
+                         description="Umeyama's similarity of the six palm points (wrist and finger bases) checks "
+                                     "the scale and places the hand; the shape is fitted to the take's median bone "
+                                     "lengths; then every frame's pose is solved within the joint limits under a "
+                                     "robust loss (wrong keypoints count little). Writes the usual hand motion.")
+    p.add_argument("input", help="3D keypoints (.npz from triangulate, .c3d .trc ...), names [LABEL:]wrist ...")
+    p.add_argument("--out", required=True, help="hand motion to write (.npz)")
+    p.add_argument("--hand", help="the hand to fit when the file holds several (its label, e.g. right)")
+    p.add_argument("--side", choices=("right", "left"), help="hand side (default: the label when it is one, else "
+                                                             "right)")
+    p.add_argument("--no-shape", action="store_true", help="keep the average hand's shape")
+    p.add_argument("--robust-mm", type=float, default=1000 * ROBUST_SCALE,
+                   help="scale of the robust loss on keypoint residuals, mm (default %(default)g)")
+    p.add_argument("--filter-cutoff", type=float, help="low-pass the motion at this frequency, Hz")
+    add_units(p)
+    add_hand_model(p)
+    p.set_defaults(run=_cmd_fit_keypoints)

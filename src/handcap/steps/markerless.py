@@ -1,0 +1,89 @@
+"""Steps of markerless capture: ``keypoints import`` (files people have to 2D detections) and ``fit_keypoints``."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from handcap.hand import hand_model_from_options
+from handcap.io import check_not_input, read_markers, write_hand_motion
+from handcap.markerless import fit_keypoints as fitting
+from handcap.markerless import hand_labels, import_keypoints
+from handcap.markerless.fit import ROBUST_SCALE
+from handcap.markerless.keypoints import hand_names
+from handcap.multiview import write_detections
+from handcap.steps.step import Step
+
+
+def keypoints_import(paths, fmt: str, out, *, rate: float, cameras=None) -> Step:
+    """2D hand keypoints of another tool's files as a 2D detections file (see
+    :func:`handcap.markerless.import_keypoints`).
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        One input per camera (a file per handedness label of one camera is a candidate hand of it).
+    fmt : str
+        ``mediapipe-npy``, ``openpose-json`` or ``coco-json``.
+    out : str or Path
+        Detections .npz to write.
+    rate : float
+        Frames per second.
+    cameras : sequence of str, optional
+        Camera names (default: from the inputs' names).
+    """
+    paths = list(paths)
+    check_not_input(out, *paths)
+    detections = import_keypoints(paths, fmt, rate=rate, cameras=cameras)
+    write_detections(detections, out)
+    labels = hand_labels(detections.marker_names)
+    per_camera = len(detections) / max(len(detections.camera_names), 1)
+    line = (f"{out}: {len(detections)} keypoints of {len(labels)} hand label(s) ({', '.join(labels) or 'unlabelled'}) "
+            f"in {len(detections.camera_names)} camera(s), {detections.n_frames} frames ({per_camera:.0f} per camera)")
+    warnings = () if len(detections) else (f"{out}: no keypoint in the inputs",)
+    return Step((line,), warnings, (str(out),), detections)
+
+
+def fit_keypoints(path, out, *, label: str | None = None, side: str | None = None, fit_shape: bool = True,
+                  robust_scale: float = ROBUST_SCALE, filter_cutoff: float | None = None, units: str | None = None,
+                  hand_model: str | None = None, mano_dir=None) -> Step:
+    """Fit the hand model to 3D keypoints (see :func:`handcap.markerless.fit_keypoints`) and write the motion.
+
+    Parameters
+    ----------
+    path, out : str or Path
+        3D keypoints (any marker file: names ``[LABEL:]wrist`` ...); the hand motion .npz to write.
+    label : str or None
+        The hand to fit when the file has several.
+    side : {'right', 'left'} or None
+        Default: the label when it is one, else right.
+    fit_shape : bool
+        Fit the shape to the take's bone lengths.
+    robust_scale : float
+        Cauchy scale of the keypoint residuals, metres.
+    filter_cutoff : float or None
+        Low-pass the motion at this frequency, Hz.
+    units : {'mm', 'cm', 'm'} or None
+        Unit of the input's coordinates, overriding what the file says.
+    hand_model, mano_dir : str or None
+        The hand model (default openhand).
+    """
+    check_not_input(out, path)
+    keypoints = read_markers(path, units=units, hand=list(hand_names(label or "")))
+    labels = hand_labels(keypoints.names)
+    chosen = label if label is not None else (labels[0] if len(labels) == 1 else None)
+    side = side or (chosen if chosen in ("left", "right") else None)
+    hand = hand_model_from_options(hand_model, mano_dir, side=side or "right", recorded=None, what=str(path))
+    start = time.perf_counter()
+    motion = fitting(keypoints, label=label, side=side, hand=hand, fit_shape=fit_shape, robust_scale=robust_scale,
+                     filter_cutoff=filter_cutoff)
+    seconds = time.perf_counter() - start
+    motion = motion.with_warnings(*keypoints.warnings)
+    write_hand_motion(motion, out)
+    res = motion.marker_residuals
+    line = (f"{out}: {motion.side} hand, {motion.n_frames} frames in {seconds:.1f} s "
+            f"({motion.n_frames / max(seconds, 1e-9):.0f} frames/s), keypoint MRE {1000 * np.nanmean(res):.2f} mm "
+            f"(median {1000 * np.nanmedian(res):.2f}), {int(np.isfinite(res).sum())} of "
+            f"{res.size} keypoints seen, shape {np.round(motion.betas, 2).tolist()}")
+    return Step((line,), motion.warnings, (str(out),), motion)
