@@ -19,6 +19,12 @@ def _cmd_fit_keypoints(a):
                                     hand_model=a.hand_model, mano_dir=a.mano_dir)
 
 
+def _cmd_markerless(a):
+    return markerless.markerless(a.input, a.out, intrinsics=a.intrinsics, camera=a.camera, label=a.hand,
+                                 side=a.side, method=a.method, scale=a.scale, rate=a.rate,
+                                 hand_model=a.hand_model, mano_dir=a.mano_dir)
+
+
 def add_markerless(verbs) -> None:
     p = verbs.add_parser("keypoints", help="2D hand keypoints: import those of other tools",
                          description="import: MediaPipe arrays (.npy), OpenPose JSON folders or COCO keypoint "
@@ -58,3 +64,29 @@ def add_markerless(verbs) -> None:
     add_units(p)
     add_hand_model(p)
     p.set_defaults(run=_cmd_fit_keypoints)
+
+    p = verbs.add_parser("markerless", help="hand pose and shape of a steady grasp from one video's 2D keypoints",
+                         description="The paper's single-video capture: the hand held still and turned in front of "
+                                     "one camera is a stationary hand seen by a moving virtual camera. Structure "
+                                     "from motion of the 21 keypoints (a sparse bundle adjustment, robust to wrong "
+                                     "keypoints), the hand model fitted to it, then (--method joint, default) pose, "
+                                     "shape and camera poses together from the reprojection error (the paper's "
+                                     "eq. 2). One camera cannot measure the hand's size: the average adult's is "
+                                     "taken unless --scale says otherwise. Writes the hand motion in the camera's "
+                                     "frame.")
+    p.add_argument("input", help="2D keypoints of the video (.npz from handcap keypoints import)")
+    p.add_argument("--intrinsics", required=True,
+                   help="the camera: a cameras file (.toml .yml ...; --camera names it) or "
+                        "fx,fy,cx,cy[,k1,k2,p1,p2,k3] in pixels")
+    p.add_argument("--camera", help="the camera to use when the keypoints or the cameras file hold several")
+    p.add_argument("--hand", help="the hand label to start from when frames show several (default: the most given)")
+    p.add_argument("--side", choices=("right", "left"), help="hand side (default: the label when it is one, else "
+                                                             "right)")
+    p.add_argument("--method", choices=("joint", "two-stage"), default="joint",
+                   help="joint: eq. 2 after the two stages (default); two-stage: the paper's pipeline")
+    p.add_argument("--scale", type=float, default=1.0, help="the hand's size relative to an average adult's "
+                                                            "(default %(default)g)")
+    p.add_argument("--rate", type=float, help="frames per second (default: the keypoints file's)")
+    p.add_argument("--out", required=True, help="hand motion to write (.npz)")
+    add_hand_model(p)
+    p.set_defaults(run=_cmd_markerless)

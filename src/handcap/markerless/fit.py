@@ -147,7 +147,8 @@ def betas_from_keypoints(hand, points, *, prior: float = SHAPE_PRIOR) -> np.ndar
     -------
     ndarray (10,)
     """
-    goal = bone_lengths(points)
+    points = np.asarray(points, dtype=np.float64)
+    goal = bone_lengths(points, min(MIN_BONE_FRAMES, len(points)))
     use = np.isfinite(goal) & (goal > 1e-4)
     if use.sum() < 3:
         return np.zeros(10)

@@ -52,9 +52,11 @@ MODEL_JOINT = np.array([0, 13, 14, 15, 16, 1, 2, 3, 17, 4, 5, 6, 18, 10, 11, 12,
 KEYPOINT_OF_JOINT = np.argsort(MODEL_JOINT)
 #: The six points the palm carries rigidly (wrist and the five finger bases), as keypoint indices.
 PALM = np.array([0, 1, 5, 9, 13, 17])
-#: Bones between keypoints (parent, child), as keypoint indices: the kinematic chain of each finger.
+#: Pairs of keypoints on one rigid body, whose distance no pose changes (keypoint indices): the bones of each
+#: finger's chain, then the palm's (wrist to each finger base, and between neighbouring finger bases: the
+#: palm's breadth).
 BONES = np.array([(0, 1), (1, 2), (2, 3), (3, 4)] + [(b + k, b + k + 1) for b in (5, 9, 13, 17) for k in range(3)]
-                 + [(0, b) for b in (5, 9, 13, 17)])
+                 + [(0, b) for b in (5, 9, 13, 17)] + [(1, 5), (5, 9), (9, 13), (13, 17)])
 
 
 def keypoints_from_joints(joints) -> np.ndarray:

@@ -12,12 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
+from handcap.core.camera import Camera
 from handcap.core.errors import HandcapError
 from handcap.hand import OpenHand
 from handcap.markerless.keypoints import hand_names, keypoints_from_joints
 from handcap.multiview.detections import Detections
-from handcap.synth.motions import make_motion
+from handcap.synth.motions import make_motion, natural_pose
 
 
 @dataclass(frozen=True)
@@ -138,3 +140,99 @@ def view_keypoints(rig, hands: dict, *, rate: float = 30.0, noise_px: float = 1.
                             np.concatenate(marker), np.concatenate(xy), np.ones(sum(len(f) for f in frame)), rate,
                             n_frames, source="synthetic keypoints")
     return detections, np.concatenate(truth)
+
+
+@dataclass(frozen=True)
+class GraspVideo:
+    """A synthetic single-camera video of a steady grasp presented to the camera, and its truth.
+
+    Attributes
+    ----------
+    camera : Camera
+        The video camera (its frame is the world).
+    pixels : ndarray (T, 21, 2)
+        Detected keypoints in the distorted image, NaN where not given.
+    points : ndarray (21, 3)
+        True keypoints in the hand's own frame (OpenHand at ``phi``, no global pose, plus each keypoint's
+        offset), metres.
+    phi : ndarray (27,)
+        The held pose, radians.
+    betas : ndarray (10,)
+    rotation, translation : ndarray (T, 3)
+        Camera-from-hand pose of every frame (axis-angle, metres): ``x_cam = R x_hand + t``.
+    wrong : ndarray (T, 21) bool
+        Keypoints given at a wrong place.
+    """
+
+    camera: object
+    pixels: np.ndarray
+    points: np.ndarray
+    phi: np.ndarray
+    betas: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    wrong: np.ndarray
+
+
+def grasp_video(n_frames: int = 200, rng=None, *, noise_px: float = 3.0, missing: float = 0.1,
+                wrong: float = 0.02, side: str = "right", size=(1280, 720), focal_px: float = 1000.0,
+                distance: float = 0.5, offset_mm: float = 2.0) -> GraspVideo:
+    """A hand holding one pose, turned in front of a camera as a participant presents a grasp (the paper's video).
+
+    The hand's back faces the camera at the start; over the take it turns up to 80 degrees about the
+    vertical and 45 degrees about the horizontal image axis (smooth random sweeps) and drifts a few
+    centimetres, ``distance`` metres from the camera. The keypoints are the model's joints moved by a
+    constant random offset (``offset_mm`` per axis: where an annotator marks a joint is not its centre of
+    rotation), so no model reproduces them exactly. In the images they get Gaussian pixel noise,
+    ``missing`` of them are not given, ``wrong`` are given at the place of another keypoint of the hand
+    (plus 10 px).
+
+    Parameters
+    ----------
+    n_frames : int
+    rng : numpy.random.Generator, optional
+    noise_px, missing, wrong : float
+    side : {"right", "left"}
+    offset_mm : float
+        Standard deviation of each keypoint's constant offset from its joint, per axis, millimetres.
+    size : (int, int)
+        Image width and height, pixels.
+    focal_px : float
+    distance : float
+        Metres from the camera to the hand's centre.
+
+    Returns
+    -------
+    GraspVideo
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    hand = OpenHand(side)
+    betas = np.clip(rng.normal(0.0, 1.0, 10), -2.5, 2.5)
+    phi = natural_pose(rng)
+    joints = hand.forward(betas, np.zeros(3), None, np.zeros(3), phi=phi, vertices=False).joints
+    points = keypoints_from_joints(joints) + rng.normal(0.0, offset_mm / 1000.0, (21, 3))
+    w, h = size
+    camera = Camera("video", (w, h), [[focal_px, 0, w / 2 + rng.normal(0, 5)], [0, focal_px, h / 2 + rng.normal(0, 5)],
+                                      [0, 0, 1]], distortions=[rng.normal(0, 0.05), rng.normal(0, 0.02), 0, 0, 0])
+    # Model axes (x distal, y dorsal) to the camera's: fingers up the image, the back towards the camera.
+    base = Rotation.from_matrix(np.column_stack([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]))
+    t = np.linspace(0.0, 1.0, n_frames)
+
+    def sweep(amplitude_deg):
+        phase, freq = rng.uniform(0, 2 * np.pi), rng.uniform(0.7, 1.5)
+        return np.deg2rad(amplitude_deg) * np.sin(2 * np.pi * freq * t + phase)
+
+    turn = Rotation.from_euler("y", sweep(80.0)[:, None]) * Rotation.from_euler("x", sweep(45.0)[:, None]) * base
+    centre = points.mean(axis=0)
+    drift = np.stack([sweep(0.0) + 0.03 * np.sin(3 * t + rng.uniform(0, 6)), 0.02 * np.sin(4 * t + rng.uniform(0, 6)),
+                      np.full(n_frames, distance) + 0.04 * np.sin(2 * t + rng.uniform(0, 6))], axis=1)
+    translation = drift - turn.apply(centre)
+    cam_points = np.einsum("tij,kj->tki", turn.as_matrix(), points) + translation[:, None]
+    pixels, _ = camera.project(cam_points.reshape(-1, 3))
+    pixels = pixels.reshape(n_frames, 21, 2) + rng.normal(0.0, noise_px, (n_frames, 21, 2))
+    bad = rng.random((n_frames, 21)) < wrong
+    other = (np.arange(21) + rng.integers(1, 21, (n_frames, 21))) % 21
+    moved = np.take_along_axis(pixels, other[..., None], axis=1) + rng.normal(0, 10.0, (n_frames, 21, 2))
+    pixels = np.where(bad[..., None], moved, pixels)
+    pixels[rng.random((n_frames, 21)) < missing] = np.nan
+    return GraspVideo(camera, pixels, points, phi, betas, turn.as_rotvec(), translation, bad)

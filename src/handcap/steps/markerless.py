@@ -1,18 +1,24 @@
-"""Steps of markerless capture: ``keypoints import`` (files people have to 2D detections) and ``fit_keypoints``."""
+"""Steps of markerless capture: ``keypoints import`` (files people have to 2D detections), ``fit_keypoints``
+(3D keypoints to a hand motion) and ``markerless`` (one video's keypoints to a hand motion)."""
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
+from handcap.core.camera import Camera
+from handcap.core.errors import HandcapError
 from handcap.hand import hand_model_from_options
 from handcap.io import check_not_input, read_markers, write_hand_motion
+from handcap.io.camera_formats import read_rig
 from handcap.markerless import fit_keypoints as fitting
 from handcap.markerless import hand_labels, import_keypoints
+from handcap.markerless.capture import capture_video, video_keypoints
 from handcap.markerless.fit import ROBUST_SCALE
 from handcap.markerless.keypoints import hand_names
-from handcap.multiview import write_detections
+from handcap.multiview import read_detections, write_detections
 from handcap.steps.step import Step
 
 
@@ -87,3 +93,65 @@ def fit_keypoints(path, out, *, label: str | None = None, side: str | None = Non
             f"(median {1000 * np.nanmedian(res):.2f}), {int(np.isfinite(res).sum())} of "
             f"{res.size} keypoints seen, shape {np.round(motion.betas, 2).tolist()}")
     return Step((line,), motion.warnings, (str(out),), motion)
+
+
+def _intrinsics(spec: str, camera: str | None, units: str | None):
+    """A Camera from a cameras file (and a name) or from ``fx,fy,cx,cy[,k1,k2,p1,p2,k3]``."""
+    parts = spec.split(",")
+    if len(parts) in (4, 9) and not Path(spec).exists():
+        try:
+            v = [float(x) for x in parts]
+        except ValueError:
+            raise HandcapError(f"--intrinsics {spec!r}: give a cameras file or fx,fy,cx,cy[,k1,k2,p1,p2,k3] in "
+                               f"pixels") from None
+        if not all(np.isfinite(v)) or v[0] <= 0 or v[1] <= 0:
+            raise HandcapError(f"--intrinsics {spec!r}: focal lengths must be positive pixels")
+        size = (max(1, int(round(2 * v[2]))), max(1, int(round(2 * v[3]))))
+        distortions = v[4:] if len(v) == 9 else (0.0,) * 5
+        return Camera("video", size, [[v[0], 0, v[2]], [0, v[1], v[3]], [0, 0, 1]], distortions=distortions)
+    rig = read_rig(spec, units=units)
+    if camera is None:
+        if len(rig) > 1:
+            raise HandcapError(f"{spec} has {len(rig)} cameras ({', '.join(rig.names)}): choose one with --camera")
+        return rig[0]
+    return rig[camera]
+
+
+def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: str | None = None,
+               side: str | None = None, method: str = "joint", scale: float = 1.0, rate: float | None = None,
+               hand_model: str | None = None, mano_dir=None) -> Step:
+    """Hand pose and shape of a steady grasp from one camera's 2D keypoints (see
+    :func:`handcap.markerless.capture_video`), written as a hand motion in the camera's frame.
+
+    Parameters
+    ----------
+    path, out : str or Path
+        2D keypoints (.npz, a detections file: ``keypoints import`` makes one); the motion .npz to write.
+    intrinsics : str
+        A cameras file (the camera named ``camera``, or its only one) or ``fx,fy,cx,cy[,k1,k2,p1,p2,k3]``.
+    camera : str or None
+        The keypoints' camera when they hold several, and its name in the cameras file.
+    label : str or None
+        The hand to start from when a frame shows several (default: the label given most often).
+    side : {'right', 'left'} or None
+        Default: the label when it is one, else right.
+    method : {'joint', 'two-stage'}
+    scale : float
+        The hand's size relative to an average adult's.
+    rate : float or None
+        Frames per second (default: the keypoints').
+    hand_model, mano_dir : str or None
+    """
+    check_not_input(out, path)
+    detections = read_detections(path)
+    pixels = video_keypoints(detections, camera, label)
+    cam = _intrinsics(intrinsics, camera, None)
+    chosen = label or (hand_labels(detections.marker_names) or [""])[0]
+    side = side or (chosen if chosen in ("left", "right") else "right")
+    hand = hand_model_from_options(hand_model, mano_dir, side=side, recorded=None, what=str(path))
+    start = time.perf_counter()
+    result = capture_video(pixels, cam, hand=hand, method=method, rate=rate or detections.rate, scale=scale)
+    seconds = time.perf_counter() - start
+    write_hand_motion(result.motion, out)
+    line = f"{out}: {side} hand, {result.summary()}, {seconds:.1f} s; shape {np.round(result.motion.betas, 2).tolist()}"
+    return Step((line,), result.motion.warnings, (str(out),), result)

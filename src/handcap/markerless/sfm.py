@@ -1,0 +1,337 @@
+"""Single-video capture of a steady grasp: structure from motion on hand keypoints (the paper's eq. 1 and eq. 2).
+
+The participant holds the grasp still and turns the hand in front of one
+camera. The problem is inverted, as in the paper: a stationary hand seen by a
+moving virtual camera, one pose per frame.
+
+* **Two-stage** (the paper's pipeline, :func:`structure_from_motion` then
+  :func:`~handcap.markerless.fit.fit_keypoints`): eq. 1, a sparse bundle
+  adjustment of the 21 keypoints ``X`` and the camera poses (scipy's
+  ``least_squares`` with the Jacobian's sparsity, a Cauchy loss against wrong
+  keypoints), then the hand model fitted to ``X``.
+* **Joint** (the paper's future work, :func:`joint_fit`): eq. 2, the same
+  reprojection error with the keypoints given by the hand model,
+  ``X = J(phi, betas)``, so pose and shape are the unknowns instead of 63 free
+  coordinates; the solver's anatomical priors (joint limits, DIP-PIP coupling) and a shape prior join
+  the residuals.
+  It starts from the two-stage result.
+
+Scale: one camera cannot tell a large hand far away from a small one near. The
+two-stage structure is held to the average hand's palm size (a weak residual),
+the joint fit to the average hand's overall size (the first shape value is not
+fitted); pass ``scale`` when the hand's size is known (:func:`capture_video`).
+
+Frames: the camera of the video is the world; a hand pose is camera-from-hand,
+``x_camera = R x_hand + t``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+from scipy.spatial.transform import Rotation
+
+from handcap.core.errors import HandcapError
+from handcap.hand.anatomy import relaxed_pose
+from handcap.markerless.fit import ROBUST_SCALE as KEYPOINT_ROBUST_SCALE
+from handcap.markerless.joint_model import KeypointModel
+from handcap.markerless.keypoints import PALM
+from handcap.solve.lm import Priors, prior_terms
+
+#: Cauchy scale of the reprojection residuals, pixels: keypoint detectors are 2-5 px off on a hand 200 px tall.
+ROBUST_PX = 4.0
+#: Weight of the palm-size residual of eq. 1 (pixels per relative size error): weak, it only fixes the scale.
+SCALE_WEIGHT = 10.0
+#: Weight of the shape prior of eq. 2, pixels per shape unit.
+SHAPE_WEIGHT = 3.0
+#: Least keypoints a frame needs to be placed (PnP and the bundle adjustment).
+MIN_POINTS = 6
+
+
+@dataclass(frozen=True)
+class VideoStructure:
+    """A stationary hand and the camera poses that see it.
+
+    Attributes
+    ----------
+    points : ndarray (21, 3)
+        Keypoints in the hand's frame, metres (keypoint order).
+    rotation, translation : ndarray (T, 3)
+        Camera-from-hand pose per frame (axis-angle, metres); NaN for frames with too few keypoints.
+    residual_px : ndarray (T, 21)
+        Reprojection error of every given keypoint, pixels; NaN where not given or the frame not placed.
+    """
+
+    points: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    residual_px: np.ndarray
+
+    @property
+    def placed(self) -> np.ndarray:
+        """Frames with a camera pose, (T,) bool."""
+        return np.isfinite(self.rotation).all(axis=1)
+
+
+def project_points(matrix, rotvec, trans, points):
+    """Pixels of hand points seen by an ideal pinhole camera from each frame's pose.
+
+    Parameters
+    ----------
+    matrix : ndarray (3, 3)
+        Camera matrix.
+    rotvec, trans : ndarray (T, 3)
+        Camera-from-hand rotation (axis-angle) and translation (metres) of each frame.
+    points : ndarray (K, 3) or (T, K, 3)
+        Points in the hand's frame, metres.
+
+    Returns
+    -------
+    ndarray (T, K, 2)
+        Undistorted pixels.
+    """
+    rot = Rotation.from_rotvec(rotvec).as_matrix()
+    pts = points if points.ndim == 3 else np.broadcast_to(points, (len(rotvec),) + points.shape)
+    cam = np.einsum("tij,tkj->tki", rot, pts) + trans[:, None]
+    z = cam[..., 2:]
+    z = np.where(np.abs(z) < 1e-9, 1e-9, z)
+    return cam[..., :2] / z * matrix[[0, 1], [0, 1]] + matrix[:2, 2]
+
+
+def template_points(hand, betas=None, phi=None) -> np.ndarray:
+    """The hand model's keypoints at a pose, in its own frame.
+
+    Parameters
+    ----------
+    hand : HandModel
+    betas : ndarray (10,), optional
+        Shape (default: the average hand).
+    phi : ndarray (27,), optional
+        Pose, radians (default: the relaxed hand).
+
+    Returns
+    -------
+    ndarray (21, 3)
+        Metres, keypoint order.
+    """
+    model = KeypointModel(hand, betas)
+    phi = relaxed_pose() if phi is None else phi
+    return model.positions(np.zeros((1, 3)), np.eye(3)[None], np.asarray(phi)[None])[0]
+
+
+def initial_poses(pixels, matrix, points) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-from-hand pose of every frame by RANSAC PnP of its keypoints against ``points``.
+
+    Parameters
+    ----------
+    pixels : ndarray (T, 21, 2)
+        Undistorted pixels, NaN where not given.
+    matrix : ndarray (3, 3)
+    points : ndarray (21, 3)
+        A template of the hand's keypoints, metres.
+
+    Returns
+    -------
+    rotation, translation : ndarray (T, 3)
+        NaN where fewer than :data:`MIN_POINTS` keypoints are given or PnP fails.
+    """
+    n = len(pixels)
+    rot, trans = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    size = np.ptp(points, axis=0).max()
+    for t in range(n):
+        seen = np.isfinite(pixels[t]).all(axis=1)
+        if seen.sum() < MIN_POINTS:
+            continue
+        img = pixels[t, seen]
+        extent = max(np.ptp(img, axis=0).max(), 1.0)
+        ok, rv, tv, _ = cv2.solvePnPRansac(points[seen].astype(np.float64), img.astype(np.float64), matrix, None,
+                                           reprojectionError=0.15 * extent, iterationsCount=200,
+                                           flags=cv2.SOLVEPNP_EPNP)
+        if ok:
+            ok, rv, tv = cv2.solvePnP(points[seen], img, matrix, None, rv, tv, True, cv2.SOLVEPNP_ITERATIVE)
+        if ok and tv[2, 0] > size:
+            rot[t], trans[t] = rv[:, 0], tv[:, 0]
+    return rot, trans
+
+
+def _palm_size(points):
+    palm = points[PALM]
+    return np.sqrt(((palm - palm.mean(axis=0)) ** 2).sum(axis=1).mean())
+
+
+def structure_from_motion(pixels, matrix, template, *, robust_px: float = ROBUST_PX,
+                          max_nfev: int = 60) -> VideoStructure:
+    """Eq. 1: keypoints of a stationary hand and the virtual camera poses, by sparse bundle adjustment.
+
+    Parameters
+    ----------
+    pixels : ndarray (T, 21, 2)
+        Undistorted pixels of one camera's keypoints, NaN where not given.
+    matrix : ndarray (3, 3)
+        The camera matrix.
+    template : ndarray (21, 3)
+        A hand of the expected size and a plausible pose (the start, and the palm size the scale is held to).
+    robust_px : float
+        Cauchy scale of the residuals, pixels.
+    max_nfev : int
+        Most evaluations of the bundle adjustment.
+
+    Returns
+    -------
+    VideoStructure
+
+    Raises
+    ------
+    HandcapError
+        Fewer than 3 frames could be placed.
+    """
+    pixels = np.asarray(pixels, dtype=np.float64)
+    matrix = np.asarray(matrix, dtype=np.float64)
+    rot0, trans0 = initial_poses(pixels, matrix, template)
+    placed = np.isfinite(rot0).all(axis=1)
+    if placed.sum() < 3:
+        raise HandcapError(f"only {int(placed.sum())} frames show {MIN_POINTS} keypoints that place the hand: no "
+                           f"structure from motion (is the hand in the video?)")
+    frames = np.flatnonzero(placed)
+    obs = pixels[frames]
+    seen = np.isfinite(obs).all(axis=2)  # (F, 21)
+    anchor = int(np.argmax(seen.sum(axis=1)))  # the paper anchors one camera: the best seen frame's
+    free = np.array([f for f in range(len(frames)) if f != anchor])
+    size0 = _palm_size(template)
+    t_idx, k_idx = np.nonzero(seen)
+
+    def unpack(p):
+        x = p[:63].reshape(21, 3)
+        rv, tv = rot0[frames].copy(), trans0[frames].copy()
+        poses = p[63:].reshape(-1, 6)
+        rv[free], tv[free] = poses[:, :3], poses[:, 3:]
+        return x, rv, tv
+
+    def residual(p):
+        x, rv, tv = unpack(p)
+        proj = project_points(matrix, rv, tv, x)
+        r = (proj - np.nan_to_num(obs))[t_idx, k_idx].reshape(-1)
+        return np.r_[r, SCALE_WEIGHT * (_palm_size(x) / size0 - 1.0)]
+
+    sparsity = lil_matrix((2 * len(t_idx) + 1, 63 + 6 * len(free)), dtype=int)
+    row = np.arange(len(t_idx))
+    column_of_frame = np.full(len(frames), -1)
+    column_of_frame[free] = 63 + 6 * np.arange(len(free))
+    for a in range(2):
+        for c in range(3):
+            sparsity[2 * row + a, 3 * k_idx + c] = 1
+        has = column_of_frame[t_idx] >= 0
+        for c in range(6):
+            sparsity[2 * row[has] + a, column_of_frame[t_idx[has]] + c] = 1
+    sparsity[2 * len(t_idx), 3 * PALM[:, None] + np.arange(3)] = 1
+    start = np.r_[template.reshape(-1), np.c_[rot0[frames][free], trans0[frames][free]].reshape(-1)]
+    x, rv, tv = unpack(_graduated(residual, start, sparsity, robust_px, max_nfev, 2 * len(t_idx)))
+    return _structure(pixels, matrix, x, frames, rv, tv)
+
+
+def _structure(pixels, matrix, points, frames, rv, tv) -> VideoStructure:
+    n = len(pixels)
+    rot, trans = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    rot[frames], trans[frames] = rv, tv
+    residual = np.full((n, 21), np.nan)
+    residual[frames] = np.linalg.norm(project_points(matrix, rv, tv, points) - pixels[frames], axis=-1)
+    return VideoStructure(points, rot, trans, residual)
+
+
+def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotation, translation, *,
+              robust_px: float = ROBUST_PX, fit_scale: bool = False, priors: Priors | None = None,
+              max_nfev: int = 40):
+    """Eq. 2: hand pose, shape and camera poses from the reprojection error of the model's keypoints.
+
+    Parameters
+    ----------
+    pixels : ndarray (T, 21, 2)
+        Undistorted pixels, NaN where not given.
+    matrix : ndarray (3, 3)
+    hand : HandModel
+    structure : VideoStructure
+        The two-stage result: which frames are placed, and their start.
+    phi : ndarray (27,)
+        Starting pose, radians.
+    betas : ndarray (10,)
+        Starting shape.
+    rotation, translation : ndarray (T, 3)
+        Starting camera-from-hand poses of the model's frame (NaN for frames not placed).
+    robust_px : float
+    fit_scale : bool
+        Fit the first shape value (overall size) too; off by default, as one camera cannot see it.
+    priors : Priors, optional
+        The anatomical priors of :func:`handcap.solve.lm.prior_terms` (default: the solver's).
+    max_nfev : int
+
+    Returns
+    -------
+    phi : ndarray (27,)
+    betas : ndarray (10,)
+    structure : VideoStructure
+        The model's keypoints and the camera poses.
+    """
+    frames = np.flatnonzero(np.isfinite(rotation).all(axis=1))
+    obs = pixels[frames]
+    seen = np.isfinite(obs).all(axis=2)
+    t_idx, k_idx = np.nonzero(seen)
+    shape_free = np.arange(10) if fit_scale else np.arange(1, 10)
+    n_shape = len(shape_free)
+    n_head = 27 + n_shape
+
+    def model_points(p):
+        b = np.array(betas, dtype=np.float64)
+        b[shape_free] = p[27:n_head]
+        return KeypointModel(hand, b).positions(np.zeros((1, 3)), np.eye(3)[None], p[None, :27])[0], b
+
+    def residual(p):
+        x, b = model_points(p)
+        poses = p[n_head:].reshape(-1, 6)
+        proj = project_points(matrix, poses[:, :3], poses[:, 3:], x)
+        r = (proj - np.nan_to_num(obs))[t_idx, k_idx].reshape(-1)
+        prior = prior_terms(p[None, :27], priors, no_hold)[0][0]
+        return np.r_[r, prior_scale * prior, SHAPE_WEIGHT * b[shape_free]]
+
+    priors = Priors() if priors is None else priors
+    no_hold = np.zeros((1, 27), bool)
+    # The solver's anatomical priors (limits, DIP-PIP coupling, a weak pull to the relaxed hand), weighed
+    # against the pixels as the two-stage fit weighs them against 3D keypoints that average every frame:
+    # pixels per metre at the two robust scales, times the square root of the frames.
+    prior_scale = robust_px / KEYPOINT_ROBUST_SCALE * np.sqrt(len(frames))
+    n_prior = prior_terms(np.zeros((1, 27)), priors, no_hold)[0].shape[1]
+    n_obs = 2 * len(t_idx)
+    sparsity = lil_matrix((n_obs + n_prior + n_shape, n_head + 6 * len(frames)), dtype=int)
+    sparsity[:n_obs, :n_head] = 1
+    row = np.arange(len(t_idx))
+    for a in range(2):
+        for c in range(6):
+            sparsity[2 * row + a, n_head + 6 * t_idx + c] = 1
+    sparsity[n_obs:n_obs + n_prior, :27] = 1
+    sparsity[n_obs + n_prior + np.arange(n_shape), 27 + np.arange(n_shape)] = 1
+    start = np.r_[phi, np.asarray(betas)[shape_free], np.c_[rotation[frames], translation[frames]].reshape(-1)]
+    p = _graduated(residual, start, sparsity, robust_px, max_nfev, n_obs)
+    x, b = model_points(p)
+    poses = p[n_head:].reshape(-1, 6)
+    return p[:27], b, _structure(pixels, matrix, x, frames, poses[:, :3], poses[:, 3:])
+
+
+def _graduated(residual, start, sparsity, robust_px, max_nfev, n_obs) -> np.ndarray:
+    """Least squares with a Cauchy loss whose scale falls from the start's typical residual to ``robust_px``.
+
+    A robust loss far narrower than the start's errors is flat there (every residual counts as an outlier)
+    and the solver stops where it began; so the scale starts at the median residual and halves down to
+    ``robust_px``, each stage starting from the last.
+    """
+    r = np.abs(residual(start)[:n_obs])
+    scale = max(float(np.median(r)) if len(r) else robust_px, robust_px)
+    p = start
+    while True:
+        p = least_squares(residual, p, jac_sparsity=sparsity, loss="cauchy", f_scale=scale, x_scale="jac",
+                          max_nfev=max_nfev, method="trf").x
+        if scale <= robust_px:
+            return p
+        scale = max(scale / 3.0, robust_px)
