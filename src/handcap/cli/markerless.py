@@ -13,6 +13,11 @@ def _cmd_keypoints_import(a):
     return markerless.keypoints_import(a.inputs, a.format, a.out, rate=a.rate, cameras=cameras)
 
 
+def _cmd_keypoints_detect(a):
+    return markerless.keypoints_detect(a.inputs, a.out, rate=a.rate, mirrored=a.mirrored, retry=not a.no_retry,
+                                       max_hands=a.max_hands)
+
+
 def _cmd_fit_keypoints(a):
     return markerless.fit_keypoints(a.input, a.out, label=a.hand, side=a.side, fit_shape=not a.no_shape,
                                     robust_scale=a.robust_mm / 1000, filter_cutoff=a.filter_cutoff, units=a.units,
@@ -26,7 +31,7 @@ def _cmd_markerless(a):
 
 
 def add_markerless(verbs) -> None:
-    p = verbs.add_parser("keypoints", help="2D hand keypoints: import those of other tools",
+    p = verbs.add_parser("keypoints", help="2D hand keypoints: detect them in images and videos, or import them",
                          description="import: MediaPipe arrays (.npy), OpenPose JSON folders or COCO keypoint "
                                      "files to handcap's 2D detections file (marker names LABEL:wrist ... in the "
                                      "usual 21-point order), which triangulate reads. One input per camera; "
@@ -34,6 +39,20 @@ def add_markerless(verbs) -> None:
                                      "candidate hands.")
     what = p.add_subparsers(dest="what", metavar="WHAT")
     what.required = True
+    q = what.add_parser("detect", help="2D hand keypoints of images or videos (MediaPipe's landmarker)",
+                        description="MediaPipe's hand landmarker (the markerless extra: pip install "
+                                    "'handcap[markerless]' && pip install --no-deps mediapipe==0.10.14), and where it "
+                                    "finds no hand, retries: around the hand of the frame before, the image "
+                                    "padded, enlarged crops, turned, mirrored. One input per camera: a folder of "
+                                    "images, a video (read frame by frame) or an image, named after the camera.")
+    q.add_argument("inputs", nargs="+", help="folders of images, videos or images, one per camera")
+    q.add_argument("--out", required=True, help="2D detections file to write (.npz)")
+    q.add_argument("--rate", type=float, help="frames per second (default: the video's, else 30)")
+    q.add_argument("--mirrored", action="store_true", help="the images are mirrored (a selfie camera): keep "
+                                                           "MediaPipe's left/right labels as they are")
+    q.add_argument("--no-retry", action="store_true", help="the landmarker alone, no retries")
+    q.add_argument("--max-hands", type=int, default=2, help="most hands per image (default %(default)s)")
+    q.set_defaults(run=_cmd_keypoints_detect)
     q = what.add_parser("import", help="keypoint files of another tool to a 2D detections file",
                         description="mediapipe-npy: arrays (C, T, 21, 2|3) or (T, 21, 2|3) in pixels, negative for "
                                     "missing, the label from the file name (left/right). openpose-json: a folder "

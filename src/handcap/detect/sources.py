@@ -41,8 +41,10 @@ class FrameSource:
     kind: str
     files: tuple = ()
 
-    def frames(self):
+    def frames(self, colour: bool = False):
         """Yield ``(frame_index, image)`` in order; images are grey uint8 ``(H, W)``.
+
+        With ``colour``, BGR uint8 ``(H, W, 3)`` instead (grey inputs repeated in the three channels).
 
         Raises
         ------
@@ -59,7 +61,7 @@ class FrameSource:
                     ok, frame = capture.read()
                     if not ok:
                         break
-                    yield index, _grey(frame)
+                    yield index, _bgr(frame) if colour else _grey(frame)
                     index += 1
             finally:
                 capture.release()
@@ -67,7 +69,7 @@ class FrameSource:
                 raise HandcapError(f"{self.path}: no frame could be read from this video (empty or damaged)")
             return
         for index, file in enumerate(self.files):
-            yield index, read_image(file)
+            yield index, read_image(file, colour=colour)
 
     def fps(self) -> float | None:
         """A video's frame rate as its header says (None for images, or when it does not say)."""
@@ -91,12 +93,14 @@ class FrameSource:
             capture.release()
 
 
-def read_image(path) -> np.ndarray:
+def read_image(path, colour: bool = False) -> np.ndarray:
     """One image file as grey uint8 ``(H, W)``.
 
     Parameters
     ----------
     path : str or Path
+    colour : bool
+        Return BGR uint8 ``(H, W, 3)`` instead (a grey file repeated in the three channels).
 
     Returns
     -------
@@ -115,7 +119,7 @@ def read_image(path) -> np.ndarray:
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if image is None:
         raise HandcapError(f"{path}: not an image that can be decoded (damaged, truncated or not an image)")
-    return _grey(image)
+    return _bgr(image) if colour else _grey(image)
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -129,6 +133,20 @@ def _grey(image: np.ndarray) -> np.ndarray:
         image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     elif image.ndim == 3:
         image = image[..., 0]
+    return np.ascontiguousarray(image)
+
+
+def _bgr(image: np.ndarray) -> np.ndarray:
+    if image.dtype == np.uint16:
+        image = (image / 257.0).round().astype(np.uint8)
+    elif image.dtype != np.uint8:
+        image = np.clip(image, 0, 255).astype(np.uint8)
+    if image.ndim == 2:
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    elif image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    elif image.shape[2] != 3:
+        image = cv2.cvtColor(np.ascontiguousarray(image[..., 0]), cv2.COLOR_GRAY2BGR)
     return np.ascontiguousarray(image)
 
 

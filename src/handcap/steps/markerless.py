@@ -10,12 +10,14 @@ import numpy as np
 
 from handcap.core.camera import Camera
 from handcap.core.errors import HandcapError
+from handcap.detect.sources import frame_sources
 from handcap.hand import hand_model_from_options
 from handcap.io import check_not_input, read_markers, write_hand_motion
 from handcap.io.camera_formats import read_rig
 from handcap.markerless import fit_keypoints as fitting
 from handcap.markerless import hand_labels, import_keypoints
 from handcap.markerless.capture import capture_video, video_keypoints
+from handcap.markerless.detector import KeypointDetector, detect_keypoints
 from handcap.markerless.fit import ROBUST_SCALE
 from handcap.markerless.keypoints import hand_names
 from handcap.multiview import read_detections, write_detections
@@ -155,3 +157,48 @@ def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: 
     write_hand_motion(result.motion, out)
     line = f"{out}: {side} hand, {result.summary()}, {seconds:.1f} s; shape {np.round(result.motion.betas, 2).tolist()}"
     return Step((line,), result.motion.warnings, (str(out),), result)
+
+
+def keypoints_detect(inputs, out, *, rate: float | None = None, mirrored: bool = False, retry: bool = True,
+                     max_hands: int = 2, progress: bool | None = None) -> Step:
+    """2D hand keypoints of images or videos (MediaPipe's landmarker with retries), as a 2D detections file.
+
+    Parameters
+    ----------
+    inputs : sequence of str or Path
+        One per camera: a folder of images, a video or an image (its name is the camera's).
+    out : str or Path
+        Detections .npz to write.
+    rate : float or None
+        Frames per second (default: a video's own, else 30 with a warning).
+    mirrored : bool
+        The images are mirrored (a selfie camera).
+    retry : bool
+        Try again, at other places, scales and turns, where the landmarker finds no hand.
+    max_hands : int
+        Most hands per image.
+    progress : bool or None
+    """
+    sources = frame_sources(inputs)
+    check_not_input(out, *[f for s in sources for f in (s.files or (s.path,))])
+    warnings = []
+    if rate is None:
+        rates = [r for r in (s.fps() for s in sources) if r is not None]
+        rate = rates[0] if rates else 30.0
+        if not rates:
+            warnings.append("frame rate not given (--rate): 30 Hz assumed")
+    elif not 0 < rate < 100000:
+        raise HandcapError(f"--rate {rate}: give frames per second, more than 0")
+    detector = KeypointDetector(max_hands=max_hands, mirrored=mirrored, retry=retry)
+    try:
+        detections, counts = detect_keypoints(sources, detector, rate, progress=progress)
+    finally:
+        detector.close()
+    if not counts["with_hand"]:
+        warnings.append(f"no hand found in any of the {counts['frames']} frames")
+    write_detections(detections, out)
+    retried = {k: v for k, v in counts.items() if k not in ("frames", "with_hand", "plain") and v}
+    line = (f"{out}: hands in {counts['with_hand']} of {counts['frames']} frames of {len(sources)} camera(s); "
+            f"{counts['plain']} found by the landmarker alone"
+            + (", then " + ", ".join(f"{v} by {k}" for k, v in retried.items()) if retried else ""))
+    return Step((line,), tuple(warnings), (str(out),), detections)
