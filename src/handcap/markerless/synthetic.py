@@ -12,14 +12,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 from scipy.spatial.transform import Rotation
 
 from handcap.core.camera import Camera
 from handcap.core.errors import HandcapError
+from handcap.core.geometry import closest_points_on_mesh
 from handcap.hand import OpenHand
+from handcap.markerless.contact import ContactMap
 from handcap.markerless.keypoints import hand_names, keypoints_from_joints
 from handcap.multiview.detections import Detections
-from handcap.synth.motions import make_motion, natural_pose
+from handcap.synth.motions import grasp_configuration, make_motion, natural_pose
+from handcap.synth.objects import make_object
 
 
 @dataclass(frozen=True)
@@ -236,3 +240,39 @@ def grasp_video(n_frames: int = 200, rng=None, *, noise_px: float = 3.0, missing
     pixels = np.where(bad[..., None], moved, pixels)
     pixels[rng.random((n_frames, 21)) < missing] = np.nan
     return GraspVideo(camera, pixels, points, phi, betas, turn.as_rotvec(), translation, bad)
+
+
+def synthetic_grasp(kind: str = "precision", object_name: str = "cuboid", *, max_edge: float = 0.006,
+                    touch: float = 0.002):
+    """A grasp of a synthetic object by the average right hand, and its exact contact map.
+
+    Parameters
+    ----------
+    kind : {"power", "precision"}
+        As :func:`handcap.synth.motions.grasp_configuration` (fingers closed until they touch).
+    object_name : str
+        ``cuboid``, ``cylinder`` or ``sphere`` (:func:`handcap.synth.objects.make_object`).
+    max_edge : float
+        The object's mesh is subdivided to edges of at most this, metres (the contact map's resolution).
+    touch : float
+        Object vertices within this of the hand's surface are in contact, metres.
+
+    Returns
+    -------
+    hand : OpenHand
+    obj : SynthObject
+        With its exact signed distance.
+    object_pose : ndarray (4, 4)
+        Object frame to the hand model's frame (the world here).
+    phi : ndarray (27,)
+        The grasping pose (global pose zero).
+    contact_map : ContactMap
+    """
+    hand = OpenHand()
+    obj = make_object(object_name, seed=0)
+    object_pose, _, phi = grasp_configuration(hand, obj, kind)
+    vertices, faces = trimesh.remesh.subdivide_to_size(obj.vertices, obj.faces, max_edge=max_edge)
+    skin = hand.forward(np.zeros(10), np.zeros(3), None, np.zeros(3), phi=phi).vertices
+    world = vertices @ object_pose[:3, :3].T + object_pose[:3, 3]
+    distance = np.linalg.norm(closest_points_on_mesh(world, skin, hand.faces)[0] - world, axis=1)
+    return hand, obj, object_pose, phi, ContactMap(vertices, faces, (distance < touch).astype(float))
