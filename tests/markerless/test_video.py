@@ -26,7 +26,7 @@ def pa_error(a, b):
 
 @pytest.fixture(scope="module")
 def video():
-    return grasp_video(60, np.random.default_rng(5), noise_px=3.0, missing=0.1, wrong=0.02)
+    return grasp_video(40, np.random.default_rng(5), noise_px=3.0, missing=0.1, wrong=0.02)
 
 
 def test_structure_from_motion_recovers_the_hand(video):
@@ -45,14 +45,14 @@ def test_joint_fit_is_no_worse_than_two_stages(video):
     for result in (two, joint):
         assert pa_error(result.structure.points, video.points) < 5e-3
         assert np.degrees(np.abs(result.motion.phi[0] - video.phi)).mean() < 8.0
-        assert result.motion.joints.shape == (60, 21, 3) and np.isfinite(result.motion.joints).all()
+        assert result.motion.joints.shape == (40, 21, 3) and np.isfinite(result.motion.joints).all()
     assert np.nanmedian(joint.structure.residual_px) <= np.nanmedian(two.structure.residual_px) + 0.05
     assert pa_error(joint.structure.points, video.points) <= pa_error(two.structure.points, video.points) + 0.5e-3
     # the motion is in the camera's frame: its keypoints project onto the given ones
     cam_points = joint.motion.marker_fit
     seen = np.isfinite(video.pixels[..., 0]) & ~video.wrong
     pixels, _ = video.camera.project(cam_points.reshape(-1, 3))
-    err = np.linalg.norm(pixels.reshape(60, 21, 2) - video.pixels, axis=-1)[seen]
+    err = np.linalg.norm(pixels.reshape(40, 21, 2) - video.pixels, axis=-1)[seen]
     assert np.median(err) < 6.0
 
 
@@ -82,7 +82,7 @@ def test_video_keypoints_follow_the_hand_through_label_flips():
 def test_command(video, tmp_path, capsys):
     t, k = np.nonzero(np.isfinite(video.pixels[..., 0]))
     det = Detections(("video",), hand_names("right"), t, np.zeros_like(t), k, video.pixels[t, k], np.ones(len(t)),
-                     30.0, 60)
+                     30.0, 40)
     write_detections(det, tmp_path / "kp.npz")
     CameraRig((video.camera,)).save(tmp_path / "cam.toml")
     assert main(["markerless", str(tmp_path / "kp.npz"), "--intrinsics", str(tmp_path / "cam.toml"), "--method",
