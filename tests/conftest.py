@@ -48,15 +48,24 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.realdata)
 
 
+_seen_realdata: list = []
+
+
 def pytest_runtest_logreport(report):
-    if report.when == "call" and "realdata" in report.keywords:
-        _ran_realdata.append(report.nodeid)
+    # Reports reach this hook in the process that runs the tests and, with pytest-xdist, in the controller
+    # too (keywords included), so the check below works either way.
+    if "realdata" in report.keywords:
+        _seen_realdata.append(report.nodeid)
+        if report.when == "call":
+            _ran_realdata.append(report.nodeid)
 
 
 def pytest_sessionfinish(session, exitstatus):
     if not os.environ.get(REQUIRE_REALDATA) or session.testscollected == 0:
         return
-    if not any(item.get_closest_marker("realdata") for item in session.items):
+    if hasattr(session.config, "workerinput"):
+        return  # a pytest-xdist worker: the controller, which sees every report, checks
+    if not _seen_realdata:
         return  # deselected on purpose (-m "not realdata", -k, a single file)
     if not _ran_realdata:
         _failures.append(f"{REQUIRE_REALDATA} is set but no real-data test ran: the folder {SHARED_DATA} is absent "
