@@ -28,20 +28,17 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
-from handcap.core.rotations import axis_angle_from_matrix
 from handcap.hand import OpenHand
 from handcap.markerless.joint_model import KeypointModel
 from handcap.markerless.keypoints import BONES, KEYPOINT_NAMES, PALM, hand_names
-from handcap.quality.filters import lowpass, smooth_rotations
 from handcap.quality.limits import HAND_LENGTH_RANGE, MM
 from handcap.quality.plausibility import SHAPE_BOUND, attach, residual_warnings, shape_warnings
-from handcap.solve.lm import Poses, Priors
-from handcap.solve.motion import observed_markers, solve_lm
+from handcap.solve.lm import Priors
+from handcap.solve.motion import motion_from_poses, observed_markers, smoothed_poses, solve_lm
 
 #: Mean keypoint error above which a fit is warned about, metres. Keypoints of 2D detectors triangulated from
 #: calibrated views sit 2-8 mm from the joint centres they stand for (skin, annotation convention), so
@@ -262,16 +259,8 @@ def fit_keypoints(keypoints: MarkerSequence, *, label: str | None = None, side: 
     poses = solve_lm(model, np.nan_to_num(target), observed, priors, robust_scale, keypoints.rate, iterations,
                      first_iterations, progress)
     if filter_cutoff is not None:
-        orient = smooth_rotations(axis_angle_from_matrix(poses.rot), keypoints.rate, filter_cutoff, filter_order)
-        poses = Poses(lowpass(poses.transl, keypoints.rate, filter_cutoff, filter_order),
-                      Rotation.from_rotvec(orient).as_matrix(),
-                      lowpass(poses.phi, keypoints.rate, filter_cutoff, filter_order))
-    orient = axis_angle_from_matrix(poses.rot)
-    hand_pose = hand.hand_pose_from_phi(poses.phi)
-    joints = hand.forward(betas, orient, hand_pose, poses.transl, vertices=False).joints
-    fit = model.positions(poses.transl, poses.rot, poses.phi)
-    residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), np.nan)
-    motion = HandMotion(betas, orient, hand_pose, poses.transl, keypoints.rate, hand.side, poses.phi, hand.name,
-                        joints, hand_names(label), fit, residuals)
+        poses = smoothed_poses(poses, keypoints.rate, filter_cutoff, filter_order)
+    motion = motion_from_poses(hand, model, poses, target, observed, keypoints.rate, hand_names(label))
+    residuals = motion.marker_residuals
     found = residual_warnings(residuals, names=hand_names(label), what="keypoint fit MRE", limit=KEYPOINT_MRE_LIMIT)
     return attach(motion, found + (shape_warnings(betas) if fit_shape else []))

@@ -147,14 +147,31 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         poses = solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
                           first_iterations, progress)
     if filter_cutoff is not None:
-        poses = _smoothed(poses, markers.rate, filter_cutoff, filter_order)
-    motion = _motion(hand, model, poses, target, observed, markers.rate, names)
+        poses = smoothed_poses(poses, markers.rate, filter_cutoff, filter_order)
+    motion = motion_from_poses(hand, model, poses, target, observed, markers.rate, names)
     found = residual_warnings(motion.marker_residuals, names=names, what="solve MRE", limit=MRE_WARNING) + \
         shape_warnings(motion.betas)
     return attach(motion.with_warnings(*attachment.warnings), found)
 
 
-def _smoothed(poses: Poses, rate, cutoff, order) -> Poses:
+def smoothed_poses(poses: Poses, rate, cutoff, order) -> Poses:
+    """Poses low-passed: translation and angles by a zero-phase Butterworth filter, orientation without flips.
+
+    Parameters
+    ----------
+    poses : Poses
+        ``transl`` (T, 3) metres, ``rot`` (T, 3, 3), ``phi`` (T, 27) radians.
+    rate : float
+        Frames per second.
+    cutoff : float
+        Hz.
+    order : int
+        Butterworth order.
+
+    Returns
+    -------
+    Poses
+    """
     from scipy.spatial.transform import Rotation
 
     orient = smooth_rotations(axis_angle_from_matrix(poses.rot), rate, cutoff, order)
@@ -270,7 +287,27 @@ def _retry_outliers(model, target, observed, poses: Poses, cost, priors, scale, 
             poses.put(slice(t, t + 1), retry)
 
 
-def _motion(hand, model, poses: Poses, target, observed, rate, names) -> HandMotion:
+def motion_from_poses(hand, model, poses: Poses, target, observed, rate, names) -> HandMotion:
+    """The hand motion of solved poses, with the model's markers and their residuals.
+
+    Parameters
+    ----------
+    hand : HandModel
+    model : MarkerModel
+        Or any model with its interface (``betas``, ``positions``).
+    poses : Poses
+    target : ndarray (T, M, 3)
+        Observed markers, metres (anything where not ``observed``).
+    observed : ndarray (T, M) bool
+    rate : float
+        Frames per second.
+    names : sequence of str (M,)
+
+    Returns
+    -------
+    HandMotion
+        ``marker_fit`` (T, M, 3) and ``marker_residuals`` (T, M) metres, NaN where not observed.
+    """
     orient = axis_angle_from_matrix(poses.rot)
     hand_pose = hand.hand_pose_from_phi(poses.phi)
     joints = hand.forward(model.betas, orient, hand_pose, poses.transl, vertices=False).joints
