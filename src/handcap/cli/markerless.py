@@ -27,7 +27,10 @@ def _cmd_fit_keypoints(a):
 def _cmd_markerless(a):
     return markerless.markerless(a.input, a.out, intrinsics=a.intrinsics, camera=a.camera, label=a.hand,
                                  side=a.side, method=a.method, scale=a.scale, rate=a.rate,
-                                 hand_model=a.hand_model, mano_dir=a.mano_dir)
+                                 hand_model=a.hand_model, mano_dir=a.mano_dir, obj=a.object,
+                                 object_pose=a.object_pose, object_points=a.object_points,
+                                 object_frame=a.object_frame, contact=a.contact, object_units=a.object_units,
+                                 object_out=a.object_out, measure_scale=a.measure_scale)
 
 
 def add_markerless(verbs) -> None:
@@ -107,5 +110,24 @@ def add_markerless(verbs) -> None:
                                                             "(default %(default)g)")
     p.add_argument("--rate", type=float, help="frames per second (default: the keypoints file's)")
     p.add_argument("--out", required=True, help="hand motion to write (.npz)")
+    g = p.add_argument_group("held object", "the object's mesh and its pose in one frame (given, or fitted to "
+                                            "a depth camera's points of it by ICP), carried to every frame by "
+                                            "the virtual cameras; a contact map measures the hand's size and "
+                                            "refines the grasp")
+    g.add_argument("--object", help="the object's mesh (.ply .obj .stl ..., or a contact map .npz)")
+    g.add_argument("--object-pose", help="its pose in --object-frame: object to camera, a 4 x 4 matrix (text "
+                                         "file of 16 numbers, .npy, or .npz with 'pose'); ICP's start with "
+                                         "--object-points")
+    g.add_argument("--object-points", help="points of its surface in --object-frame, camera frame (.npz with "
+                                           "'points', .ply ...)")
+    g.add_argument("--object-frame", type=int, default=0, help="the frame the object's pose or points belong "
+                                                               "to (default %(default)s)")
+    g.add_argument("--contact", help="contact map .npz (object mesh and which vertices were touched)")
+    g.add_argument("--object-units", choices=("m", "cm", "mm"), default="m",
+                   help="unit of the object's mesh, pose and points (default %(default)s; contact maps are metres)")
+    g.add_argument("--object-out", help="object motion to write (default: OUT's name with -object)")
+    g.add_argument("--measure-scale", action="store_true",
+                   help="measure the hand's size against the contact map (--scale is the start): the hand, "
+                        "scaled about the camera, put where the contacted points touch it")
     add_hand_model(p)
     p.set_defaults(run=_cmd_markerless)

@@ -141,7 +141,7 @@ def capture_video(pixels, camera, *, side: str = "right", hand=None, method: str
         final = VideoStructure(fitted.marker_fit[0], rot, trans, two_stage.residual_px)
         model_points = model.positions(np.zeros((1, 3)), np.eye(3)[None], phi[None])[0]
         final = _reprojected(final, model_points, und, matrix)
-    motion = _motion(hand, betas, phi, rot, trans, rate)
+    motion = video_motion(hand, betas, phi, rot, trans, rate)
     median = float(np.nanmedian(final.residual_px))
     if median > REPROJECTION_WARNING_PX:
         motion = attach(motion, [f"reprojection error median {median:.1f} px is above {REPROJECTION_WARNING_PX:g} px: "
@@ -157,7 +157,25 @@ def _reprojected(structure, points, pixels, matrix) -> VideoStructure:
     return VideoStructure(points, structure.rotation, structure.translation, residual)
 
 
-def _motion(hand, betas, phi, rot, trans, rate) -> HandMotion:
+def video_motion(hand, betas, phi, rot, trans, rate) -> HandMotion:
+    """A hand holding one pose, moved by a camera-from-hand pose per frame.
+
+    Parameters
+    ----------
+    hand : HandModel
+    betas : ndarray (10,)
+    phi : ndarray (27,)
+        The held angles, radians.
+    rot, trans : ndarray (T, 3)
+        Camera-from-model poses (axis-angle, metres: a point ``x`` of the model at rest goes to ``R x + t``);
+        NaN in frames not placed, which hold the nearest placed frame's pose (with a warning).
+    rate : float
+
+    Returns
+    -------
+    HandMotion
+        In the camera's frame, ``marker_fit`` the model's keypoints.
+    """
     model = KeypointModel(hand, betas)
     placed = np.isfinite(rot).all(axis=1)
     rot, trans = _held(rot, placed), _held(trans, placed)

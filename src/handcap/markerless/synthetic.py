@@ -180,7 +180,7 @@ class GraspVideo:
 
 def grasp_video(n_frames: int = 200, rng=None, *, noise_px: float = 3.0, missing: float = 0.1,
                 wrong: float = 0.02, side: str = "right", size=(1280, 720), focal_px: float = 1000.0,
-                distance: float = 0.5, offset_mm: float = 2.0) -> GraspVideo:
+                distance: float = 0.5, offset_mm: float = 2.0, phi=None, betas=None) -> GraspVideo:
     """A hand holding one pose, turned in front of a camera as a participant presents a grasp (the paper's video).
 
     The hand's back faces the camera at the start; over the take it turns up to 80 degrees about the
@@ -204,6 +204,10 @@ def grasp_video(n_frames: int = 200, rng=None, *, noise_px: float = 3.0, missing
     focal_px : float
     distance : float
         Metres from the camera to the hand's centre.
+    phi : ndarray (27,), optional
+        The held pose, radians (default: a random natural pose).
+    betas : ndarray (10,), optional
+        The hand's shape (default: random).
 
     Returns
     -------
@@ -211,8 +215,9 @@ def grasp_video(n_frames: int = 200, rng=None, *, noise_px: float = 3.0, missing
     """
     rng = np.random.default_rng(0) if rng is None else rng
     hand = OpenHand(side)
-    betas = np.clip(rng.normal(0.0, 1.0, 10), -2.5, 2.5)
-    phi = natural_pose(rng)
+    drawn_betas, drawn_phi = np.clip(rng.normal(0.0, 1.0, 10), -2.5, 2.5), natural_pose(rng)
+    betas = drawn_betas if betas is None else np.asarray(betas, dtype=np.float64)
+    phi = drawn_phi if phi is None else np.asarray(phi, dtype=np.float64)
     joints = hand.forward(betas, np.zeros(3), None, np.zeros(3), phi=phi, vertices=False).joints
     points = keypoints_from_joints(joints) + rng.normal(0.0, offset_mm / 1000.0, (21, 3))
     w, h = size
@@ -276,3 +281,74 @@ def synthetic_grasp(kind: str = "precision", object_name: str = "cuboid", *, max
     world = vertices @ object_pose[:3, :3].T + object_pose[:3, 3]
     distance = np.linalg.norm(closest_points_on_mesh(world, skin, hand.faces)[0] - world, axis=1)
     return hand, obj, object_pose, phi, ContactMap(vertices, faces, (distance < touch).astype(float))
+
+
+@dataclass(frozen=True)
+class GraspVideoTruth:
+    """A video of a steady grasp of a known object, with the object's truth (:func:`grasp_object_video`).
+
+    Attributes
+    ----------
+    video : GraspVideo
+        The hand (average shape, the grasping pose) and its keypoints.
+    hand : OpenHand
+    obj : SynthObject
+        Mesh in its frame, metres, with its exact signed distance.
+    object_poses : ndarray (T, 4, 4)
+        Object to camera in every frame.
+    contact_map : ContactMap
+        The exact contacts (the object's mesh subdivided).
+    points : ndarray (N, 3)
+        The object's surface as a depth camera at the video camera would see it in frame 0 (the sides facing
+        the camera, not behind the hand), metres, with noise.
+    """
+
+    video: GraspVideo
+    hand: object
+    obj: object
+    object_poses: np.ndarray
+    contact_map: ContactMap
+    points: np.ndarray
+
+
+def grasp_object_video(kind: str = "precision", object_name: str = "cuboid", n_frames: int = 200, rng=None, *,
+                       points: int = 3000, point_noise: float = 0.0005, **video) -> GraspVideoTruth:
+    """A hand holding an object in a grasp, turned in front of a camera (:func:`grasp_video` with
+    :func:`synthetic_grasp`'s hand, pose and object), and a depth view of the object in the first frame.
+
+    Parameters
+    ----------
+    kind, object_name : str
+        As :func:`synthetic_grasp`.
+    n_frames : int
+    rng : numpy.random.Generator, optional
+    points : int
+        Surface samples of the object before those hidden are removed.
+    point_noise : float
+        Standard deviation of the depth points' noise per axis, metres.
+    **video
+        More arguments of :func:`grasp_video` (noise, missing and wrong keypoints, ...).
+
+    Returns
+    -------
+    GraspVideoTruth
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    hand, obj, object_pose, phi, contact_map = synthetic_grasp(kind, object_name)
+    clip = grasp_video(n_frames, rng, phi=phi, betas=np.zeros(10), side=hand.side, **video)
+    poses = np.zeros((n_frames, 4, 4))
+    poses[:, :3, :3] = Rotation.from_rotvec(clip.rotation).as_matrix()
+    poses[:, :3, 3] = clip.translation
+    poses[:, 3, 3] = 1.0
+    object_poses = poses @ object_pose
+    mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
+    surface, face = trimesh.sample.sample_surface(mesh, points, seed=int(rng.integers(1 << 31)))
+    cam = surface @ object_poses[0, :3, :3].T + object_poses[0, :3, 3]
+    normals = mesh.face_normals[face] @ object_poses[0, :3, :3].T
+    facing = np.einsum("ij,ij->i", normals, cam) < 0
+    skin_cam = hand.forward(np.zeros(10), np.zeros(3), None, np.zeros(3), phi=phi).vertices @ poses[0, :3, :3].T \
+        + poses[0, :3, 3]
+    hidden = trimesh.Trimesh(skin_cam, hand.faces, process=False).ray.intersects_any(
+        cam, -cam / np.linalg.norm(cam, axis=1, keepdims=True))
+    seen = cam[facing & ~hidden] + rng.normal(0.0, point_noise, (int((facing & ~hidden).sum()), 3))
+    return GraspVideoTruth(clip, hand, obj, object_poses, contact_map, seen)

@@ -12,13 +12,16 @@ from handcap.core.camera import Camera
 from handcap.core.errors import HandcapError
 from handcap.detect.sources import frame_sources
 from handcap.hand import hand_model_from_options
-from handcap.io import check_not_input, read_markers, write_hand_motion
+from handcap.io import (check_not_input, read_markers, read_mesh, read_scan_points, write_hand_motion,
+                        write_object_motion)
 from handcap.io.camera_formats import read_rig
 from handcap.markerless import fit_keypoints as fitting
 from handcap.markerless import hand_labels, import_keypoints
 from handcap.markerless.capture import capture_video, video_keypoints
+from handcap.markerless.contact import ContactMap
 from handcap.markerless.detector import KeypointDetector, detect_keypoints
 from handcap.markerless.fit import ROBUST_SCALE
+from handcap.markerless.grasp import capture_grasp
 from handcap.markerless.keypoints import hand_names
 from handcap.multiview import read_detections, write_detections
 from handcap.steps.step import Step
@@ -119,11 +122,57 @@ def _intrinsics(spec: str, camera: str | None, units: str | None):
     return rig[camera]
 
 
+def _object_pose(path, factor) -> np.ndarray:
+    """A 4 x 4 object-to-camera pose from a text file (16 numbers), ``.npy`` or ``.npz`` (``pose``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no such object pose file")
+    try:
+        if path.suffix.lower() == ".npz":
+            with np.load(path, allow_pickle=False) as data:
+                pose = np.asarray(data["pose"], dtype=np.float64)
+        elif path.suffix.lower() == ".npy":
+            pose = np.asarray(np.load(path, allow_pickle=False), dtype=np.float64)
+        else:
+            pose = np.loadtxt(path, delimiter=None if "," not in path.read_text(errors="replace") else ",")
+    except Exception as err:  # numpy's readers raise many types for a bad file
+        raise HandcapError(f"{path}: not an object pose (a 4 x 4 matrix: 16 numbers, .npy, or .npz with 'pose'): "
+                           f"{' '.join(str(err).split())[:100]}") from None
+    pose = np.asarray(pose, dtype=np.float64).reshape(-1)
+    if pose.size != 16 or not np.isfinite(pose).all():
+        raise HandcapError(f"{path}: an object pose is a 4 x 4 matrix of finite numbers, got {pose.size} values")
+    pose = pose.reshape(4, 4).copy()
+    pose[:3, 3] *= factor
+    return pose
+
+
+def _object_mesh(obj, contact, factor):
+    """The object's mesh (vertices metres, faces) and the contact map, from the files given."""
+    contact_map = ContactMap.load(contact) if contact is not None else None
+    if obj is None:
+        return contact_map.vertices, contact_map.faces, contact_map
+    if Path(obj).suffix.lower() == ".npz":
+        loaded = ContactMap.load(obj)
+        return loaded.vertices, loaded.faces, contact_map
+    mesh = read_mesh(obj, "object mesh")
+    vertices = np.asarray(getattr(mesh, "vertices", []), dtype=np.float64) * factor
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+    if vertices.ndim != 2 or len(faces) == 0:
+        raise HandcapError(f"{obj}: holds no mesh faces; give the object's surface mesh")
+    across = float(np.ptp(vertices, axis=0).max())
+    if not 0.005 <= across <= 2.0:
+        raise HandcapError(f"{obj}: the object is {across:.3g} m across: give its unit with --object-units")
+    return vertices, faces, contact_map
+
+
 def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: str | None = None,
                side: str | None = None, method: str = "joint", scale: float = 1.0, rate: float | None = None,
-               hand_model: str | None = None, mano_dir=None) -> Step:
+               hand_model: str | None = None, mano_dir=None, obj=None, object_pose=None, object_points=None,
+               object_frame: int = 0, contact=None, object_units: str = "m", object_out=None,
+               measure_scale: bool = False) -> Step:
     """Hand pose and shape of a steady grasp from one camera's 2D keypoints (see
-    :func:`handcap.markerless.capture_video`), written as a hand motion in the camera's frame.
+    :func:`handcap.markerless.capture_video`), written as a hand motion in the camera's frame; with an object,
+    its motion too (see :func:`handcap.markerless.grasp.capture_grasp`).
 
     Parameters
     ----------
@@ -139,24 +188,67 @@ def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: 
         Default: the label when it is one, else right.
     method : {'joint', 'two-stage'}
     scale : float
-        The hand's size relative to an average adult's.
+        The hand's size relative to an average adult's (the start when ``measure_scale``).
     rate : float or None
         Frames per second (default: the keypoints').
     hand_model, mano_dir : str or None
+    obj : str, Path or None
+        The held object's mesh (any format trimesh reads, or a contact map .npz); default: the contact map's.
+    object_pose : str, Path or None
+        Its pose in ``object_frame`` (object to camera, 4 x 4): the pose, or ICP's start with ``object_points``.
+    object_points : str, Path or None
+        Points of its surface in ``object_frame``'s camera (.npz ``points``, .ply ...).
+    object_frame : int
+    contact : str, Path or None
+        A contact map .npz (:mod:`handcap.markerless.contact`): measures the hand's size, refines the grasp.
+    object_units : {'m', 'cm', 'mm'}
+        Unit of the object's mesh, pose and points.
+    object_out : str, Path or None
+        The object motion .npz to write (default: ``OUT``'s name with ``-object``).
+    measure_scale : bool
+        Measure the hand's size against the contact map.
     """
-    check_not_input(out, path)
+    grasp = obj is not None or contact is not None
+    if not grasp and (object_pose is not None or object_points is not None):
+        raise HandcapError("--object-pose and --object-points need the object: --object MESH or --contact MAP")
+    if measure_scale and contact is None:
+        raise HandcapError("--measure-scale needs the contact map (--contact)")
+    if not (np.isfinite(scale) and 0.5 <= scale <= 2.0):
+        raise HandcapError(f"--scale {scale}: the hand's size relative to an average adult's, 0.5-2")
+    object_out = Path(object_out) if object_out else Path(out).with_name(Path(out).stem + "-object.npz")
+    inputs = [p for p in (path, obj, object_pose, object_points, contact) if p is not None]
+    check_not_input(out, *inputs)
+    if grasp:
+        check_not_input(object_out, out, *inputs)
     detections = read_detections(path)
     pixels = video_keypoints(detections, camera, label)
     cam = _intrinsics(intrinsics, camera, None)
     chosen = label or (hand_labels(detections.marker_names) or [""])[0]
     side = side or (chosen if chosen in ("left", "right") else "right")
     hand = hand_model_from_options(hand_model, mano_dir, side=side, recorded=None, what=str(path))
+    rate = rate or detections.rate
     start = time.perf_counter()
-    result = capture_video(pixels, cam, hand=hand, method=method, rate=rate or detections.rate, scale=scale)
-    seconds = time.perf_counter() - start
-    write_hand_motion(result.motion, out)
-    line = f"{out}: {side} hand, {result.summary()}, {seconds:.1f} s; shape {np.round(result.motion.betas, 2).tolist()}"
-    return Step((line,), result.motion.warnings, (str(out),), result)
+    if not grasp:
+        result = capture_video(pixels, cam, hand=hand, method=method, rate=rate, scale=scale)
+        write_hand_motion(result.motion, out)
+        line = (f"{out}: {side} hand, {result.summary()}, {time.perf_counter() - start:.1f} s; shape "
+                f"{np.round(result.motion.betas, 2).tolist()}")
+        return Step((line,), result.motion.warnings, (str(out),), result)
+    factor = {"m": 1.0, "cm": 0.01, "mm": 0.001}.get(object_units)
+    if factor is None:
+        raise HandcapError(f"--object-units {object_units!r}: choose m, cm or mm")
+    vertices, faces, contact_map = _object_mesh(obj, contact, factor)
+    pose = _object_pose(object_pose, factor) if object_pose is not None else None
+    points = read_scan_points(object_points) * factor if object_points is not None else None
+    name = Path(obj).stem if obj is not None else "object"
+    result = capture_grasp(pixels, cam, vertices, faces, object_pose=pose, object_points=points, frame=object_frame,
+                           contact_map=contact_map, scale=scale, measure_scale=measure_scale, hand=hand,
+                           method=method, rate=rate, name=name)
+    write_hand_motion(result.video.motion, out)
+    write_object_motion(result.object_motion, object_out)
+    lines = (f"{out}: {side} hand, {result.video.summary()}, {time.perf_counter() - start:.1f} s",
+             f"{object_out}: {name} carried through {len(pixels)} frames; {result.summary()}")
+    return Step(lines, result.video.motion.warnings, (str(out), str(object_out)), result)
 
 
 def keypoints_detect(inputs, out, *, rate: float | None = None, mirrored: bool = False, retry: bool = True,
