@@ -175,3 +175,22 @@ def test_markerless_verb_with_an_object(grasp, tmp_path, capsys):
         assert main(base[:-1] + [str(tmp_path / "bad.npz")] + extra) == 2
         assert message in capsys.readouterr().err
         assert not (tmp_path / "bad.npz").exists() and not (tmp_path / "bad-object.npz").exists()
+
+
+def test_markerless_demo_meets_its_figures(tmp_path, capsys):
+    from handcap.demo_markerless import run_markerless_demo
+
+    summary = run_markerless_demo(tmp_path / "demo", frames=60)
+    assert summary["keypoint_error_pa_mm"] < 5.0 and summary["joint_angle_error_deg"] < 8.0
+    before, after = summary["contact_distance_mm_before_after"]
+    assert after < before
+    assert summary["object_surface_error_mm"] < 12.0
+    for name in ("keypoints.npz", "camera.toml", "box.ply", "contact.npz", "box_points.npz", "motion.npz",
+                 "motion-object.npz", "summary.json"):
+        assert (tmp_path / "demo" / name).is_file()
+    # the command the summary prints repeats the capture from the demo's files
+    args = summary["command"].split()[1:]
+    args[args.index("--out") + 1] = str(tmp_path / "again.npz")
+    assert main(args) == 0
+    assert main(["demo", "--images", "--markerless", "--out", str(tmp_path / "x")]) == 2
+    assert "choose one" in capsys.readouterr().err

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from handcap.core.errors import HandcapError
 from handcap.layouts import SHIPPED
 from handcap.steps import synth
 from handcap.synth.motions import MOTIONS
@@ -21,8 +22,12 @@ def _cmd_synth(a):
 
 
 def _cmd_demo(a):
+    if a.images and a.markerless:
+        raise HandcapError("--images and --markerless are two demos: choose one")
     if a.images:
         return synth.demo_images(a.out or "demo-images")
+    if a.markerless:
+        return synth.demo_markerless(a.out or "demo-markerless")
     return synth.demo(a.out or "demo-output")
 
 
@@ -75,9 +80,13 @@ def add_synth(verbs) -> None:
                          description="Synthetic DexterCap-style session -> marker calibration -> solve -> "
                                      "5 Hz smoothing -> metrics against the truth, written to demo-output/.")
     p.add_argument("--out", help="output folder, rewritten on every run (default demo-output/, with --images "
-                                 "demo-images/)")
+                                 "demo-images/, with --markerless demo-markerless/)")
     p.add_argument("--images", action="store_true",
                    help="the path from pixels instead: render 13 cameras' images of the patched hand, detect the "
                         "coded patches, triangulate, clean, calibrate and solve, each stage against the truth "
                         "(a few minutes)")
+    p.add_argument("--markerless", action="store_true",
+                   help="a grasp from one video instead: synthetic keypoints of a hand holding a box, structure "
+                        "from motion, the hand fitted, the box placed by ICP and carried through the frames, "
+                        "the grasp refined with a contact map, each against the truth (demo-markerless/)")
     p.set_defaults(run=_cmd_demo)

@@ -133,8 +133,9 @@ def _object_pose(path, factor) -> np.ndarray:
                 pose = np.asarray(data["pose"], dtype=np.float64)
         elif path.suffix.lower() == ".npy":
             pose = np.asarray(np.load(path, allow_pickle=False), dtype=np.float64)
-        else:
-            pose = np.loadtxt(path, delimiter=None if "," not in path.read_text(errors="replace") else ",")
+        else:  # 16 numbers separated by spaces, commas or semicolons; '#' starts a comment
+            text = " ".join(line.split("#")[0] for line in path.read_text(errors="replace").splitlines())
+            pose = np.array([float(v) for v in text.replace(",", " ").replace(";", " ").split()])
     except Exception as err:  # numpy's readers raise many types for a bad file
         raise HandcapError(f"{path}: not an object pose (a 4 x 4 matrix: 16 numbers, .npy, or .npz with 'pose'): "
                            f"{' '.join(str(err).split())[:100]}") from None

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from handcap.core.errors import HandcapError
 from handcap.demo import run_demo
+from handcap.demo_markerless import run_markerless_demo
 from handcap.io import check_output_folder
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
@@ -74,6 +75,17 @@ def demo(out="demo-output") -> Step:
               + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings")]
     lines += [f"  {path.relative_to(out) if path.is_relative_to(out) else path}" for path in files]
     return Step(tuple(lines), warnings, tuple(map(str, files)), summary)
+
+
+def demo_markerless(out="demo-markerless") -> Step:
+    """Run :func:`handcap.demo_markerless.run_markerless_demo` into ``out`` (rewritten on every run)."""
+    check_output_folder(out, force=True)  # the demo's folder is rewritten on every run
+    summary = run_markerless_demo(out)
+    warnings = tuple(summary["warnings"])
+    lines = [f"{key:38s} {value}" for key, value in summary.items() if key not in ("files", "warnings")]
+    lines.append(f"\nwrote {len(summary['files'])} files to {out}/ (figures in {out}/summary.txt); "
+                 + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
+    return Step(tuple(lines), warnings, tuple(summary["files"]), summary)
 
 
 def demo_images(out="demo-images") -> Step:
