@@ -7,7 +7,7 @@ from pathlib import Path
 
 from handcap.core.errors import HandcapError
 from handcap.demo import run_demo
-from handcap.demo_markerless import run_markerless_demo
+from handcap.steps.markerless_demo import run_markerless_demo
 from handcap.io import check_output_folder
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
@@ -78,7 +78,7 @@ def demo(out="demo-output") -> Step:
 
 
 def demo_markerless(out="demo-markerless") -> Step:
-    """Run :func:`handcap.demo_markerless.run_markerless_demo` into ``out`` (rewritten on every run)."""
+    """Run :func:`handcap.steps.markerless_demo.run_markerless_demo` into ``out`` (rewritten on every run)."""
     check_output_folder(out, force=True)  # the demo's folder is rewritten on every run
     summary = run_markerless_demo(out)
     warnings = tuple(summary["warnings"])

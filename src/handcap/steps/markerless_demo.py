@@ -61,7 +61,24 @@ def _pa_error(a, b) -> float:
 
 
 def run_markerless_demo(out="demo-markerless", *, frames: int = FRAMES, seed: int = SEED) -> dict:
-    """Run the demo into ``out`` (see the module docstring); returns its summary."""
+    """Run the demo into ``out`` (see the module docstring); returns its summary.
+
+    It sits among the steps because it runs one (``markerless``) on the files it writes, as a user would.
+
+    Parameters
+    ----------
+    out : str or Path
+        The folder to write into (created; files of the same names are replaced).
+    frames : int
+        Frames of the video.
+    seed : int
+        Seeds the synthetic grasp.
+
+    Returns
+    -------
+    dict
+        The figures (see the module docstring), ``command``, ``warnings`` and ``files`` (those written).
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     before_files = file_stamps(out)
