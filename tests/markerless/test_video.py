@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from handcap import HandcapError
 from handcap.cli import main
@@ -95,3 +96,37 @@ def test_command(video, tmp_path, capsys):
                  "--out", str(tmp_path / "n.npz")]) == 2
     err = capsys.readouterr().err
     assert err.count("error:") == 2 and not (tmp_path / "n.npz").exists()
+
+
+def test_a_frame_whose_pose_jumps_is_solved_again_from_its_neighbours(video):
+    from handcap.markerless.sfm import continuous_poses
+
+    pixels = video.camera.undistort_pixels(video.pixels)
+    structure = structure_from_motion(pixels, video.camera.matrix, template_points(OpenHand()))
+    assert continuous_poses(pixels, video.camera.matrix, structure).rotation == pytest.approx(structure.rotation)
+    flipped = structure.rotation.copy()
+    t = 17
+    turn = Rotation.from_rotvec([0.0, np.pi, 0.0]) * Rotation.from_rotvec(flipped[t])  # 180 degrees off
+    flipped[t] = turn.as_rotvec()
+    broken = type(structure)(structure.points, flipped, structure.translation, structure.residual_px)
+    repaired = continuous_poses(pixels, video.camera.matrix, broken)
+    error = np.degrees((Rotation.from_rotvec(repaired.rotation[t]) * Rotation.from_rotvec(structure.rotation[t]).inv())
+                       .magnitude())
+    assert error < 2.0
+    assert np.nanmedian(repaired.residual_px[t]) < 6.0
+
+
+def test_learned_offsets_make_eq2_angles_better(video):
+    import handcap.markerless.sfm as sfm
+
+    pixels = video.camera.undistort_pixels(video.pixels)
+    hand = OpenHand()
+    two = capture_video(video.pixels, video.camera, method="two-stage")
+    fitted_phi, betas = two.motion.phi[0], two.motion.betas
+    rot, trans = two.structure.rotation, two.structure.translation
+    errors = {}
+    for offsets in (False, True):
+        phi, _, structure = sfm.joint_fit(pixels, video.camera.matrix, hand, two.two_stage, fitted_phi, betas, rot,
+                                          trans, offsets=offsets)
+        errors[offsets] = np.degrees(np.abs(phi - video.phi)).mean()
+    assert errors[True] < errors[False], errors

@@ -22,8 +22,8 @@ from handcap.hand import OpenHand
 from handcap.markerless.fit import fit_keypoints
 from handcap.markerless.joint_model import KeypointModel
 from handcap.markerless.keypoints import KEYPOINT_NAMES, split_hand_name
-from handcap.markerless.sfm import (ROBUST_PX, VideoStructure, joint_fit, project_points, structure_from_motion,
-                                   template_points)
+from handcap.markerless.sfm import (ROBUST_PX, VideoStructure, continuous_poses, joint_fit, project_points,
+                                   structure_from_motion, template_points)
 from handcap.quality.plausibility import attach, shape_warnings
 
 METHODS = ("joint", "two-stage")
@@ -141,6 +141,8 @@ def capture_video(pixels, camera, *, side: str = "right", hand=None, method: str
         final = VideoStructure(fitted.marker_fit[0], rot, trans, two_stage.residual_px)
         model_points = model.positions(np.zeros((1, 3)), np.eye(3)[None], phi[None])[0]
         final = _reprojected(final, model_points, und, matrix)
+    final = continuous_poses(und, matrix, final)
+    rot, trans = final.rotation, final.translation
     motion = video_motion(hand, betas, phi, rot, trans, rate)
     median = float(np.nanmedian(final.residual_px))
     if median > REPROJECTION_WARNING_PX:

@@ -50,6 +50,13 @@ from handcap.solve.lm import Priors, prior_terms
 ROBUST_PX = 4.0
 #: Weight of the shape prior of eq. 2, pixels per shape unit.
 SHAPE_WEIGHT = 3.0
+#: Prior standard deviation of a keypoint's constant offset from its model joint in eq. 2, metres (where a
+#: detector puts a joint is not its centre of rotation: 2-3 mm on each axis).
+OFFSET_SIGMA = 0.003
+#: Pixels per relative error of the keypoints' palm size against the two-stage structure's (the template's):
+#: with offsets the overall size is no longer held by the first shape value, and the scale of the whole scene
+#: drifted by 5-8 %; quadratic (outside the robust loss), so it holds.
+OFFSET_SIZE_WEIGHT = 1000.0
 #: Least keypoints a frame needs to be placed (PnP and the bundle adjustment).
 MIN_POINTS = 6
 
@@ -235,6 +242,70 @@ def structure_from_motion(pixels, matrix, template, *, robust_px: float = ROBUST
     return _structure(pixels, matrix, k * x, frames, rv, k * tv)
 
 
+#: A frame whose pose turns more than this from both its placed neighbours' (degrees) is solved again from
+#: theirs: a hand does not turn 90 degrees in a frame, and a nearly flat hand seen edge-on has a mirrored
+#: pose that fits its keypoints almost as well.
+JUMP_DEG = 45.0
+
+
+def continuous_poses(pixels, matrix, structure: VideoStructure, *, jump_deg: float = JUMP_DEG,
+                     robust_px: float = ROBUST_PX) -> VideoStructure:
+    """The structure with every frame whose pose jumps away from both neighbours solved again from theirs.
+
+    The frame's pose is solved again from each neighbour's pose (least squares with a Cauchy loss against the
+    structure's points: wrong keypoints count little), and the candidate that reprojects best (median)
+    replaces the jump unless it reprojects more than 1.5 times worse (a fast turn the neighbours do not
+    explain).
+
+    Parameters
+    ----------
+    pixels : ndarray (T, 21, 2)
+        Undistorted pixels, NaN where not given.
+    matrix : ndarray (3, 3)
+    structure : VideoStructure
+    jump_deg : float
+    robust_px : float
+        Cauchy scale of the pixels, pixels.
+
+    Returns
+    -------
+    VideoStructure
+    """
+    placed = np.flatnonzero(structure.placed)
+    if len(placed) < 3:
+        return structure
+    rot, trans = structure.rotation.copy(), structure.translation.copy()
+    mats = Rotation.from_rotvec(rot[placed])
+    step = np.degrees((mats[1:] * mats[:-1].inv()).magnitude())
+    before, after = np.r_[np.inf, step], np.r_[step, np.inf]
+    jumps = placed[np.minimum(before, after) > jump_deg]  # at the ends, the one neighbour
+    points = np.asarray(structure.points, dtype=np.float64)
+    for t in jumps:
+        seen = np.isfinite(pixels[t]).all(axis=1)
+        i = int(np.searchsorted(placed, t))
+        neighbours = [placed[j] for j in (i - 1, i + 1) if 0 <= j < len(placed)]
+        best, best_err = None, np.inf
+        for n in neighbours:
+            fit = least_squares(_pose_residual, np.r_[rot[n], trans[n]], loss="cauchy", f_scale=robust_px,
+                                x_scale="jac", max_nfev=50, args=(matrix, points[seen], pixels[t, seen]))
+            err = _median_px(matrix, fit.x[:3], fit.x[3:], points[seen], pixels[t, seen])
+            if err < best_err:
+                best, best_err = (fit.x[:3], fit.x[3:]), err
+        if best is not None and best_err <= 1.5 * _median_px(matrix, rot[t], trans[t], points[seen], pixels[t, seen]):
+            rot[t], trans[t] = best
+    frames = placed
+    return _structure(pixels, matrix, points, frames, rot[frames], trans[frames])
+
+
+def _pose_residual(q, matrix, points, pixels):
+    return (project_points(matrix, q[None, :3], q[None, 3:], points)[0] - pixels).ravel()
+
+
+def _median_px(matrix, rv, tv, points, pixels) -> float:
+    proj = project_points(matrix, rv[None], tv[None], points)[0]
+    return float(np.median(np.linalg.norm(proj - pixels, axis=1)))
+
+
 def _structure(pixels, matrix, points, frames, rv, tv) -> VideoStructure:
     n = len(pixels)
     rot, trans = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
@@ -246,7 +317,7 @@ def _structure(pixels, matrix, points, frames, rv, tv) -> VideoStructure:
 
 def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotation, translation, *,
               robust_px: float = ROBUST_PX, fit_scale: bool = False, priors: Priors | None = None,
-              max_nfev: int = 40):
+              max_nfev: int = 40, offsets: bool = True):
     """Eq. 2: hand pose, shape and camera poses from the reprojection error of the model's keypoints.
 
     Parameters
@@ -269,13 +340,16 @@ def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotat
     priors : Priors, optional
         The anatomical priors of :func:`handcap.solve.lm.prior_terms` (default: the solver's).
     max_nfev : int
+    offsets : bool
+        Learn each keypoint's constant offset from its model joint (hand frame, a Gaussian prior of
+        :data:`OFFSET_SIGMA`): the hand is still, so the offset is the same in every frame.
 
     Returns
     -------
     phi : ndarray (27,)
     betas : ndarray (10,)
     structure : VideoStructure
-        The model's keypoints and the camera poses.
+        The model's keypoints (plus the learned offsets) and the camera poses.
     """
     frames = np.flatnonzero(np.isfinite(rotation).all(axis=1))
     obs = pixels[frames]
@@ -283,12 +357,14 @@ def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotat
     t_idx, k_idx = np.nonzero(seen)
     shape_free = np.arange(10) if fit_scale else np.arange(1, 10)
     n_shape = len(shape_free)
-    n_head = 27 + n_shape
+    n_off = 63 if offsets else 0
+    n_head = 27 + n_shape + n_off
 
     def model_points(p):
         b = np.array(betas, dtype=np.float64)
-        b[shape_free] = p[27:n_head]
-        return KeypointModel(hand, b).positions(np.zeros((1, 3)), np.eye(3)[None], p[None, :27])[0], b
+        b[shape_free] = p[27:27 + n_shape]
+        x = KeypointModel(hand, b).positions(np.zeros((1, 3)), np.eye(3)[None], p[None, :27])[0]
+        return x + p[27 + n_shape:n_head].reshape(-1, 3) if offsets else x, b
 
     def residual(p):
         x, b = model_points(p)
@@ -296,25 +372,39 @@ def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotat
         proj = project_points(matrix, poses[:, :3], poses[:, 3:], x)
         r = (proj - np.nan_to_num(obs))[t_idx, k_idx].reshape(-1)
         prior = prior_terms(p[None, :27], priors, no_hold)[0][0]
-        return np.r_[r, prior_scale * prior, SHAPE_WEIGHT * b[shape_free]]
+        if not offsets:
+            return np.r_[r, prior_scale * prior, SHAPE_WEIGHT * b[shape_free]]
+        size = OFFSET_SIZE_WEIGHT * (_palm_size(x) / palm0 - 1.0)
+        return np.r_[r, prior_scale * prior, SHAPE_WEIGHT * b[shape_free],
+                     robust_px / OFFSET_SIGMA * p[27 + n_shape:n_head], size]
 
     priors = Priors() if priors is None else priors
     no_hold = np.zeros((1, 27), bool)
+    palm0 = _palm_size(structure.points)
     # The solver's anatomical priors (limits, DIP-PIP coupling, a weak pull to the relaxed hand), weighed
     # against the pixels as the two-stage fit weighs them against 3D keypoints that average every frame:
     # pixels per metre at the two robust scales, times the square root of the frames.
     prior_scale = robust_px / KEYPOINT_ROBUST_SCALE * np.sqrt(len(frames))
     n_prior = prior_terms(np.zeros((1, 27)), priors, no_hold)[0].shape[1]
     n_obs = 2 * len(t_idx)
-    sparsity = lil_matrix((n_obs + n_prior + n_shape, n_head + 6 * len(frames)), dtype=int)
-    sparsity[:n_obs, :n_head] = 1
+    sparsity = lil_matrix((n_obs + n_prior + n_shape + n_off + (1 if offsets else 0), n_head + 6 * len(frames)),
+                          dtype=int)
+    sparsity[:n_obs, :27 + n_shape] = 1
     row = np.arange(len(t_idx))
     for a in range(2):
         for c in range(6):
             sparsity[2 * row + a, n_head + 6 * t_idx + c] = 1
+        if offsets:
+            for c in range(3):
+                sparsity[2 * row + a, 27 + n_shape + 3 * k_idx + c] = 1
     sparsity[n_obs:n_obs + n_prior, :27] = 1
     sparsity[n_obs + n_prior + np.arange(n_shape), 27 + np.arange(n_shape)] = 1
-    start = np.r_[phi, np.asarray(betas)[shape_free], np.c_[rotation[frames], translation[frames]].reshape(-1)]
+    sparsity[n_obs + n_prior + n_shape + np.arange(n_off), 27 + n_shape + np.arange(n_off)] = 1
+    if offsets:
+        sparsity[-1, :27 + n_shape] = 1
+        sparsity[-1, 27 + n_shape + 3 * PALM[:, None] + np.arange(3)] = 1
+    start = np.r_[phi, np.asarray(betas)[shape_free], np.zeros(n_off),
+                  np.c_[rotation[frames], translation[frames]].reshape(-1)]
     p = _graduated(residual, start, sparsity, robust_px, max_nfev, n_obs)
     x, b = model_points(p)
     poses = p[n_head:].reshape(-1, 6)
@@ -331,9 +421,15 @@ def _graduated(residual, start, sparsity, robust_px, max_nfev, n_obs) -> np.ndar
     r = np.abs(residual(start)[:n_obs])
     scale = max(float(np.median(r)) if len(r) else robust_px, robust_px)
     p = start
+
+    def robust(q):  # Cauchy on the pixels only (Triggs' square-root form): the priors stay quadratic
+        res = residual(q)
+        pix = res[:n_obs]
+        res[:n_obs] = np.sign(pix) * scale * np.sqrt(np.log1p((pix / scale) ** 2))
+        return res
+
     while True:
-        p = least_squares(residual, p, jac_sparsity=sparsity, loss="cauchy", f_scale=scale, x_scale="jac",
-                          max_nfev=max_nfev, method="trf").x
+        p = least_squares(robust, p, jac_sparsity=sparsity, x_scale="jac", max_nfev=max_nfev, method="trf").x
         if scale <= robust_px:
             return p
         scale = max(scale / 3.0, robust_px)

@@ -6,8 +6,8 @@ stage, writes its outputs atomically with their warnings, and returns a
 They are the layer that combines the stages: the command line only parses
 arguments and calls them, and a session runner can chain them.
 
-Modules: :mod:`~handcap.steps.markers` (convert, corrupt, fill), :mod:`~handcap.steps.markerless` (keypoints, fit-keypoints,
-markerless) and :mod:`~handcap.steps.markerless_demo` (demo --markerless),
+Modules: :mod:`~handcap.steps.markers` (convert, corrupt, fill), :mod:`~handcap.steps.markerless`
+(keypoints, fit-keypoints, markerless), :mod:`~handcap.steps.markerless_demo` (demo --markerless),
 :mod:`~handcap.steps.synth` (synth, demo), :mod:`~handcap.steps.solve`
 (calibrate-markers, solve, shape), :mod:`~handcap.steps.objects` (track-object),
 :mod:`~handcap.steps.metrics`, :mod:`~handcap.steps.label` (label, score-labels),
