@@ -16,8 +16,8 @@
    penetration depth and contact distance before and after, from a grasp estimate 5 degrees off.
 6. Grasp videos with their object (150 frames, 3 px noise; a box in a precision grasp, a cylinder in a power
    grasp, 3 seeds each): the object placed by ICP on a depth view from a start 5 degrees / 5 mm off and
-   carried by the virtual cameras (mean surface error over the frames), and the hand against the true
-   object before and after the refinement inside the capture; seconds per video.
+   carried by the virtual cameras (mean surface error over the frames), the hand's size measured against the
+   contact map, and the hand against the true object before and after the refinement; seconds per video.
 
     .venv/bin/python benchmarks/markerless.py [--videos 4] [--sections 3,6]
 """

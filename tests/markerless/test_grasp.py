@@ -116,8 +116,11 @@ def test_capture_grasp_places_the_object_and_refines_the_hand(grasp):
         return contact_figures((v - est[0, :3, 3]) @ est[0, :3, :3], grasp.hand.faces, cm, grasp.obj.signed_distance)
 
     before, after = truth(result.before), truth(motion)
-    assert after["contact_mm"] < before["contact_mm"]
-    assert after["contact_mm"] < 4.0
+    # the size measured against the contacts already puts the hand on them (about 1 mm here); the refinement
+    # keeps it there and takes the hand out of the object
+    assert after["contact_mm"] < 2.5 and after["contact_mm"] < before["contact_mm"] + 0.5
+    assert after["penetration_max_mm"] < 3.0
+    assert 0.97 < result.scale < 1.08  # the keypoints' offsets make the average hand's palm look 1-4 % larger
     # every frame holds the refined pose, and the hand keeps its relation to the object in every frame
     assert np.allclose(motion.phi, motion.phi[0])
     rel = np.linalg.inv(est) @ hand_poses(motion, grasp.hand)
@@ -134,8 +137,6 @@ def test_capture_grasp_bad_input(grasp):
         capture_grasp(px, cam, cm.vertices, cm.faces, object_pose=np.eye(4), frame=60)
     with pytest.raises(HandcapError, match="rigid"):
         capture_grasp(px, cam, cm.vertices, cm.faces, object_pose=2 * np.eye(4))
-    with pytest.raises(HandcapError, match="contact map"):
-        capture_grasp(px, cam, cm.vertices, cm.faces, object_pose=np.eye(4), measure_scale=True)
 
 
 def test_markerless_verb_with_an_object(grasp, tmp_path, capsys):
@@ -169,9 +170,7 @@ def test_markerless_verb_with_an_object(grasp, tmp_path, capsys):
                            (["--contact", str(tmp_path / "contact.npz"), "--object-pose", str(tmp_path / "kp.npz")],
                             "object pose"),
                            (["--contact", str(tmp_path / "contact.npz"), "--object-pose", str(tmp_path / "pose.txt"),
-                             "--object-frame", "99", "--object-units", "mm"], "outside"),
-                           (["--object", str(tmp_path / "box.ply"), "--object-units", "mm", "--measure-scale",
-                             "--object-pose", str(tmp_path / "pose.txt")], "contact map")):
+                             "--object-frame", "99", "--object-units", "mm"], "outside")):
         assert main(base[:-1] + [str(tmp_path / "bad.npz")] + extra) == 2
         assert message in capsys.readouterr().err
         assert not (tmp_path / "bad.npz").exists() and not (tmp_path / "bad-object.npz").exists()
@@ -182,8 +181,8 @@ def test_markerless_demo_meets_its_figures(tmp_path, capsys):
 
     summary = run_markerless_demo(tmp_path / "demo", frames=60)
     assert summary["keypoint_error_pa_mm"] < 5.0 and summary["joint_angle_error_deg"] < 8.0
-    before, after = summary["contact_distance_mm_before_after"]
-    assert after < before
+    _, after = summary["contact_distance_mm_before_after"]
+    assert after < 3.0
     assert summary["object_surface_error_mm"] < 12.0
     for name in ("keypoints.npz", "camera.toml", "box.ply", "contact.npz", "box_points.npz", "motion.npz",
                  "motion-object.npz", "summary.json"):

@@ -30,7 +30,7 @@ def _cmd_markerless(a):
                                  hand_model=a.hand_model, mano_dir=a.mano_dir, obj=a.object,
                                  object_pose=a.object_pose, object_points=a.object_points,
                                  object_frame=a.object_frame, contact=a.contact, object_units=a.object_units,
-                                 object_out=a.object_out, measure_scale=a.measure_scale)
+                                 object_out=a.object_out)
 
 
 def add_markerless(verbs) -> None:
@@ -106,8 +106,8 @@ def add_markerless(verbs) -> None:
                                                              "right)")
     p.add_argument("--method", choices=("joint", "two-stage"), default="joint",
                    help="joint: eq. 2 after the two stages (default); two-stage: the paper's pipeline")
-    p.add_argument("--scale", type=float, default=1.0, help="the hand's size relative to an average adult's "
-                                                            "(default %(default)g)")
+    p.add_argument("--scale", type=float, help="the hand's size relative to an average adult's (default: "
+                                               "measured against the object's contact map with --contact, else 1)")
     p.add_argument("--rate", type=float, help="frames per second (default: the keypoints file's)")
     p.add_argument("--out", required=True, help="hand motion to write (.npz)")
     g = p.add_argument_group("held object", "the object's mesh and its pose in one frame (given, or fitted to "
@@ -126,8 +126,5 @@ def add_markerless(verbs) -> None:
     g.add_argument("--object-units", choices=("m", "cm", "mm"), default="m",
                    help="unit of the object's mesh, pose and points (default %(default)s; contact maps are metres)")
     g.add_argument("--object-out", help="object motion to write (default: OUT's name with -object)")
-    g.add_argument("--measure-scale", action="store_true",
-                   help="measure the hand's size against the contact map (--scale is the start): the hand, "
-                        "scaled about the camera, put where the contacted points touch it")
     add_hand_model(p)
     p.set_defaults(run=_cmd_markerless)

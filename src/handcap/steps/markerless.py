@@ -167,10 +167,9 @@ def _object_mesh(obj, contact, factor):
 
 
 def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: str | None = None,
-               side: str | None = None, method: str = "joint", scale: float = 1.0, rate: float | None = None,
+               side: str | None = None, method: str = "joint", scale: float | None = None, rate: float | None = None,
                hand_model: str | None = None, mano_dir=None, obj=None, object_pose=None, object_points=None,
-               object_frame: int = 0, contact=None, object_units: str = "m", object_out=None,
-               measure_scale: bool = False) -> Step:
+               object_frame: int = 0, contact=None, object_units: str = "m", object_out=None) -> Step:
     """Hand pose and shape of a steady grasp from one camera's 2D keypoints (see
     :func:`handcap.markerless.capture_video`), written as a hand motion in the camera's frame; with an object,
     its motion too (see :func:`handcap.markerless.grasp.capture_grasp`).
@@ -188,8 +187,9 @@ def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: 
     side : {'right', 'left'} or None
         Default: the label when it is one, else right.
     method : {'joint', 'two-stage'}
-    scale : float
-        The hand's size relative to an average adult's (the start when ``measure_scale``).
+    scale : float or None
+        The hand's size relative to an average adult's (default: measured against the object's contact map
+        when one is given, else 1).
     rate : float or None
         Frames per second (default: the keypoints').
     hand_model, mano_dir : str or None
@@ -206,15 +206,11 @@ def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: 
         Unit of the object's mesh, pose and points.
     object_out : str, Path or None
         The object motion .npz to write (default: ``OUT``'s name with ``-object``).
-    measure_scale : bool
-        Measure the hand's size against the contact map.
     """
     grasp = obj is not None or contact is not None
     if not grasp and (object_pose is not None or object_points is not None):
         raise HandcapError("--object-pose and --object-points need the object: --object MESH or --contact MAP")
-    if measure_scale and contact is None:
-        raise HandcapError("--measure-scale needs the contact map (--contact)")
-    if not (np.isfinite(scale) and 0.5 <= scale <= 2.0):
+    if scale is not None and not (np.isfinite(scale) and 0.5 <= scale <= 2.0):
         raise HandcapError(f"--scale {scale}: the hand's size relative to an average adult's, 0.5-2")
     object_out = Path(object_out) if object_out else Path(out).with_name(Path(out).stem + "-object.npz")
     inputs = [p for p in (path, obj, object_pose, object_points, contact) if p is not None]
@@ -230,7 +226,7 @@ def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: 
     rate = rate or detections.rate
     start = time.perf_counter()
     if not grasp:
-        result = capture_video(pixels, cam, hand=hand, method=method, rate=rate, scale=scale)
+        result = capture_video(pixels, cam, hand=hand, method=method, rate=rate, scale=scale or 1.0)
         write_hand_motion(result.motion, out)
         line = (f"{out}: {side} hand, {result.summary()}, {time.perf_counter() - start:.1f} s; shape "
                 f"{np.round(result.motion.betas, 2).tolist()}")
@@ -243,8 +239,7 @@ def markerless(path, out, *, intrinsics: str, camera: str | None = None, label: 
     points = read_scan_points(object_points) * factor if object_points is not None else None
     name = Path(obj).stem if obj is not None else "object"
     result = capture_grasp(pixels, cam, vertices, faces, object_pose=pose, object_points=points, frame=object_frame,
-                           contact_map=contact_map, scale=scale, measure_scale=measure_scale, hand=hand,
-                           method=method, rate=rate, name=name)
+                           contact_map=contact_map, scale=scale, hand=hand, method=method, rate=rate, name=name)
     write_hand_motion(result.video.motion, out)
     write_object_motion(result.object_motion, object_out)
     lines = (f"{out}: {side} hand, {result.video.summary()}, {time.perf_counter() - start:.1f} s",
