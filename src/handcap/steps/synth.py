@@ -80,12 +80,7 @@ def demo(out="demo-output") -> Step:
 def demo_markerless(out="demo-markerless") -> Step:
     """Run :func:`handcap.steps.markerless_demo.run_markerless_demo` into ``out`` (rewritten on every run)."""
     check_output_folder(out, force=True)  # the demo's folder is rewritten on every run
-    summary = run_markerless_demo(out)
-    warnings = tuple(summary["warnings"])
-    lines = [f"{key:38s} {value}" for key, value in summary.items() if key not in ("files", "warnings")]
-    lines.append(f"\nwrote {len(summary['files'])} files to {out}/ (figures in {out}/summary.txt); "
-                 + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
-    return Step(tuple(lines), warnings, tuple(summary["files"]), summary)
+    return _figures_step(run_markerless_demo(out), out)
 
 
 def demo_images(out="demo-images") -> Step:
@@ -93,7 +88,11 @@ def demo_images(out="demo-images") -> Step:
     from handcap.demo_images import run_image_demo  # loads torch (the detector's networks)
 
     check_output_folder(out, force=True)  # the demo's folder is rewritten on every run
-    summary = run_image_demo(out)
+    return _figures_step(run_image_demo(out), out)
+
+
+def _figures_step(summary: dict, out) -> Step:
+    """A demo's summary (figures, ``warnings``, ``files``) as the lines the command prints."""
     warnings = tuple(summary["warnings"])
     lines = [f"{key:40s} {value}" for key, value in summary.items() if key not in ("files", "warnings")]
     lines.append(f"\nwrote {len(summary['files'])} files to {out}/ (figures in {out}/summary.txt); "
