@@ -143,7 +143,7 @@ def capture_video(pixels, camera, *, side: str = "right", hand=None, method: str
         final = _reprojected(final, model_points, und, matrix)
     final = continuous_poses(und, matrix, final)
     rot, trans = final.rotation, final.translation
-    motion = video_motion(hand, betas, phi, rot, trans, rate)
+    motion = video_motion(hand, betas, phi, rot, trans, rate, final.points - template_points(hand, betas, phi))
     median = float(np.nanmedian(final.residual_px))
     if median > REPROJECTION_WARNING_PX:
         motion = attach(motion, [f"reprojection error median {median:.1f} px is above {REPROJECTION_WARNING_PX:g} px: "
@@ -159,7 +159,7 @@ def _reprojected(structure, points, pixels, matrix) -> VideoStructure:
     return VideoStructure(points, structure.rotation, structure.translation, residual)
 
 
-def video_motion(hand, betas, phi, rot, trans, rate) -> HandMotion:
+def video_motion(hand, betas, phi, rot, trans, rate, offsets=None) -> HandMotion:
     """A hand holding one pose, moved by a camera-from-hand pose per frame.
 
     Parameters
@@ -172,11 +172,13 @@ def video_motion(hand, betas, phi, rot, trans, rate) -> HandMotion:
         Camera-from-model poses (axis-angle, metres: a point ``x`` of the model at rest goes to ``R x + t``);
         NaN in frames not placed, which hold the nearest placed frame's pose (with a warning).
     rate : float
+    offsets : ndarray (21, 3), optional
+        Each keypoint's constant offset from its model joint in the model's frame, metres (eq. 2 learns them).
 
     Returns
     -------
     HandMotion
-        In the camera's frame, ``marker_fit`` the model's keypoints.
+        In the camera's frame, ``marker_fit`` the model's keypoints plus their offsets.
     """
     model = KeypointModel(hand, betas)
     placed = np.isfinite(rot).all(axis=1)
@@ -189,6 +191,8 @@ def video_motion(hand, betas, phi, rot, trans, rate) -> HandMotion:
     hand_pose = hand.hand_pose_from_phi(phis)
     joints = hand.forward(betas, rot, hand_pose, transl, vertices=False).joints
     fit = model.positions(transl, r, phis)
+    if offsets is not None:
+        fit = fit + np.einsum("tij,kj->tki", r, np.asarray(offsets, dtype=np.float64))
     motion = HandMotion(betas, rot, hand_pose, transl, rate, hand.side, phis, hand.name, joints, KEYPOINT_NAMES, fit)
     found = shape_warnings(betas)
     if (~placed).any():

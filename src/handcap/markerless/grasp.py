@@ -36,6 +36,7 @@ from handcap.hand import OpenHand
 from handcap.markerless.capture import VideoCapture, capture_video, video_motion
 from handcap.markerless.contact import ContactMap, ObjectField, refine_grasp
 from handcap.markerless.joint_model import KeypointModel
+from handcap.markerless.sfm import template_points
 from handcap.quality.plausibility import attach
 
 #: Points sampled on the mesh's surface for ICP.
@@ -337,8 +338,9 @@ def capture_grasp(pixels, camera, vertices, faces, *, object_pose=None, object_p
         moved = poses @ (np.linalg.inv(poses[frame]) @ refined)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", HandcapWarning)
+            offsets = video.structure.points - template_points(hand, motion.betas, motion.phi[frame])
             new = video_motion(hand, motion.betas, phi, Rotation.from_matrix(moved[:, :3, :3]).as_rotvec(),
-                               moved[:, :3, 3], motion.rate)
+                               moved[:, :3, 3], motion.rate, offsets)
         motion = replace(new, warnings=motion.warnings)
         _, c1, p1 = _contact_figures(hand, motion, frame, contact_map, field, object_pose)
         figures.update(contact_mm=(c0, c1), penetration_mm=(p0, p1))
