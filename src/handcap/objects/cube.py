@@ -31,7 +31,15 @@ _MOVE = re.compile(r"^([RLUDFB])(2'?|'2?|)$")
 
 def quarter_turn(axis, quarters: int) -> np.ndarray:
     """The integer rotation (3, 3) by ``quarters`` times -90 degrees about a signed unit ``axis`` (clockwise seen
-    from the axis' tip)."""
+    from the axis' tip).
+
+    Parameters
+    ----------
+    axis : array_like (3,) int
+        A face's outward normal, e.g. ``(1, 0, 0)``.
+    quarters : int
+        Clockwise quarter turns (negative: counter-clockwise).
+    """
     axis = np.asarray(axis, dtype=np.int64)
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     q = (-quarters) % 4  # counter-clockwise quarters (Rodrigues with sin, cos of multiples of 90 degrees)
@@ -79,12 +87,26 @@ def positions(state) -> np.ndarray:
 
 
 def layer(state, face: str) -> np.ndarray:
-    """Which cubies (8,) bool sit in ``face``'s layer now."""
+    """Which cubies (8,) bool sit in ``face``'s layer now.
+
+    Parameters
+    ----------
+    state : ndarray (8, 3, 3) int
+    face : str
+        One of U D L R F B.
+    """
     return positions(state) @ np.array(FACES[face]) > 0
 
 
 def apply_moves(state, moves) -> np.ndarray:
-    """The state after ``moves`` (a notation string or ``(face, turns)`` pairs), (8, 3, 3) int."""
+    """The state after ``moves``, (8, 3, 3) int.
+
+    Parameters
+    ----------
+    state : ndarray (8, 3, 3) int
+    moves : str or sequence of (str, int)
+        Notation (``"R U R' U'"``) or ``(face, quarter turns)`` pairs.
+    """
     state = np.array(state, dtype=np.int64)
     for face, turns in (parse_moves(moves) if isinstance(moves, str) else moves):
         turn = quarter_turn(FACES[face], turns)
