@@ -1,0 +1,255 @@
+"""Tracking a 2x2x2 cube turned in the hand: its pose, the angle of the turning layer, the moves (issue 18).
+
+The cube's markers are in its description's order (eight cubies, :func:`handcap.objects.articulated.
+load_articulated`). The state is every cubie's rotation in the cube's frame (:mod:`handcap.objects.cube`);
+it starts as the arrangement of the first frame in which every cubie is seen (cubie DBL's pose is then the
+cube's frame), and it changes only by committed moves.
+
+1. At rest the cube's pose is Kabsch of every marker, each placed as the state has it.
+2. For each axis, the two halves of the cube (the cubies on either side) are fitted on their own; the angle
+   of one relative to the other about the axis is their layer's turn. A move begins where it exceeds
+   :data:`MOVE_DEG` (from where it left :data:`REST_DEG`) and ends where the layer holds still at a quarter
+   for :data:`HOLD` frames, so a half turn is one move and a layer turned back is none.
+3. Which half turned: the one whose orientation departs from a smooth (quadratic in time) path over the
+   move and :data:`SMOOTH_FRAMES` around it; the other half is the cube, carried smoothly by the hand. This is
+   what tells a turn of D from a turn of U with the whole cube turned: both leave the same arrangement,
+   and only the turning layer starts and stops.
+4. The move (face, clockwise quarter turns seen from the face) is committed to the state; consecutive moves
+   of one face merge (``R R`` gives ``R2``). During a move the cube's pose is its body half's, and the
+   layer's angle is reported per frame.
+
+Frames before the cube is first seen whole get its pose only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from handcap.core.errors import HandcapError
+from handcap.objects.articulated import ArticulatedObject
+from handcap.objects.cube import FACES, HOME, apply_moves, format_moves
+from handcap.objects.rigid import kabsch
+
+FACE_ORDER = tuple(FACES)
+#: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
+REST_DEG = 3.0
+#: A layer turned more than this from its last quarter (degrees) is moving: a move begins.
+MOVE_DEG = 6.0
+#: Frames a layer must hold still at a quarter for its move to end.
+HOLD = 5
+#: Frames before and after a move over which the two halves' smoothness is compared.
+SMOOTH_FRAMES = 10
+
+
+def cubie_poses(markers, cube: ArticulatedObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every cubie's pose in every frame by Kabsch of its markers.
+
+    Parameters
+    ----------
+    markers : ndarray (T, M, 3)
+        The cube's markers in its description's order, metres, NaN where not seen.
+    cube : ArticulatedObject
+        Eight parts, in the order of :data:`handcap.objects.cube.HOME`.
+
+    Returns
+    -------
+    rotation : ndarray (T, 8, 3, 3)
+    translation : ndarray (T, 8, 3)
+        ``world = rotation @ rest + translation``.
+    seen : ndarray (T, 8) bool
+        Cubies with 3 or more markers seen (elsewhere rotation and translation are NaN).
+    """
+    markers = np.asarray(markers, dtype=np.float64)
+    n = len(markers)
+    rotation = np.full((n, 8, 3, 3), np.nan)
+    translation = np.full((n, 8, 3), np.nan)
+    seen = np.zeros((n, 8), bool)
+    start = 0
+    for c, part in enumerate(cube.parts):
+        m = len(part.marker_names)
+        obs = markers[:, start:start + m]
+        start += m
+        w = np.isfinite(obs).all(axis=2)
+        seen[:, c] = w.sum(axis=1) >= 3
+        if seen[:, c].any():
+            ok = seen[:, c]
+            rotation[ok, c], translation[ok, c] = kabsch(np.broadcast_to(part.markers, obs[ok].shape),
+                                                         np.nan_to_num(obs[ok]), w[ok])
+    return rotation, translation, seen
+
+
+@dataclass(frozen=True)
+class CubeTrack:
+    """What :func:`track_cube` found.
+
+    Attributes
+    ----------
+    rotation, translation : ndarray (T, 3)
+        The cube's pose (axis-angle, metres), cube frame to world; NaN where fewer than 3 markers were seen.
+    layer_angle : ndarray (T, 6)
+        Each face's layer angle (:data:`FACE_ORDER`) during its moves, from where the move began, radians,
+        clockwise seen from the face; 0 elsewhere.
+    moves : str
+        The move sequence in standard notation.
+    state : ndarray (8, 3, 3) int
+        Every cubie's rotation in the cube's frame at the end (the identity for a cube that started solved).
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    layer_angle: np.ndarray
+    moves: str
+    state: np.ndarray
+
+    @property
+    def permutation(self) -> np.ndarray:
+        """The cubie (start index) at each home place at the end, (8,) int."""
+        where = np.einsum("nij,nj->ni", self.state, HOME)
+        out = np.empty(8, dtype=np.int64)
+        for cubie, place in enumerate(where):
+            out[int(np.flatnonzero((HOME == place).all(axis=1))[0])] = cubie
+        return out
+
+
+def _angle(r) -> np.ndarray:
+    return np.arccos(np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
+
+
+def _poses(local, world, weights):
+    """Kabsch of ``local`` (M, 3) onto every frame's ``world`` (F, M, 3) with ``weights`` (F, M): rotations
+    (F, 3, 3) and translations (F, 3); NaN where fewer than 3 markers weigh."""
+    rot, trans = kabsch(np.broadcast_to(local, world.shape), world, weights)
+    bad = weights.sum(axis=1) < 3
+    rot[bad], trans[bad] = np.nan, np.nan
+    return rot, trans
+
+
+def _relative_angle(minus, plus, axis) -> np.ndarray:
+    """Unwrapped angle (F,) of the ``plus`` half relative to the ``minus`` half about ``axis`` (a unit vector),
+    radians; frames where either is missing take the last known angle."""
+    ok = np.isfinite(minus).all(axis=(1, 2)) & np.isfinite(plus).all(axis=(1, 2))
+    theta = np.full(len(minus), np.nan)
+    if ok.any():
+        rv = Rotation.from_matrix(np.einsum("fji,fjk->fik", minus[ok], plus[ok])).as_rotvec()
+        theta[ok] = np.unwrap(rv @ axis)
+    idx = np.where(np.isfinite(theta), np.arange(len(theta)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    return np.nan_to_num(theta[idx]) if ok.any() else np.zeros(len(theta))
+
+
+def _roughness(rot) -> float:
+    """How far rotations (F, 3, 3) depart from a smooth (quadratic in time) turn, radians RMS: the noise for
+    a cube moved by a hand, degrees for a layer that starts and stops turning."""
+    ok = np.flatnonzero(np.isfinite(rot).all(axis=(1, 2)))
+    if len(ok) < 4:
+        return np.inf
+    rv = Rotation.from_matrix(np.einsum("ji,fjk->fik", rot[ok[0]], rot[ok])).as_rotvec()
+    basis = np.vander(ok - ok.mean(), 3)
+    fit = np.linalg.lstsq(basis, rv, rcond=None)[0]
+    return float(np.sqrt(np.mean((basis @ fit - rv) ** 2)))
+
+
+def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
+    """Pose, layer angles and moves of a 2x2x2 cube from its labelled markers (see the module docstring).
+
+    Parameters
+    ----------
+    markers : ndarray (T, M, 3)
+        The cube's markers in its description's order, metres, NaN where not seen.
+    cube : ArticulatedObject
+        The cube's description (``load_articulated("cube2x2")``).
+
+    Returns
+    -------
+    CubeTrack
+
+    Raises
+    ------
+    HandcapError
+        A description that is not a 2x2x2 cube, markers of the wrong shape, or a take in which every cubie
+        is never seen at once.
+    """
+    if len(cube.parts) != 8 or cube.layers is None:
+        raise HandcapError(f"{cube.name}: not a 2x2x2 cube (eight parts and a layers joint)")
+    markers = np.asarray(markers, dtype=np.float64)
+    if markers.ndim != 3 or markers.shape[1:] != (len(cube.marker_names), 3):
+        raise HandcapError(f"cube markers must be (T, {len(cube.marker_names)}, 3), got {markers.shape}")
+    w, _, seen = cubie_poses(markers, cube)
+    full = np.flatnonzero(seen.all(axis=1))
+    if not len(full):
+        raise HandcapError(f"the cube is never seen whole ({len(markers)} frames; every cubie needs 3 markers "
+                           f"in one frame to start)")
+    n, first = len(markers), int(full[0])
+    state = np.rint(np.einsum("ji,njk->nik", w[first, 0], w[first])).astype(np.int64)  # S_c = G^T W_c
+    start_state = state.copy()
+    cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
+    rest = np.concatenate([p.markers for p in cube.parts])
+    valid = np.isfinite(markers).all(axis=2)
+    world = np.nan_to_num(markers)
+    rotation, translation = np.full((n, 3, 3), np.nan), np.full((n, 3), np.nan)
+    angles = np.zeros((n, 6))
+    committed: list[list] = []
+
+    def local(state):
+        return np.einsum("mij,mj->mi", state[cubie], rest)
+
+    def halves(state, a, frames):
+        """Poses of the minus and plus halves along axis ``a`` in ``frames``, and their relative angle."""
+        where = np.einsum("nij,nj->ni", state, HOME)[cubie, a]
+        x = local(state)
+        minus = _poses(x, world[frames], valid[frames] & (where < 0))
+        plus = _poses(x, world[frames], valid[frames] & (where > 0))
+        return minus, plus, _relative_angle(minus[0], plus[0], np.eye(3)[a])
+
+    t = first
+    while t < n:
+        frames = np.arange(t, n)
+        theta = np.stack([halves(state, a, frames)[2] for a in range(3)])  # (3, F)
+        moving = np.abs(theta) > np.deg2rad(MOVE_DEG)
+        begin = int(np.argmax(moving.any(axis=0))) if moving.any() else len(frames)
+        rot_all, trans_all = _poses(local(state), world[t:t + begin], valid[t:t + begin].astype(float))
+        rotation[t:t + begin], translation[t:t + begin] = rot_all, trans_all  # at rest: every marker
+        if begin == len(frames):
+            break
+        a = int(np.argmax(np.abs(theta[:, begin])))
+        s0 = begin
+        while s0 > 0 and abs(theta[a, s0 - 1]) > np.deg2rad(REST_DEG):
+            s0 -= 1
+        # the move ends where the layer holds still at a quarter for HOLD frames
+        off = np.abs(theta[a] - np.pi / 2 * np.round(theta[a] / (np.pi / 2)))
+        still = np.convolve((off <= np.deg2rad(REST_DEG)).astype(int), np.ones(HOLD, int), "full")[HOLD - 1:]
+        after = np.flatnonzero((np.arange(len(frames)) > begin) & (still >= HOLD))
+        end = int(after[0]) if len(after) else len(frames) - 1
+        seg = frames[s0:end + 1]
+        lo, hi = max(seg[0] - SMOOTH_FRAMES, first), min(seg[-1] + SMOOTH_FRAMES, n - 1)
+        (m_rot, m_trans), (p_rot, p_trans), _ = halves(state, a, np.arange(lo, hi + 1))
+        body_is_minus = _roughness(m_rot) <= _roughness(p_rot)
+        inside = slice(seg[0] - lo, seg[-1] - lo + 1)
+        rotation[seg] = (m_rot if body_is_minus else p_rot)[inside]
+        translation[seg] = (m_trans if body_is_minus else p_trans)[inside]
+        face = ("R", "U", "F")[a] if body_is_minus else ("L", "D", "B")[a]
+        # the moving half's turn about its face's outward normal is theta either way; clockwise is minus that
+        progress = -theta[a, s0:end + 1]
+        angles[seg, FACE_ORDER.index(face)] = progress
+        quarters = int(np.round(progress[-1] / (np.pi / 2)))
+        if quarters % 4:
+            state = apply_moves(state, [(face, quarters)])
+            if committed and committed[-1][0] == face:
+                committed[-1][1] += quarters
+            else:
+                committed.append([face, quarters])
+        t = int(seg[-1]) + 1
+    if first:  # before the cube was first seen whole: its pose only, as at the start
+        rotation[:first], translation[:first] = _poses(local(start_state), world[:first],
+                                                       valid[:first].astype(float))
+    rotation = np.where(np.isfinite(rotation).all(axis=(1, 2))[:, None, None], rotation, np.eye(3))
+    found = np.isfinite(translation).all(axis=1)
+    rotvec = np.full((n, 3), np.nan)
+    rotvec[found] = Rotation.from_matrix(rotation[found]).as_rotvec()
+    rotation = rotvec
+    return CubeTrack(rotation, translation, angles, format_moves(committed), state)
+
+

@@ -1,0 +1,75 @@
+"""Cube tracking against synthetic cube takes whose poses, layer angles and moves are exact."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from handcap import HandcapError
+from handcap.objects.articulated import load_articulated
+from handcap.objects.cube import FACES, format_moves, is_solved
+from handcap.objects.cube_track import FACE_ORDER, track_cube
+from handcap.synth.cube import cube_take
+
+CUBE = load_articulated("cube2x2")
+
+
+def _scramble(rng, length=10):
+    moves = []
+    while len(moves) < length:
+        face = "UDLRFB"[rng.integers(6)]
+        if not moves or moves[-1][0] != face:  # a scramble never turns one face twice in a row
+            moves.append((face, int(rng.choice([1, -1, 2]))))
+    return format_moves(moves)
+
+
+def _track(moves, seed, noise=0.0005, rate=120.0):
+    rng = np.random.default_rng(seed)
+    take = cube_take(moves, rng, rate=rate)
+    return take, track_cube(take.markers + rng.normal(0.0, noise, take.markers.shape), CUBE)
+
+
+def test_sexy_move_six_times_returns_the_cube_to_its_start():
+    take, track = _track("R U R' U' " * 6, 0)
+    assert track.moves == ("R U R' U' " * 6).strip()
+    assert is_solved(track.state) and (track.permutation == np.arange(8)).all()
+
+
+def test_every_face_turn_is_recognised():
+    for face in FACES:
+        for suffix in ("", "'", "2"):
+            assert _track(face + suffix, 1)[1].moves == face + suffix
+
+
+def test_scrambles_poses_and_layer_angles():
+    for seed in range(3):
+        text = _scramble(np.random.default_rng(100 + seed))
+        take, track = _track(text, seed)
+        assert track.moves == text
+        turned = Rotation.from_rotvec(track.rotation) * Rotation.from_matrix(take.global_pose[:, :3, :3]).inv()
+        assert np.degrees(turned.magnitude()).mean() < 1.0
+        assert 1000 * np.linalg.norm(track.translation - take.global_pose[:, :3, 3], axis=1).mean() < 1.0
+        # the layer angles during the moves (clockwise from where the move began) against the truth
+        for (face, _), (a, b) in zip(take.moves, take.move_frames):
+            f = FACE_ORDER.index(face)
+            error = np.degrees(np.abs(track.layer_angle[a:b + 1, f] - take.layer_angle[a:b + 1, f]))
+            assert np.median(error) < 2.0, (face, np.median(error))
+
+
+def test_d_is_not_u_with_a_whole_cube_turn():
+    assert _track("D", 3)[1].moves == "D"
+    assert _track("U", 3)[1].moves == "U"
+    assert _track("D U'", 3)[1].moves == "D U'"
+
+
+def test_bad_takes():
+    take = cube_take("R", rate=30.0)
+    hidden = take.markers.copy()
+    hidden[:, :2] = np.nan  # one cubie never has 3 markers
+    with pytest.raises(HandcapError, match="never seen whole"):
+        track_cube(hidden, CUBE)
+    with pytest.raises(HandcapError, match="must be"):
+        track_cube(take.markers[:, :10], CUBE)
+    with pytest.raises(HandcapError, match="not a 2x2x2"):
+        track_cube(take.markers, load_articulated.__globals__["articulated_from_table"](
+            {"name": "box", "parts": [{"name": "a", "markers": {"p": [0, 0, 0], "q": [0.01, 0, 0],
+                                                                 "r": [0, 0.01, 0]}}]}))
