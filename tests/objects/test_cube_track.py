@@ -73,3 +73,26 @@ def test_bad_takes():
         track_cube(take.markers, load_articulated.__globals__["articulated_from_table"](
             {"name": "box", "parts": [{"name": "a", "markers": {"p": [0, 0, 0], "q": [0.01, 0, 0],
                                                                  "r": [0, 0.01, 0]}}]}))
+
+
+def test_track_object_verb_with_the_shipped_cube(tmp_path, capsys):
+    from handcap.cli import main
+    from handcap.core.markers import MarkerSequence
+    from handcap.io import read_object_motion, write_markers
+
+    take = cube_take("R U' F2", np.random.default_rng(4), rate=120.0)
+    write_markers(MarkerSequence(take.markers, take.marker_names, take.rate), tmp_path / "cube.c3d")
+    assert main(["track-object", str(tmp_path / "cube.c3d"), "--articulated", "cube2x2",
+                 "--out", str(tmp_path / "cube.npz")]) == 0
+    assert "R U' F2" in capsys.readouterr().out
+    with np.load(tmp_path / "cube.npz") as data:
+        assert str(data["moves"]) == "R U' F2" and data["state_layer_angles"].shape == (len(take.markers), 6)
+    motion = read_object_motion(tmp_path / "cube.npz")
+    assert motion.name == "cube2x2" and motion.n_frames == len(take.markers)
+    # a take without the cube's markers, and a move string with an unknown face: one line, exit 2
+    write_markers(MarkerSequence(take.markers[:, :20], take.marker_names[:20], take.rate), tmp_path / "part.c3d")
+    assert main(["track-object", str(tmp_path / "part.c3d"), "--articulated", "cube2x2",
+                 "--out", str(tmp_path / "bad.npz")]) == 2
+    assert "lacks 4" in capsys.readouterr().err and not (tmp_path / "bad.npz").exists()
+    assert main(["track-object", str(tmp_path / "cube.c3d"), "--out", str(tmp_path / "bad.npz")]) == 2
+    assert "--articulated" in capsys.readouterr().err

@@ -8,7 +8,7 @@ from handcap.steps import metrics, objects
 
 def _cmd_track_object(a):
     return objects.track_object(a.input, a.out, markers=a.markers, canonical=a.canonical, name=a.name,
-                                threshold=a.threshold_mm / 1000, units=a.units)
+                                threshold=a.threshold_mm / 1000, units=a.units, articulated=a.articulated)
 
 
 def _cmd_metrics(a):
@@ -23,8 +23,11 @@ def add_objects(verbs) -> None:
                                      "the take unless --canonical gives it. Frames with fewer than 3 markers are "
                                      "reported and left empty (NaN), not guessed.")
     p.add_argument("input", help="labeled markers")
-    p.add_argument("--markers", required=True,
+    p.add_argument("--markers",
                    help="comma-separated names of the object's markers (3 or more); patterns such as 'boite:*' work")
+    p.add_argument("--articulated", metavar="CUBE",
+                   help="a 2x2x2 cube instead: cube2x2 (shipped) or its TOML description; writes its pose, layer "
+                        "angles and the moves (key 'moves', printed)")
     p.add_argument("--canonical", help="object .npz with canonical (M, 3) marker positions")
     p.add_argument("--name", default="object")
     p.add_argument("--threshold-mm", type=float, default=5.0, help="RANSAC inlier distance (default %(default)s)")

@@ -225,7 +225,7 @@ def read_hand_motion(path) -> HandMotion:
         raise HandcapError(f"{path}: {err}") from None
 
 
-def write_object_motion(motion: ObjectMotion, path) -> None:
+def write_object_motion(motion: ObjectMotion, path, extra: dict | None = None) -> None:
     """Write an object-motion ``.npz``: ``rotation`` (T, 3) radians, ``translation`` (T, 3) metres, and the rest.
 
     Articulation states are stored as ``state_<key>`` entries.
@@ -234,6 +234,8 @@ def write_object_motion(motion: ObjectMotion, path) -> None:
     ----------
     motion : ObjectMotion
     path : str or Path
+    extra : dict, optional
+        More entries (e.g. a cube's ``moves``), written as they are.
     """
     arrays = {"kind": np.array("object_motion"), "rotation": motion.rotation,
               "translation": motion.translation, "rate": np.array(motion.rate),
@@ -242,7 +244,7 @@ def write_object_motion(motion: ObjectMotion, path) -> None:
         arrays["canonical"] = motion.canonical
     for key, value in motion.state.items():
         arrays[f"state_{key}"] = value
-    save_npz(path, {**arrays, **warnings_entry(motion.warnings)})
+    save_npz(path, {**arrays, **(extra or {}), **warnings_entry(motion.warnings)})
 
 
 def read_object_motion(path) -> ObjectMotion:
