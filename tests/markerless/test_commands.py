@@ -63,9 +63,16 @@ def test_import_triangulate_fit(take, capsys):
 
 
 def test_bad_input_exits_2(take, capsys):
-    folder, _, _ = take
+    folder, rig, _ = take
     before = _hash(folder / "left.npy")
-    assert main(["fit-keypoints", str(folder / "hand3d.npz"), "--out", str(folder / "x.npz")]) == 2
+    # its own triangulated file: under pytest-xdist the test above may run in another process
+    assert main(["keypoints", "import", str(folder / "left.npy"), str(folder / "right.npy"), "--format",
+                 "mediapipe-npy", "--rate", "30", "--cameras", ",".join(rig.names), "--out",
+                 str(folder / "kp_two.npz")]) == 0
+    assert main(["triangulate", str(folder / "kp_two.npz"), "--cameras", str(folder / "rig.toml"), "--out",
+                 str(folder / "two_hands.npz")]) == 0
+    capsys.readouterr()
+    assert main(["fit-keypoints", str(folder / "two_hands.npz"), "--out", str(folder / "x.npz")]) == 2
     assert "several hands" in capsys.readouterr().err
     assert main(["keypoints", "import", str(folder / "left.npy"), "--format", "mediapipe-npy", "--rate", "30",
                  "--cameras", "a,b", "--out", str(folder / "y.npz")]) == 2
