@@ -32,6 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError, HandcapWarning
 from handcap.core.motion import HandMotion, ObjectMotion
+from handcap.core.transforms import homogeneous
 from handcap.hand import OpenHand
 from handcap.markerless.capture import VideoCapture, capture_video, video_motion
 from handcap.markerless.contact import ContactMap, ObjectField, refine_grasp
@@ -55,12 +56,11 @@ SCALE_RANGE = (0.6, 1.6)
 SCALE_CAP = 0.02
 
 
-def _matrix(rotvec, trans) -> np.ndarray:
-    m = np.zeros(np.shape(trans)[:-1] + (4, 4))
-    m[..., :3, :3] = Rotation.from_rotvec(np.reshape(rotvec, (-1, 3))).as_matrix().reshape(m.shape[:-2] + (3, 3))
-    m[..., :3, 3] = trans
-    m[..., 3, 3] = 1.0
-    return m
+def _model_poses(hand, betas, orient, transl) -> np.ndarray:
+    """Camera-from-model poses (..., 4, 4) of MANO-style global parameters (the model turns about its root)."""
+    j0 = KeypointModel(hand, betas).rest_joints[0]
+    rot = Rotation.from_rotvec(np.reshape(orient, (-1, 3))).as_matrix().reshape(np.shape(orient)[:-1] + (3, 3))
+    return homogeneous(rot, np.asarray(transl) + j0 - rot @ j0)
 
 
 def _transform(pose, points) -> np.ndarray:
@@ -145,10 +145,7 @@ def hand_poses(motion: HandMotion, hand) -> np.ndarray:
     hand : HandModel
         The motion's model.
     """
-    j0 = KeypointModel(hand, motion.betas).rest_joints[0]
-    poses = _matrix(motion.global_orient, motion.transl)
-    poses[:, :3, 3] += j0 - poses[:, :3, :3] @ j0
-    return poses
+    return _model_poses(hand, motion.betas, motion.global_orient, motion.transl)
 
 
 def carry_object(poses, frame: int, object_pose) -> np.ndarray:
@@ -332,9 +329,7 @@ def capture_grasp(pixels, camera, vertices, faces, *, object_pose=None, object_p
         _, c0, p0 = _contact_figures(hand, motion, frame, contact_map, field, object_pose)
         phi, orient, transl = refine_grasp(hand, motion.betas, motion.phi[frame], motion.global_orient[frame],
                                            motion.transl[frame], contact_map, object_pose)
-        refined = _matrix(orient, transl)
-        j0 = KeypointModel(hand, motion.betas).rest_joints[0]
-        refined[:3, 3] += j0 - refined[:3, :3] @ j0
+        refined = _model_poses(hand, motion.betas, orient, transl)
         moved = poses @ (np.linalg.inv(poses[frame]) @ refined)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", HandcapWarning)

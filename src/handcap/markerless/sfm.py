@@ -302,8 +302,7 @@ def continuous_poses(pixels, matrix, structure: VideoStructure, *, jump_deg: flo
                 best, best_err = (fit.x[:3], fit.x[3:]), err
         if best is not None and best_err <= 1.5 * _median_px(matrix, rot[t], trans[t], points[seen], pixels[t, seen]):
             rot[t], trans[t] = best
-    frames = placed
-    return _structure(pixels, matrix, points, frames, rot[frames], trans[frames])
+    return _structure(pixels, matrix, points, placed, rot[placed], trans[placed])
 
 
 def _pose_residual(q, matrix, points, pixels):

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 from handcap.core.camera import Camera
 from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
+from handcap.core.transforms import homogeneous
 from handcap.hand import OpenHand
 from handcap.markerless.contact import ContactMap
 from handcap.markerless.keypoints import hand_names, keypoints_from_joints
@@ -336,10 +337,7 @@ def grasp_object_video(kind: str = "precision", object_name: str = "cuboid", n_f
     rng = np.random.default_rng(0) if rng is None else rng
     hand, obj, object_pose, phi, contact_map = synthetic_grasp(kind, object_name)
     clip = grasp_video(n_frames, rng, phi=phi, betas=np.zeros(10), side=hand.side, **video)
-    poses = np.zeros((n_frames, 4, 4))
-    poses[:, :3, :3] = Rotation.from_rotvec(clip.rotation).as_matrix()
-    poses[:, :3, 3] = clip.translation
-    poses[:, 3, 3] = 1.0
+    poses = homogeneous(Rotation.from_rotvec(clip.rotation).as_matrix(), clip.translation)
     object_poses = poses @ object_pose
     mesh = trimesh.Trimesh(obj.vertices, obj.faces, process=False)
     surface, face = trimesh.sample.sample_surface(mesh, points, seed=int(rng.integers(1 << 31)))

@@ -105,6 +105,11 @@ class ArticulatedObject:
         """Every marker's name, part by part."""
         return tuple(n for p in self.parts for n in p.marker_names)
 
+    @property
+    def markers(self) -> np.ndarray:
+        """Every marker at rest (M, 3), object frame, metres, in :attr:`marker_names` order."""
+        return np.concatenate([p.markers for p in self.parts])
+
     def part(self, name: str) -> Part:
         """The part called ``name``."""
         for p in self.parts:

@@ -22,6 +22,8 @@ from handcap.core.errors import HandcapError
 
 #: Outward normal of each face, cube frame.
 FACES = {"R": (1, 0, 0), "L": (-1, 0, 0), "U": (0, 1, 0), "D": (0, -1, 0), "F": (0, 0, 1), "B": (0, 0, -1)}
+#: The faces in the order of per-face arrays (layer angles).
+FACE_ORDER = tuple(FACES)
 #: Home positions of the eight cubies (signs of their centres), in a fixed order.
 HOME = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.int64)
 #: Quarter turns of each suffix: clockwise, counter-clockwise, half.

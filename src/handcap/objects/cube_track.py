@@ -30,10 +30,9 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.objects.articulated import ArticulatedObject
-from handcap.objects.cube import FACES, HOME, apply_moves, format_moves
+from handcap.objects.cube import FACE_ORDER, HOME, apply_moves, format_moves, permutation
 from handcap.objects.rigid import kabsch
 
-FACE_ORDER = tuple(FACES)
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
 REST_DEG = 3.0
 #: A layer turned more than this from its last quarter (degrees) is moving: a move begins.
@@ -107,11 +106,7 @@ class CubeTrack:
     @property
     def permutation(self) -> np.ndarray:
         """The cubie (start index) at each home place at the end, (8,) int."""
-        where = np.einsum("nij,nj->ni", self.state, HOME)
-        out = np.empty(8, dtype=np.int64)
-        for cubie, place in enumerate(where):
-            out[int(np.flatnonzero((HOME == place).all(axis=1))[0])] = cubie
-        return out
+        return permutation(self.state)
 
 
 def _angle(r) -> np.ndarray:
@@ -186,7 +181,7 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
     state = np.rint(np.einsum("ji,njk->nik", w[first, 0], w[first])).astype(np.int64)  # S_c = G^T W_c
     start_state = state.copy()
     cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
-    rest = np.concatenate([p.markers for p in cube.parts])
+    rest = cube.markers
     valid = np.isfinite(markers).all(axis=2)
     world = np.nan_to_num(markers)
     rotation, translation = np.full((n, 3, 3), np.nan), np.full((n, 3), np.nan)
@@ -245,11 +240,9 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
     if first:  # before the cube was first seen whole: its pose only, as at the start
         rotation[:first], translation[:first] = _poses(local(start_state), world[:first],
                                                        valid[:first].astype(float))
-    rotation = np.where(np.isfinite(rotation).all(axis=(1, 2))[:, None, None], rotation, np.eye(3))
-    found = np.isfinite(translation).all(axis=1)
+    found = np.isfinite(translation).all(axis=1)  # _poses leaves rotation and translation NaN together
     rotvec = np.full((n, 3), np.nan)
     rotvec[found] = Rotation.from_matrix(rotation[found]).as_rotvec()
-    rotation = rotvec
-    return CubeTrack(rotation, translation, angles, format_moves(committed), state)
+    return CubeTrack(rotvec, translation, angles, format_moves(committed), state)
 
 

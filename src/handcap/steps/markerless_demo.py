@@ -32,6 +32,7 @@ from scipy.spatial.transform import Rotation
 from handcap.core.camera_rig import CameraRig
 from handcap.core.errors import HandcapWarning
 from handcap.core.files import atomic_output, save_npz
+from handcap.core.transforms import homogeneous
 from handcap.demo import file_stamps, written_since
 from handcap.io import read_hand_motion, read_object_motion, write_rig
 from handcap.markerless.contact import contact_figures
@@ -41,14 +42,6 @@ from handcap.multiview.detections import Detections, write_detections
 from handcap.steps.markerless import markerless
 
 FRAMES, SEED = 150, 1
-
-
-def _pose_matrices(rotation, translation) -> np.ndarray:
-    poses = np.zeros((len(rotation), 4, 4))
-    poses[:, :3, :3] = Rotation.from_rotvec(rotation).as_matrix()
-    poses[:, :3, 3] = translation
-    poses[:, 3, 3] = 1.0
-    return poses
 
 
 def _pa_error(a, b) -> float:
@@ -111,7 +104,7 @@ def run_markerless_demo(out="demo-markerless", *, frames: int = FRAMES, seed: in
                           object_points=out / "box_points.npz", contact=out / "contact.npz")
     result = step.result
     motion, obj = read_hand_motion(out / "motion.npz"), read_object_motion(out / "motion-object.npz")
-    est = _pose_matrices(obj.rotation, obj.translation)
+    est = homogeneous(Rotation.from_rotvec(obj.rotation).as_matrix(), obj.translation)
     surface = [cKDTree(cm.vertices @ g.object_poses[f, :3, :3].T + g.object_poses[f, :3, 3]).query(
         cm.vertices @ est[f, :3, :3].T + est[f, :3, 3])[0].mean() for f in range(frames)]
 

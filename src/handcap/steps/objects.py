@@ -63,8 +63,7 @@ def _track_cube(path, out, articulated, units) -> Step:
     if any(j.kind == "revolute" for j in cube.joints):
         raise HandcapError(f"{cube.name}: tracking revolute joints is not built yet; only a 2x2x2 cube's layers")
     track = track_cube(take.select(list(cube.marker_names)).positions, cube)
-    rest = np.concatenate([p.markers for p in cube.parts])
-    motion = ObjectMotion(track.rotation, track.translation, take.rate, cube.name, cube.marker_names, rest,
+    motion = ObjectMotion(track.rotation, track.translation, take.rate, cube.name, cube.marker_names, cube.markers,
                           {"layer_angles": track.layer_angle}, take.warnings)
     write_object_motion(motion, out, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER))})
     lost = int(np.isnan(track.translation[:, 0]).sum())

@@ -13,10 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from handcap.core.transforms import homogeneous
 from handcap.objects.articulated import ArticulatedObject, load_articulated
-from handcap.objects.cube import FACES, apply_moves, layer, parse_moves, solved_state
-
-FACE_ORDER = tuple(FACES)
+from handcap.objects.cube import FACE_ORDER, FACES, apply_moves, layer, parse_moves, solved_state
 
 
 @dataclass(frozen=True)
@@ -110,13 +109,11 @@ def cube_take(moves: str, rng=None, *, rate: float = 120.0, turn_seconds: float 
     phases = rng.uniform(0, 2 * np.pi, 6)
     freq = rng.uniform(0.2, 0.5, 6)
     turn = np.deg2rad(turn_deg) * np.sin(2 * np.pi * freq[:3] * t[:, None] + phases[:3])
-    glob = np.tile(np.eye(4), (n, 1, 1))
     start_pose = Rotation.random(random_state=int(rng.integers(1 << 31)))
-    glob[:, :3, :3] = (Rotation.from_rotvec(turn) * start_pose).as_matrix()
-    glob[:, :3, 3] = np.array([0.0, 0.0, 0.3]) + drift * np.sin(2 * np.pi * freq[3:] * t[:, None] + phases[3:])
-    rest = [p.markers for p in cube.parts]
-    per_cubie = np.stack([np.einsum("tij,mj->tmi", rot[:, c], rest[c]) for c in range(8)], axis=1)  # cube frame
-    local = np.concatenate([per_cubie[:, c] for c in range(8)], axis=1)
+    glob = homogeneous((Rotation.from_rotvec(turn) * start_pose).as_matrix(),
+                       np.array([0.0, 0.0, 0.3]) + drift * np.sin(2 * np.pi * freq[3:] * t[:, None] + phases[3:]))
+    cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
+    local = np.einsum("tmij,mj->tmi", rot[:, cubie], cube.markers)  # cube frame
     world = np.einsum("tij,tmj->tmi", glob[:, :3, :3], local) + glob[:, None, :3, 3]
     return CubeTake(world, cube.marker_names, float(rate), glob, rot, angle, sequence, np.array(frames, dtype=int),
                     state)
