@@ -64,9 +64,13 @@ def test_d_is_not_u_with_a_whole_cube_turn():
 def test_bad_takes():
     take = cube_take("R", rate=30.0)
     hidden = take.markers.copy()
-    hidden[:, :2] = np.nan  # one cubie never has 3 markers
-    with pytest.raises(HandcapError, match="never seen whole"):
+    hidden[:, :2] = np.nan  # one cubie never has 2 markers: where it starts is unknown
+    with pytest.raises(HandcapError, match="DBL are never seen"):
         track_cube(hidden, CUBE)
+    hidden[:, :1] = take.markers[:, :1]  # two markers and the cube's centre place it
+    assert track_cube(hidden, CUBE).moves == "R"
+    with pytest.raises(HandcapError, match="the cube is never seen"):
+        track_cube(np.full_like(take.markers, np.nan), CUBE)
     with pytest.raises(HandcapError, match="must be"):
         track_cube(take.markers[:, :10], CUBE)
     with pytest.raises(HandcapError, match="not a 2x2x2"):

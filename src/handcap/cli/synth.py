@@ -5,18 +5,20 @@ from __future__ import annotations
 from handcap.core.errors import HandcapError
 from handcap.layouts import SHIPPED
 from handcap.steps import synth
+from handcap.synth.cube import CUBE_MOTION
 from handcap.synth.motions import MOTIONS
 from handcap.synth.objects import OBJECTS
 from handcap.synth.scene import SynthConfig
 
-_SETTINGS = ("layout", "motion", "frames", "rate", "seed", "side", "object", "cameras", "min_views", "noise_mm",
+_SETTINGS = ("layout", "frames", "rate", "seed", "side", "object", "cameras", "min_views", "noise_mm",
              "pixel_noise", "dropout", "ghost_rate", "swap_rate", "outlier_rate", "placement_mm", "subject_seed")
 
 
 def _cmd_synth(a):
     betas = None if a.betas is None else tuple(float(b) for b in a.betas.split(","))
-    config = None if a.scene else SynthConfig(**{k: getattr(a, k) for k in _SETTINGS}, betas=betas,
-                                              max_view_angle_deg=a.max_view_angle)
+    motion = a.motion or (CUBE_MOTION if a.moves is not None else SynthConfig.motion)
+    config = None if a.scene else SynthConfig(**{k: getattr(a, k) for k in _SETTINGS}, betas=betas, motion=motion,
+                                              moves=a.moves, max_view_angle_deg=a.max_view_angle)
     return synth.synth(a.out, config, scene=a.scene, force=a.force, images=a.images, image_scale=a.image_scale,
                        image_style=a.image_style)
 
@@ -39,13 +41,17 @@ def add_synth(verbs) -> None:
                                      "Writes markers.c3d/.npz, points.npz, detections.npz, cameras.toml, truth.npz "
                                      "and scene.toml into OUT; the same settings give the same bytes.")
     p.add_argument("--layout", default=d.layout, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
-    p.add_argument("--motion", default=d.motion, choices=MOTIONS)
+    p.add_argument("--motion", choices=MOTIONS + (CUBE_MOTION,),
+                   help=f"default {d.motion}, or {CUBE_MOTION} with --moves")
     p.add_argument("--frames", type=int, default=d.frames)
     p.add_argument("--rate", type=float, default=d.rate, help="frames per second (default %(default)s)")
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--side", default=d.side, choices=("right", "left"))
     p.add_argument("--object", default=d.object, choices=OBJECTS + ("auto", "none"),
                    help="object to manipulate (auto: the motion's usual one)")
+    p.add_argument("--moves", help=f"the hand turns the 2x2x2 cube's layers through these moves, e.g. \"R U R' U' D2\" "
+                                   f"(motion {CUBE_MOTION}; without --moves it draws a 10-move scramble); the take "
+                                   f"lasts as long as they need and truth.npz holds every layer's angle")
     p.add_argument("--betas", help="10 comma-separated shape values (default: drawn from the seed)")
     p.add_argument("--cameras", type=int, default=d.cameras)
     p.add_argument("--min-views", type=int, default=d.min_views, help="cameras needed to reconstruct a marker")

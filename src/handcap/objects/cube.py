@@ -28,6 +28,10 @@ FACE_ORDER = tuple(FACES)
 HOME = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.int64)
 #: Quarter turns of each suffix: clockwise, counter-clockwise, half.
 TURNS = {"": 1, "'": -1, "2": 2}
+#: Edge of a cubie of the shipped cube (56 mm across, with a little play between the cubies), metres.
+CUBIE_EDGE = 0.0275
+#: Distance of a cubie's centre from the cube's along each axis, metres.
+CUBIE_OFFSET = 0.014
 _MOVE = re.compile(r"^([RLUDFB])(2'?|'2?|)$")
 
 
@@ -76,6 +80,22 @@ def format_moves(moves) -> str:
         if q:
             out.append(face + {1: "", 2: "2", 3: "'"}[q])
     return " ".join(out)
+
+
+def random_moves(count: int, rng) -> list[tuple[str, int]]:
+    """A random scramble of ``count`` face turns, no face twice in a row (what a scrambler would write).
+
+    Parameters
+    ----------
+    count : int
+    rng : numpy.random.Generator
+    """
+    moves, last = [], None
+    for _ in range(count):
+        face = str(rng.choice([f for f in FACES if f != last]))
+        moves.append((face, int(rng.choice([1, -1, 2]))))
+        last = face
+    return moves
 
 
 def solved_state() -> np.ndarray:
@@ -129,4 +149,36 @@ def permutation(state) -> np.ndarray:
     out = np.empty(8, dtype=np.int64)
     for cubie, place in enumerate(where):
         out[index[tuple(place)]] = cubie
+    return out
+
+
+def cube_signed_distance(points, cube_pose, cubie_rotation, *, chunk: int = 64) -> np.ndarray:
+    """Signed distance (metres, negative inside) of world points to the union of the cube's eight cubies, each
+    where its rotation puts it (mid-turn too).
+
+    Parameters
+    ----------
+    points : ndarray (T, P, 3)
+        World points, metres (e.g. a hand's vertices); NaN gives NaN.
+    cube_pose : ndarray (T, 4, 4)
+        The cube's frame to the world.
+    cubie_rotation : ndarray (T, 8, 3, 3)
+        Each cubie's rotation in the cube's frame.
+    chunk : int
+        Frames computed at once (memory).
+
+    Returns
+    -------
+    ndarray (T, P)
+    """
+    points = np.asarray(points, dtype=np.float64)
+    out = np.empty(points.shape[:2])
+    centre = HOME * CUBIE_OFFSET
+    for a in range(0, len(points), chunk):
+        b = slice(a, a + chunk)
+        local = np.einsum("tji,tpj->tpi", cube_pose[b, :3, :3], points[b] - cube_pose[b, None, :3, 3])
+        inner = np.einsum("tnji,tpj->tnpi", cubie_rotation[b], local) - centre[None, :, None]  # cubie frames
+        q = np.abs(inner) - CUBIE_EDGE / 2
+        d = np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(axis=-1), 0)
+        out[b] = d.min(axis=1)
     return out

@@ -26,18 +26,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import savgol_filter
 from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.objects.articulated import ArticulatedObject
-from handcap.objects.cube import FACE_ORDER, HOME, apply_moves, format_moves, permutation
+from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, format_moves, permutation
 from handcap.objects.rigid import kabsch
 
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
 REST_DEG = 3.0
 #: A layer turned more than this from its last quarter (degrees) is moving: a move begins.
 MOVE_DEG = 6.0
-#: Frames a layer must hold still at a quarter for its move to end.
+#: A move began where its layer last left this (degrees) from its quarter (its angle is measured from
+#: :data:`HOLD` frames before that).
+ONSET_DEG = 1.0
+#: Frames a layer must hold still at a quarter for its move to end (the move takes them in).
 HOLD = 5
 #: Frames before and after a move over which the two halves' smoothness is compared.
 SMOOTH_FRAMES = 10
@@ -95,6 +99,9 @@ class CubeTrack:
         The move sequence in standard notation.
     state : ndarray (8, 3, 3) int
         Every cubie's rotation in the cube's frame at the end (the identity for a cube that started solved).
+    cubie_rotation : ndarray (T, 8, 3, 3)
+        Every cubie's rotation in the cube's frame in every frame: the committed state at rest, the turning
+        layer at its measured angle during a move.
     """
 
     rotation: np.ndarray
@@ -102,6 +109,7 @@ class CubeTrack:
     layer_angle: np.ndarray
     moves: str
     state: np.ndarray
+    cubie_rotation: np.ndarray
 
     @property
     def permutation(self) -> np.ndarray:
@@ -113,10 +121,23 @@ def _angle(r) -> np.ndarray:
     return np.arccos(np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
 
 
+#: A marker farther than this (metres) from where the first fit puts it is dropped (a swapped or
+#: misplaced label) and the pose fitted again.
+OUTLIER = 0.003
+
+
 def _poses(local, world, weights):
     """Kabsch of ``local`` (M, 3) onto every frame's ``world`` (F, M, 3) with ``weights`` (F, M): rotations
-    (F, 3, 3) and translations (F, 3); NaN where fewer than 3 markers weigh."""
+    (F, 3, 3) and translations (F, 3); markers more than :data:`OUTLIER` off are dropped and the fit
+    repeated; NaN where fewer than 3 markers weigh."""
+    weights = np.asarray(weights, dtype=np.float64)
     rot, trans = kabsch(np.broadcast_to(local, world.shape), world, weights)
+    off = np.linalg.norm(np.einsum("fij,mj->fmi", rot, local) + trans[:, None] - world, axis=-1)
+    kept = np.where(off > OUTLIER, 0.0, weights)
+    redo = (kept != weights).any(axis=1) & (kept.sum(axis=1) >= 3)
+    if redo.any():
+        weights = np.where(redo[:, None], kept, weights)
+        rot[redo], trans[redo] = kabsch(np.broadcast_to(local, world[redo].shape), world[redo], weights[redo])
     bad = weights.sum(axis=1) < 3
     rot[bad], trans[bad] = np.nan, np.nan
     return rot, trans
@@ -147,7 +168,86 @@ def _roughness(rot) -> float:
     return float(np.sqrt(np.mean((basis @ fit - rv) ** 2)))
 
 
-def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
+def _start(w, seen, world, valid, cubie, rest):
+    """The first frame to track from and the cubies' state there.
+
+    From the first frame in which most cubies are seen (at least four, or as many as are ever seen), the
+    first cubie seen sets the cube's frame; the others join as they are first seen (two markers and the
+    cube's centre, about which every cubie turns), placed in the frame that the known cubies' markers give,
+    while those still move as one body (no layer is turning yet).
+    """
+    counts = seen.sum(axis=1)
+    if counts.max() < 2:
+        raise HandcapError(f"the cube is never seen: in {len(w)} frames no two of its cubies show 3 markers "
+                           f"each")
+    first = int(np.argmax(counts >= min(4, counts.max())))
+    known = seen[first].copy()
+    state = np.zeros((8, 3, 3), dtype=np.int64)
+    state[known] = np.rint(np.einsum("ji,njk->nik", w[first, int(np.argmax(known))], w[first, known]))
+    for f in range(first + 1, len(w)):
+        if known.all():
+            break
+        use = valid[f] & known[cubie]
+        if use.sum() < 3:
+            continue
+        x = np.einsum("mij,mj->mi", state[cubie], rest)
+        rot, trans = kabsch(x, world[f], use.astype(float))
+        residual = np.sqrt(np.mean(np.sum((x[use] @ rot.T + trans - world[f, use]) ** 2, axis=1)))
+        if residual > 0.0025:  # a layer has begun to turn
+            break
+        for c in np.flatnonzero(~known):
+            mine = (cubie == c) & valid[f]
+            if mine.sum() < 2:
+                continue
+            # the cube's centre is a point of every cubie (it turns about it): with it, two markers place one
+            turn, _ = kabsch(np.vstack([rest[mine], np.zeros(3)]), np.vstack([world[f, mine], trans]))
+            guess = rot.T @ turn
+            if np.abs(guess - np.rint(guess)).max() < 0.2:
+                state[c], known[c] = np.rint(guess), True
+    if not known.all():
+        missing = ", ".join(np.array(["DBL", "DFL", "UBL", "UFL", "DBR", "DFR", "UBR", "UFR"])[~known])
+        raise HandcapError(f"the cube's cubies {missing} are never seen (2 markers each) before its first turn: "
+                           f"cannot tell where they start")
+    return first, state
+
+
+def _runs(ok):
+    """(start, stop) of every run of True in ``ok`` (T,) bool."""
+    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
+    return edges.reshape(-1, 2)
+
+
+def smooth_pose(rotation, translation, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """A pose track smoothed by a quadratic Savitzky-Golay filter over ``window`` frames, run by run (NaN
+    frames split runs; runs shorter than ``window`` are left alone).
+
+    Parameters
+    ----------
+    rotation : ndarray (T, 3, 3)
+    translation : ndarray (T, 3)
+        Metres; NaN where the pose is unknown.
+    window : int
+        Odd number of frames; below 5 returns the inputs.
+
+    Returns
+    -------
+    rotation, translation : ndarrays (T, 3, 3), (T, 3)
+    """
+    rotation, translation = rotation.copy(), translation.copy()
+    if window < 5:
+        return rotation, translation
+    for a, b in _runs(np.isfinite(translation).all(axis=1)):
+        if b - a < window:
+            continue
+        q = Rotation.from_matrix(rotation[a:b]).as_quat()
+        q *= np.where(np.cumprod(np.r_[1.0, np.sign(np.sum(q[1:] * q[:-1], axis=1))]) < 0, -1.0, 1.0)[:, None]
+        q = savgol_filter(q, window, 2, axis=0)
+        rotation[a:b] = Rotation.from_quat(q).as_matrix()
+        translation[a:b] = savgol_filter(translation[a:b], window, 2, axis=0)
+    return rotation, translation
+
+
+def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrack:
     """Pose, layer angles and moves of a 2x2x2 cube from its labelled markers (see the module docstring).
 
     Parameters
@@ -156,6 +256,9 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
         The cube's markers in its description's order, metres, NaN where not seen.
     cube : ArticulatedObject
         The cube's description (``load_articulated("cube2x2")``).
+    window : int
+        Frames of the quadratic Savitzky-Golay filter that smooths the cube's pose and the layers' angles
+        (odd; 9 suits 100-120 Hz; below 5: none).
 
     Returns
     -------
@@ -173,19 +276,16 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
     if markers.ndim != 3 or markers.shape[1:] != (len(cube.marker_names), 3):
         raise HandcapError(f"cube markers must be (T, {len(cube.marker_names)}, 3), got {markers.shape}")
     w, _, seen = cubie_poses(markers, cube)
-    full = np.flatnonzero(seen.all(axis=1))
-    if not len(full):
-        raise HandcapError(f"the cube is never seen whole ({len(markers)} frames; every cubie needs 3 markers "
-                           f"in one frame to start)")
-    n, first = len(markers), int(full[0])
-    state = np.rint(np.einsum("ji,njk->nik", w[first, 0], w[first])).astype(np.int64)  # S_c = G^T W_c
-    start_state = state.copy()
     cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
     rest = cube.markers
     valid = np.isfinite(markers).all(axis=2)
     world = np.nan_to_num(markers)
+    n = len(markers)
+    first, state = _start(w, seen, world, valid, cubie, rest)
+    start_state = state.copy()
     rotation, translation = np.full((n, 3, 3), np.nan), np.full((n, 3), np.nan)
     angles = np.zeros((n, 6))
+    cubies = np.repeat(start_state[None].astype(float), n, axis=0)
     committed: list[list] = []
 
     def local(state):
@@ -208,16 +308,18 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
         rot_all, trans_all = _poses(local(state), world[t:t + begin], valid[t:t + begin].astype(float))
         rotation[t:t + begin], translation[t:t + begin] = rot_all, trans_all  # at rest: every marker
         if begin == len(frames):
+            cubies[t:] = state
             break
         a = int(np.argmax(np.abs(theta[:, begin])))
         s0 = begin
-        while s0 > 0 and abs(theta[a, s0 - 1]) > np.deg2rad(REST_DEG):
+        while s0 > 0 and abs(theta[a, s0 - 1]) > np.deg2rad(ONSET_DEG):
             s0 -= 1
+        s0 = max(s0 - HOLD, 0)  # a slow start hides in the noise: measure the layer from a little before
         # the move ends where the layer holds still at a quarter for HOLD frames
         off = np.abs(theta[a] - np.pi / 2 * np.round(theta[a] / (np.pi / 2)))
         still = np.convolve((off <= np.deg2rad(REST_DEG)).astype(int), np.ones(HOLD, int), "full")[HOLD - 1:]
         after = np.flatnonzero((np.arange(len(frames)) > begin) & (still >= HOLD))
-        end = int(after[0]) if len(after) else len(frames) - 1
+        end = int(after[0]) + HOLD - 1 if len(after) else len(frames) - 1
         seg = frames[s0:end + 1]
         lo, hi = max(seg[0] - SMOOTH_FRAMES, first), min(seg[-1] + SMOOTH_FRAMES, n - 1)
         (m_rot, m_trans), (p_rot, p_trans), _ = halves(state, a, np.arange(lo, hi + 1))
@@ -228,7 +330,14 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
         face = ("R", "U", "F")[a] if body_is_minus else ("L", "D", "B")[a]
         # the moving half's turn about its face's outward normal is theta either way; clockwise is minus that
         progress = -theta[a, s0:end + 1]
+        if window >= 5 and len(progress) >= window:
+            progress = savgol_filter(progress, window, 2)
         angles[seg, FACE_ORDER.index(face)] = progress
+        moving = np.flatnonzero((np.einsum("nij,nj->ni", state, HOME) @ np.array(FACES[face])) > 0)
+        turn = Rotation.from_rotvec(np.outer(-progress, FACES[face])).as_matrix()
+        cubies[t:seg[0]] = state
+        cubies[seg] = state
+        cubies[seg[:, None], moving] = np.einsum("fij,njk->fnik", turn, state[moving].astype(float))
         quarters = int(np.round(progress[-1] / (np.pi / 2)))
         if quarters % 4:
             state = apply_moves(state, [(face, quarters)])
@@ -240,9 +349,37 @@ def track_cube(markers, cube: ArticulatedObject) -> CubeTrack:
     if first:  # before the cube was first seen whole: its pose only, as at the start
         rotation[:first], translation[:first] = _poses(local(start_state), world[:first],
                                                        valid[:first].astype(float))
+    rotation, translation = smooth_pose(rotation, translation, window | 1)
     found = np.isfinite(translation).all(axis=1)  # _poses leaves rotation and translation NaN together
     rotvec = np.full((n, 3), np.nan)
     rotvec[found] = Rotation.from_matrix(rotation[found]).as_rotvec()
-    return CubeTrack(rotvec, translation, angles, format_moves(committed), state)
+    return CubeTrack(rotvec, translation, angles, format_moves(committed), state, cubies)
 
 
+
+
+def cube_errors(track: CubeTrack, pose, cubie_rotation) -> dict:
+    """How far a track is from the truth, frame by frame.
+
+    Parameters
+    ----------
+    track : CubeTrack
+    pose : ndarray (T, 4, 4)
+        The true cube frame (its body, the cubies not turning) to the world, metres.
+    cubie_rotation : ndarray (T, 8, 3, 3)
+        The true cubie rotations in the cube's frame.
+
+    Returns
+    -------
+    dict
+        ``position_mm`` (T,) and ``rotation_deg`` (T,): the cube's pose; ``layer_deg`` (T,): the largest
+        error of a cubie's rotation in the cube's frame (the turning layer's angle, which quarter it is
+        at included); NaN where the track has no pose.
+    """
+    rot = Rotation.from_rotvec(np.nan_to_num(track.rotation)).as_matrix()
+    found = np.isfinite(track.translation).all(axis=1)
+    position = np.linalg.norm(track.translation - pose[:, :3, 3], axis=1) * 1000
+    rotation = np.rad2deg(_angle(np.einsum("tji,tjk->tik", rot, pose[:, :3, :3])))
+    layer = np.rad2deg(_angle(np.einsum("tnji,tnjk->tnik", track.cubie_rotation, cubie_rotation))).max(axis=1)
+    rotation[~found] = np.nan
+    return {"position_mm": position, "rotation_deg": rotation, "layer_deg": layer}

@@ -12,10 +12,12 @@ import numpy as np
 from handcap import __version__
 from handcap.core.errors import HandcapError
 from handcap.core.motion import check_side
+from handcap.objects.cube import parse_moves
+from handcap.synth.cube import CUBE_MOTION
 from handcap.synth.motions import MOTIONS
 from handcap.synth.objects import OBJECTS
 
-DEFAULT_OBJECT = {"grasp": "cylinder", "precision": "sphere", "rotate-cube": "cube2x2"}
+DEFAULT_OBJECT = {"grasp": "cylinder", "precision": "sphere", "rotate-cube": "cube2x2", CUBE_MOTION: "cube2x2"}
 
 
 @dataclass(frozen=True)
@@ -27,8 +29,10 @@ class SynthConfig:
     layout : str
         Shipped layout name or a layout TOML path.
     motion : str
-        One of :data:`handcap.synth.motions.MOTIONS`.
+        One of :data:`handcap.synth.motions.MOTIONS`, or ``turn-cube`` (the hand turning the 2x2x2 cube's
+        layers through ``moves``: :mod:`handcap.synth.cube`).
     frames : int
+        Ignored by ``turn-cube``, whose take lasts as long as its moves need.
     rate : float
         Frames per second.
     seed : int
@@ -68,6 +72,9 @@ class SynthConfig:
         Seed of the subject: hand shape (when ``betas`` is None) and marker
         placement. Takes with the same subject seed share them, like the
         calibration take and the takes of one session. None: ``seed``.
+    moves : str or None
+        ``turn-cube`` only: the moves in standard notation (``"R U R' U'"``); None: a random 10-move scramble
+        drawn from the seed.
     """
 
     layout: str = "glove-13"
@@ -89,11 +96,20 @@ class SynthConfig:
     max_view_angle_deg: float | None = None
     placement_mm: float = 3.0
     subject_seed: int | None = None
+    moves: str | None = None
 
     def __post_init__(self):
         check_side(self.side)
-        if self.motion not in MOTIONS:
-            raise HandcapError(f"unknown motion {self.motion!r}; choose one of {', '.join(MOTIONS)}")
+        if self.motion not in MOTIONS + (CUBE_MOTION,):
+            raise HandcapError(f"unknown motion {self.motion!r}; choose one of {', '.join(MOTIONS + (CUBE_MOTION,))}")
+        if self.moves is not None:
+            if self.motion != CUBE_MOTION:
+                raise HandcapError(f"moves are turned by motion {CUBE_MOTION!r}, not {self.motion!r}")
+            if not parse_moves(self.moves):
+                raise HandcapError("moves: give at least one face turn, e.g. \"R U R' U'\"")
+        if self.motion == CUBE_MOTION and self.object not in ("auto", "cube2x2"):
+            raise HandcapError(f"motion {CUBE_MOTION!r} turns the 2x2x2 cube's layers: use --object cube2x2 "
+                               f"(or auto), not {self.object!r}")
         if self.object not in OBJECTS + ("none", "auto"):
             raise HandcapError(f"unknown object {self.object!r}; choose one of {', '.join(OBJECTS)}, none, auto")
         if not (isinstance(self.frames, int) and 2 <= self.frames <= 1_000_000):

@@ -94,12 +94,31 @@ def natural_pose(rng) -> np.ndarray:
 
 # -- interpolation -------------------------------------------------------------
 
-def _spline(times, values, t):
+def spline(times, values, t):
+    """Clamped cubic spline through key values, zero velocity at the ends.
+
+    Parameters
+    ----------
+    times : ndarray (K,)
+        Seconds, increasing.
+    values : ndarray (K, ...)
+    t : ndarray (T,)
+        Seconds to evaluate at.
+    """
     return CubicSpline(times, values, axis=0, bc_type="clamped")(t)
 
 
-def _rotation_path(times, rotations: Rotation, t) -> Rotation:
-    # A C2 spline through the key orientations in rotation-vector space (scipy).
+def rotation_path(times, rotations: Rotation, t) -> Rotation:
+    """A C2 spline through key orientations.
+
+    Parameters
+    ----------
+    times : ndarray (K,)
+        Seconds, increasing.
+    rotations : Rotation (K,)
+    t : ndarray (T,)
+        Seconds to evaluate at.
+    """
     return RotationSpline(times, rotations)(t)
 
 
@@ -111,7 +130,23 @@ def _tremor(rng, n, width, rate, amplitude, cutoff=6.0):
     return smooth / max(smooth.std(), 1e-12) * amplitude
 
 
-def _wrist_keys(rng, n_keys, *, turn_deg=25.0, move=0.05, centre=WORK_CENTRE, base=NEUTRAL):
+def wrist_keys(rng, n_keys, *, turn_deg=25.0, move=0.05, centre=WORK_CENTRE, base=NEUTRAL):
+    """``n_keys`` wrist orientations about ``base`` (spread ``turn_deg`` degrees) and positions about ``centre``
+    (spread ``move`` metres), drawn from ``rng``.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    n_keys : int
+    turn_deg, move : float
+        Twice the standard deviation of the turn (degrees, per axis) and of the position (metres, per axis).
+    centre, base : ndarray (3,) (metres) and Rotation
+
+    Returns
+    -------
+    rotations : Rotation (n_keys,)
+    positions : ndarray (n_keys, 3)
+    """
     rots = [base * Rotation.from_rotvec(np.deg2rad(rng.normal(0, turn_deg / 2, 3))) for _ in range(n_keys)]
     pos = [centre + rng.normal(0, move / 2, 3) for _ in range(n_keys)]
     return Rotation.concatenate(rots), np.array(pos)
@@ -348,14 +383,26 @@ def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> M
     else:
         keys = [natural_pose(rng) for _ in range(n_keys)]
         turn, move = 35.0, 0.08
-    phi = _spline(key_t, np.array(keys), t)
-    rots, pos = _wrist_keys(rng, n_keys, turn_deg=turn, move=move)
-    orient = _rotation_path(key_t, rots, t)
-    transl = _spline(key_t, pos, t)
-    return _finish(phi, orient, transl, rng, rate)
+    phi = spline(key_t, np.array(keys), t)
+    rots, pos = wrist_keys(rng, n_keys, turn_deg=turn, move=move)
+    orient = rotation_path(key_t, rots, t)
+    transl = spline(key_t, pos, t)
+    return finish_motion(phi, orient, transl, rng, rate)
 
 
-def _finish(phi, orient: Rotation, transl, rng, rate, hold_slice=None):
+def finish_motion(phi, orient: Rotation, transl, rng, rate):
+    """A :class:`Motion` from smooth angles (T, 27), wrist orientations (T rotations) and positions (T, 3), with a
+    physiological tremor added (angles 0.4 degrees, wrist 0.3 degrees and 0.4 mm, below 6 Hz).
+
+    Parameters
+    ----------
+    phi : ndarray (T, 27)
+        Radians; clipped to :data:`PHI_LIMITS` after the tremor.
+    orient, transl : Rotation (T,) and ndarray (T, 3)
+    rng : numpy.random.Generator
+    rate : float
+        Frames per second.
+    """
     n = len(phi)
     phi = phi + _tremor(rng, n, 27, rate, np.deg2rad(0.4))
     phi = np.clip(phi, PHI_LIMITS[:, 0], PHI_LIMITS[:, 1])
@@ -377,7 +424,7 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
     grasp_rot = Rotation.from_matrix(wrist_at_grasp[:3, :3])
     grasp_pos = wrist_at_grasp[:3, 3]
     up = np.array([0.0, 0.0, 1.0])
-    carry_rot, carry_pos = _wrist_keys(rng, n_carry, turn_deg=50.0, move=0.1, centre=grasp_pos + 0.12 * up,
+    carry_rot, carry_pos = wrist_keys(rng, n_carry, turn_deg=50.0, move=0.1, centre=grasp_pos + 0.12 * up,
                                        base=grasp_rot)
     put_down = carry_pos[-1].copy()
     put_down[2] = grasp_pos[2]
@@ -390,10 +437,10 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
                      put_down + 0.12 * up])
     phis = np.vstack([open_phi, open_phi, grasp_phi] + [grasp_phi] * n_carry + [grasp_phi, open_phi, open_phi])
     key_t, order = np.unique(key_t, return_index=True)
-    orient = _rotation_path(key_t, rots[order], t)
-    transl = _spline(key_t, pos[order], t)
-    phi = _spline(key_t, phis[order], t)
-    motion = _finish(phi, orient, transl, rng, rate)
+    orient = rotation_path(key_t, rots[order], t)
+    transl = spline(key_t, pos[order], t)
+    phi = spline(key_t, phis[order], t)
+    motion = finish_motion(phi, orient, transl, rng, rate)
     holding = (t >= f[2]) & (t <= f[3])
     # The object: on the table, then carried rigidly (turning in the fingers for
     # rotate-cube, about the axis through the thumb and finger contacts), then put down.

@@ -17,7 +17,11 @@ near real ones and label swaps. :func:`write_capture` writes the folder::
                                (names) with its noise-free position (positions,
                                normals), visibility (visible (T, M), camera_visible
                                (T, C, M)), faults (dropped, swaps, ghosts), the
-                               marker attachment and the object motion
+                               marker attachment and the object motion; with the
+                               2x2x2 cube turned (motion turn-cube) also its
+                               cube_cubie_rotation (T, 8, 3, 3), cube_layer_angle
+                               (T, 6), cube_move_frames (K, 2), cube_moves and
+                               cube_riding (the finger on each move's layer)
     scene.toml                 every setting, to make the folder again
 
 Everything is deterministic for a seed: same settings, same bytes. The settings
@@ -45,7 +49,10 @@ from handcap.hand.attachment import MarkerAttachment
 from handcap.io import write_c3d, write_markers_npz, write_points_npz
 from handcap.io.npz import write_hand_motion
 from handcap.layouts import LayoutMarker, MarkerLayout, load_layout
+from handcap.objects.articulated import load_articulated
+from handcap.objects.cube import format_moves, random_moves
 from handcap.synth.cameras import cage_rig
+from handcap.synth.cube import CUBE_MOTION, turning_motion
 from handcap.synth.config import DEFAULT_OBJECT, SynthConfig, config_from_scene, scene_table
 from handcap.synth.faults import burst_dropouts, ghost_markers, swap_labels
 from handcap.synth.motions import WORK_CENTRE, make_motion
@@ -190,10 +197,16 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
     attachment = MarkerAttachment.from_layout(misplaced(layout, hand, config.placement_mm / 1000, rng_place),
                                               hand, betas)
     kind = config.object_kind
-    obj = make_object(kind, seed=config.seed) if kind else None
+    turning = cube = None
+    if config.motion == CUBE_MOTION:  # the hand turns the cube's layers: an articulated object
+        moves = config.moves if config.moves is not None else format_moves(random_moves(10, rng_motion))
+        turning, cube, obj = turning_motion(hand, moves, config.rate, rng_motion), load_articulated("cube2x2"), None
+    else:
+        obj = make_object(kind, seed=config.seed) if kind else None
 
     # 1. Motion and the hand surface in every frame.
-    motion = make_motion(config.motion, hand, config.frames, config.rate, rng_motion, obj)
+    motion = turning.motion if turning else make_motion(config.motion, hand, config.frames, config.rate,
+                                                        rng_motion, obj)
     hand_pose = hand.hand_pose_from_phi(motion.phi)
     out = hand.forward(betas, motion.global_orient, hand_pose, motion.transl)
     vertices, joints = out.vertices, out.joints
@@ -204,7 +217,14 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
     names = list(attachment.marker_names)
     truth_markers, normals = hand_markers, hand_normals
     object_motion = None
-    if obj is not None:
+    if turning is not None:
+        obj_markers, obj_normals = turning.markers(cube)
+        truth_markers = np.concatenate([hand_markers, obj_markers], axis=1)
+        normals = np.concatenate([hand_normals, obj_normals], axis=1)
+        names += list(cube.marker_names)
+        object_motion = ObjectMotion(motion.object_rotation, motion.object_translation, config.rate, cube.name,
+                                     cube.marker_names, cube.markers, {"holding": motion.holding.astype(np.int8)})
+    elif obj is not None:
         rot = Rotation.from_rotvec(motion.object_rotation).as_matrix()
         obj_markers = np.einsum("tij,kj->tki", rot, obj.marker_positions) + motion.object_translation[:, None]
         obj_normals = np.einsum("tij,kj->tki", rot, obj.marker_normals)
@@ -225,6 +245,8 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
     n_frames, n_markers = truth_markers.shape[:2]
     seen_by = np.zeros((n_frames, len(rig), n_markers), bool)
     faces = hand.faces if obj is None else np.concatenate([hand.faces, obj.faces + vertices.shape[1]])
+    if turning is not None:
+        faces = np.concatenate([hand.faces, turning.surface(0)[1] + vertices.shape[1]])
     # tqdm: disable=None hides the bar when not on a terminal.
     hidden = None if progress is None else not progress
     for t in tqdm(range(n_frames), desc="visibility", unit="frame", disable=hidden, leave=False):
@@ -232,6 +254,8 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
         if obj is not None:
             turned = Rotation.from_rotvec(motion.object_rotation[t]).as_matrix()
             surface = np.concatenate([surface, obj.vertices @ turned.T + motion.object_translation[t]])
+        elif turning is not None:
+            surface = np.concatenate([surface, turning.surface(t)[0]])
         if max_angle is None:
             seen_by[t] = camera_visibility(truth_markers[t], rig, surface, faces)
         else:  # printed patches are on the hand; object markers stay spheres
@@ -266,6 +290,10 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
         "attachment_triangles": attachment.triangles, "attachment_barycentric": attachment.barycentric,
         "attachment_offset": attachment.offset,
     }
+    if turning is not None:
+        truth.update({"cube_cubie_rotation": turning.cubie_rotation, "cube_layer_angle": turning.layer_angle,
+                      "cube_move_frames": turning.move_frames, "cube_moves": np.array(format_moves(turning.moves)),
+                      "cube_riding": np.array(turning.riding)})
     return SynthCapture(config, markers, points, detections, rig, hand_motion, object_motion, truth)
 
 
