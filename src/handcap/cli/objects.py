@@ -25,9 +25,10 @@ def add_objects(verbs) -> None:
     p.add_argument("input", help="labeled markers")
     p.add_argument("--markers",
                    help="comma-separated names of the object's markers (3 or more); patterns such as 'boite:*' work")
-    p.add_argument("--articulated", metavar="CUBE",
-                   help="a 2x2x2 cube instead: cube2x2 (shipped) or its TOML description; writes its pose, layer "
-                        "angles and the moves (key 'moves', printed)")
+    p.add_argument("--articulated", metavar="OBJECT",
+                   help="an articulated object instead: cube2x2 (the shipped 2x2x2 cube: pose, layer angles and "
+                        "the moves, key 'moves', printed) or a TOML description of your own (parts with their "
+                        "markers, revolute joints: pose and joint angles)")
     p.add_argument("--canonical", help="object .npz with canonical (M, 3) marker positions")
     p.add_argument("--name", default="object")
     p.add_argument("--threshold-mm", type=float, default=5.0, help="RANSAC inlier distance (default %(default)s)")

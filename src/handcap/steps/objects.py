@@ -9,7 +9,9 @@ from handcap.core.markers import expand_names
 from handcap.core.motion import ObjectMotion
 from handcap.io import check_not_input, load_npz, read_markers, write_object_motion
 from handcap.objects import load_articulated, track_rigid
+from handcap.objects.articulated import SHIPPED
 from handcap.objects.cube_track import FACE_ORDER, track_cube
+from handcap.objects.jointed import track_jointed
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
 
@@ -33,9 +35,12 @@ def track_object(path, out, *, markers=None, canonical=None, name: str = "object
     units : {'mm', 'cm', 'm'} or None
         Unit of the input's coordinates, overriding what the file says.
     articulated : str, Path or None
-        A 2x2x2 cube's description (``cube2x2``, or a TOML file, :mod:`handcap.objects.articulated`): its
-        markers are found by name, and the cube's pose, layer angles (``state_layer_angles`` (T, 6), faces
-        in the order R L U D F B) and moves (``moves``, standard notation) are written.
+        An articulated object's description (``cube2x2``, or a TOML file, :mod:`handcap.objects.articulated`):
+        its markers are found by name. For a 2x2x2 cube its pose, layer angles (``state_layer_angles``
+        (T, 6), faces in the order R L U D F B), every cubie's rotation (``cubie_rotation`` (T, 8, 3, 3)) and
+        the moves (``moves``, standard notation) are written; for revolute joints the root part's pose, the
+        joint angles (``state_joint_angles`` (T, J), radians, joints named by their child part in
+        ``joints``) and the fit's RMS per frame (``fit_rms``, metres).
     """
     if articulated is not None:
         return _track_cube(path, out, articulated, units)
@@ -53,20 +58,40 @@ def track_object(path, out, *, markers=None, canonical=None, name: str = "object
 
 
 def _track_cube(path, out, articulated, units) -> Step:
-    check_not_input(out, path, articulated if str(articulated) != "cube2x2" else None)
-    cube = load_articulated(articulated)
+    check_not_input(out, path, articulated if str(articulated) not in SHIPPED else None)
+    obj = load_articulated(articulated)
     take = read_markers(path, units=units)
-    missing = [n for n in cube.marker_names if n not in take.names]
+    missing = [n for n in obj.marker_names if n not in take.names]
     if missing:
-        raise HandcapError(f"{path} lacks {len(missing)} of the {cube.name} markers ({', '.join(missing[:6])}"
+        raise HandcapError(f"{path} lacks {len(missing)} of the {obj.name} markers ({', '.join(missing[:6])}"
                            f"{' ...' if len(missing) > 6 else ''}): label them with the description's names")
-    if any(j.kind == "revolute" for j in cube.joints):
-        raise HandcapError(f"{cube.name}: tracking revolute joints is not built yet; only a 2x2x2 cube's layers")
-    track = track_cube(take.select(list(cube.marker_names)).positions, cube)
-    motion = ObjectMotion(track.rotation, track.translation, take.rate, cube.name, cube.marker_names, cube.markers,
-                          {"layer_angles": track.layer_angle}, take.warnings)
-    write_object_motion(motion, out, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER))})
+    positions = take.select(list(obj.marker_names)).positions
+    if obj.layers is None:
+        return _track_jointed(take, positions, obj, out)
+    if any(j.kind == "revolute" for j in obj.joints):
+        raise HandcapError(f"{obj.name}: a puzzle cube's layers and revolute joints in one object are not "
+                           f"tracked together; describe them as two objects")
+    window = max(int(round(0.075 * take.rate)) | 1, 1)  # 75 ms of smoothing: 9 frames at 120 Hz
+    track = track_cube(positions, obj, window=window)
+    warnings = [*take.warnings]
     lost = int(np.isnan(track.translation[:, 0]).sum())
-    line = (f"{out}: {cube.name} over {take.n_frames} frames, {len(track.moves.split())} moves: "
-            f"{track.moves or '(none)'}" + (f"; {lost} frames without a pose" if lost else ""))
-    return Step((line,), motion.warnings, (str(out),), track)
+    if lost:
+        warnings.append(f"{obj.name}: no pose in {lost} of {take.n_frames} frames (fewer than 3 markers seen)")
+    motion = ObjectMotion(track.rotation, track.translation, take.rate, obj.name, obj.marker_names, obj.markers,
+                          {"layer_angles": track.layer_angle}, tuple(warnings))
+    write_object_motion(motion, out, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER)),
+                                      "cubie_rotation": track.cubie_rotation})
+    line = (f"{out}: {obj.name} over {take.n_frames} frames, {len(track.moves.split())} moves: "
+            f"{track.moves or '(none)'}")
+    return Step((line, quality_line(motion.warnings, "  quality: ")), motion.warnings, (str(out),), track)
+
+
+def _track_jointed(take, positions, obj, out) -> Step:
+    track = track_jointed(positions, obj)
+    motion = ObjectMotion(track.rotation, track.translation, take.rate, obj.name, obj.marker_names, obj.markers,
+                          {"joint_angles": track.angles}, (*take.warnings, *track.warnings))
+    write_object_motion(motion, out, {"joints": np.array(track.joint_names), "fit_rms": track.rms})
+    ranges = ", ".join(f"{name} {np.nanmin(a):.0f}..{np.nanmax(a):.0f} deg" if np.isfinite(a).any() else
+                       f"{name} never measured" for name, a in zip(track.joint_names, np.rad2deg(track.angles).T))
+    line = f"{out}: {obj.name} over {take.n_frames} frames, joints {ranges}"
+    return Step((line, quality_line(motion.warnings, "  quality: ")), motion.warnings, (str(out),), track)
