@@ -43,6 +43,8 @@ MOVE_DEG = 6.0
 ONSET_DEG = 1.0
 #: Frames a layer must hold still at a quarter for its move to end (the move takes them in).
 HOLD = 5
+#: Frames searched at once for the next move (more when a move outlasts them).
+SPAN = 256
 #: Frames before and after a move over which the two halves' smoothness is compared.
 SMOOTH_FRAMES = 10
 
@@ -299,11 +301,17 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
         plus = _poses(x, world[frames], valid[frames] & (where > 0))
         return minus, plus, _relative_angle(minus[0], plus[0], np.eye(3)[a])
 
-    t = first
+    t, span = first, SPAN
     while t < n:
-        frames = np.arange(t, n)
+        frames = np.arange(t, min(t + span, n))
         theta = np.stack([halves(state, a, frames)[2] for a in range(3)])  # (3, F)
         moving = np.abs(theta) > np.deg2rad(MOVE_DEG)
+        if not moving.any() and frames[-1] < n - 1:  # at rest throughout: on to the next stretch
+            rest = slice(t, int(frames[-1]) + 1 - SPAN // 8)
+            rotation[rest], translation[rest] = _poses(local(state), world[rest], valid[rest].astype(float))
+            cubies[rest] = state
+            t = rest.stop
+            continue
         begin = int(np.argmax(moving.any(axis=0))) if moving.any() else len(frames)
         rot_all, trans_all = _poses(local(state), world[t:t + begin], valid[t:t + begin].astype(float))
         rotation[t:t + begin], translation[t:t + begin] = rot_all, trans_all  # at rest: every marker
@@ -319,7 +327,11 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
         off = np.abs(theta[a] - np.pi / 2 * np.round(theta[a] / (np.pi / 2)))
         still = np.convolve((off <= np.deg2rad(REST_DEG)).astype(int), np.ones(HOLD, int), "full")[HOLD - 1:]
         after = np.flatnonzero((np.arange(len(frames)) > begin) & (still >= HOLD))
-        end = int(after[0]) + HOLD - 1 if len(after) else len(frames) - 1
+        if (not len(after) or after[0] + HOLD > len(frames)) and frames[-1] < n - 1:
+            span *= 2  # the move outlasts the stretch: look further
+            continue
+        span = SPAN
+        end = min(int(after[0]) + HOLD, len(frames)) - 1 if len(after) else len(frames) - 1
         seg = frames[s0:end + 1]
         lo, hi = max(seg[0] - SMOOTH_FRAMES, first), min(seg[-1] + SMOOTH_FRAMES, n - 1)
         (m_rot, m_trans), (p_rot, p_trans), _ = halves(state, a, np.arange(lo, hi + 1))

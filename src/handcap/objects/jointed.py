@@ -280,7 +280,7 @@ def track_jointed(markers, obj: ArticulatedObject) -> JointedTrack:
     pose, angles = frames[root].copy(), angles
     known = np.isfinite(pose).all(axis=(1, 2)) & np.isfinite(angles).all(axis=1)
     # a frame whose root shows too few markers starts from the nearest known one, if it has enough in all
-    gap = ~known & (valid.sum(axis=1) >= max(4, (len(obj.joints) + 8) // 3 + 1))  # 3 numbers a marker
+    gap = ~known & (valid.sum(axis=1) >= max(5, (len(obj.joints) + 11) // 3 + 1))  # a margin over 6 + J
     if known.any() and gap.any():
         near = np.flatnonzero(known)[np.clip(np.searchsorted(np.flatnonzero(known), np.flatnonzero(gap)), 0,
                                              known.sum() - 1)]
@@ -291,7 +291,9 @@ def track_jointed(markers, obj: ArticulatedObject) -> JointedTrack:
     err = np.where(valid, np.linalg.norm(np.nan_to_num(fitted - markers), axis=-1), np.nan)
     with np.errstate(invalid="ignore"):
         rms = np.sqrt(np.nanmean(err ** 2, axis=1)) if valid.any() else np.full(n, np.nan)
-    lost = ~(known | gap) | (gap & ~(rms <= POOR_FIT))  # a gap frame that did not fit stays empty
+    # a gap frame stays empty unless it fits about as well as the frames that had their root
+    usual = np.nanmedian(rms[known]) if np.isfinite(rms[known]).any() else POOR_FIT
+    lost = ~(known | gap) | (gap & ~(rms <= min(2.0 * usual, POOR_FIT)))
     pose[lost], angles[lost], rms[lost] = np.nan, np.nan, np.nan
     angles = np.stack([_unwrap(a) for a in angles.T], axis=1) if angles.size else angles
     rot, trans = pose[:, :3, :3], pose[:, :3, 3]
