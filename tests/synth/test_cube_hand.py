@@ -104,3 +104,38 @@ def test_synth_verb_with_moves_and_its_bad_inputs(tmp_path, capsys):
 def test_moves_that_undo_each_other_leave_the_cube_solved(moves):
     take = turning_motion(OpenHand("right"), moves, 60.0, np.random.default_rng(0))
     assert (take.state == solved_state()).all()
+
+
+def test_marker_path_on_a_cube_take_solve_and_cube_metrics(tmp_path, capsys):
+    """Track the cube, solve the hand (true attachment), and score both with the cube's own metrics."""
+    import json
+
+    from handcap.synth.scene import write_capture
+
+    capture = synthesize(SynthConfig(motion="turn-cube", moves="R U'", seed=5, noise_mm=0.5, rate=60.0, cameras=8),
+                         progress=False)
+    write_capture(capture, tmp_path)
+    capture.attachment.save(tmp_path / "attachment.npz")
+    assert main(["track-object", str(tmp_path / "markers.c3d"), "--articulated", "cube2x2",
+                 "--out", str(tmp_path / "cube.npz")]) == 0
+    assert main(["solve", str(tmp_path / "markers.c3d"), "--attachment", str(tmp_path / "attachment.npz"),
+                 "--out", str(tmp_path / "motion.npz")]) == 0
+    capsys.readouterr()
+    for motion in ("truth", "motion"):
+        assert main(["metrics", str(tmp_path / f"{motion}.npz"), "--object", str(tmp_path / "cube.npz"),
+                     "--truth", str(tmp_path / "truth.npz"), "--out", str(tmp_path / f"{motion}.json")]) == 0
+    assert "cube moves             R U'" in capsys.readouterr().out
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    solved = json.loads((tmp_path / "motion.json").read_text())
+    assert truth["cube_moves"] == solved["cube_moves"] == "R U'" and truth["joint_error_mm"][0] < 1e-6
+    # against an independent computation: the true hand's deepest vertex in the true cubies, frame by frame
+    hand = OpenHand("right")
+    hm = capture.hand_motion
+    verts = hand.forward(hm.betas, hm.global_orient, hm.hand_pose, hm.transl).vertices
+    om = capture.object_motion
+    pose = np.tile(np.eye(4), (len(verts), 1, 1))
+    pose[:, :3, :3], pose[:, :3, 3] = Rotation.from_rotvec(om.rotation).as_matrix(), om.translation
+    depth = -cube_signed_distance(verts, pose, capture.truth["cube_cubie_rotation"]).min(axis=1)
+    assert abs(truth["penetration_mm"][0] - 1000 * depth[depth > 0].mean()) < 0.3
+    assert solved["joint_error_mm"][0] < 4.0 and 0 < solved["penetration_mm"][0] < 10.0
+    assert truth["cube_msnr_db"] > 10 and truth["cube_jerk_m_s3"][0] > 0

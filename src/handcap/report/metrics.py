@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
-from handcap.core.files import existing_file
+from handcap.core.files import existing_file, load_npz
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
 from handcap.io import read_hand_motion, read_markers, read_mesh, read_object_motion
+from handcap.objects.cube import cube_signed_distance
 from handcap.quality import metrics as q
 from handcap.solve.leave_one_out import leave_one_marker_out
 from handcap.solve.motion import observed_markers
@@ -28,7 +30,9 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     markers : path, optional
         The labeled markers the motion was solved from: MRE against them.
     obj, object_mesh : paths, optional
-        Object motion ``.npz`` and the object's mesh in its own frame: penetration.
+        Object motion ``.npz`` and the object's mesh in its own frame: penetration. A 2x2x2 cube's track
+        (``track-object --articulated cube2x2``) needs no mesh: the penetration is into its cubies where
+        they are, and its moves, MSNR and jerk are added (``cube_*``).
     attachment : path, optional
         Needed with ``leave_one_out`` (re-solves the take once per marker).
     hand : HandModel, optional
@@ -66,6 +70,18 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     diversity, coherence = q.diversity_coherence(
         q.pose_features(motion.joints, None if object_motion is None else object_motion.translation))
     out["diversity"], out["coherence"] = diversity, coherence
+    if obj is not None:
+        cube = _cube_figures(obj, object_motion)
+        out.update(cube)
+        if cube and object_mesh is None:  # the cube's own geometry: its cubies where they are
+            hand = _hand_for(motion, hand)
+            verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
+            pose = np.tile(np.eye(4), (object_motion.n_frames, 1, 1))
+            pose[:, :3, :3] = Rotation.from_rotvec(np.nan_to_num(object_motion.rotation)).as_matrix()
+            pose[:, :3, 3] = object_motion.translation
+            depth = -cube_signed_distance(verts, pose, load_npz(obj)["cubie_rotation"]).min(axis=1)
+            s = q.Stat.of(depth[depth > 0])
+            out["penetration_mm"] = [1000 * s.mean, 1000 * s.std, s.count]
     if object_motion is not None and object_mesh is not None:
         mesh = read_mesh(object_mesh)
         if len(getattr(mesh, "faces", ())) == 0:
@@ -83,6 +99,29 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     return out
 
 
+def _cube_figures(path, object_motion) -> dict:
+    """A 2x2x2 cube's moves and the smoothness of its markers' motion (relative to its centre, so that the
+    layers' turns count and the hand's carrying does not), when ``path`` is a cube track
+    (``track-object --articulated cube2x2``); else nothing."""
+    data = load_npz(path)
+    if "cubie_rotation" not in data or "cubie_of_marker" not in data:
+        return {}
+    rotation = data["cubie_rotation"]
+    cubie = data["cubie_of_marker"].astype(int)
+    if rotation.shape != (object_motion.n_frames, 8, 3, 3) or cubie.shape != (len(object_motion.canonical),):
+        raise HandcapError(f"{path}: its cubie_rotation or cubie_of_marker does not match its frames and markers")
+    turned = Rotation.from_rotvec(np.nan_to_num(object_motion.rotation)).as_matrix()
+    local = np.einsum("tmij,mj->tmi", rotation[:, cubie], object_motion.canonical)  # cube frame, per frame
+    centre = object_motion.translation[:, None]
+    world = np.einsum("tij,tmj->tmi", turned, local) + centre
+    world = np.concatenate([centre, world], axis=1)[np.isfinite(object_motion.translation).all(axis=1)]
+    if len(world) < 4:
+        return {"cube_moves": str(data.get("moves", ""))}
+    s = q.jerk(world[:, 1:], object_motion.rate)
+    return {"cube_moves": str(data.get("moves", "")), "cube_msnr_db": q.msnr(world),
+            "cube_jerk_m_s3": [s.mean, s.std]}
+
+
 def _hand_for(motion, hand):
     """``hand``, or the OpenHand when the motion was solved with it."""
     if hand is not None:
@@ -98,7 +137,8 @@ def metrics_table(metrics: dict) -> str:
     lines = []
     fmt = {"mre_mm": "MRE (mm)", "joint_error_mm": "joint error (mm)", "msnr_db": "MSNR (dB)",
            "jerk_m_s3": "jerk (m/s^3)", "diversity": "diversity", "coherence": "coherence",
-           "penetration_mm": "penetration (mm)", "frames": "frames", "rate_hz": "rate (Hz)"}
+           "penetration_mm": "penetration (mm)", "frames": "frames", "rate_hz": "rate (Hz)",
+           "cube_msnr_db": "cube MSNR (dB)", "cube_jerk_m_s3": "cube jerk (m/s^3)", "cube_moves": "cube moves"}
     for key, label in fmt.items():
         if key not in metrics:
             continue

@@ -80,7 +80,9 @@ def _track_cube(path, out, articulated, units) -> Step:
     motion = ObjectMotion(track.rotation, track.translation, take.rate, obj.name, obj.marker_names, obj.markers,
                           {"layer_angles": track.layer_angle}, tuple(warnings))
     write_object_motion(motion, out, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER)),
-                                      "cubie_rotation": track.cubie_rotation})
+                                      "cubie_rotation": track.cubie_rotation,
+                                      "cubie_of_marker": np.repeat(np.arange(8), [len(p.marker_names)
+                                                                                  for p in obj.parts])})
     line = (f"{out}: {obj.name} over {take.n_frames} frames, {len(track.moves.split())} moves: "
             f"{track.moves or '(none)'}")
     return Step((line, quality_line(motion.warnings, "  quality: ")), motion.warnings, (str(out),), track)
