@@ -8,7 +8,8 @@ from handcap.steps import metrics, objects
 
 def _cmd_track_object(a):
     return objects.track_object(a.input, a.out, markers=a.markers, canonical=a.canonical, name=a.name,
-                                threshold=a.threshold_mm / 1000, units=a.units, articulated=a.articulated)
+                                threshold=a.threshold_mm / 1000, units=a.units, articulated=a.articulated,
+                                start=a.start, labeled=a.labeled, filled=a.filled)
 
 
 def _cmd_metrics(a):
@@ -29,6 +30,14 @@ def add_objects(verbs) -> None:
                    help="an articulated object instead: cube2x2 (the shipped 2x2x2 cube: pose, layer angles and "
                         "the moves, key 'moves', printed) or a TOML description of your own (parts with their "
                         "markers, revolute joints: pose and joint angles)")
+    p.add_argument("--start", metavar="LABELLED",
+                   help="with --articulated cube2x2: the input holds unlabelled points, and this file the cube's "
+                        "labelled markers in at least one frame (the first frame in which every cubie shows 2 "
+                        "starts); the cube's markers are labelled by following its cubies")
+    p.add_argument("--labeled", metavar="FILE", help="with --start: also write the cube's labelled markers here")
+    p.add_argument("--filled", metavar="FILE",
+                   help="with --articulated cube2x2: also write the cube's markers with their gaps filled from the "
+                        "track (each hidden marker where its cubie is)")
     p.add_argument("--canonical", help="object .npz with canonical (M, 3) marker positions")
     p.add_argument("--name", default="object")
     p.add_argument("--threshold-mm", type=float, default=5.0, help="RANSAC inlier distance (default %(default)s)")

@@ -395,3 +395,23 @@ def cube_errors(track: CubeTrack, pose, cubie_rotation) -> dict:
     layer = np.rad2deg(_angle(np.einsum("tnji,tnjk->tnik", track.cubie_rotation, cubie_rotation))).max(axis=1)
     rotation[~found] = np.nan
     return {"position_mm": position, "rotation_deg": rotation, "layer_deg": layer}
+
+
+def fitted_markers(track: CubeTrack, cube: ArticulatedObject) -> np.ndarray:
+    """Where the track puts every marker of the cube in every frame (the gaps of a take filled).
+
+    Parameters
+    ----------
+    track : CubeTrack
+    cube : ArticulatedObject
+        The description it was tracked with.
+
+    Returns
+    -------
+    ndarray (T, M, 3)
+        Metres, description order; NaN where the track has no pose.
+    """
+    cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
+    turn = Rotation.from_rotvec(np.nan_to_num(track.rotation)).as_matrix()
+    local = np.einsum("tmij,mj->tmi", track.cubie_rotation[:, cubie], cube.markers)
+    return np.einsum("tij,tmj->tmi", turn, local) + track.translation[:, None]

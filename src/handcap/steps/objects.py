@@ -5,19 +5,20 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.markers import expand_names
+from handcap.core.markers import MarkerSequence, expand_names
 from handcap.core.motion import ObjectMotion
-from handcap.io import check_not_input, load_npz, read_markers, write_object_motion
+from handcap.io import check_not_input, load_npz, read_markers, read_points, write_markers, write_object_motion
 from handcap.objects import load_articulated, track_rigid
 from handcap.objects.articulated import SHIPPED
-from handcap.objects.cube_track import FACE_ORDER, track_cube
+from handcap.objects.cube_label import label_cube
+from handcap.objects.cube_track import FACE_ORDER, fitted_markers, track_cube
 from handcap.objects.jointed import track_jointed
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
 
 
 def track_object(path, out, *, markers=None, canonical=None, name: str = "object", threshold: float = 0.005,
-                 units: str | None = None, articulated=None) -> Step:
+                 units: str | None = None, articulated=None, start=None, labeled=None, filled=None) -> Step:
     """Track a rigid object by Kabsch with RANSAC per frame (see :func:`handcap.objects.track_rigid`).
 
     Parameters
@@ -41,9 +42,19 @@ def track_object(path, out, *, markers=None, canonical=None, name: str = "object
         the moves (``moves``, standard notation) are written; for revolute joints the root part's pose, the
         joint angles (``state_joint_angles`` (T, J), radians, joints named by their child part in
         ``joints``) and the fit's RMS per frame (``fit_rms``, metres).
+    start, labeled : str, Path or None
+        With a 2x2x2 cube: ``path`` holds unlabelled points, and ``start`` the cube's labelled markers in at
+        least one frame of the take (frame numbers as in ``path``; the first frame in which every cubie shows
+        2 markers starts the labeling, :func:`handcap.objects.cube_label.label_cube`); ``labeled`` also
+        writes the cube's markers so labelled.
+    filled : str, Path or None
+        With a 2x2x2 cube: also write its markers with every gap filled where the track puts them (seen
+        markers kept as they are).
     """
     if articulated is not None:
-        return _track_cube(path, out, articulated, units)
+        return _track_cube(path, out, articulated, units, start, labeled, filled)
+    if start is not None or labeled is not None or filled is not None:
+        raise HandcapError("--start, --labeled and --filled are for a 2x2x2 cube: give --articulated too")
     if markers is None:
         raise HandcapError("give the object's markers (--markers) or its description (--articulated)")
     check_not_input(out, path, canonical)
@@ -57,15 +68,27 @@ def track_object(path, out, *, markers=None, canonical=None, name: str = "object
                 (str(out),), track)
 
 
-def _track_cube(path, out, articulated, units) -> Step:
-    check_not_input(out, path, articulated if str(articulated) not in SHIPPED else None)
+def _track_cube(path, out, articulated, units, start, labeled, filled) -> Step:
+    shipped = str(articulated) in SHIPPED
+    check_not_input(out, path, None if shipped else articulated, start)
+    for extra in (labeled, filled):
+        if extra is not None:
+            check_not_input(extra, path, None if shipped else articulated, start, out)
     obj = load_articulated(articulated)
-    take = read_markers(path, units=units)
-    missing = [n for n in obj.marker_names if n not in take.names]
-    if missing:
-        raise HandcapError(f"{path} lacks {len(missing)} of the {obj.name} markers ({', '.join(missing[:6])}"
-                           f"{' ...' if len(missing) > 6 else ''}): label them with the description's names")
-    positions = take.select(list(obj.marker_names)).positions
+    if start is not None:
+        take, positions = _label_cube(path, obj, start, units)
+        if labeled is not None:
+            write_markers(take, labeled)
+    else:
+        if labeled is not None:
+            raise HandcapError("--labeled writes the markers that --start labels: give --start too")
+        take = read_markers(path, units=units)
+        missing = [n for n in obj.marker_names if n not in take.names]
+        if missing:
+            raise HandcapError(f"{path} lacks {len(missing)} of the {obj.name} markers ({', '.join(missing[:6])}"
+                               f"{' ...' if len(missing) > 6 else ''}): label them with the description's names, "
+                               f"or give --start to label them from a labelled frame")
+        positions = take.select(list(obj.marker_names)).positions
     if obj.layers is None:
         return _track_jointed(take, positions, obj, out)
     if any(j.kind == "revolute" for j in obj.joints):
@@ -85,7 +108,34 @@ def _track_cube(path, out, articulated, units) -> Step:
                                                                                   for p in obj.parts])})
     line = (f"{out}: {obj.name} over {take.n_frames} frames, {len(track.moves.split())} moves: "
             f"{track.moves or '(none)'}")
-    return Step((line, quality_line(motion.warnings, "  quality: ")), motion.warnings, (str(out),), track)
+    written = (str(out),)
+    if filled is not None:
+        complete = np.where(np.isfinite(positions), positions, fitted_markers(track, obj))
+        write_markers(MarkerSequence(complete, obj.marker_names, take.rate), filled)
+        gaps = int((~np.isfinite(positions).all(axis=2) & np.isfinite(complete).all(axis=2)).sum())
+        line += f"\n{filled}: the cube's markers with {gaps} missing samples filled from the track"
+        written += (str(filled),)
+    return Step((line, quality_line(motion.warnings, "  quality: ")), motion.warnings, written, track)
+
+
+def _label_cube(path, obj, start, units):
+    """The cube's markers labelled in the unlabelled points of ``path`` from the labelled frame of ``start``."""
+    if obj.layers is None:
+        raise HandcapError(f"{obj.name}: --start labels a 2x2x2 cube's markers; label other objects' markers first")
+    points = read_points(path, units=units)
+    given = read_markers(start, units=units)
+    missing = [n for n in obj.marker_names if n not in given.names]
+    if missing:
+        raise HandcapError(f"{start} lacks {len(missing)} of the {obj.name} markers ({', '.join(missing[:6])}): "
+                           f"it must hold the cube's labelled markers")
+    first = given.select(list(obj.marker_names)).positions[:points.n_frames]
+    counts = np.isfinite(first).all(axis=2).reshape(len(first), len(obj.parts), -1).sum(axis=2)
+    whole = np.flatnonzero((counts >= 2).all(axis=1))
+    if not len(whole):
+        raise HandcapError(f"{start}: no frame shows 2 labelled markers of every cubie; label one such frame")
+    labels = label_cube(points.frames, obj, first[whole[0]], int(whole[0]))
+    take = MarkerSequence(labels.positions, obj.marker_names, points.rate)
+    return take, labels.positions
 
 
 def _track_jointed(take, positions, obj, out) -> Step:
