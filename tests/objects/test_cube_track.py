@@ -100,3 +100,32 @@ def test_track_object_verb_with_the_shipped_cube(tmp_path, capsys):
     assert "lacks 4" in capsys.readouterr().err and not (tmp_path / "bad.npz").exists()
     assert main(["track-object", str(tmp_path / "cube.c3d"), "--out", str(tmp_path / "bad.npz")]) == 2
     assert "--articulated" in capsys.readouterr().err
+
+
+def test_bad_cube_files_and_takes_through_the_verb(tmp_path, capsys):
+    """A cube description with a cubie short of markers, a take in which the cube is never seen, and a move
+    string with an unknown face: one line each, exit 2."""
+    from handcap.cli import main
+    from handcap.core.markers import MarkerSequence
+    from handcap.io import write_markers
+    from handcap.objects.articulated import SHIPPED
+
+    text = SHIPPED["cube2x2"].read_text()
+    short = text.replace("markers = { DBL_L = [-28, -14, -14], DBL_D = [-14, -28, -14], DBL_B = [-14, -14, -28] }",
+                         "markers = { DBL_L = [-28, -14, -14], DBL_D = [-14, -28, -14] }")
+    assert short != text
+    (tmp_path / "short.toml").write_text(short)
+    take = cube_take("R", rate=30.0)
+    write_markers(MarkerSequence(take.markers, take.marker_names, take.rate), tmp_path / "cube.c3d")
+    unseen = np.full_like(take.markers, np.nan)
+    unseen[:, 0] = take.markers[:, 0]  # one marker: the cube is never seen
+    write_markers(MarkerSequence(unseen, take.marker_names, take.rate), tmp_path / "unseen.c3d")
+    cases = ((["track-object", str(tmp_path / "cube.c3d"), "--articulated", str(tmp_path / "short.toml")],
+              "part 'DBL' has 2 markers"),
+             (["track-object", str(tmp_path / "unseen.c3d"), "--articulated", "cube2x2"], "the cube is never seen"),
+             (["synth", "--moves", "R U Q'"], "move \"Q'\""))
+    for argv, message in cases:
+        assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "out").exists()
