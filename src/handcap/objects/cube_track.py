@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 from handcap.core.errors import HandcapError
 from handcap.objects.articulated import ArticulatedObject
 from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, format_moves, permutation
-from handcap.objects.rigid import kabsch
+from handcap.objects.rigid import kabsch, kabsch_refit
 
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
 REST_DEG = 3.0
@@ -132,17 +132,7 @@ def _poses(local, world, weights):
     """Kabsch of ``local`` (M, 3) onto every frame's ``world`` (F, M, 3) with ``weights`` (F, M): rotations
     (F, 3, 3) and translations (F, 3); markers more than :data:`OUTLIER` off are dropped and the fit
     repeated; NaN where fewer than 3 markers weigh."""
-    weights = np.asarray(weights, dtype=np.float64)
-    rot, trans = kabsch(np.broadcast_to(local, world.shape), world, weights)
-    off = np.linalg.norm(np.einsum("fij,mj->fmi", rot, local) + trans[:, None] - world, axis=-1)
-    kept = np.where(off > OUTLIER, 0.0, weights)
-    redo = (kept != weights).any(axis=1) & (kept.sum(axis=1) >= 3)
-    if redo.any():
-        weights = np.where(redo[:, None], kept, weights)
-        rot[redo], trans[redo] = kabsch(np.broadcast_to(local, world[redo].shape), world[redo], weights[redo])
-    bad = weights.sum(axis=1) < 3
-    rot[bad], trans[bad] = np.nan, np.nan
-    return rot, trans
+    return kabsch_refit(local, world, weights, OUTLIER)
 
 
 def _relative_angle(minus, plus, axis) -> np.ndarray:

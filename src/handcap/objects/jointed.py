@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.objects.articulated import ArticulatedObject
-from handcap.objects.rigid import kabsch
+from handcap.objects.rigid import kabsch_refit
 
 #: A marker farther than this from the first fit of its part (metres) is dropped and the fit repeated.
 OUTLIER = 0.005
@@ -155,21 +155,6 @@ class JointedTrack:
     warnings: tuple
 
 
-def _rigid(rest, seen, valid):
-    """Kabsch of rest (M, 3) onto seen (T, M, 3) where valid (T, M), one outlier pass; NaN under 3 markers."""
-    world = np.nan_to_num(seen)
-    weights = valid.astype(float)
-    rot, trans = kabsch(np.broadcast_to(rest, world.shape), world, weights)
-    off = np.linalg.norm(np.einsum("tij,mj->tmi", rot, rest) + trans[:, None] - world, axis=-1)
-    kept = np.where(off > OUTLIER, 0.0, weights)
-    redo = (kept != weights).any(axis=1) & (kept.sum(axis=1) >= 3)
-    if redo.any():
-        rot[redo], trans[redo] = kabsch(np.broadcast_to(rest, world[redo].shape), world[redo], kept[redo])
-    bad = weights.sum(axis=1) < 3
-    rot[bad], trans[bad] = np.nan, np.nan
-    return rot, trans
-
-
 def _hinge_angle(joint, rest, in_parent, valid) -> np.ndarray:
     """The angle (T,) about ``joint``'s axis through its origin that best moves ``rest`` (M, 3) onto
     ``in_parent`` (T, M, 3), both in the parent's rest frame; NaN where no marker off the axis is seen."""
@@ -258,7 +243,8 @@ def track_jointed(markers, obj: ArticulatedObject) -> JointedTrack:
     valid = np.isfinite(markers).all(axis=2)
     start = np.cumsum([0] + [len(p.marker_names) for p in obj.parts])
     cols = {p.name: slice(start[k], start[k + 1]) for k, p in enumerate(obj.parts)}
-    rot, trans = _rigid(obj.part(root).markers, markers[:, cols[root]], valid[:, cols[root]])
+    rot, trans = kabsch_refit(obj.part(root).markers, np.nan_to_num(markers[:, cols[root]]), valid[:, cols[root]],
+                              OUTLIER)
     if not np.isfinite(trans).all(axis=1).any():
         raise HandcapError(f"{obj.name}: its root part {root!r} never shows 3 markers in one frame ({n} frames)")
     index = {id(j): k for k, j in enumerate(obj.joints)}

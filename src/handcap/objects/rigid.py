@@ -59,6 +59,39 @@ def kabsch(source, target, weights=None):
     return rotation, translation
 
 
+def kabsch_refit(source, target, weights, outlier: float):
+    """Kabsch of ``source`` (M, 3) onto every frame's ``target`` (T, M, 3), a point more than ``outlier``
+    metres from the first fit dropped and the fit repeated (a swapped or misplaced label).
+
+    Parameters
+    ----------
+    source : ndarray (M, 3)
+    target : ndarray (T, M, 3)
+        Metres; finite (weight 0 where not seen).
+    weights : ndarray (T, M)
+        Non-negative; 0 drops a point.
+    outlier : float
+        Metres.
+
+    Returns
+    -------
+    rotation : ndarray (T, 3, 3)
+    translation : ndarray (T, 3)
+        NaN in frames where fewer than 3 points weigh.
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    rot, trans = kabsch(np.broadcast_to(source, target.shape), target, weights)
+    off = np.linalg.norm(np.einsum("tij,mj->tmi", rot, source) + trans[:, None] - target, axis=-1)
+    kept = np.where(off > outlier, 0.0, weights)
+    redo = (kept != weights).any(axis=1) & ((kept > 0).sum(axis=1) >= 3)
+    if redo.any():
+        weights = np.where(redo[:, None], kept, weights)
+        rot[redo], trans[redo] = kabsch(np.broadcast_to(source, target[redo].shape), target[redo], weights[redo])
+    bad = (weights > 0).sum(axis=1) < 3
+    rot[bad], trans[bad] = np.nan, np.nan
+    return rot, trans
+
+
 def ransac_kabsch(source, target, *, threshold: float = 0.005, iterations: int = 64, rng=None):
     """Kabsch with RANSAC over triples: (rotation, translation, inliers) for one frame.
 
