@@ -30,7 +30,8 @@ parts whose centres lie on that axis' side (which parts those are changes with e
     axes = { R = [1, 0, 0], L = [-1, 0, 0], U = [0, 1, 0], D = [0, -1, 0], F = [0, 0, 1], B = [0, 0, -1] }
 
 ``cube2x2`` names the shipped 2x2x2 cube (:file:`objects/data/cube2x2.toml`: three markers on each of the
-eight cubies, one on each of its outer faces).
+eight cubies, one on each of its outer faces); ``cube2x2-patches`` the same cube with a coded patch on every
+facelet, each patch corner a marker named as ``handcap detect`` names it (:mod:`handcap.objects.cube_patches`).
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 
-SHIPPED = {"cube2x2": Path(__file__).resolve().parent / "data" / "cube2x2.toml"}
+SHIPPED = {name: Path(__file__).resolve().parent / "data" / f"{name}.toml" for name in ("cube2x2", "cube2x2-patches")}
 _METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 #: Fewest markers a part needs to be tracked on its own (Kabsch).
 MIN_MARKERS = 3

@@ -43,6 +43,8 @@ MOVE_DEG = 6.0
 ONSET_DEG = 1.0
 #: Frames a layer must hold still at a quarter for its move to end (the move takes them in).
 HOLD = 5
+#: Markers per cubie (spread over it) that the search for moves looks at; a move's own frames use them all.
+SEARCH_MARKERS = 8
 #: Frames searched at once for the next move (more when a move outlasts them).
 SPAN = 256
 #: Frames before and after a move over which the two halves' smoothness is compared.
@@ -283,18 +285,24 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
     def local(state):
         return np.einsum("mij,mj->mi", state[cubie], rest)
 
-    def halves(state, a, frames):
+    # the search for moves looks at a few markers spread over each cubie (a patched cube has dozens)
+    few = np.concatenate([start + np.unique(np.round(np.linspace(0, len(p.marker_names) - 1, SEARCH_MARKERS)))
+                          for start, p in zip(np.cumsum([0] + [len(p.marker_names) for p in cube.parts]),
+                                              cube.parts)]).astype(int)
+
+    def halves(state, a, frames, markers=slice(None)):
         """Poses of the minus and plus halves along axis ``a`` in ``frames``, and their relative angle."""
-        where = np.einsum("nij,nj->ni", state, HOME)[cubie, a]
-        x = local(state)
-        minus = _poses(x, world[frames], valid[frames] & (where < 0))
-        plus = _poses(x, world[frames], valid[frames] & (where > 0))
+        where = np.einsum("nij,nj->ni", state, HOME)[cubie, a][markers]
+        x = local(state)[markers]
+        seen = valid[frames][:, markers]
+        minus = _poses(x, world[frames][:, markers], seen & (where < 0))
+        plus = _poses(x, world[frames][:, markers], seen & (where > 0))
         return minus, plus, _relative_angle(minus[0], plus[0], np.eye(3)[a])
 
     t, span = first, SPAN
     while t < n:
         frames = np.arange(t, min(t + span, n))
-        theta = np.stack([halves(state, a, frames)[2] for a in range(3)])  # (3, F)
+        theta = np.stack([halves(state, a, frames, few)[2] for a in range(3)])  # (3, F)
         moving = np.abs(theta) > np.deg2rad(MOVE_DEG)
         if not moving.any() and frames[-1] < n - 1:  # at rest throughout: on to the next stretch
             rest = slice(t, int(frames[-1]) + 1 - SPAN // 8)
@@ -324,14 +332,14 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
         end = min(int(after[0]) + HOLD, len(frames)) - 1 if len(after) else len(frames) - 1
         seg = frames[s0:end + 1]
         lo, hi = max(seg[0] - SMOOTH_FRAMES, first), min(seg[-1] + SMOOTH_FRAMES, n - 1)
-        (m_rot, m_trans), (p_rot, p_trans), _ = halves(state, a, np.arange(lo, hi + 1))
+        (m_rot, m_trans), (p_rot, p_trans), full = halves(state, a, np.arange(lo, hi + 1))
         body_is_minus = _roughness(m_rot) <= _roughness(p_rot)
         inside = slice(seg[0] - lo, seg[-1] - lo + 1)
         rotation[seg] = (m_rot if body_is_minus else p_rot)[inside]
         translation[seg] = (m_trans if body_is_minus else p_trans)[inside]
         face = ("R", "U", "F")[a] if body_is_minus else ("L", "D", "B")[a]
         # the moving half's turn about its face's outward normal is theta either way; clockwise is minus that
-        progress = -theta[a, s0:end + 1]
+        progress = -full[inside]  # every marker's say, not only the search's few
         if window >= 5 and len(progress) >= window:
             progress = savgol_filter(progress, window, 2)
         angles[seg, FACE_ORDER.index(face)] = progress

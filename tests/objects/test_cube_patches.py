@@ -1,0 +1,45 @@
+"""The cube in coded patches: the shipped file is the generator's, the corners sit on their cubies' outer
+faces with the template's names, and the cube is tracked from them."""
+
+import tomllib
+
+import numpy as np
+
+from handcap.objects import load_articulated
+from handcap.objects.articulated import SHIPPED
+from handcap.objects.cube import HOME
+from handcap.objects.cube_patches import FACE_AXES, cubie_name, patch_cube_table
+from handcap.objects.cube_track import track_cube
+from handcap.patterns.session import session_pattern
+from handcap.synth.cube import cube_take
+
+
+def test_shipped_file_is_the_generators():
+    assert tomllib.loads(SHIPPED["cube2x2-patches"].read_text()) == patch_cube_table()
+
+
+def test_corners_lie_on_their_cubies_faces_with_the_templates_names():
+    cube = load_articulated("cube2x2-patches")
+    assert [p.name for p in cube.parts] == [p.name for p in load_articulated("cube2x2").parts]
+    assert [cubie_name(h) for h in HOME][:2] == ["DBL", "DFL"]
+    names = {n for p in session_pattern(hands=(), objects=("cube2x2",)).patches for n in p.corner_names()}
+    assert set(cube.marker_names) == names and len(names) == 24 * 23
+    for part, home in zip(cube.parts, HOME):
+        assert (np.sign(part.markers) == home).all()  # on its own corner of the cube
+        on_face = np.isclose(np.abs(part.markers), 0.028).sum(axis=1)
+        assert (on_face == 1).all()  # each corner on exactly one outer face
+    for face, (right, up) in FACE_AXES.items():
+        assert np.array_equal(np.cross(right, up), {"R": (1, 0, 0), "L": (-1, 0, 0), "U": (0, 1, 0),
+                                                    "D": (0, -1, 0), "F": (0, 0, 1), "B": (0, 0, -1)}[face])
+    # a patch is a 5 mm grid: neighbouring corners of U0 are 5 mm apart
+    u0 = np.array([m for n, m in zip(cube.marker_names, cube.markers) if n.startswith("cube2x2:U0_r0c")])
+    assert np.allclose(np.linalg.norm(np.diff(u0, axis=0), axis=1), 0.005)
+
+
+def test_tracked_from_its_corners_with_most_hidden():
+    cube = load_articulated("cube2x2-patches")
+    take = cube_take("R U' F2 D B L2", np.random.default_rng(1), rate=100.0, cube=cube)
+    rng = np.random.default_rng(2)
+    markers = take.markers + rng.normal(0, 0.0005, take.markers.shape)
+    markers[rng.random(markers.shape[:2]) < 0.5] = np.nan
+    assert track_cube(markers, cube).moves == "R U' F2 D B L2"
