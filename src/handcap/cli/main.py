@@ -10,6 +10,7 @@ import warnings
 from handcap.cli.calibrate import add_calibrate
 from handcap.cli.convert import add_convert
 from handcap.cli.detect import add_detect
+from handcap.cli.export import add_export
 from handcap.cli.label import add_label
 from handcap.cli.layout import add_layout
 from handcap.cli.markerless import add_markerless
@@ -45,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_pattern(verbs)
     add_detect(verbs)
     add_markerless(verbs)
+    add_export(verbs)
     return parser
 
 
