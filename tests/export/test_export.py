@@ -88,7 +88,7 @@ def test_export_verb_and_its_bad_inputs(motion, tmp_path, capsys):
     before = (tmp_path / "motion.npz").read_bytes()
     assert main(["export", str(tmp_path / "motion.npz"), "--to", str(tmp_path / "hand.bvh"), "--units", "mm"]) == 0
     assert "80 frames at 60 Hz, BVH" in capsys.readouterr().out
-    for to, message in (("hand.glb", "the suffix chooses the format"), ("motion.npz", "overwrite the input")):
+    for to, message in (("hand.usdz", "the suffix chooses the format"), ("motion.npz", "overwrite the input")):
         assert main(["export", str(tmp_path / "motion.npz"), "--to", str(tmp_path / to)]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err

@@ -8,7 +8,8 @@ from handcap.steps import export
 
 
 def _cmd_export(a):
-    return export.export(a.motion, a.to, units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir)
+    return export.export(a.motion, a.to, units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir,
+                         objects=a.object, meshes=a.object_mesh)
 
 
 def add_export(verbs) -> None:
@@ -19,5 +20,9 @@ def add_export(verbs) -> None:
     p.add_argument("--to", required=True, help="the file to write (.bvh .csv .c3d .trc .npz)")
     p.add_argument("--units", choices=("cm", "mm", "m"), default="cm",
                    help="length unit of a BVH file (default %(default)s, as Blender and MotionBuilder take it)")
+    p.add_argument("--object", action="append", metavar="MOTION",
+                   help="an object motion .npz (track-object) to animate in a .glb; repeat for several")
+    p.add_argument("--object-mesh", action="append", metavar="MESH",
+                   help="its mesh in its own frame (.obj .stl .ply ...), one per --object, in the same order")
     add_hand_model(p, default="the motion's")
     p.set_defaults(run=_cmd_export)

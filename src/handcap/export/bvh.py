@@ -31,6 +31,27 @@ def _filled(values, found):
     return values[use]
 
 
+def filled_frames(motion: HandMotion):
+    """The motion's ``global_orient`` (T, 3), ``hand_pose`` (T, 45) and ``transl`` (T, 3) with every frame
+    without a pose (NaN) given the nearest frame's, and the warning that says so (a list, empty if none).
+
+    Raises
+    ------
+    HandcapError
+        A motion without a single frame with a pose.
+    """
+    params = np.concatenate([motion.global_orient, motion.hand_pose, motion.transl], axis=1)
+    found = np.isfinite(params).all(axis=1)
+    if not found.any():
+        raise HandcapError("the motion has no frame with a pose: nothing to export")
+    warnings = []
+    if not found.all():
+        warnings.append(f"{int((~found).sum())} of {motion.n_frames} frames have no pose; the export holds the "
+                        f"nearest frame's pose there")
+    return (_filled(motion.global_orient, found), _filled(motion.hand_pose, found), _filled(motion.transl, found),
+            warnings)
+
+
 def bvh_text(motion: HandMotion, hand, *, units: str = "cm") -> tuple[str, list[str]]:
     """The BVH file of ``motion`` as text, and the warnings it raised.
 
@@ -56,16 +77,8 @@ def bvh_text(motion: HandMotion, hand, *, units: str = "cm") -> tuple[str, list[
     if units not in UNITS:
         raise HandcapError(f"BVH units {units!r}: choose cm, mm or m")
     scale = 1.0 / UNITS[units]
-    params = np.concatenate([motion.global_orient, motion.hand_pose, motion.transl], axis=1)
-    found = np.isfinite(params).all(axis=1)
-    if not found.any():
-        raise HandcapError("the motion has no frame with a pose: nothing to export")
-    warnings = []
-    if not found.all():
-        warnings.append(f"{int((~found).sum())} of {motion.n_frames} frames have no pose; the BVH holds the nearest "
-                        f"frame's pose there")
-    out = hand.forward(motion.betas, _filled(motion.global_orient, found), _filled(motion.hand_pose, found),
-                       _filled(motion.transl, found), vertices=False)
+    global_orient, hand_pose, transl, warnings = filled_frames(motion)
+    out = hand.forward(motion.betas, global_orient, hand_pose, transl, vertices=False)
     rotations = np.asarray(out.rotations)  # (T, 16, 3, 3) world
     local = rotations.copy()
     local[:, 1:] = np.einsum("tnji,tnjk->tnik", rotations[:, PARENTS[1:]], rotations[:, 1:])

@@ -8,10 +8,12 @@ from pathlib import Path
 from handcap.core.errors import HandcapError
 from handcap.core.motion import HandMotion
 from handcap.export.bvh import write_bvh
+from handcap.export.gltf import write_glb
 from handcap.export.tables import write_angles_csv, write_joint_markers, write_mano_npz
 
 #: What each output suffix gets.
-FORMATS = {".bvh": "BVH: the joint tree at rest and every joint's rotation per frame",
+FORMATS = {".glb": "glTF binary: the skinned hand mesh with its animation (and objects as animated nodes)",
+           ".bvh": "BVH: the joint tree at rest and every joint's rotation per frame",
            ".csv": "joint angles per frame (the 27 anatomical angles in degrees, and time in seconds)",
            ".c3d": "the 21 joints and the virtual markers as marker trajectories",
            ".trc": "the 21 joints and the virtual markers as marker trajectories",
@@ -19,7 +21,7 @@ FORMATS = {".bvh": "BVH: the joint tree at rest and every joint's rotation per f
 
 
 
-def export_motion(motion: HandMotion, hand, path, *, units: str = "cm") -> list[str]:
+def export_motion(motion: HandMotion, hand, path, *, units: str = "cm", objects=()) -> list[str]:
     """Write ``motion`` in the format its file name asks for (:data:`FORMATS`); returns the warnings.
 
     Parameters
@@ -30,6 +32,8 @@ def export_motion(motion: HandMotion, hand, path, *, units: str = "cm") -> list[
     path : str or Path
     units : {'cm', 'mm', 'm'}
         Length unit of a BVH file.
+    objects : sequence of (ObjectMotion, vertices (V, 3), faces (F, 3))
+        Objects to animate in a ``.glb`` (their meshes in their own frames, metres).
 
     Raises
     ------
@@ -39,6 +43,10 @@ def export_motion(motion: HandMotion, hand, path, *, units: str = "cm") -> list[
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
         raise HandcapError(f"{path}: export to {', '.join(FORMATS)} (the suffix chooses the format)")
+    if suffix == ".glb":
+        return write_glb(motion, hand, path, objects)
+    if objects:
+        raise HandcapError(f"{path}: objects go into a .glb export only")
     if suffix == ".bvh":
         return write_bvh(motion, hand, path, units=units)
     if suffix == ".csv":
