@@ -18,6 +18,7 @@ from handcap.cli.multiview import add_clean, add_multiview
 from handcap.cli.objects import add_objects
 from handcap.cli.occlusion import add_occlusion
 from handcap.cli.pattern import add_pattern
+from handcap.cli.report import add_report
 from handcap.cli.solve import add_solve
 from handcap.cli.synth import add_synth
 from handcap import __version__
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_detect(verbs)
     add_markerless(verbs)
     add_export(verbs)
+    add_report(verbs)
     return parser
 
 

@@ -1,0 +1,97 @@
+"""The HTML report: self-contained (no network), every section present, and in headless Chromium (when
+installed; .ci/run installs Debian's) it loads with no script error and its 3D view draws the skeleton."""
+
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from handcap.cli import main
+from handcap.synth.scene import SynthConfig, synthesize, write_capture
+
+pytest.importorskip("plotly", reason="the report needs the extra 'report' (plotly)")
+
+
+def _take(folder, seed):
+    capture = synthesize(SynthConfig(motion="grasp", frames=260, rate=100.0, seed=seed, cameras=6), progress=False)
+    write_capture(capture, folder)
+    capture.attachment.save(folder / "attachment.npz")
+    assert main(["solve", str(folder / "markers.c3d"), "--attachment", str(folder / "attachment.npz"),
+                 "--out", str(folder / "motion.npz")]) == 0
+    return capture
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    root = tmp_path_factory.mktemp("session")
+    for k in (1, 2):
+        (root / f"take{k}").mkdir()
+        _take(root / f"take{k}", k)
+    return root
+
+
+def test_take_report_is_self_contained_and_complete(session, tmp_path, capsys):
+    out = tmp_path / "take1.html"
+    assert main(["report", str(session / "take1"), "--out", str(out)]) == 0
+    page = out.read_text()
+    assert not re.search(r"<script[^>]+src=", page) and not re.search(r"<link[^>]+href=['\"]?http", page)
+    assert page.count("Plotly.newPlot") >= 4  # 3D view, residuals, gaps, joint angles
+    for heading in ("3D view", "Marker residuals", "Gaps", "Joint angles", "Quality", "Warnings", "Settings"):
+        assert heading in page, heading
+    assert "motion.npz" in page and "truth.npz" in page and "scene.toml" in page
+    assert "joint error (mm)" in page  # the figures, computed against the synthetic truth
+
+
+def test_session_report_links_every_take(session, tmp_path):
+    out = tmp_path / "session.html"
+    assert main(["report", str(session), "--out", str(out)]) == 0
+    index = out.read_text()
+    assert "session-take1.html" in index and "session-take2.html" in index
+    assert (tmp_path / "session-take2.html").stat().st_size > 1_000_000  # plotly.js is inside
+
+
+def test_bad_report_inputs(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    for argv, message in ((["report", str(tmp_path / "empty"), "--out", str(tmp_path / "r.html")], "no hand motion"),
+                          (["report", str(tmp_path / "empty"), "--out", str(tmp_path / "r.pdf")], "an .html file"),
+                          (["report", str(tmp_path / "none"), "--out", str(tmp_path / "r.html")], "no hand motion")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "r.html").exists()
+
+
+def _chromium():
+    return next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+
+
+def _shoot(browser, page, png):
+    run = subprocess.run([browser, "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+                          "--hide-scrollbars", "--window-size=1280,1400", "--virtual-time-budget=10000",
+                          "--enable-logging=stderr", "--v=0", f"--screenshot={png}", page.as_uri()],
+                         capture_output=True, text=True, timeout=180)
+    console = [line for line in run.stderr.splitlines() if ":CONSOLE" in line]
+    return console
+
+
+def test_report_in_headless_chromium(session, tmp_path):
+    import matplotlib.image
+
+    browser = _chromium()
+    if browser is None:
+        pytest.skip("no Chromium (apt-get install chromium; .ci/run installs it)")
+    out = tmp_path / "take.html"
+    assert main(["report", str(session / "take1"), "--out", str(out)]) == 0
+    console = _shoot(browser, out, tmp_path / "take.png")
+    errors = [line for line in console if re.search(r"Uncaught|Error|not defined|Failed", line)]
+    assert errors == [], errors
+    blank = tmp_path / "blank.html"
+    blank.write_text("<!doctype html><html><body></body></html>")
+    _shoot(browser, blank, tmp_path / "blank.png")
+    shot = matplotlib.image.imread(tmp_path / "take.png")[..., :3]
+    empty = matplotlib.image.imread(tmp_path / "blank.png")[..., :3]
+    red = (np.abs(shot - np.array([214, 39, 40]) / 255).max(axis=-1) < 0.12).sum()  # the skeleton's colour
+    assert red > 150 and (np.abs(empty - np.array([214, 39, 40]) / 255).max(axis=-1) < 0.12).sum() == 0
+    assert shot.std() > 5 * max(empty.std(), 1e-3)
