@@ -52,6 +52,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def verb_parsers() -> dict:
+    """Every verb's parser, by name, in the order ``handcap --help`` lists them (for the docs pages)."""
+    parser = build_parser()
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)
+
+
 def _version() -> str:
     return f"handcap {__version__}"
 
