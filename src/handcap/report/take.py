@@ -97,7 +97,7 @@ def read_take(folder) -> TakeFiles:
             except tomllib.TOMLDecodeError:
                 continue
             take.settings[path.name] = text
-        elif suffix == ".json":
+        elif suffix == ".json" and not path.name.endswith(".manifest.json"):
             try:
                 values = json.loads(path.read_text())
             except (json.JSONDecodeError, UnicodeDecodeError):

@@ -1,0 +1,169 @@
+"""``handcap process``: every stage of every take of a session, resumable (issue 19).
+
+Each take's results go to ``RESULTS/<take>/``: ``attachment.npz`` (calibrate), ``motion.npz`` (solve),
+``metrics.json`` (metrics), ``report.html`` (report). Beside each stage's output a manifest
+(``<stage>.manifest.json``) records the stage's settings, the SHA-256 of every input, handcap's version, the
+outputs, figures, warnings and seconds. A stage whose manifest matches (same settings, inputs and version, its
+outputs present) is skipped, so a killed run resumes where it stopped, and an edited setting reruns its stage
+and those whose inputs then change (a stage that writes the same bytes again stops the cascade). Every
+output is written atomically and the manifest last. Takes run in parallel (:func:`handcap.parallel.map_chunks`:
+local processes, or a Dask cluster with ``scheduler``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from handcap import __version__
+from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output
+from handcap.parallel import map_chunks
+from handcap.session.spec import Session, Take
+from handcap.steps import metrics as metrics_step
+from handcap.steps import report as report_step
+from handcap.steps import solve as solve_step
+
+#: Each stage's output file in the take's folder.
+OUTPUTS = {"calibrate": "attachment.npz", "solve": "motion.npz", "metrics": "metrics.json", "report": "report.html"}
+
+
+@dataclass(frozen=True)
+class StageRun:
+    """One stage of one take as it ran (or was skipped): ``status`` is ``done``, ``skipped`` or ``planned``."""
+
+    take: str
+    stage: str
+    status: str
+    seconds: float
+    warnings: tuple
+    output: str
+
+
+def file_hash(path) -> str:
+    """SHA-256 of a file's bytes (hex).
+
+    Parameters
+    ----------
+    path : str or Path
+    """
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _inputs(take: Take, stage: str, folder: Path) -> dict:
+    """The files a stage reads, by role."""
+    attachment = take.inputs.get("attachment", folder / OUTPUTS["calibrate"])
+    return {"calibrate": {"calibration": take.inputs.get("calibration")},
+            "solve": {"markers": take.inputs["markers"], "attachment": attachment},
+            "metrics": {"motion": folder / OUTPUTS["solve"], "markers": take.inputs["markers"],
+                        "truth": take.inputs.get("truth")},
+            "report": {"motion": folder / OUTPUTS["solve"], "metrics": folder / OUTPUTS["metrics"]}}[stage]
+
+
+def _stages(session: Session, take: Take) -> list[str]:
+    """The stages that apply to ``take``: calibrate only when it has a calibration take."""
+    return [s for s in session.stages if s != "calibrate" or "calibration" in take.inputs]
+
+
+def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path):
+    if stage == "calibrate":
+        layout = settings.get("layout", take.layout)
+        if layout is None:
+            raise HandcapError(f"take {take.name}: calibrate needs a layout (stages.calibrate.layout or the take's "
+                               f"layout)")
+        options = {k: v for k, v in settings.items() if k != "layout"}
+        return solve_step.calibrate_markers(inputs["calibration"], out, layout=take.layout or layout, **options)
+    if stage == "solve":
+        return solve_step.solve(inputs["markers"], inputs["attachment"], out, **settings)
+    if stage == "metrics":
+        return metrics_step.metrics(inputs["motion"], truth=inputs.get("truth"), markers=inputs["markers"], out=out,
+                                    **settings)
+    return report_step.report(out.parent, out)
+
+
+def run_take(job) -> list[StageRun]:
+    """Run (or skip) every stage of one take; module-level so that workers can run it.
+
+    Parameters
+    ----------
+    job : tuple (Session, Take, bool)
+        The session, the take, and whether to only plan (dry run).
+    """
+    session, take, dry = job
+    folder = session.results / take.name
+    runs = []
+    for stage in _stages(session, take):
+        out = folder / OUTPUTS[stage]
+        settings = dict(session.settings.get(stage, {}))
+        inputs = {k: Path(v) for k, v in _inputs(take, stage, folder).items() if v is not None}
+        manifest_path = folder / f"{stage}.manifest.json"
+        missing = [str(p) for p in inputs.values() if not p.is_file()]
+        record = None
+        if not missing and manifest_path.is_file() and out.is_file():
+            try:
+                record = json.loads(manifest_path.read_text())
+            except (json.JSONDecodeError, UnicodeDecodeError):
+                record = None
+        hashes = {k: file_hash(p) for k, p in inputs.items()} if not missing else None
+        if (record and record.get("settings") == settings and record.get("inputs") == hashes
+                and record.get("version") == __version__):
+            runs.append(StageRun(take.name, stage, "skipped", 0.0, tuple(record.get("warnings", ())), str(out)))
+            continue
+        if dry:
+            runs.append(StageRun(take.name, stage, "planned", 0.0, (), str(out)))
+            continue
+        if missing:
+            raise HandcapError(f"take {take.name}: stage {stage} lacks {missing[0]}")
+        folder.mkdir(parents=True, exist_ok=True)
+        start = time.perf_counter()
+        step = _run_stage(stage, take, settings, inputs, out)
+        seconds = time.perf_counter() - start
+        figures = step.result if isinstance(step.result, dict) else {}
+        manifest = {"stage": stage, "take": take.name, "settings": settings, "inputs": hashes,
+                    "input_paths": {k: str(p) for k, p in inputs.items()}, "version": __version__,
+                    "outputs": {OUTPUTS[stage]: file_hash(out)}, "seconds": round(seconds, 3),
+                    "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(step.warnings),
+                    "figures": {k: v for k, v in figures.items() if k in ("mre_mm", "joint_error_mm", "msnr_db")}}
+        with atomic_output(manifest_path, "w") as fh:
+            json.dump(manifest, fh, indent=2)
+        runs.append(StageRun(take.name, stage, "done", seconds, tuple(step.warnings), str(out)))
+    return runs
+
+
+def process(session: Session, *, dry_run: bool = False, scheduler=None, workers: int | None = None) -> list:
+    """Run the session (see the module docstring).
+
+    Parameters
+    ----------
+    session : Session
+    dry_run : bool
+        Only say what would run and what is up to date.
+    scheduler : str or None
+        A Dask scheduler's address; default local processes.
+    workers : int or None
+        Local processes (default: one per core, at most one per take).
+
+    Returns
+    -------
+    list of StageRun
+        Every stage of every take, take by take.
+    """
+    jobs = [(session, take, dry_run) for take in session.takes]
+    count = workers if workers is not None else min(len(jobs), 2)
+    results = map_chunks(run_take, jobs, scheduler=scheduler, workers=count, desc="takes")
+    return [run for take_runs in results for run in take_runs]
+
+
+def summary(runs) -> str:
+    """The table ``handcap process`` ends with: one row per take and stage."""
+    lines = [f"{'take':<16} {'stage':<10} {'status':<8} {'seconds':>8}  warnings"]
+    for r in runs:
+        lines.append(f"{r.take:<16} {r.stage:<10} {r.status:<8} {r.seconds:>8.2f}  {len(r.warnings)}")
+    return "\n".join(lines)

@@ -1,0 +1,178 @@
+"""The session file (``session.toml``) of ``handcap process``: what it may say, checked with one clear line per
+mistake naming the key and the file (issue 19).
+
+::
+
+    [session]
+    name = "lab-2026-11"
+    results = "results"                 # relative to this file (default: results)
+    stages = ["calibrate", "solve", "metrics", "report"]   # default: all of STAGES that apply
+
+    [stages.calibrate]
+    layout = "glove-13"                 # every take's layout unless the take names one
+    [stages.solve]
+    method = "lm"
+    filter_cutoff = 8.0                 # Hz; omit for none
+
+    [[takes]]
+    name = "grasp-01"
+    kind = "markers"                    # labelled markers (the kind built so far)
+    markers = "raw/grasp-01.c3d"
+    calibration = "raw/calib.c3d"       # a calibration take ... or attachment = "attachment.npz"
+    truth = "raw/grasp-01-truth.npz"    # optional: a synthetic take's truth, for the metrics
+
+Paths are relative to the session file.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from handcap.core.errors import HandcapError
+
+#: The stages of a markers take, in the order they run; each one's settings and their types.
+STAGES = {
+    "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str},
+    "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
+    "metrics": {"leave_one_out": bool},
+    "report": {},
+}
+#: Kinds of take the runner knows, and the inputs each takes (required, optional).
+KINDS = {"markers": (("markers",), ("calibration", "attachment", "truth", "layout"))}
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+
+
+@dataclass(frozen=True)
+class Take:
+    """One take of a session: its name (a folder name under the results), kind and input paths."""
+
+    name: str
+    kind: str
+    inputs: dict = field(default_factory=dict)
+    layout: str | None = None
+
+
+@dataclass(frozen=True)
+class Session:
+    """A parsed session file.
+
+    Attributes
+    ----------
+    path : Path
+    name : str
+    results : Path
+    stages : tuple of str
+    settings : dict of str to dict
+        Per stage.
+    takes : tuple of Take
+    """
+
+    path: Path
+    name: str
+    results: Path
+    stages: tuple
+    settings: dict
+    takes: tuple
+
+
+_KIND_NAMES = {str: "a string", float: "a number", int: "an integer", bool: "true or false"}
+
+
+def _typed(value, kind, where):
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise HandcapError(f"{where} must be {_KIND_NAMES[kind]}, got {value!r}")
+    return value
+
+
+def load_session(path) -> Session:
+    """Read and check a session file.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Session
+
+    Raises
+    ------
+    HandcapError
+        One line naming the file and the key: a missing file, bad TOML, an unknown table, stage, kind or
+        setting, a value of the wrong type, a missing input file, a take without calibration or attachment,
+        or two takes of one name.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no such session file (handcap session new DIR writes an example)")
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise HandcapError(f"{path}: not TOML ({' '.join(str(err).split())[:100]})") from None
+    unknown = set(table) - {"session", "stages", "takes"}
+    if unknown:
+        raise HandcapError(f"{path}: unknown table {sorted(unknown)[0]!r} (session, stages and takes are known)")
+    head = table.get("session", {})
+    if not isinstance(head, dict):
+        raise HandcapError(f"{path}: session must be a table ([session])")
+    for key in set(head) - {"name", "results", "stages"}:
+        raise HandcapError(f"{path}: session.{key} is not a setting (name, results, stages)")
+    name = _typed(head.get("name", path.parent.name), str, f"{path}: session.name")
+    results = path.parent / _typed(head.get("results", "results"), str, f"{path}: session.results")
+    stages = head.get("stages", list(STAGES))
+    if not isinstance(stages, list) or not stages:
+        raise HandcapError(f"{path}: session.stages must be a list of stages ({', '.join(STAGES)})")
+    for stage in stages:
+        if stage not in STAGES:
+            raise HandcapError(f"{path}: session.stages: unknown stage {stage!r} (choose from {', '.join(STAGES)})")
+    settings = {}
+    raw = table.get("stages", {})
+    if not isinstance(raw, dict):
+        raise HandcapError(f"{path}: stages must be tables ([stages.solve] ...)")
+    for stage, values in raw.items():
+        if stage not in STAGES:
+            raise HandcapError(f"{path}: stages.{stage}: unknown stage (choose from {', '.join(STAGES)})")
+        if not isinstance(values, dict):
+            raise HandcapError(f"{path}: stages.{stage} must be a table of settings")
+        for key, value in values.items():
+            if key not in STAGES[stage]:
+                known = ", ".join(STAGES[stage]) or "none"
+                raise HandcapError(f"{path}: stages.{stage}.{key} is not a setting of {stage} ({known})")
+            values[key] = _typed(value, STAGES[stage][key], f"{path}: stages.{stage}.{key}")
+        settings[stage] = dict(values)
+    takes, seen = [], set()
+    raw_takes = table.get("takes", [])
+    if not isinstance(raw_takes, list) or not raw_takes:
+        raise HandcapError(f"{path}: no [[takes]]")
+    for k, raw_take in enumerate(raw_takes):
+        where = f"{path}: takes[{k}]"
+        if not isinstance(raw_take, dict):
+            raise HandcapError(f"{where} must be a table")
+        label = _typed(raw_take.get("name", ""), str, f"{where}.name")
+        if not _NAME.match(label) or label in seen:
+            raise HandcapError(f"{where}.name {label!r}: give each take a unique name of letters, digits, . _ -")
+        seen.add(label)
+        kind = raw_take.get("kind", "markers")
+        if kind not in KINDS:
+            raise HandcapError(f"{where}.kind {kind!r}: the runner knows {', '.join(KINDS)} takes so far")
+        required, optional = KINDS[kind]
+        for key in set(raw_take) - {"name", "kind", *required, *optional}:
+            raise HandcapError(f"{where}.{key} is not an input of a {kind} take ({', '.join(required + optional)})")
+        inputs = {}
+        for key in required + tuple(k for k in optional if k in raw_take and k != "layout"):
+            if key not in raw_take:
+                raise HandcapError(f"{where}.{key} is missing: a {kind} take needs it")
+            file = path.parent / _typed(raw_take[key], str, f"{where}.{key}")
+            if not file.is_file():
+                raise HandcapError(f"{where}.{key}: no such file {file}")
+            inputs[key] = file
+        if kind == "markers" and "solve" in stages and not ({"calibration", "attachment"} & set(inputs)):
+            raise HandcapError(f"{where}: give calibration (a calibration take) or attachment (an .npz) to solve")
+        layout = raw_take.get("layout")
+        takes.append(Take(label, kind, inputs, None if layout is None else _typed(layout, str, f"{where}.layout")))
+    return Session(path, name, results, tuple(s for s in STAGES if s in stages), settings, tuple(takes))
