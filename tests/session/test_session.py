@@ -48,19 +48,22 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     assert status == {("take1", "calibrate"): "skipped", ("take1", "solve"): "skipped",
                       ("take1", "metrics"): "skipped", ("take1", "report"): "skipped",
                       ("take2", "calibrate"): "skipped", ("take2", "solve"): "skipped",
-                      ("take2", "metrics"): "done", ("take2", "report"): "done"}
+                      ("take2", "metrics"): "done", ("take2", "report"): "done",
+                      ("hands1", "fit"): "done", ("hands1", "metrics"): "done", ("hands1", "report"): "done"}
     assert all(p.stat().st_mtime_ns == stamps[p] for p in before)  # finished stages untouched
     manifest = json.loads((made / "results/take2/metrics.manifest.json").read_text())
     assert manifest["settings"] == {"leave_one_out": False} and set(manifest["inputs"]) == {"motion", "markers",
                                                                                             "truth"}
     assert manifest["figures"]["joint_error_mm"][0] < 10
+    keypoints = json.loads((made / "results/hands1/metrics.manifest.json").read_text())
+    assert keypoints["figures"]["joint_error_mm"][0] < 4  # 2 mm of keypoint noise
     assert (made / "results/take2/report.html").stat().st_size > 1_000_000
     # an edited setting reruns its stage and what depends on it, not calibrate
     text = (made / "session.toml").read_text().replace("filter_cutoff = 8.0", "filter_cutoff = 5.0")
     (made / "session.toml").write_text(text)
     runs = process(load_session(made / "session.toml"), workers=1)
     assert {(r.take, r.stage) for r in runs if r.status == "done"} == {
-        (t, s) for t in ("take1", "take2") for s in ("solve", "metrics", "report")}
+        (t, s) for t in ("take1", "take2") for s in ("solve", "metrics", "report")}  # hands1 has its own fit
     capsys.readouterr()
     assert main(["process", str(made / "session.toml"), "--dry-run"]) == 0
     assert "planned" not in capsys.readouterr().out
@@ -73,6 +76,8 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     (lambda t: t.replace("method = \"lm\"", "speed = 3"), "stages.solve.speed is not a setting of solve"),
     (lambda t: t.replace("take1/markers.c3d", "take9/markers.c3d"), "takes[0].markers: no such file"),
     (lambda t: t.replace('kind = "markers"', 'kind = "video"', 1), "takes[0].kind 'video'"),
+    (lambda t: t.replace('keypoints = "hands1/keypoints.c3d"', 'markers = "take1/markers.c3d"'),
+     "takes[2].markers is not an input of a keypoints take"),
     (lambda t: t.replace('name = "take2"', 'name = "take1"'), "unique name"),
     (lambda t: t + "\n[extra]\nx = 1\n", "unknown table 'extra'"),
     (lambda t: t.replace("[session]", "[session"), "not TOML"),

@@ -1,7 +1,7 @@
 """``handcap process``: every stage of every take of a session, resumable (issue 19).
 
-Each take's results go to ``RESULTS/<take>/``: ``attachment.npz`` (calibrate), ``motion.npz`` (solve),
-``metrics.json`` (metrics), ``report.html`` (report). Beside each stage's output a manifest
+Each take's results go to ``RESULTS/<take>/``: ``attachment.npz`` (calibrate), ``motion.npz`` (solve, or fit
+for a keypoints take), ``metrics.json`` (metrics), ``report.html`` (report). Beside each stage's output a manifest
 (``<stage>.manifest.json``) records the stage's settings, the SHA-256 of every input, handcap's version, the
 outputs, figures, warnings and seconds. A stage whose manifest matches (same settings, inputs and version, its
 outputs present) is skipped, so a killed run resumes where it stopped, and an edited setting reruns its stage
@@ -22,13 +22,15 @@ from handcap import __version__
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.parallel import map_chunks
-from handcap.session.spec import Session, Take
+from handcap.session.spec import KIND_STAGES, Session, Take
+from handcap.steps import markerless as markerless_step
 from handcap.steps import metrics as metrics_step
 from handcap.steps import report as report_step
 from handcap.steps import solve as solve_step
 
 #: Each stage's output file in the take's folder.
-OUTPUTS = {"calibrate": "attachment.npz", "solve": "motion.npz", "metrics": "metrics.json", "report": "report.html"}
+OUTPUTS = {"calibrate": "attachment.npz", "solve": "motion.npz", "fit": "motion.npz", "metrics": "metrics.json",
+           "report": "report.html"}
 
 
 @dataclass(frozen=True)
@@ -61,15 +63,19 @@ def _inputs(take: Take, stage: str, folder: Path) -> dict:
     """The files a stage reads, by role."""
     attachment = take.inputs.get("attachment", folder / OUTPUTS["calibrate"])
     return {"calibrate": {"calibration": take.inputs.get("calibration")},
-            "solve": {"markers": take.inputs["markers"], "attachment": attachment},
-            "metrics": {"motion": folder / OUTPUTS["solve"], "markers": take.inputs["markers"],
+            "solve": {"markers": take.inputs.get("markers"), "attachment": attachment},
+            "fit": {"keypoints": take.inputs.get("keypoints")},
+            "metrics": {"motion": folder / OUTPUTS["solve"],
+                        "markers": take.inputs.get("markers", take.inputs.get("keypoints")),
                         "truth": take.inputs.get("truth")},
             "report": {"motion": folder / OUTPUTS["solve"], "metrics": folder / OUTPUTS["metrics"]}}[stage]
 
 
 def _stages(session: Session, take: Take) -> list[str]:
-    """The stages that apply to ``take``: calibrate only when it has a calibration take."""
-    return [s for s in session.stages if s != "calibrate" or "calibration" in take.inputs]
+    """The stages that apply to ``take``: its kind's, those the session runs, calibrate only with a calibration
+    take."""
+    return [s for s in KIND_STAGES[take.kind] if s in session.stages and (s != "calibrate"
+                                                                          or "calibration" in take.inputs)]
 
 
 def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path):
@@ -82,6 +88,8 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path):
         return solve_step.calibrate_markers(inputs["calibration"], out, layout=take.layout or layout, **options)
     if stage == "solve":
         return solve_step.solve(inputs["markers"], inputs["attachment"], out, **settings)
+    if stage == "fit":
+        return markerless_step.fit_keypoints(inputs["keypoints"], out, **settings)
     if stage == "metrics":
         return metrics_step.metrics(inputs["motion"], truth=inputs.get("truth"), markers=inputs["markers"], out=out,
                                     **settings)

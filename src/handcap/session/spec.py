@@ -6,7 +6,7 @@ mistake naming the key and the file (issue 19).
     [session]
     name = "lab-2026-11"
     results = "results"                 # relative to this file (default: results)
-    stages = ["calibrate", "solve", "metrics", "report"]   # default: all of STAGES that apply
+    stages = ["calibrate", "solve", "fit", "metrics", "report"]   # default: all of STAGES that apply
 
     [stages.calibrate]
     layout = "glove-13"                 # every take's layout unless the take names one
@@ -16,10 +16,15 @@ mistake naming the key and the file (issue 19).
 
     [[takes]]
     name = "grasp-01"
-    kind = "markers"                    # labelled markers (the kind built so far)
+    kind = "markers"                    # labelled markers
     markers = "raw/grasp-01.c3d"
     calibration = "raw/calib.c3d"       # a calibration take ... or attachment = "attachment.npz"
     truth = "raw/grasp-01-truth.npz"    # optional: a synthetic take's truth, for the metrics
+
+    [[takes]]
+    name = "video-02"
+    kind = "keypoints"                  # 3D hand keypoints (triangulated or lifted from video)
+    keypoints = "raw/video-02-keypoints.c3d"
 
 Paths are relative to the session file.
 """
@@ -33,15 +38,20 @@ from pathlib import Path
 
 from handcap.core.errors import HandcapError
 
-#: The stages of a markers take, in the order they run; each one's settings and their types.
+#: The stages, in the order they run; each one's settings and their types.
 STAGES = {
     "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str},
     "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
+    "fit": {"fit_shape": bool, "robust_scale": float, "filter_cutoff": float, "side": str, "label": str,
+            "units": str},
     "metrics": {"leave_one_out": bool},
     "report": {},
 }
-#: Kinds of take the runner knows, and the inputs each takes (required, optional).
-KINDS = {"markers": (("markers",), ("calibration", "attachment", "truth", "layout"))}
+#: Kinds of take the runner knows, the inputs each takes (required, optional) and the stages it goes through:
+#: labelled markers (calibrate, solve) and 3D hand keypoints (fit the hand model to them).
+KINDS = {"markers": (("markers",), ("calibration", "attachment", "truth", "layout")),
+         "keypoints": (("keypoints",), ("truth",))}
+KIND_STAGES = {"markers": ("calibrate", "solve", "metrics", "report"), "keypoints": ("fit", "metrics", "report")}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
