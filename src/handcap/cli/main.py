@@ -20,6 +20,7 @@ from handcap.cli.occlusion import add_occlusion
 from handcap.cli.pattern import add_pattern
 from handcap.cli.report import add_report
 from handcap.cli.session import add_session
+from handcap.cli.stream import add_stream
 from handcap.cli.solve import add_solve
 from handcap.cli.synth import add_synth
 from handcap import __version__
@@ -51,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_export(verbs)
     add_report(verbs)
     add_session(verbs)
+    add_stream(verbs)
     return parser
 
 

@@ -1,0 +1,117 @@
+"""Where a live stream's solved frames go: OSC (python-osc) and WebSocket (websockets) clients and servers in
+the usual roles; each output is a callable ``send(frame, time_s, joints (21, 3), phi (27,))``.
+
+- :class:`OscOutput` sends one OSC message per frame to ``HOST:PORT``: address ``/handcap/joints`` with the
+  frame number, the time (s) and the 63 joint coordinates in metres (wrist first, then as
+  :data:`handcap.hand.anatomy.JOINT_NAMES` and the tips), then ``/handcap/angles`` with the 27 angles (rad).
+- :class:`WebSocketOutput` serves ``ws://HOST:PORT``: every connected client gets one JSON text message per
+  frame, ``{"frame", "time", "joints": [[x, y, z] x 21], "angles": [27]}``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+
+
+def _endpoint(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:
+    host, _, port = str(text).rpartition(":")
+    try:
+        number = int(port)
+    except ValueError:
+        raise HandcapError(f"{text!r}: give PORT or HOST:PORT") from None
+    if not 0 < number < 65536:
+        raise HandcapError(f"{text!r}: the port must be 1-65535")
+    return host or default_host, number
+
+
+class OscOutput:
+    """Send each frame as OSC messages over UDP.
+
+    Parameters
+    ----------
+    target : str
+        ``HOST:PORT`` (or ``PORT`` for this machine).
+    """
+
+    def __init__(self, target: str):
+        try:
+            from pythonosc.udp_client import SimpleUDPClient  # noqa: PLC0415 (optional extra 'stream')
+        except ImportError:
+            raise HandcapError("OSC output needs python-osc: pip install 'handcap[stream]'") from None
+        self.host, self.port = _endpoint(target)
+        self.client = SimpleUDPClient(self.host, self.port)
+
+    def __call__(self, frame: int, time_s: float, joints, phi) -> None:
+        """Send one frame (see the module docstring)."""
+        values = np.nan_to_num(np.asarray(joints, dtype=np.float64)).ravel().tolist()
+        self.client.send_message("/handcap/joints", [int(frame), float(time_s), *values])
+        self.client.send_message("/handcap/angles", [int(frame), *np.nan_to_num(phi).tolist()])
+
+    def close(self) -> None:
+        """Nothing to release (UDP)."""
+
+
+class WebSocketOutput:
+    """Serve each frame as JSON to every connected WebSocket client (a server on its own thread).
+
+    Parameters
+    ----------
+    listen : str
+        ``PORT`` or ``HOST:PORT`` to listen on (port 0: any free port, see :attr:`port`).
+    """
+
+    def __init__(self, listen: str):
+        try:
+            from websockets.asyncio.server import serve  # noqa: PLC0415 (optional extra 'stream')
+        except ImportError:
+            raise HandcapError("WebSocket output needs websockets: pip install 'handcap[stream]'") from None
+        host, port = _endpoint(listen) if str(listen) != "0" else ("127.0.0.1", 0)
+        self.clients = set()
+        self.loop = asyncio.new_event_loop()
+        ready = threading.Event()
+
+        async def handler(connection):
+            self.clients.add(connection)
+            try:
+                await connection.wait_closed()
+            finally:
+                self.clients.discard(connection)
+
+        async def main():
+            self.server = await serve(handler, host, port)
+            self.port = self.server.sockets[0].getsockname()[1]
+            ready.set()
+            await self.server.serve_forever()
+
+        self.thread = threading.Thread(target=lambda: self._run(main()), daemon=True)
+        self.thread.start()
+        if not ready.wait(10):
+            raise HandcapError(f"could not listen for WebSocket clients on {host}:{port}")
+
+    def _run(self, coroutine) -> None:
+        asyncio.set_event_loop(self.loop)
+        try:
+            self.loop.run_until_complete(coroutine)
+        except asyncio.CancelledError:
+            pass
+
+    def __call__(self, frame: int, time_s: float, joints, phi) -> None:
+        """Send one frame to every client (see the module docstring)."""
+        if not self.clients:
+            return
+        text = json.dumps({"frame": int(frame), "time": float(time_s),
+                           "joints": np.round(np.nan_to_num(joints), 6).tolist(),
+                           "angles": np.round(np.nan_to_num(phi), 6).tolist()})
+        for client in list(self.clients):
+            asyncio.run_coroutine_threadsafe(client.send(text), self.loop)
+
+    def close(self) -> None:
+        """Stop the server."""
+        self.loop.call_soon_threadsafe(self.server.close)
+        self.thread.join(5)

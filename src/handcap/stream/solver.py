@@ -1,0 +1,82 @@
+"""Solving one frame at a time for live streams: Levenberg-Marquardt warm-started from the frame before.
+
+The batch solver (:func:`handcap.solve.solve_hand`) sees the whole take; a live stream sees one frame and
+must answer before the next. :class:`FrameSolver` keeps the last pose, starts the next frame's fit from it and
+runs a few Gauss-Newton iterations (:data:`ITERATIONS`); it starts afresh (rigid start, many iterations) on the
+first frame, and whenever a frame's residual says the hand was lost.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.core.rotations import axis_angle_from_matrix
+from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
+from handcap.solve.markers import MarkerModel
+from handcap.solve.rigid_start import rigid_start
+
+#: Gauss-Newton iterations per streamed frame (from the frame before).
+ITERATIONS = 4
+#: Iterations of a fresh start.
+FIRST_ITERATIONS = 60
+#: RMS marker residual (metres) above which the next frame starts afresh.
+LOST = 0.01
+
+
+class FrameSolver:
+    """Solve streamed frames of one hand's labelled markers.
+
+    Parameters
+    ----------
+    attachment : MarkerAttachment
+    hand : HandModel
+        The attachment's model.
+    iterations : int
+        Per frame, warm-started.
+    """
+
+    def __init__(self, attachment, hand, *, iterations: int = ITERATIONS):
+        self.hand, self.names = hand, list(attachment.marker_names)
+        self.model = MarkerModel(hand, attachment)
+        self.priors = Priors()
+        self.rest = self.priors.rest_phi()
+        self.iterations = iterations
+        self.pose = None
+
+    def solve(self, positions) -> tuple[np.ndarray, np.ndarray, float]:
+        """One frame.
+
+        Parameters
+        ----------
+        positions : ndarray (M, 3)
+            The attachment's markers in its order, metres, NaN where not seen.
+
+        Returns
+        -------
+        joints : ndarray (21, 3)
+            Metres; NaN when no marker was seen.
+        phi : ndarray (27,)
+            Radians.
+        rms : float
+            RMS residual of the seen markers, metres (NaN when none).
+        """
+        target = np.asarray(positions, dtype=np.float64).reshape(1, len(self.names), 3)
+        observed = np.isfinite(target).all(axis=2)
+        if observed.sum() < 3:
+            return np.full((21, 3), np.nan), np.full(27, np.nan), float("nan")
+        target = np.nan_to_num(target)
+        if self.pose is None:
+            rot, trans, _ = rigid_start(self.model, target, observed, self.rest)
+            init, iterations = Poses(trans.copy(), rot.copy(), self.rest[None].copy()), FIRST_ITERATIONS
+        else:
+            init, iterations = self.pose, self.iterations
+        pose, _ = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
+                                      iterations=iterations, held=held_angles(self.model, observed))
+        orient = axis_angle_from_matrix(pose.rot)
+        joints = self.hand.forward(self.model.betas, orient, self.hand.hand_pose_from_phi(pose.phi), pose.transl,
+                                   vertices=False).joints[0]
+        fit = self.model.positions(pose.transl, pose.rot, pose.phi)[0]
+        distance = np.linalg.norm(fit - target[0], axis=-1)[observed[0]]
+        rms = float(np.sqrt(np.mean(distance ** 2)))
+        self.pose = None if rms > LOST else pose  # lost: the next frame starts afresh
+        return np.asarray(joints), pose.phi[0].copy(), rms
