@@ -3,9 +3,10 @@ OSC and WebSocket to loopback receivers, each measured in this run.
 
 A synthetic take (layout ``joints-19``, 120 Hz, ``--take-seconds`` long, default 20 s) is replayed in a loop
 for ``--seconds`` (default 600: ten minutes) as fast as it is solved (``--realtime`` for the take's rate).
-Printed: frames, latency per frame (p50, p99, worst; from a frame's arrival to its sending; goal p99 < 5 ms),
-the process's resident memory after the first minute and at the end (goal: growth < 5 %), messages the
-receivers got, and the streamed joints against the synthetic truth.
+The receivers (an OSC server and a WebSocket client) run in a process of their own. Printed: frames, latency
+per frame (p50, p99, worst; from a frame's arrival to its sending; goal p99 < 5 ms), the process's resident
+memory after the first minute and at the end (goal: growth < 5 %), messages the receivers got, and the
+streamed joints against the synthetic truth.
 
     .venv/bin/python benchmarks/stream.py [--seconds 600] [--take-seconds 20] [--realtime]
 """
@@ -13,10 +14,37 @@ receivers got, and the streamed joints against the synthetic truth.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import threading
 import time
 
 import numpy as np
+
+
+def receivers(ws_port, ports, counts, stop) -> None:
+    """The loopback receivers, in a process of their own: an OSC server (its port sent on ``ports``) and a
+    WebSocket client; their message counts go to ``counts`` once ``stop`` is set."""
+    from pythonosc.dispatcher import Dispatcher
+    from pythonosc.osc_server import ThreadingOSCUDPServer
+    from websockets.sync.client import connect
+
+    got = {"osc": 0, "ws": 0}
+    dispatcher = Dispatcher()
+    dispatcher.map("/handcap/joints", lambda *_: got.__setitem__("osc", got["osc"] + 1))
+    server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+
+    def receive():
+        with connect(f"ws://127.0.0.1:{ws_port}") as client:
+            for _ in client:
+                got["ws"] += 1
+
+    threading.Thread(target=receive, daemon=True).start()
+    ports.put(server.server_address[1])
+    stop.wait()
+    time.sleep(0.5)
+    counts.put(dict(got))
+    server.shutdown()
 
 
 def main() -> None:
@@ -25,10 +53,6 @@ def main() -> None:
     parser.add_argument("--take-seconds", type=float, default=20.0)
     parser.add_argument("--realtime", action="store_true")
     a = parser.parse_args()
-
-    from pythonosc.dispatcher import Dispatcher
-    from pythonosc.osc_server import ThreadingOSCUDPServer
-    from websockets.sync.client import connect
 
     from handcap.core.markers import MarkerSequence
     from handcap.hand import OpenHand
@@ -44,20 +68,12 @@ def main() -> None:
     markers = MarkerSequence(np.tile(one, (loops, 1, 1))[:int(a.seconds * rate)], tuple(names), rate)
     truth = np.tile(capture.hand_motion.joints, (loops, 1, 1))[:markers.n_frames]
 
-    got = {"osc": 0, "ws": 0}
-    dispatcher = Dispatcher()
-    dispatcher.map("/handcap/joints", lambda *_: got.__setitem__("osc", got["osc"] + 1))
-    server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    osc = OscOutput(f"127.0.0.1:{server.server_address[1]}")
     ws = WebSocketOutput("0")
-
-    def receive():
-        with connect(f"ws://127.0.0.1:{ws.port}") as client:
-            for _ in client:
-                got["ws"] += 1
-
-    threading.Thread(target=receive, daemon=True).start()
+    context = multiprocessing.get_context("spawn")
+    ports, counts, stop = context.Queue(), context.Queue(), context.Event()
+    process = context.Process(target=receivers, args=(ws.port, ports, counts, stop), daemon=True)
+    process.start()
+    osc = OscOutput(f"127.0.0.1:{ports.get(timeout=60)}")
     while not ws.clients:
         time.sleep(0.01)
     print(f"{len(names)} markers ({markers.n_frames} frames at {rate:g} Hz = {a.seconds:g} s, a "
@@ -66,9 +82,10 @@ def main() -> None:
     stats = stream(markers, capture.attachment, OpenHand(capture.hand_motion.side), [osc, ws],
                    realtime=a.realtime)
     wall = time.perf_counter() - start
-    time.sleep(0.5)
+    stop.set()
+    got = counts.get(timeout=60)
     ws.close()
-    server.shutdown()
+    process.join(10)
     lat = stats.latency_ms
     first, last = stats.memory_mb
     error = np.linalg.norm(stats.solved - truth, axis=-1) * 1000

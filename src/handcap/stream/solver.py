@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.rotations import axis_angle_from_matrix
+from handcap.hand.anatomy import TIP_PARENTS
+from handcap.hand.kinematics import attached_points, chain_transforms, pose_rotations
 from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
 from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
@@ -42,6 +44,9 @@ class FrameSolver:
         self.rest = self.priors.rest_phi()
         self.iterations = iterations
         self.pose = None
+        # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
+        _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
+        self.rest_joints, self.rest_tips = np.asarray(rest_joints), np.asarray(rest_tips)
 
     def solve(self, positions) -> tuple[np.ndarray, np.ndarray, float]:
         """One frame.
@@ -72,9 +77,10 @@ class FrameSolver:
             init, iterations = self.pose, self.iterations
         pose, _ = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
                                       iterations=iterations, held=held_angles(self.model, observed))
-        orient = axis_angle_from_matrix(pose.rot)
-        joints = self.hand.forward(self.model.betas, orient, self.hand.hand_pose_from_phi(pose.phi), pose.transl,
-                                   vertices=False).joints[0]
+        rotations = pose_rotations(axis_angle_from_matrix(pose.rot), self.hand.hand_pose_from_phi(pose.phi))
+        world_rot, world_pos = chain_transforms(rotations, self.rest_joints)
+        tips = attached_points(world_rot, world_pos, self.rest_joints[None], self.rest_tips[None], TIP_PARENTS)
+        joints = np.concatenate([world_pos, tips], axis=-2)[0] + pose.transl[0]
         fit = self.model.positions(pose.transl, pose.rot, pose.phi)[0]
         distance = np.linalg.norm(fit - target[0], axis=-1)[observed[0]]
         rms = float(np.sqrt(np.mean(distance ** 2)))
