@@ -22,13 +22,19 @@ from handcap.hand.anatomy import JOINT_NAMES, PARENTS, TIP_PARENTS
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 
-def _filled(values, found):
-    """``values`` (T, ...) with the frames that are not ``found`` taken from the nearest found frame."""
+def nearest_found(found) -> np.ndarray:
+    """For every frame, the index of the nearest frame that is ``found`` (T,) bool (the earlier one on a tie).
+
+    Parameters
+    ----------
+    found : ndarray (T,) bool
+        At least one True.
+    """
     index = np.flatnonzero(found)
-    near = index[np.clip(np.searchsorted(index, np.arange(len(found))), 0, len(index) - 1)]
-    previous = index[np.clip(np.searchsorted(index, np.arange(len(found))) - 1, 0, len(index) - 1)]
-    use = np.where(np.abs(previous - np.arange(len(found))) <= np.abs(near - np.arange(len(found))), previous, near)
-    return values[use]
+    after = np.clip(np.searchsorted(index, np.arange(len(found))), 0, len(index) - 1)
+    before = np.clip(after - 1, 0, len(index) - 1)
+    frames = np.arange(len(found))
+    return np.where(np.abs(index[before] - frames) <= np.abs(index[after] - frames), index[before], index[after])
 
 
 def filled_frames(motion: HandMotion):
@@ -48,8 +54,8 @@ def filled_frames(motion: HandMotion):
     if not found.all():
         warnings.append(f"{int((~found).sum())} of {motion.n_frames} frames have no pose; the export holds the "
                         f"nearest frame's pose there")
-    return (_filled(motion.global_orient, found), _filled(motion.hand_pose, found), _filled(motion.transl, found),
-            warnings)
+    near = nearest_found(found)
+    return motion.global_orient[near], motion.hand_pose[near], motion.transl[near], warnings
 
 
 def bvh_text(motion: HandMotion, hand, *, units: str = "cm") -> tuple[str, list[str]]:

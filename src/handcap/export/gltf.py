@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.core.motion import HandMotion
-from handcap.export.bvh import filled_frames
+from handcap.export.bvh import filled_frames, nearest_found
 from handcap.hand.anatomy import JOINT_NAMES, PARENTS
 
 _FLOAT, _UINT, _USHORT = 5126, 5125, 5123
@@ -126,7 +126,7 @@ def glb_bytes(motion: HandMotion, hand, objects=()) -> tuple[bytes, list[str]]:
         if not ok.any():
             warnings.append(f"object {om.name} has no pose in any frame: written unanimated")
             continue
-        index = np.flatnonzero(ok)[np.clip(np.searchsorted(np.flatnonzero(ok), np.arange(len(ok))), 0, ok.sum() - 1)]
+        index = nearest_found(ok)
         animate(node, "translation", om.translation[index], "VEC3")
         animate(node, "rotation", Rotation.from_rotvec(om.rotation[index]).as_quat(), "VEC4")
     gltf.animations.append(gl.Animation(name="take", samplers=samplers, channels=channels))

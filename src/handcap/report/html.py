@@ -130,7 +130,7 @@ def _figures_of(take: TakeFiles) -> dict:
         return {"metrics": f"not computed: {err}"}
 
 
-def take_page(take: TakeFiles, title: str | None = None) -> str:
+def take_page(take: TakeFiles, title: str | None = None, figures: dict | None = None) -> str:
     """The HTML page of one take.
 
     Parameters
@@ -139,6 +139,8 @@ def take_page(take: TakeFiles, title: str | None = None) -> str:
         From :func:`handcap.report.take.read_take`; its hand motion needs joints.
     title : str, optional
         Default: the folder's name.
+    figures : dict, optional
+        The take's quality figures, when the caller has them (default: its metrics JSON, else computed).
 
     Returns
     -------
@@ -149,7 +151,7 @@ def take_page(take: TakeFiles, title: str | None = None) -> str:
     if motion.joints is None:
         raise HandcapError(f"{take.folder / take.paths['hand motion']}: has no joints; solve it with handcap solve")
     title = title or take.folder.name
-    figures = _figures_of(take)
+    figures = _figures_of(take) if figures is None else figures
     warnings = list(dict.fromkeys([*motion.warnings, *(take.markers.warnings if take.markers is not None else ()),
                                    *(w for om in take.objects.values() for w in om.warnings),
                                    *figures.get("warnings", ())]))
@@ -212,10 +214,10 @@ def write_report(folder, out) -> list[str]:
     written, rows = [], []
     for take in takes:
         page = out.with_name(f"{out.stem}-{take.folder.name}.html")
+        figures = _figures_of(take)  # once: the page and the session's row both show them
         with atomic_output(page) as fh:
-            fh.write(take_page(take).encode())
+            fh.write(take_page(take, figures=figures).encode())
         written.append(str(page))
-        figures = _figures_of(take)
         mre = figures.get("mre_mm", ["", ""])[0]
         rows.append(f"<tr><td><a href='{html.escape(page.name)}'>{html.escape(take.folder.name)}</a></td>"
                     f"<td>{take.motion.n_frames}</td><td>{mre if mre == '' else f'{mre:.2f}'}</td>"

@@ -3,6 +3,8 @@ MANO parameters)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from handcap.core.errors import HandcapError
@@ -46,6 +48,6 @@ def export(motion, to, *, units: str = "cm", hand_model: str | None = None, mano
         raise HandcapError(f"{motion}: holds no frames")
     hand = hand_model_from_options(hand_model, mano_dir, side=solved.side, recorded=solved.model, what=str(motion))
     warnings = export_motion(solved, hand, to, units=units, objects=loaded)
-    kind = FORMATS[str(to)[str(to).rfind("."):].lower()].split(":")[0]
+    kind = FORMATS[Path(to).suffix.lower()].split(":")[0]
     return Step((f"{to}: {solved.n_frames} frames at {solved.rate:g} Hz, {kind}",), tuple(warnings), (str(to),),
                 None)
