@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,8 +42,7 @@ from handcap.patterns.pattern import Pattern
 from handcap.quality import plausibility as q
 from handcap.solve import calibrate_attachment, solve_hand
 from handcap.synth.config import SynthConfig
-from handcap.synth.filming import film_capture, region_rig
-from handcap.synth.scene import synthesize
+from handcap.synth.filming import film_take
 
 #: The two takes, one subject, 13 cameras at 4 Hz: 8 frames of calibration, 11 of the grasp (its shortest: 2.5 s).
 IMAGE_DEMO_CONFIGS = {
@@ -81,14 +79,8 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
     for key, config in configs.items():
         folder = out / key
         folder.mkdir(parents=True, exist_ok=True)
-        capture = synthesize(config, progress=progress)
-        hand_points = capture.truth["positions"][:, :len(capture.hand_motion.marker_names)]
-        capture = replace(capture, rig=region_rig(capture.rig, hand_points[np.isfinite(hand_points).all(axis=-1)]))
-        captures[key] = capture
-        capture.rig.save(folder / "cameras.toml")
-        write_hand_motion(capture.hand_motion, folder / "truth.npz")
         start = time.perf_counter()
-        film_capture(capture, folder, progress=progress)
+        captures[key] = capture = film_take(config, folder, progress=progress)
         summary[f"{key}_render_seconds"] = round(time.perf_counter() - start, 1)
         pattern = Pattern.load(folder / "pattern.toml")
         if detector is None:
@@ -120,8 +112,8 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
     full = load_layout(configs["calibration"].layout)
     calib = cleaned["calibration"]
     seen = set(np.array(calib.names)[np.isfinite(calib.positions).all(axis=-1).any(axis=0)])
-    kept = tuple(m for m in full.markers if m.name in seen)
-    layout = replace(full, markers=kept, rigid=tuple(r for r in full.rigid if r in seen))
+    layout = full.subset(seen)
+    kept = layout.names
     summary["calibrated_markers"] = f"{len(kept)} of {len(full.names)}"
     if len(kept) < len(full.names):
         warnings.append(f"{len(full.names) - len(kept)} of the layout's {len(full.names)} corners were never "

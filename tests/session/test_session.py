@@ -14,42 +14,45 @@ from handcap.steps import metrics as metrics_step
 
 
 @pytest.fixture(scope="module")
-def made(tmp_path_factory):
+def made(tmp_path_factory, gl_ok):
     folder = tmp_path_factory.mktemp("sess") / "lab"
-    new_session(folder, takes=2, frames=260)
+    new_session(folder, takes=2, frames=260, progress=False)
     return folder
 
 
-def _finished(folder):
-    return {p.name: json.loads(p.read_text())["finished"] + str(p.stat().st_mtime_ns)
-            for p in sorted(folder.glob("results/*/*.manifest.json"))}
+MARKER_STAGES = ("calibrate", "solve", "metrics", "report")
+IMAGE_STAGES = ("detect", "triangulate", "clean", *MARKER_STAGES)
 
 
 def test_process_resume_and_rerun(made, monkeypatch, capsys):
     session = load_session(made / "session.toml")
+    assert {t.kind for t in session.takes} == {"images", "markers", "keypoints"}
     real = metrics_step.metrics
 
+    victim = []
+
     def killed(motion, **kw):
-        if "take2" in str(motion):
-            raise KeyboardInterrupt  # the run is killed during take2's metrics
+        if victim[-1] in str(motion):
+            raise KeyboardInterrupt  # the run is killed during this take's metrics
         return real(motion, **kw)
 
     monkeypatch.setattr(metrics_step, "metrics", killed)
-    with pytest.raises(KeyboardInterrupt):
-        process(session, workers=1)
+    for take in ("take2", "images1"):  # killed twice, once in a take of markers and once in one of images
+        victim.append(take)
+        with pytest.raises(KeyboardInterrupt):
+            process(session, workers=1)
     monkeypatch.setattr(metrics_step, "metrics", real)
     before = {p: json.loads(p.read_text()) for p in made.glob("results/*/*.manifest.json")}
-    assert {(p.parent.name, p.name) for p in before} == {
-        ("take1", f"{s}.manifest.json") for s in ("calibrate", "solve", "metrics", "report")} | {
-        ("take2", "calibrate.manifest.json"), ("take2", "solve.manifest.json")}
+    finished = {(p.parent.name, p.name.split(".")[0]) for p in before}
+    assert finished == ({(t, s) for t in ("take1", "take2") for s in MARKER_STAGES}  # take2 ended in the second run
+                        | {("hands1", s) for s in ("fit", "metrics", "report")}
+                        | {("calib-images", s) for s in IMAGE_STAGES}
+                        | {("images1", s) for s in IMAGE_STAGES[:-2]})
     stamps = {p: p.stat().st_mtime_ns for p in before}
     runs = process(session, workers=1)
     status = {(r.take, r.stage): r.status for r in runs}
-    assert status == {("take1", "calibrate"): "skipped", ("take1", "solve"): "skipped",
-                      ("take1", "metrics"): "skipped", ("take1", "report"): "skipped",
-                      ("take2", "calibrate"): "skipped", ("take2", "solve"): "skipped",
-                      ("take2", "metrics"): "done", ("take2", "report"): "done",
-                      ("hands1", "fit"): "done", ("hands1", "metrics"): "done", ("hands1", "report"): "done"}
+    assert status == {**{key: "skipped" for key in finished},
+                      ("images1", "metrics"): "done", ("images1", "report"): "done"}
     assert all(p.stat().st_mtime_ns == stamps[p] for p in before)  # finished stages untouched
     manifest = json.loads((made / "results/take2/metrics.manifest.json").read_text())
     assert manifest["settings"] == {"leave_one_out": False} and set(manifest["inputs"]) == {"motion", "markers",
@@ -57,20 +60,30 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     assert manifest["figures"]["joint_error_mm"][0] < 10
     keypoints = json.loads((made / "results/hands1/metrics.manifest.json").read_text())
     assert keypoints["figures"]["joint_error_mm"][0] < 4  # 2 mm of keypoint noise
+    images = json.loads((made / "results/images1/metrics.manifest.json").read_text())
+    assert images["figures"]["mre_mm"][0] < 1 and images["figures"]["joint_error_mm"][0] < 15
+    calibrate = json.loads((made / "results/images1/calibrate.manifest.json").read_text())
+    assert calibrate["input_paths"]["calibration"].endswith("calib-images/cleaned.c3d")  # its calibration take's
     assert (made / "results/take2/report.html").stat().st_size > 1_000_000
     # an edited setting reruns its stage and what depends on it, not calibrate
     text = (made / "session.toml").read_text().replace("filter_cutoff = 8.0", "filter_cutoff = 5.0")
     (made / "session.toml").write_text(text)
     runs = process(load_session(made / "session.toml"), workers=1)
     assert {(r.take, r.stage) for r in runs if r.status == "done"} == {
-        (t, s) for t in ("take1", "take2") for s in ("solve", "metrics", "report")}  # hands1 has its own fit
+        (t, s) for t in ("take1", "take2") for s in ("solve", "metrics", "report")}  # the image takes filter none
+    # two cameras -> three: the image takes triangulate again and what follows, but do not detect again
+    text = text.replace("min_views = 2", "min_views = 3")
+    (made / "session.toml").write_text(text)
+    runs = process(load_session(made / "session.toml"), workers=1)
+    assert {(r.take, r.stage) for r in runs if r.status == "done"} == {
+        (t, s) for t in ("calib-images", "images1") for s in IMAGE_STAGES[1:]}
     capsys.readouterr()
     assert main(["process", str(made / "session.toml"), "--dry-run"]) == 0
     assert "planned" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda t: t.replace('stages = ["calibrate"', 'stages = ["align", "calibrate"'), "unknown stage 'align'"),
+    (lambda t: t.replace('stages = ["detect"', 'stages = ["align", "detect"'), "unknown stage 'align'"),
     (lambda t: re.sub(r"filter_cutoff = [0-9.]+", 'filter_cutoff = "fast"', t),
      "stages.solve.filter_cutoff must be a number"),
     (lambda t: t.replace("method = \"lm\"", "speed = 3"), "stages.solve.speed is not a setting of solve"),
@@ -80,6 +93,14 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
      "takes[2].markers is not an input of a keypoints take"),
     (lambda t: t.replace('name = "take2"', 'name = "take1"'), "unique name"),
     (lambda t: t + "\n[extra]\nx = 1\n", "unknown table 'extra'"),
+    (lambda t: t.replace('images = "images1/images"', 'images = "images1/pictures"'),
+     "takes[4].images: no such folder"),
+    (lambda t: t.replace('calibration_take = "calib-images"', 'calibration_take = "hands1"'),
+     "takes[4].calibration_take 'hands1': name another markers or images take"),
+    (lambda t: t.replace("filter_cutoff = 0 ", "filter_cutoff = false "),
+     "takes[3].settings.solve.filter_cutoff must be"),
+    (lambda t: t.replace("[takes.settings.solve]", "[takes.settings.align]", 1),
+     "takes[3].settings.align: unknown stage"),
     (lambda t: t.replace("[session]", "[session"), "not TOML"),
 ])
 def test_bad_session_files(made, tmp_path, capsys, edit, message):
@@ -94,3 +115,17 @@ def test_bad_session_files(made, tmp_path, capsys, edit, message):
         bad.unlink()
     with pytest.raises(HandcapError, match="no such session file"):
         load_session(tmp_path / "none.toml")
+
+
+def test_a_folder_hash_sees_every_file_its_name_and_bytes(tmp_path):
+    from handcap.session.runner import file_hash
+
+    (tmp_path / "cam_0").mkdir()
+    (tmp_path / "cam_0" / "0000.png").write_bytes(b"a")
+    (tmp_path / "cam_0" / "0001.png").write_bytes(b"b")
+    first = file_hash(tmp_path)
+    assert file_hash(tmp_path) == first
+    (tmp_path / "cam_0" / "0001.png").write_bytes(b"c")
+    changed = file_hash(tmp_path)
+    (tmp_path / "cam_0" / "0001.png").rename(tmp_path / "cam_0" / "0002.png")
+    assert len({first, changed, file_hash(tmp_path)}) == 3

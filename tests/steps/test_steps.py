@@ -100,3 +100,31 @@ def test_every_result_a_step_returns_has_a_text_summary(name):
     module, _, cls = name.rpartition(".")
     summary = getattr(getattr(importlib.import_module(module), cls), "summary", None)
     assert callable(summary) and summary.__annotations__.get("return") == "str"
+
+
+def test_calibration_drops_the_markers_a_take_never_shows_only_when_asked(tmp_path):
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.steps.solve import calibrate_markers
+    from handcap.synth.scene import SynthConfig, synthesize
+
+    capture = synthesize(SynthConfig(motion="calibration", frames=60, seed=3, dropout=0.0, swap_rate=0.0,
+                                     ghost_rate=0.0), progress=False)
+    markers = capture.markers
+    hidden = markers.positions.copy()
+    hidden[:, markers.index("ring_tip")] = np.nan  # no camera ever saw it
+    write_markers(MarkerSequence(hidden, markers.names, markers.rate), tmp_path / "calib.c3d")
+    with pytest.raises(HandcapError, match="ring_tip"):
+        calibrate_markers(tmp_path / "calib.c3d", tmp_path / "a.npz", layout="glove-13")
+    with pytest.warns(UserWarning, match="1 of the layout's 13 markers were never seen"):
+        done = calibrate_markers(tmp_path / "calib.c3d", tmp_path / "a.npz", layout="glove-13", drop_unseen=True)
+    attachment = MarkerAttachment.load(tmp_path / "a.npz")
+    assert "ring_tip" not in attachment.marker_names and len(attachment.marker_names) == 12
+    assert any("never seen" in w for w in attachment.warnings) and done.result.mre < 0.002
+
+
+def test_a_layout_subset_keeps_order_and_rigid_markers():
+    from handcap.layouts import load_layout
+
+    layout = load_layout("glove-13")
+    part = layout.subset(reversed(layout.names[2:]))
+    assert part.names == layout.names[2:] and set(part.rigid) == set(layout.rigid) & set(layout.names[2:])

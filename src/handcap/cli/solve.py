@@ -13,7 +13,8 @@ from handcap.steps import solve
 def _cmd_calibrate_markers(a):
     return solve.calibrate_markers(a.input, a.out, layout=a.layout, side=a.side, frames=frames_arg(a.frames),
                                    betas=betas_arg(a.betas), fit_shape=a.fit_shape, estimate_offset=a.estimate_offset,
-                                   units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir)
+                                   units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir,
+                                   drop_unseen=a.drop_unseen)
 
 
 def _cmd_solve(a):
@@ -41,6 +42,9 @@ def add_solve(verbs) -> None:
     p.add_argument("--estimate-offset", action=argparse.BooleanOptionalAction, default=None,
                    help="estimate each marker's height off the skin (default: for sphere markers the layout places "
                         "on a segment with 3 or more markers)")
+    p.add_argument("--drop-unseen", action="store_true",
+                   help="leave out (with a warning) the layout's markers the take never shows, e.g. corners of dense "
+                        "patches that no two cameras saw; without it they are an error")
     p.add_argument("--out", required=True, help="attachment .npz")
     add_units(p)
     add_hand_model(p)

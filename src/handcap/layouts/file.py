@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import difflib
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib.resources import files
 from pathlib import Path
 
@@ -135,6 +135,17 @@ class MarkerLayout:
     def for_side(self, side: str) -> "MarkerLayout":
         """This layout on hand ``side`` (mirrored if needed)."""
         return self if check_side(side) == self.side else self.mirrored()
+
+    def subset(self, names) -> "MarkerLayout":
+        """This layout with only the markers named in ``names`` (layout order kept; rigid markers too).
+
+        Parameters
+        ----------
+        names : iterable of str
+        """
+        keep = set(names)
+        return replace(self, markers=tuple(m for m in self.markers if m.name in keep),
+                       rigid=tuple(r for r in self.rigid if r in keep))
 
     def to_toml(self) -> dict:
         """The layout as a TOML document (a dict): its settings, then one ``markers`` table per marker.

@@ -15,6 +15,9 @@ from handcap.quality import metrics as q
 from handcap.solve.leave_one_out import leave_one_marker_out
 from handcap.solve.motion import observed_markers
 
+#: Pose clusters of the diversity and coherence figures (the paper's k-means); a take of no more frames has neither.
+CLUSTERS = 5
+
 
 def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_mesh=None, attachment=None,
                    leave_one_out: bool = False, hand=None) -> dict:
@@ -67,9 +70,9 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     if object_motion is not None and object_motion.n_frames != motion.n_frames:
         raise HandcapError(f"{obj}: the object moves for {object_motion.n_frames} frames, the hand motion "
                            f"{motion_path} for {motion.n_frames}; give the object motion of the same take")
-    diversity, coherence = q.diversity_coherence(
-        q.pose_features(motion.joints, None if object_motion is None else object_motion.translation))
-    out["diversity"], out["coherence"] = diversity, coherence
+    features = q.pose_features(motion.joints, None if object_motion is None else object_motion.translation)
+    if np.isfinite(features).all(axis=1).sum() > CLUSTERS:  # else too short a take for k-means: left out
+        out["diversity"], out["coherence"] = q.diversity_coherence(features, k=CLUSTERS)
     if obj is not None:
         cube = _cube_figures(obj, object_motion)
         out.update(cube)

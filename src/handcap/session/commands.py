@@ -32,13 +32,15 @@ def run_session(path, *, dry_run: bool = False, scheduler=None, workers: int | N
     return Step((head, summary(runs)), warnings, tuple(r.output for r in runs if r.status == "done"), runs)
 
 
-def session_new(folder) -> Step:
+def session_new(folder, *, images: bool = True) -> Step:
     """Write an example session with synthetic takes into ``folder`` (see :func:`new_session`).
 
     Parameters
     ----------
     folder : str or Path
+    images : bool
+        Film the takes of coded patches too.
     """
-    written = new_session(folder)
+    written = new_session(folder, images=images)
     return Step((f"{written[-1]}: a session of synthetic takes; run handcap process {written[-1]}",), (),
                 tuple(written), None)

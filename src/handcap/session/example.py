@@ -16,17 +16,19 @@ from handcap.io import write_markers
 from handcap.io.npz import write_hand_motion
 from handcap.markerless.keypoints import hand_names
 from handcap.markerless.synthetic import synthetic_hand
+from handcap.synth.filming import film_take
 from handcap.synth.scene import SynthConfig, synthesize, write_capture
 
 TEMPLATE = '''# A handcap session: `handcap process session.toml` runs every stage of every take and writes
-# results/<take>/ (attachment.npz, motion.npz, metrics.json, report.html, and a manifest per stage).
+# results/<take>/ (detections.npz, triangulated.c3d, cleaned.c3d for camera takes; attachment.npz,
+# motion.npz, metrics.json, report.html; and a manifest per stage).
 # Run it again and finished stages are skipped; edit a setting and only what depends on it runs again.
 # `handcap process session.toml --dry-run` prints the plan.
 
 [session]
 name = "{name}"
 results = "results"
-stages = ["calibrate", "solve", "fit", "metrics", "report"]   # fit: the keypoint takes
+stages = [{stages}]
 
 [stages.calibrate]
 layout = "glove-13"          # the marker layout of every take (a take may name its own)
@@ -37,8 +39,36 @@ filter_cutoff = 8.0          # Hz: a low-pass on the solved motion; remove the l
 
 [stages.metrics]
 leave_one_out = false
-
+{image_stages}
 {takes}'''
+
+IMAGE_STAGES = '''
+[stages.detect]
+rate = 4.0                   # frames per second of the image folders (a video says its own)
+
+[stages.triangulate]
+min_views = 2                # cameras that must agree on a corner
+
+[stages.clean]
+# Four frames a second: a finger moves too far between frames to interpolate over a gap, so only the
+# rigid fill (from patch-mates seen in the same frame) fills, over at most 1.5 s.
+max_linear_frames = 0
+max_spline_frames = 0
+max_rigid_frames = 6
+'''
+
+IMAGES = '''[[takes]]
+name = "{name}"
+kind = "images"              # camera images of coded patches: detect, triangulate, clean, then as markers
+images = "{name}/images"     # one sub-folder of images (or one video) per camera
+cameras = "{name}/cameras.toml"
+pattern = "{name}/pattern.toml"
+layout = "dense-patches"
+{calibration}truth = "{name}/truth.npz"
+[takes.settings.solve]       # this take's own settings over the session's
+filter_cutoff = 0            # no low-pass: 4 frames a second
+
+'''
 
 KEYPOINTS = '''[[takes]]
 name = "{name}"
@@ -74,16 +104,38 @@ def _keypoint_take(folder: Path, frames: int) -> list[str]:
     return [str(folder / "keypoints.c3d"), str(folder / "truth.npz")]
 
 
-def new_session(folder, *, takes: int = 2, frames: int = 300) -> list[str]:
+def _image_takes(folder: Path, progress: bool | None) -> tuple[list[str], str]:
+    """Two filmed takes of printed patches, 6 cameras at 4 Hz: an open hand turned (the calibration) and a grasp;
+    the files and their [[takes]] tables."""
+    configs = {"calib-images": SynthConfig(layout="dense-patches", motion="calibration", frames=4, rate=4.0, seed=8,
+                                           subject_seed=21, cameras=6, min_views=2, object="none"),
+               "images1": SynthConfig(layout="dense-patches", motion="calibration", frames=6, rate=4.0, seed=9,
+                                      subject_seed=21, cameras=6, min_views=2, object="none")}
+    before = set(folder.rglob("*"))
+    tables = ""
+    for name, config in configs.items():
+        film_take(config, folder / name, progress=progress)
+        tables += IMAGES.format(name=name, calibration="" if name == "calib-images" else
+                                'calibration_take = "calib-images"   # its cleaned corners calibrate this take\n')
+    return sorted(str(p) for p in set(folder.rglob("*")) - before if p.is_file()), tables
+
+
+def new_session(folder, *, takes: int = 2, frames: int = 300, images: bool = True,
+                progress: bool | None = None) -> list[str]:
     """Write a session into ``folder``: a calibration take, ``takes`` grasp takes (synthetic markers, one
-    subject), a take of 3D hand keypoints, and a commented ``session.toml``.
+    subject), a take of 3D hand keypoints, two filmed takes of printed patches (``images``), and a commented
+    ``session.toml``.
 
     Parameters
     ----------
     folder : str or Path
         New or empty.
     takes, frames : int
-        Number of takes and frames of each (100 Hz).
+        Number of marker takes and frames of each (100 Hz).
+    images : bool
+        Film the image takes (needs the extra 'images' and headless OpenGL).
+    progress : bool, optional
+        Progress bars while filming (default: on a terminal).
 
     Returns
     -------
@@ -100,8 +152,15 @@ def new_session(folder, *, takes: int = 2, frames: int = 300) -> list[str]:
     for name, config in configs.items():
         written += [str(p) for p in write_capture(synthesize(config, progress=False), folder / name).values()]
     written += _keypoint_take(folder / "hands1", frames)
-    takes = "".join(TAKE.format(name=n) for n in configs if n != "calibration") + KEYPOINTS.format(name="hands1")
-    text = TEMPLATE.format(name=folder.name, takes=takes)
+    tables = "".join(TAKE.format(name=n) for n in configs if n != "calibration") + KEYPOINTS.format(name="hands1")
+    stages = ["calibrate", "solve", "fit", "metrics", "report"]
+    if images:
+        files, image_tables = _image_takes(folder, progress)
+        written += files
+        tables += image_tables
+        stages = ["detect", "triangulate", "clean", *stages]
+    text = TEMPLATE.format(name=folder.name, takes=tables, stages=", ".join(f'"{s}"' for s in stages),
+                           image_stages=IMAGE_STAGES if images else "")
     with atomic_output(folder / "session.toml", "w") as fh:
         fh.write(text)
     return [*written, str(folder / "session.toml")]

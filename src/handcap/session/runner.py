@@ -1,13 +1,15 @@
 """``handcap process``: every stage of every take of a session, resumable (issue 19).
 
-Each take's results go to ``RESULTS/<take>/``: ``attachment.npz`` (calibrate), ``motion.npz`` (solve, or fit
-for a keypoints take), ``metrics.json`` (metrics), ``report.html`` (report). Beside each stage's output a manifest
-(``<stage>.manifest.json``) records the stage's settings, the SHA-256 of every input, handcap's version, the
-outputs, figures, warnings and seconds. A stage whose manifest matches (same settings, inputs and version, its
-outputs present) is skipped, so a killed run resumes where it stopped, and an edited setting reruns its stage
-and those whose inputs then change (a stage that writes the same bytes again stops the cascade). Every
-output is written atomically and the manifest last. Takes run in parallel (:func:`handcap.parallel.map_chunks`:
-local processes, or a Dask cluster with ``scheduler``).
+Each take's results go to ``RESULTS/<take>/`` (:data:`OUTPUTS`): for an images take ``detections.npz``
+(detect), ``triangulated.c3d`` (triangulate), ``cleaned.c3d`` (clean); then ``attachment.npz`` (calibrate),
+``motion.npz`` (solve, or fit for a keypoints take), ``metrics.json`` (metrics), ``report.html`` (report).
+Beside each stage's output a manifest (``<stage>.manifest.json``) records the stage's settings, the SHA-256 of
+every input, handcap's version, the outputs, figures, warnings and seconds. A stage whose manifest matches (same
+settings, inputs and version, its outputs present) is skipped, so a killed run resumes where it stopped, and an
+edited setting reruns its stage and those whose inputs then change (a stage that writes the same bytes again stops
+the cascade). Every output is written atomically and the manifest last. Takes run in parallel
+(:func:`handcap.parallel.map_chunks`: local processes, or a Dask cluster with ``scheduler``): the takes that
+calibrate others first, then the rest.
 """
 
 from __future__ import annotations
@@ -23,13 +25,16 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.parallel import map_chunks
 from handcap.session.spec import KIND_STAGES, Session, Take
+from handcap.steps import detect as detect_step
 from handcap.steps import markerless as markerless_step
 from handcap.steps import metrics as metrics_step
+from handcap.steps import multiview as multiview_step
 from handcap.steps import report as report_step
 from handcap.steps import solve as solve_step
 
 #: Each stage's output file in the take's folder.
-OUTPUTS = {"calibrate": "attachment.npz", "solve": "motion.npz", "fit": "motion.npz", "metrics": "metrics.json",
+OUTPUTS = {"detect": "detections.npz", "triangulate": "triangulated.c3d", "clean": "cleaned.c3d",
+           "calibrate": "attachment.npz", "solve": "motion.npz", "fit": "motion.npz", "metrics": "metrics.json",
            "report": "report.html"}
 
 
@@ -46,46 +51,89 @@ class StageRun:
 
 
 def file_hash(path) -> str:
-    """SHA-256 of a file's bytes (hex).
+    """SHA-256 of a file's bytes, or of a folder's files (their relative paths and bytes, in sorted order; hex).
 
     Parameters
     ----------
     path : str or Path
     """
+    path = Path(path)
     digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for file in files:
+        if path.is_dir():
+            digest.update(str(file.relative_to(path)).encode() + b"\0")
+        with open(file, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
     return digest.hexdigest()
 
 
-def _inputs(take: Take, stage: str, folder: Path) -> dict:
+def _markers_of(session: Session, take: Take):
+    """The labelled markers a take's solve reads: its cleaned corners (images) or its markers file."""
+    return session.results / take.name / OUTPUTS["clean"] if take.kind == "images" else take.inputs.get("markers")
+
+
+def _calibration_of(session: Session, take: Take):
+    """The markers that calibrate ``take``: its ``calibration`` file, else its calibration take's markers, else its
+    own when another take names it as theirs (None: it has an attachment)."""
+    if "calibration" in take.inputs:
+        return take.inputs["calibration"]
+    source = take.calibration_take
+    if source is None and any(t.calibration_take == take.name for t in session.takes):
+        source = take.name
+    if source is None or "attachment" in take.inputs:
+        return None
+    return _markers_of(session, next(t for t in session.takes if t.name == source))
+
+
+def _inputs(session: Session, take: Take, stage: str, folder: Path) -> dict:
     """The files a stage reads, by role."""
     attachment = take.inputs.get("attachment", folder / OUTPUTS["calibrate"])
-    return {"calibrate": {"calibration": take.inputs.get("calibration")},
-            "solve": {"markers": take.inputs.get("markers"), "attachment": attachment},
+    markers = _markers_of(session, take)
+    return {"detect": {"images": take.inputs.get("images"), "cameras": take.inputs.get("cameras"),
+                       "pattern": take.inputs.get("pattern")},
+            "triangulate": {"detections": folder / OUTPUTS["detect"], "cameras": take.inputs.get("cameras")},
+            "clean": {"markers": folder / OUTPUTS["triangulate"]},
+            "calibrate": {"calibration": _calibration_of(session, take)},
+            "solve": {"markers": markers, "attachment": attachment},
             "fit": {"keypoints": take.inputs.get("keypoints")},
-            "metrics": {"motion": folder / OUTPUTS["solve"],
-                        "markers": take.inputs.get("markers", take.inputs.get("keypoints")),
+            "metrics": {"motion": folder / OUTPUTS["solve"], "markers": markers or take.inputs.get("keypoints"),
                         "truth": take.inputs.get("truth")},
             "report": {"motion": folder / OUTPUTS["solve"], "metrics": folder / OUTPUTS["metrics"]}}[stage]
 
 
 def _stages(session: Session, take: Take) -> list[str]:
-    """The stages that apply to ``take``: its kind's, those the session runs, calibrate only with a calibration
-    take."""
+    """The stages that apply to ``take``: its kind's, those the session runs, calibrate only with something to
+    calibrate on."""
     return [s for s in KIND_STAGES[take.kind] if s in session.stages and (s != "calibrate"
-                                                                          or "calibration" in take.inputs)]
+                                                                          or _calibration_of(session, take))]
 
 
-def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path):
+def _layout(take: Take, settings: dict, stage: str) -> str:
+    layout = take.layout or settings.get("layout")
+    if layout is None:
+        raise HandcapError(f"take {take.name}: {stage} needs a layout (stages.calibrate.layout or the take's layout)")
+    return layout
+
+
+def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path, session: Session):
+    if stage == "detect":
+        sources = sorted(p for p in inputs["images"].iterdir() if not p.name.startswith("."))
+        return detect_step.detect(sources, out, rig=inputs["cameras"], pattern=inputs["pattern"], progress=False,
+                                  **settings)
+    if stage == "triangulate":
+        return multiview_step.triangulate([inputs["detections"]], inputs["cameras"], out, workers=1, **settings)
+    if stage == "clean":
+        layout = _layout(take, session.settings.get("calibrate", {}), stage)
+        return multiview_step.clean(inputs["markers"], out, layout=layout, **settings)
     if stage == "calibrate":
-        layout = settings.get("layout", take.layout)
-        if layout is None:
-            raise HandcapError(f"take {take.name}: calibrate needs a layout (stages.calibrate.layout or the take's "
-                               f"layout)")
+        layout = _layout(take, settings, stage)
         options = {k: v for k, v in settings.items() if k != "layout"}
-        return solve_step.calibrate_markers(inputs["calibration"], out, layout=take.layout or layout, **options)
+        calibrated_on = next((t for t in session.takes if _markers_of(session, t) == inputs["calibration"]), take)
+        # Corners of dense patches that no two cameras saw are normal: an images take calibrates on those seen.
+        options.setdefault("drop_unseen", calibrated_on.kind == "images")
+        return solve_step.calibrate_markers(inputs["calibration"], out, layout=layout, **options)
     if stage == "solve":
         return solve_step.solve(inputs["markers"], inputs["attachment"], out, **settings)
     if stage == "fit":
@@ -94,6 +142,22 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path):
         return metrics_step.metrics(inputs["motion"], truth=inputs.get("truth"), markers=inputs["markers"], out=out,
                                     **settings)
     return report_step.report(out.parent, out)
+
+
+def stage_settings(session: Session, take: Take, stage: str) -> dict:
+    """A stage's settings for one take: the session's, then the take's own over them; a ``filter_cutoff`` of 0
+    means no filter.
+
+    Parameters
+    ----------
+    session : Session
+    take : Take
+    stage : str
+    """
+    settings = {**session.settings.get(stage, {}), **take.settings.get(stage, {})}
+    if settings.get("filter_cutoff") == 0:
+        del settings["filter_cutoff"]
+    return settings
 
 
 def run_take(job) -> list[StageRun]:
@@ -109,10 +173,10 @@ def run_take(job) -> list[StageRun]:
     runs = []
     for stage in _stages(session, take):
         out = folder / OUTPUTS[stage]
-        settings = dict(session.settings.get(stage, {}))
-        inputs = {k: Path(v) for k, v in _inputs(take, stage, folder).items() if v is not None}
+        settings = stage_settings(session, take, stage)
+        inputs = {k: Path(v) for k, v in _inputs(session, take, stage, folder).items() if v is not None}
         manifest_path = folder / f"{stage}.manifest.json"
-        missing = [str(p) for p in inputs.values() if not p.is_file()]
+        missing = [str(p) for p in inputs.values() if not p.exists()]
         record = None
         if not missing and manifest_path.is_file() and out.is_file():
             try:
@@ -131,7 +195,7 @@ def run_take(job) -> list[StageRun]:
             raise HandcapError(f"take {take.name}: stage {stage} lacks {missing[0]}")
         folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        step = _run_stage(stage, take, settings, inputs, out)
+        step = _run_stage(stage, take, settings, inputs, out, session)
         seconds = time.perf_counter() - start
         figures = step.result if isinstance(step.result, dict) else {}
         manifest = {"stage": stage, "take": take.name, "settings": settings, "inputs": hashes,
@@ -163,15 +227,23 @@ def process(session: Session, *, dry_run: bool = False, scheduler=None, workers:
     list of StageRun
         Every stage of every take, take by take.
     """
-    jobs = [(session, take, dry_run) for take in session.takes]
-    count = workers if workers is not None else min(len(jobs), 2)
-    results = map_chunks(run_take, jobs, scheduler=scheduler, workers=count, desc="takes")
-    return [run for take_runs in results for run in take_runs]
+    # Two waves: the takes that calibrate others first, then the rest (each wave's takes in parallel).
+    sources = {t.calibration_take for t in session.takes}
+    runs = []
+    for wave in ([t for t in session.takes if t.name in sources], [t for t in session.takes if t.name not in sources]):
+        if not wave:
+            continue
+        jobs = [(session, take, dry_run) for take in wave]
+        count = workers if workers is not None else min(len(jobs), 2)
+        results = map_chunks(run_take, jobs, scheduler=scheduler, workers=count, desc="takes")
+        runs += [run for take_runs in results for run in take_runs]
+    order = [t.name for t in session.takes]
+    return sorted(runs, key=lambda r: order.index(r.take))  # stable: each take's stages stay in order
 
 
 def summary(runs) -> str:
     """The table ``handcap process`` ends with: one row per take and stage."""
-    lines = [f"{'take':<16} {'stage':<10} {'status':<8} {'seconds':>8}  warnings"]
+    lines = [f"{'take':<16} {'stage':<12} {'status':<8} {'seconds':>8}  warnings"]
     for r in runs:
-        lines.append(f"{r.take:<16} {r.stage:<10} {r.status:<8} {r.seconds:>8.2f}  {len(r.warnings)}")
+        lines.append(f"{r.take:<16} {r.stage:<12} {r.status:<8} {r.seconds:>8.2f}  {len(r.warnings)}")
     return "\n".join(lines)

@@ -12,7 +12,7 @@ mistake naming the key and the file (issue 19).
     layout = "glove-13"                 # every take's layout unless the take names one
     [stages.solve]
     method = "lm"
-    filter_cutoff = 8.0                 # Hz; omit for none
+    filter_cutoff = 8.0                 # Hz; omit (or 0) for none
 
     [[takes]]
     name = "grasp-01"
@@ -25,6 +25,17 @@ mistake naming the key and the file (issue 19).
     name = "video-02"
     kind = "keypoints"                  # 3D hand keypoints (triangulated or lifted from video)
     keypoints = "raw/video-02-keypoints.c3d"
+
+    [[takes]]
+    name = "patches-03"
+    kind = "images"                     # camera images of coded patches: detect, triangulate, clean, ...
+    images = "raw/patches-03"           # one sub-folder of images (or one video) per camera
+    cameras = "raw/cameras.toml"
+    pattern = "raw/pattern.toml"
+    layout = "dense-patches"
+    calibration_take = "patches-calib"  # another take of the session, run first; its markers calibrate this one
+    [takes.settings.solve]              # this take's own settings over the session's
+    filter_cutoff = 0                   # 0: no filter
 
 Paths are relative to the session file.
 """
@@ -40,7 +51,12 @@ from handcap.core.errors import HandcapError
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
-    "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str},
+    "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str},
+    "triangulate": {"min_views": int, "threshold_px": float, "units": str},
+    "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,
+              "max_spline_frames": int},
+    "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str,
+                  "drop_unseen": bool},
     "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
     "fit": {"fit_shape": bool, "robust_scale": float, "filter_cutoff": float, "side": str, "label": str,
             "units": str},
@@ -48,21 +64,35 @@ STAGES = {
     "report": {},
 }
 #: Kinds of take the runner knows, the inputs each takes (required, optional) and the stages it goes through:
-#: labelled markers (calibrate, solve) and 3D hand keypoints (fit the hand model to them).
-KINDS = {"markers": (("markers",), ("calibration", "attachment", "truth", "layout")),
+#: camera images of coded patches (detect, triangulate, clean, calibrate, solve), labelled markers (calibrate,
+#: solve) and 3D hand keypoints (fit the hand model to them). ``layout`` and ``calibration_take`` are names, not
+#: files; ``images`` is a folder with one sub-folder of images (or one video) per camera of ``cameras``.
+KINDS = {"images": (("images", "cameras", "pattern"),
+                    ("calibration", "attachment", "calibration_take", "truth", "layout")),
+         "markers": (("markers",), ("calibration", "attachment", "calibration_take", "truth", "layout")),
          "keypoints": (("keypoints",), ("truth",))}
-KIND_STAGES = {"markers": ("calibrate", "solve", "metrics", "report"), "keypoints": ("fit", "metrics", "report")}
+KIND_STAGES = {"images": ("detect", "triangulate", "clean", "calibrate", "solve", "metrics", "report"),
+               "markers": ("calibrate", "solve", "metrics", "report"),
+               "keypoints": ("fit", "metrics", "report")}
+#: Inputs that name something other than a file.
+NAMES = ("layout", "calibration_take")
+#: Inputs that are folders.
+FOLDERS = ("images",)
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
 @dataclass(frozen=True)
 class Take:
-    """One take of a session: its name (a folder name under the results), kind and input paths."""
+    """One take of a session: its name (a folder name under the results), kind, input paths, layout, the
+    take whose markers calibrate it (``calibration_take``; the take itself when another take names it so and it
+    has no calibration of its own) and its own stage settings over the session's (``[takes.settings.STAGE]``)."""
 
     name: str
     kind: str
     inputs: dict = field(default_factory=dict)
     layout: str | None = None
+    calibration_take: str | None = None
+    settings: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -97,6 +127,25 @@ def _typed(value, kind, where):
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
         raise HandcapError(f"{where} must be {_KIND_NAMES[kind]}, got {value!r}")
     return value
+
+
+def _settings(raw, where: str) -> dict:
+    """Stage settings ``{stage: {key: value}}`` checked against :data:`STAGES` (numbers made floats where wanted)."""
+    if not isinstance(raw, dict):
+        raise HandcapError(f"{where} must be tables of settings ([stages.solve] ...)")
+    settings = {}
+    for stage, values in raw.items():
+        if stage not in STAGES:
+            raise HandcapError(f"{where}.{stage}: unknown stage (choose from {', '.join(STAGES)})")
+        if not isinstance(values, dict):
+            raise HandcapError(f"{where}.{stage} must be a table of settings")
+        settings[stage] = {}
+        for key, value in values.items():
+            if key not in STAGES[stage]:
+                known = ", ".join(STAGES[stage]) or "none"
+                raise HandcapError(f"{where}.{stage}.{key} is not a setting of {stage} ({known})")
+            settings[stage][key] = _typed(value, STAGES[stage][key], f"{where}.{stage}.{key}")
+    return settings
 
 
 def load_session(path) -> Session:
@@ -140,21 +189,8 @@ def load_session(path) -> Session:
     for stage in stages:
         if stage not in STAGES:
             raise HandcapError(f"{path}: session.stages: unknown stage {stage!r} (choose from {', '.join(STAGES)})")
-    settings = {}
     raw = table.get("stages", {})
-    if not isinstance(raw, dict):
-        raise HandcapError(f"{path}: stages must be tables ([stages.solve] ...)")
-    for stage, values in raw.items():
-        if stage not in STAGES:
-            raise HandcapError(f"{path}: stages.{stage}: unknown stage (choose from {', '.join(STAGES)})")
-        if not isinstance(values, dict):
-            raise HandcapError(f"{path}: stages.{stage} must be a table of settings")
-        for key, value in values.items():
-            if key not in STAGES[stage]:
-                known = ", ".join(STAGES[stage]) or "none"
-                raise HandcapError(f"{path}: stages.{stage}.{key} is not a setting of {stage} ({known})")
-            values[key] = _typed(value, STAGES[stage][key], f"{path}: stages.{stage}.{key}")
-        settings[stage] = dict(values)
+    settings = _settings(raw, f"{path}: stages")
     takes, seen = [], set()
     raw_takes = table.get("takes", [])
     if not isinstance(raw_takes, list) or not raw_takes:
@@ -171,18 +207,36 @@ def load_session(path) -> Session:
         if kind not in KINDS:
             raise HandcapError(f"{where}.kind {kind!r}: the runner knows {', '.join(KINDS)} takes so far")
         required, optional = KINDS[kind]
-        for key in set(raw_take) - {"name", "kind", *required, *optional}:
+        for key in set(raw_take) - {"name", "kind", "settings", *required, *optional}:
             raise HandcapError(f"{where}.{key} is not an input of a {kind} take ({', '.join(required + optional)})")
         inputs = {}
-        for key in required + tuple(k for k in optional if k in raw_take and k != "layout"):
+        for key in required + tuple(k for k in optional if k in raw_take and k not in NAMES):
             if key not in raw_take:
                 raise HandcapError(f"{where}.{key} is missing: a {kind} take needs it")
             file = path.parent / _typed(raw_take[key], str, f"{where}.{key}")
-            if not file.is_file():
+            if key in FOLDERS and not file.is_dir():
+                raise HandcapError(f"{where}.{key}: no such folder {file} (one sub-folder or video per camera)")
+            if key not in FOLDERS and not file.is_file():
                 raise HandcapError(f"{where}.{key}: no such file {file}")
             inputs[key] = file
-        if kind == "markers" and "solve" in stages and not ({"calibration", "attachment"} & set(inputs)):
-            raise HandcapError(f"{where}: give calibration (a calibration take) or attachment (an .npz) to solve")
-        layout = raw_take.get("layout")
-        takes.append(Take(label, kind, inputs, None if layout is None else _typed(layout, str, f"{where}.layout")))
+        named = {k: _typed(raw_take[k], str, f"{where}.{k}") for k in NAMES if k in raw_take}
+        own = _settings(raw_take.get("settings", {}), f"{where}.settings")
+        takes.append(Take(label, kind, inputs, named.get("layout"), named.get("calibration_take"), own))
+    sources = {t.calibration_take for t in takes} - {None}
+    by_name = {t.name: t for t in takes}
+    for k, take in enumerate(takes):
+        where = f"{path}: takes[{k}]"
+        other = by_name.get(take.calibration_take)
+        if take.calibration_take is not None and (other is None or other.kind == "keypoints"):
+            raise HandcapError(f"{where}.calibration_take {take.calibration_take!r}: name another markers or images "
+                               f"take of this session")
+        if other is not None and other.calibration_take not in (None, other.name):
+            raise HandcapError(f"{where}.calibration_take {take.calibration_take!r}: that take is calibrated by "
+                               f"{other.calibration_take!r}; name the calibration take itself")
+    for k, take in enumerate(takes):
+        where = f"{path}: takes[{k}]"
+        if (take.kind != "keypoints" and "solve" in stages and take.name not in sources
+                and not ({"calibration", "attachment"} & set(take.inputs)) and take.calibration_take is None):
+            raise HandcapError(f"{where}: give calibration (a calibration take's markers), calibration_take (a take "
+                               f"of this session) or attachment (an .npz) to solve")
     return Session(path, name, results, tuple(s for s in STAGES if s in stages), settings, tuple(takes))

@@ -13,13 +13,14 @@ from handcap.hand.attachment import MarkerAttachment
 from handcap.io import check_not_input, check_output, read_markers, read_scan_points, save_npz, write_hand_motion
 from handcap.layouts import load_layout
 from handcap.quality import plausibility as q
+from handcap.solve.motion import observed_markers
 from handcap.solve import betas_from_measurements, betas_from_scan, calibrate_attachment, hand_measurements, solve_hand
 from handcap.steps.step import Step
 
 
 def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames: slice | None = None, betas=None,
                       fit_shape: bool | None = None, estimate_offset: bool | None = None, units: str | None = None,
-                      hand_model: str | None = None, mano_dir=None) -> Step:
+                      hand_model: str | None = None, mano_dir=None, drop_unseen: bool = False) -> Step:
     """Calibrate the marker attachment from a calibration take (see :func:`handcap.solve.calibrate_attachment`).
 
     Parameters
@@ -40,15 +41,33 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
         Unit of the input's coordinates, overriding what the file says.
     hand_model, mano_dir : str or None
         The hand model (see :func:`handcap.hand.hand_model_from_options`; default openhand).
+    drop_unseen : bool
+        Calibrate only the layout's markers that the take shows at least once, with a warning that counts the
+        others (dense patches: corners that no camera pair saw); without it such a marker is an error.
     """
     check_not_input(out, path)
     marker_layout = load_layout(layout, side=side)
     markers = read_markers(path, units=units, hand=[m.name for m in marker_layout.hand_markers])
+    dropped = []
+    if drop_unseen:
+        wanted = marker_layout.names
+        seen = np.isfinite(observed_markers(markers, wanted)[0]).all(axis=-1).any(axis=0)  # prefixes allowed
+        shown = {n for n, s in zip(wanted, seen) if s}
+        dropped = [n for n in wanted if n not in shown]
+        if len(dropped) == len(marker_layout.names):
+            raise HandcapError(f"{path}: shows none of layout {marker_layout.name}'s markers")
+        marker_layout = marker_layout.subset(shown)
     hand = hand_model_from_options(hand_model, mano_dir, side=marker_layout.side, recorded=None, what="the input")
     result = calibrate_attachment(markers, marker_layout, hand, betas=betas, frames=frames, fit_shape=fit_shape,
                                   estimate_offset=estimate_offset)
-    result.attachment.save(out)
-    return Step((f"{out}: {result.summary()}",), result.warnings, (str(out),), result)
+    attachment, warnings = result.attachment, result.warnings
+    if dropped:
+        note = (f"{len(dropped)} of the layout's {len(dropped) + len(marker_layout.names)} markers were never seen "
+                f"in the calibration take ({', '.join(dropped[:3])}...): they are left out of the attachment")
+        attachment = q.attach(attachment, [note])
+        warnings = (*warnings, note)
+    attachment.save(out)
+    return Step((f"{out}: {result.summary()}",), warnings, (str(out),), result)
 
 
 def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | None = None, filter_order: int = 2,

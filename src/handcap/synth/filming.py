@@ -27,6 +27,7 @@ piece of tape), so ``image_truth.npz`` and not ``truth.npz`` holds their truth.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -41,10 +42,12 @@ from handcap.core.files import atomic_output, save_npz
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.session import session_pattern
 from handcap.hand import OpenHand
+from handcap.io.npz import write_hand_motion
 from handcap.layouts import load_layout
 from handcap.synth.decals import patch_skin
 from handcap.synth.images import ImageStyle, PatchRenderer, random_blobs
 from handcap.synth.objects import make_object
+from handcap.synth.scene import synthesize
 from handcap.synth.textures import build_atlas
 
 
@@ -240,3 +243,35 @@ def _truth_arrays(patches, names, cameras, all_xy, visible, positions, rate) -> 
         "positions": positions, "all_xy": all_xy, "visible": visible,
         "image_size": np.array([c.size for c in cameras]),
     }
+
+
+def film_take(config, folder, *, progress: bool | None = None):
+    """Synthesize a take of printed patches and film it into ``folder``, as a user's camera take would arrive.
+
+    The cameras read out the window of their sensor that holds the hand (:func:`region_rig`). Writes
+    ``cameras.toml`` (the rig), ``truth.npz`` (the true hand motion) and what :func:`film_capture` writes
+    (``images/CAM/FRAME.png``, ``pattern.toml``, ``image_truth.npz``).
+
+    Parameters
+    ----------
+    config : SynthConfig
+        A patch layout (see :func:`check_filmable`).
+    folder : str or Path
+    progress : bool, optional
+        Progress bars (default: on a terminal).
+
+    Returns
+    -------
+    Capture
+        The synthesized take, with the windowed rig.
+    """
+    check_filmable(config)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    capture = synthesize(config, progress=progress)
+    hand_points = capture.truth["positions"][:, :len(capture.hand_motion.marker_names)]
+    capture = replace(capture, rig=region_rig(capture.rig, hand_points[np.isfinite(hand_points).all(axis=-1)]))
+    capture.rig.save(folder / "cameras.toml")
+    write_hand_motion(capture.hand_motion, folder / "truth.npz")
+    film_capture(capture, folder, progress=progress)
+    return capture
