@@ -1,22 +1,29 @@
-"""``handcap stream``: a labelled take replayed as a live stream, solved frame by frame, sent over OSC and
-WebSocket."""
+"""``handcap stream``: a take replayed as a live stream, labelled, filled and solved frame by frame, sent over
+OSC, WebSocket and LSL."""
 
 from __future__ import annotations
 
 from handcap.hand import hand_model_from_options
 from handcap.hand.attachment import MarkerAttachment
-from handcap.io import read_markers
+from handcap.hand.anatomy import JOINT_NAMES, PHI_NAMES, TIP_NAMES
+from handcap.io import read_markers, read_points
+from handcap.occlusion import SHIPPED_MODELS
 from handcap.steps.step import Step
-from handcap.stream import OscOutput, WebSocketOutput, stream
+from handcap.stream import LslOutput, OscOutput, WebSocketOutput, stream
 
 
 def _cmd_stream(a):
     attachment = MarkerAttachment.load(a.attachment)
-    markers = read_markers(a.replay, units=a.units, hand=attachment.marker_names)
+    if a.labeling:
+        source = read_points(a.replay, units=a.units)  # unlabelled: whatever names the file has are ignored
+    else:
+        source = read_markers(a.replay, units=a.units, hand=attachment.marker_names)
     hand = hand_model_from_options(None, None, side=attachment.side, recorded=attachment.model, what=a.attachment)
     outputs = [OscOutput(target) for target in a.osc or ()] + [WebSocketOutput(port) for port in a.websocket or ()]
+    outputs += [LslOutput(name, source.rate, JOINT_NAMES + TIP_NAMES, PHI_NAMES) for name in a.lsl or ()]
     try:
-        stats = stream(markers, attachment, hand, outputs, realtime=not a.fast, seconds=a.seconds)
+        stats = stream(source, attachment, hand, outputs, realtime=not a.fast, seconds=a.seconds,
+                       labeling=a.labeling, fill=a.fill)
     finally:
         for output in outputs:
             output.close()
@@ -24,13 +31,24 @@ def _cmd_stream(a):
 
 
 def add_stream(verbs) -> None:
-    p = verbs.add_parser("stream", help="replay a labelled take as a live stream: solve each frame, send it out",
-                         description="Frames are handed over at the take's rate, solved one by one (warm-started "
-                                     "Levenberg-Marquardt), and sent to every output: OSC messages /handcap/joints "
-                                     "and /handcap/angles, and JSON to WebSocket clients. Ends with the latency per "
-                                     "frame (p50, p99) and the memory growth. Needs the extra 'stream'.")
-    p.add_argument("--replay", required=True, help="labelled markers to replay (.c3d .trc .npz ...)")
+    p = verbs.add_parser("stream", help="replay a take as a live stream: label, fill and solve each frame, send it out",
+                         description="Frames are handed over at the take's rate, labelled (with --labeling: the "
+                                     "online labeler), filled (with --fill: the occlusion autoencoder), solved one "
+                                     "by one (warm-started Levenberg-Marquardt), and sent to every output: OSC "
+                                     "messages /handcap/joints and /handcap/angles, JSON to WebSocket clients, LSL "
+                                     "outlets NAME-joints and NAME-angles. Ends with the latency per frame (p50, "
+                                     "p99, and each stage's) and the memory growth. Needs the extra 'stream'.")
+    p.add_argument("--replay", required=True,
+                   help="the take to replay: labelled markers (.c3d .trc .npz ...), or with --labeling unlabelled "
+                        "points (any marker file, its names ignored, or a points .npz)")
     p.add_argument("--attachment", required=True, help="the attachment .npz (calibrate-markers)")
+    p.add_argument("--labeling", metavar="MODEL",
+                   help="label every frame's points with this labelling model (.npz, from handcap label --model)")
+    p.add_argument("--fill", metavar="MODEL",
+                   help=f"fill hidden markers with this occlusion model: {', '.join(SHIPPED_MODELS)} or a .npz "
+                        "(train-occlusion)")
+    p.add_argument("--lsl", action="append", metavar="NAME",
+                   help="push every frame to the LSL outlets NAME-joints and NAME-angles (repeatable)")
     p.add_argument("--osc", action="append", metavar="HOST:PORT", help="send OSC over UDP there (repeatable)")
     p.add_argument("--websocket", action="append", metavar="[HOST:]PORT",
                    help="serve WebSocket clients on this port (repeatable)")

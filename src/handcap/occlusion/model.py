@@ -22,7 +22,7 @@ from handcap.occlusion.predictor import MarkerPredictor
 from handcap.occlusion.regressor import JointRegressor
 
 FORMAT = "handcap-occlusion-1"
-SHIPPED_MODELS = ("active-9", "glove-13")
+SHIPPED_MODELS = ("active-9", "glove-13", "joints-19")
 
 
 @dataclass(frozen=True, eq=False)

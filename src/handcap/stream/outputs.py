@@ -6,6 +6,9 @@ the usual roles; each output is a callable ``send(frame, time_s, joints (21, 3),
   :data:`handcap.hand.anatomy.JOINT_NAMES` and the tips), then ``/handcap/angles`` with the 27 angles (rad).
 - :class:`WebSocketOutput` serves ``ws://HOST:PORT``: every connected client gets one JSON text message per
   frame, ``{"frame", "time", "joints": [[x, y, z] x 21], "angles": [27]}``.
+- :class:`LslOutput` opens two Lab Streaming Layer outlets (pylsl), ``NAME-joints`` (type ``MoCap``, 63
+  float32 channels ``wrist_x`` ... in metres) and ``NAME-angles`` (27 channels in radians), each at the
+  stream's nominal rate with a unique source id; every frame is one sample of each, stamped with LSL's clock.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+import uuid
 
 import numpy as np
 
@@ -57,6 +61,47 @@ class OscOutput:
         """Nothing to release (UDP)."""
 
 
+class LslOutput:
+    """Push each frame as one sample of two LSL outlets (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        Stream name prefix (``NAME-joints``, ``NAME-angles``).
+    rate : float
+        Nominal frames per second.
+    joint_names, angle_names : sequence of str
+        The 21 joints' and 27 angles' names, for the channel labels.
+    """
+
+    def __init__(self, name: str, rate: float, joint_names, angle_names):
+        try:
+            import pylsl  # noqa: PLC0415 (optional extra 'stream')
+        except (ImportError, RuntimeError):
+            raise HandcapError("LSL output needs pylsl: pip install 'handcap[stream]'") from None
+        self.outlets = []
+        for kind, channels in (("joints", [f"{j}_{a}" for j in joint_names for a in "xyz"]),
+                               ("angles", list(angle_names))):
+            info = pylsl.StreamInfo(f"{name}-{kind}", "MoCap", len(channels), float(rate), "float32",
+                                    f"handcap-{name}-{kind}-{uuid.uuid4().hex[:8]}")
+            labels = info.desc().append_child("channels")
+            for label in channels:
+                channel = labels.append_child("channel")
+                channel.append_child_value("label", label)
+                channel.append_child_value("unit", "metres" if kind == "joints" else "radians")
+            self.outlets.append(pylsl.StreamOutlet(info))
+        self.source_ids = tuple(o.get_info().source_id() for o in self.outlets)
+
+    def __call__(self, frame: int, time_s: float, joints, phi) -> None:
+        """Push one frame (see the module docstring)."""
+        self.outlets[0].push_sample(np.asarray(joints, dtype=np.float32).ravel())
+        self.outlets[1].push_sample(np.asarray(phi, dtype=np.float32))
+
+    def close(self) -> None:
+        """Close the outlets."""
+        self.outlets.clear()
+
+
 class WebSocketOutput:
     """Serve each frame as JSON to every connected WebSocket client (a server on its own thread).
 
@@ -68,11 +113,11 @@ class WebSocketOutput:
 
     def __init__(self, listen: str):
         try:
-            from websockets.asyncio.server import serve  # noqa: PLC0415 (optional extra 'stream')
+            from websockets.asyncio.server import broadcast, serve  # noqa: PLC0415 (optional extra 'stream')
         except ImportError:
             raise HandcapError("WebSocket output needs websockets: pip install 'handcap[stream]'") from None
         host, port = _endpoint(listen) if str(listen) != "0" else ("127.0.0.1", 0)
-        self.clients = set()
+        self.clients, self.broadcast = set(), broadcast
         self.loop = asyncio.new_event_loop()
         ready = threading.Event()
 
@@ -108,8 +153,9 @@ class WebSocketOutput:
         text = json.dumps({"frame": int(frame), "time": float(time_s),
                            "joints": np.round(np.nan_to_num(joints), 6).tolist(),
                            "angles": np.round(np.nan_to_num(phi), 6).tolist()})
-        for client in list(self.clients):
-            asyncio.run_coroutine_threadsafe(client.send(text), self.loop)
+        # websockets' broadcast writes to every client without waiting on any (a slow one drops behind alone),
+        # one call on the server's loop per frame.
+        self.loop.call_soon_threadsafe(self.broadcast, self.clients, text)
 
     def close(self) -> None:
         """Stop the server."""

@@ -2,26 +2,28 @@
 
 The batch solver (:func:`handcap.solve.solve_hand`) sees the whole take; a live stream sees one frame and
 must answer before the next. :class:`FrameSolver` keeps the last pose, starts the next frame's fit from it and
-runs a few Gauss-Newton iterations (:data:`ITERATIONS`); it starts afresh (rigid start, many iterations) on the
-first frame, and whenever a frame's residual says the hand was lost.
+runs a Gauss-Newton iteration (:data:`ITERATIONS`); it starts afresh (rigid start, many iterations) on the
+first frame, and whenever a frame's median marker residual says the hand was lost.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from handcap.core.rotations import axis_angle_from_matrix
 from handcap.hand.anatomy import TIP_PARENTS
-from handcap.hand.kinematics import attached_points, chain_transforms, pose_rotations
+from handcap.hand.kinematics import attached_points
 from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
 from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
 
-#: Gauss-Newton iterations per streamed frame (from the frame before).
-ITERATIONS = 4
+#: Gauss-Newton iterations per streamed frame (from the frame before). One suffices: the frame before is close,
+#: and more fit the markers' noise. Measured on 20 s of synthetic random motion, 22 markers (joints vs truth,
+#: median / p99): at 120 Hz 0.32 / 1.89 mm with one iteration, 0.32 / 2.21 mm with four; at 30 Hz 0.35 / 2.40 and
+#: 0.32 / 2.37 mm; each iteration costs about 0.7 ms.
+ITERATIONS = 1
 #: Iterations of a fresh start.
 FIRST_ITERATIONS = 60
-#: RMS marker residual (metres) above which the next frame starts afresh.
+#: Median marker residual (metres) above which the next frame starts afresh.
 LOST = 0.01
 
 
@@ -44,6 +46,7 @@ class FrameSolver:
         self.rest = self.priors.rest_phi()
         self.iterations = iterations
         self.pose = None
+        self.restarts = 0  # frames after which the next started afresh
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
         self.rest_joints, self.rest_tips = np.asarray(rest_joints), np.asarray(rest_tips)
@@ -77,12 +80,16 @@ class FrameSolver:
             init, iterations = self.pose, self.iterations
         pose, _ = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
                                       iterations=iterations, held=held_angles(self.model, observed))
-        rotations = pose_rotations(axis_angle_from_matrix(pose.rot), self.hand.hand_pose_from_phi(pose.phi))
-        world_rot, world_pos = chain_transforms(rotations, self.rest_joints)
+        kin = self.model.kinematics(pose.transl, pose.rot, pose.phi)  # once, for the joints and the markers
+        world_rot, world_pos = kin[0], kin[1]  # the translation included
         tips = attached_points(world_rot, world_pos, self.rest_joints[None], self.rest_tips[None], TIP_PARENTS)
-        joints = np.concatenate([world_pos, tips], axis=-2)[0] + pose.transl[0]
-        fit = self.model.positions(pose.transl, pose.rot, pose.phi)[0]
+        joints = np.concatenate([world_pos, tips], axis=-2)[0]
+        fit = self.model.positions(pose.transl, pose.rot, pose.phi, kin=kin)[0]
         distance = np.linalg.norm(fit - target[0], axis=-1)[observed[0]]
         rms = float(np.sqrt(np.mean(distance ** 2)))
-        self.pose = None if rms > LOST else pose  # lost: the next frame starts afresh
+        # Lost when most markers are off, not when a few are (a mislabelled or swapped marker is an outlier
+        # that the robust loss already discounts): the next frame then starts afresh.
+        lost = float(np.median(distance)) > LOST
+        self.restarts += lost
+        self.pose = None if lost else pose
         return np.asarray(joints), pose.phi[0].copy(), rms
