@@ -1,6 +1,7 @@
 """handcap demo: its picture shows the solve beside the truth, and it lists every file it wrote."""
 
 import dataclasses
+import json
 import re
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 
 import handcap.demo as demo
 from handcap.cli import main
-from handcap.core.files import atomic_output
+from handcap.core.files import atomic_output, file_stamps, written_since
 from handcap.synth.scene import SynthConfig, synthesize
 
 
@@ -34,20 +35,30 @@ def test_demo_counts_and_lists_every_file_it_wrote(small_demo, tmp_path, capsys)
     on_disk = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.name != "notes.txt")
     assert count == len(listed) == len(on_disk) > 20
     assert [line.strip() for line in listed] == on_disk
-    for name in ("hand.png", "motion.npz", "attachment.npz", "summary.json", "calibration/cleaned.c3d"):
+    for name in ("hand.png", "session.toml", "summary.json", "results/take/motion.npz",
+                 "results/calibration/attachment.npz",
+                 "results/take/report.html", "results/calibration/cleaned.c3d", "results/take/solve.manifest.json"):
         assert name in on_disk
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stages_run"] == 11 and summary["stages_up_to_date"] == 0  # the take is not calibrated again
+    assert summary["triangulation_median_mm"] < 1.0 and summary["wrong_ids_rejected"] > 0.9
+    assert "the session's stages" in printed
+    # run again: the same inputs, every stage up to date
+    assert main(["demo", "--out", str(out)]) == 0
+    again = json.loads((out / "summary.json").read_text())
+    assert again["stages_run"] == 0 and again["stages_up_to_date"] == 11
 
 
 def test_written_since_sees_new_and_rewritten_files_only(tmp_path):
     (tmp_path / "old.txt").write_text("kept")
     (tmp_path / "again.txt").write_text("first")
-    before = demo.file_stamps(tmp_path)
+    before = file_stamps(tmp_path)
     with atomic_output(tmp_path / "again.txt", "w") as fh:
         fh.write("second")
     (tmp_path / "sub").mkdir()
     (tmp_path / "sub" / "new.txt").write_text("new")
-    assert demo.written_since(tmp_path, before) == [str(tmp_path / "again.txt"), str(tmp_path / "sub" / "new.txt")]
-    assert demo.file_stamps(tmp_path / "missing") == {}
+    assert written_since(tmp_path, before) == [str(tmp_path / "again.txt"), str(tmp_path / "sub" / "new.txt")]
+    assert file_stamps(tmp_path / "missing") == {}
 
 
 @pytest.fixture(scope="module")

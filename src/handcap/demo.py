@@ -1,20 +1,24 @@
-"""``handcap demo``: the end-to-end job on built-in data.
+"""``handcap demo``: the end-to-end job on built-in data, as a session.
 
 1. Synthesize a DexterCap-style session (dense checkerboard patches, twelve
    cameras at 20 Hz): a calibration take (open hand, slowly turned) and a take
-   of a power grasp of a cylinder, same subject (shape, marker placement).
-2. Triangulate both takes from the 2D detections of the twelve cameras (2 % of
-   them with a wrong marker id; RANSAC over views), then clean them (largest
-   cluster per patch, spikes, rigid and short gap filling).
-3. Calibrate the marker attachment on the cleaned calibration take.
-4. Solve the cleaned grasp take, low-pass it at 5 Hz (DexterCap Appendix D).
-5. Measure it against the ground truth: MRE, joint error, MSNR, jerk,
-   penetration of the cylinder, diversity and coherence.
+   of a power grasp of a cylinder, same subject (shape, marker placement), with
+   the 2D detections of the twelve cameras (2 % of them with a wrong marker id).
+2. Write ``session.toml`` naming both takes (kind ``detections``) and run it
+   with :func:`handcap.session.process`, the runner of ``handcap process``:
+   triangulate (RANSAC over views), clean (largest cluster per patch, spikes,
+   rigid and short gap filling), calibrate the marker attachment on the
+   calibration take, solve the grasp take and low-pass it at 5 Hz (DexterCap
+   Appendix D), measure it (MRE, joint error, MSNR, jerk, penetration of the
+   cylinder, diversity and coherence) and write each take's report page.
+3. Measure the stages against the ground truth and draw the truth beside the
+   solve.
 
-Writes the capture folder, ``attachment.npz``, ``motion.npz``,
-``metrics.json``/``metrics.txt``, ``summary.json``/``summary.txt`` and a
-picture ``hand.png`` (the truth and, beside it, the solved hand) into the
-output folder; the summary's ``files`` lists every file written.
+Writes ``calibration/`` and ``take/`` (the synthetic inputs; ``take/`` also the
+object's motion and mesh), ``session.toml``, ``results/<take>/`` (each stage's
+output and manifest: run the demo again and finished stages are skipped),
+``summary.json``/``summary.txt`` and the picture ``hand.png`` into the output
+folder; the summary's ``files`` lists every file written.
 """
 
 from __future__ import annotations
@@ -24,17 +28,49 @@ from pathlib import Path
 
 import numpy as np
 
-from handcap.core.files import atomic_output
+from handcap.core.files import atomic_output, check_output_folder, file_stamps, written_since
 from handcap.hand import OpenHand
-from handcap.io import write_hand_motion, write_markers, write_object_motion
-from handcap.layouts import load_layout
-from handcap.multiview import clean_markers, read_detections, triangulate_detections, write_quality
-from handcap.quality import plausibility as q
-from handcap.report import metrics_table, motion_metrics
-from handcap.solve import calibrate_attachment, solve_hand
+from handcap.io import read_hand_motion, read_markers, write_object_motion
+from handcap.report import metrics_table
+from handcap.session import load_session, process
+from handcap.session.runner import summary as session_table
+from handcap.solve.motion import observed_markers
+from handcap.steps.step import Step
 from handcap.synth.objects import make_object
 from handcap.synth.render import View, render, save_png
 from handcap.synth.scene import SynthConfig, synthesize, write_capture
+
+SESSION = """# handcap demo: two synthetic takes of 2D detections (twelve cameras), run by handcap process.
+[session]
+name = "demo"
+results = "results"
+
+[stages.triangulate]
+min_views = {min_views}
+
+[stages.calibrate]
+layout = "{layout}"
+
+[stages.solve]
+filter_cutoff = 5.0          # Hz (DexterCap Appendix D)
+
+[[takes]]
+name = "calibration"
+kind = "detections"
+detections = "calibration/detections.npz"
+cameras = "calibration/cameras.toml"
+truth = "calibration/truth.npz"
+
+[[takes]]
+name = "take"
+kind = "detections"
+detections = "take/detections.npz"
+cameras = "take/cameras.toml"
+calibration_take = "calibration"
+truth = "take/truth.npz"
+object = "take/object.npz"
+object_mesh = "take/object.ply"
+"""
 
 DEMO_CONFIG = SynthConfig(layout="dense-patches", motion="grasp", frames=120, rate=20.0, seed=7, min_views=3,
                           subject_seed=21, noise_mm=0.5, outlier_rate=0.02)
@@ -153,117 +189,89 @@ def run_demo(out="demo-output", *, progress: bool | None = None) -> dict:
     dict
         The capture summary (:func:`summarize`) and the stage results; each key names its unit
         (``_mm`` millimetres, ``_px`` pixels, ``_seconds`` seconds, ``_fraction`` a share from 0 to 1).
-        Also ``warnings`` (list of str), ``metrics`` (the metrics table as text) and ``files``
-        (the paths written, :func:`written_since`).
+        Also ``warnings`` (list of str), ``metrics`` (the metrics table as text), ``stages`` (the runner's
+        table) and ``files`` (the paths written, :func:`~handcap.core.files.written_since`).
     """
-    import time
+    import trimesh
 
     out = Path(out)
     before = file_stamps(out)
     calibration = synthesize(CALIBRATION_CONFIG, progress=progress)
     capture = synthesize(DEMO_CONFIG, progress=progress)
-    paths = write_capture(capture, out)
     write_capture(calibration, out / "calibration")
-    summary = summarize(capture)
-    warnings = []  # every stage's plausibility warnings, stored in its file and listed in the summary
-
-    layout = load_layout(DEMO_CONFIG.layout)
-    cleaned = {}
-    for key, take, folder in (("calibration", calibration, out / "calibration"), ("take", capture, out)):
-        start = time.perf_counter()
-        triangulated = triangulate_detections(read_detections(folder / "detections.npz"), take.rig,
-                                              progress=progress)
-        seconds = time.perf_counter() - start
-        found = q.triangulation_warnings(triangulated.error_px, triangulated.views, threshold_px=5.0,
-                                         used=triangulated.used)
-        write_markers(q.attach(triangulated.to_markers(), found), folder / "triangulated.c3d")
-        write_quality(triangulated, folder / "triangulated.c3d")
-        cleaned[key], report = clean_markers(triangulated.to_markers(), layout)
-        cleaned[key] = q.attach(cleaned[key], q.marker_warnings(cleaned[key], hand=layout.names))
-        write_markers(cleaned[key], folder / "cleaned.c3d")
-        warnings += found + list(cleaned[key].warnings)
-        if key == "take":
-            truth = take.truth["positions"]
-            error = np.linalg.norm(triangulated.positions - truth, axis=-1) * 1000
-            clean_error = np.linalg.norm(cleaned[key].positions - truth, axis=-1) * 1000
-            summary.update({
-                "triangulated_fraction": round(float(np.isfinite(error).mean()), 4),
-                "triangulation_median_mm": round(float(np.nanmedian(error)), 3),
-                "triangulation_p95_mm": round(float(np.nanpercentile(error, 95)), 3),
-                "reprojection_error_px": round(float(np.nanmean(triangulated.error_px)), 3),
-                "wrong_ids_rejected": round(float((~triangulated.used[take.detections["wrong_id"]]).mean()), 4),
-                "triangulation_marker_frames_per_s": round(error.size / seconds),
-                "cleaned_fraction": round(float(np.isfinite(clean_error).mean()), 4),
-                "cleaned_p95_mm": round(float(np.nanpercentile(clean_error, 95)), 3),
-                "cleaning": report.counts(),
-            })
-
-    start = time.perf_counter()
-    calibrated = calibrate_attachment(cleaned["calibration"], layout)
-    found = q.residual_warnings(calibrated.residuals, names=calibrated.attachment.marker_names,
-                                what="calibration MRE") + q.shape_warnings(calibrated.attachment.betas)
-    attachment = q.attach(calibrated.attachment, found)
-    attachment.save(out / "attachment.npz")
-    warnings += list(attachment.warnings)
-    summary["calibration_seconds"] = round(time.perf_counter() - start, 2)
-    summary["calibration_mre_mm"] = round(1000 * calibrated.mre, 3)
-    start = time.perf_counter()
-    motion = solve_hand(cleaned["take"], calibrated.attachment, filter_cutoff=5.0, progress=progress)
-    seconds = time.perf_counter() - start
-    summary["solve_frames_per_second"] = round(motion.n_frames / seconds, 1)
-    motion = q.attach(motion, q.motion_warnings(motion))
-    write_hand_motion(motion, out / "motion.npz")
-    warnings += list(motion.warnings)
-
-    mesh_path = out / "object.ply"
+    write_capture(capture, out / "take")
     obj = make_object(DEMO_CONFIG.object_kind, seed=DEMO_CONFIG.seed)
-    import trimesh
-    with atomic_output(mesh_path) as fh:
+    with atomic_output(out / "take" / "object.ply") as fh:
         fh.write(trimesh.Trimesh(obj.vertices, obj.faces, process=False).export(file_type="ply"))
-    write_object_motion(capture.object_motion, out / "object.npz")
-    metrics = motion_metrics(out / "motion.npz", truth=paths["truth.npz"], markers=out / "cleaned.c3d",
-                             obj=out / "object.npz", object_mesh=mesh_path)
-    with atomic_output(out / "metrics.json", "w") as fh:
-        json.dump(metrics, fh, indent=2)
+    write_object_motion(capture.object_motion, out / "take" / "object.npz")
+    with atomic_output(out / "session.toml", "w") as fh:
+        fh.write(SESSION.format(layout=DEMO_CONFIG.layout, min_views=DEMO_CONFIG.min_views))
+    session = load_session(out / "session.toml")
+    runs = process(session, workers=1)
+    summary = summarize(capture)
+    summary.update(_stage_figures(capture, session.results / "take", runs))
+    motion = read_hand_motion(session.results / "take" / "motion.npz")
+    metrics = json.loads((session.results / "take" / "metrics.json").read_text())
     table = metrics_table(metrics)
-    with atomic_output(out / "metrics.txt", "w") as fh:
-        fh.write(table + "\n")
-
-    summary["warnings"] = list(dict.fromkeys(warnings))
+    summary["warnings"] = list(dict.fromkeys(w for r in runs for w in r.warnings))
     text = "\n".join(f"{k:28s} {v}" for k, v in summary.items() if k != "seen_per_camera_fraction")
     with atomic_output(out / "summary.json", "w") as fh:
         json.dump(summary, fh, indent=2)
     with atomic_output(out / "summary.txt", "w") as fh:
         fh.write(text + "\n")
     save_png(out / "hand.png", picture(capture, motion))
+    summary["stages"] = session_table(runs)
     summary["metrics"] = table
     summary["files"] = written_since(out, before)
     return summary
 
 
-def file_stamps(folder) -> dict:
-    """Path -> (inode, modification time in ns) of every file under ``folder`` (empty if it does not exist)."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        return {}
-    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.rglob("*") if p.is_file()}
+def _stage_figures(capture, folder: Path, runs) -> dict:
+    """The take's triangulated and cleaned markers against the truth, and each stage's speed and figures."""
+    names = list(capture.truth["names"])
+    truth = capture.truth["positions"]
+    triangulated, _ = observed_markers(read_markers(folder / "triangulated.c3d"), names)
+    cleaned, _ = observed_markers(read_markers(folder / "cleaned.c3d"), names)
+    error = np.linalg.norm(triangulated - truth, axis=-1) * 1000
+    clean_error = np.linalg.norm(cleaned - truth, axis=-1) * 1000
+    quality = np.load(folder / "triangulated.triangulation.npz")
+    manifests = {stage: json.loads((folder.parent / take / f"{stage}.manifest.json").read_text())
+                 for take, stage in (("take", "triangulate"), ("calibration", "calibrate"), ("take", "solve"))}
+    figures = {
+        "triangulated_fraction": round(float(np.isfinite(error).mean()), 4),
+        "triangulation_median_mm": round(float(np.nanmedian(error)), 3),
+        "triangulation_p95_mm": round(float(np.nanpercentile(error, 95)), 3),
+        "reprojection_error_px": round(float(np.nanmean(quality["error_px"])), 3),
+        "wrong_ids_rejected": round(float((~quality["used"][capture.detections["wrong_id"]]).mean()), 4),
+        "cleaned_fraction": round(float(np.isfinite(clean_error).mean()), 4),
+        "cleaned_p95_mm": round(float(np.nanpercentile(clean_error, 95)), 3),
+        "calibration_mre_mm": manifests["calibrate"]["figures"].get("mre_mm"),
+        "calibration_seconds": manifests["calibrate"]["seconds"],
+        "solve_seconds": manifests["solve"]["seconds"],
+        "triangulation_seconds": manifests["triangulate"]["seconds"],
+    }
+    figures["stages_run"] = sum(r.status == "done" for r in runs)
+    figures["stages_up_to_date"] = sum(r.status == "skipped" for r in runs)
+    return figures
 
 
-def written_since(folder, before: dict) -> list[str]:
-    """Files under ``folder`` that are new or rewritten since ``before`` (:func:`file_stamps`), sorted.
-
-    Every handcap write renames a new file into place, so a rewritten file has a new inode or time.
+def demo(out="demo-output") -> Step:
+    """Run :func:`run_demo` into ``out`` (rewritten on every run) and summarise it.
 
     Parameters
     ----------
-    folder : str or Path
-        Folder searched recursively.
-    before : dict
-        Earlier :func:`file_stamps` of the same folder.
-
-    Returns
-    -------
-    list of str
-        Paths, sorted.
+    out : str or Path
     """
-    return sorted(str(p) for p, stamp in file_stamps(folder).items() if before.get(p) != stamp)
+    check_output_folder(out, force=True)  # demo-output/ is rewritten on every run
+    summary = run_demo(out)
+    lines = [f"{key:28s} {value}" for key, value in summary.items()
+             if key not in ("files", "seen_per_camera_fraction", "metrics", "warnings", "stages")]
+    warnings = tuple(summary["warnings"])
+    files = [Path(f) for f in summary["files"]]
+    lines += ["\nthe session's stages (handcap process " + f"{out}/session.toml):", summary["stages"],
+              "\nsolved motion against the ground truth:", summary["metrics"],
+              f"\nwrote {len(files)} files to {out}/ (picture of the truth beside the solve: {out}/hand.png; "
+              f"the take's report: {out}/results/take/report.html); "
+              + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings")]
+    lines += [f"  {path.relative_to(out) if path.is_relative_to(out) else path}" for path in files]
+    return Step(tuple(lines), warnings, tuple(map(str, files)), summary)

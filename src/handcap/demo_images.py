@@ -29,8 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handcap.core.files import atomic_output, save_npz
-from handcap.demo import file_stamps, written_since
+from handcap.core.files import atomic_output, file_stamps, save_npz, written_since
 from handcap.detect.capture import detect_capture
 from handcap.detect.networks import load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector

@@ -22,6 +22,7 @@ def made(tmp_path_factory, gl_ok):
 
 MARKER_STAGES = ("calibrate", "solve", "metrics", "report")
 IMAGE_STAGES = ("detect", "triangulate", "clean", *MARKER_STAGES)
+CALIBRATED = tuple(s for s in IMAGE_STAGES if s != "calibrate")  # by its calibration take's attachment
 
 
 def test_process_resume_and_rerun(made, monkeypatch, capsys):
@@ -47,7 +48,7 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     assert finished == ({(t, s) for t in ("take1", "take2") for s in MARKER_STAGES}  # take2 ended in the second run
                         | {("hands1", s) for s in ("fit", "metrics", "report")}
                         | {("calib-images", s) for s in IMAGE_STAGES}
-                        | {("images1", s) for s in IMAGE_STAGES[:-2]})
+                        | {("images1", s) for s in CALIBRATED[:-2]})
     stamps = {p: p.stat().st_mtime_ns for p in before}
     runs = process(session, workers=1)
     status = {(r.take, r.stage): r.status for r in runs}
@@ -62,8 +63,10 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     assert keypoints["figures"]["joint_error_mm"][0] < 4  # 2 mm of keypoint noise
     images = json.loads((made / "results/images1/metrics.manifest.json").read_text())
     assert images["figures"]["mre_mm"][0] < 1 and images["figures"]["joint_error_mm"][0] < 15
-    calibrate = json.loads((made / "results/images1/calibrate.manifest.json").read_text())
-    assert calibrate["input_paths"]["calibration"].endswith("calib-images/cleaned.c3d")  # its calibration take's
+    calibrate = json.loads((made / "results/calib-images/calibrate.manifest.json").read_text())
+    assert calibrate["input_paths"]["calibration"].endswith("calib-images/cleaned.c3d")  # on its own corners
+    solve = json.loads((made / "results/images1/solve.manifest.json").read_text())
+    assert solve["input_paths"]["attachment"].endswith("calib-images/attachment.npz")  # calibrated once
     assert (made / "results/take2/report.html").stat().st_size > 1_000_000
     # an edited setting reruns its stage and what depends on it, not calibrate
     text = (made / "session.toml").read_text().replace("filter_cutoff = 8.0", "filter_cutoff = 5.0")
@@ -76,7 +79,7 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     (made / "session.toml").write_text(text)
     runs = process(load_session(made / "session.toml"), workers=1)
     assert {(r.take, r.stage) for r in runs if r.status == "done"} == {
-        (t, s) for t in ("calib-images", "images1") for s in IMAGE_STAGES[1:]}
+        *(("calib-images", s) for s in IMAGE_STAGES[1:]), *(("images1", s) for s in CALIBRATED[1:])}
     capsys.readouterr()
     assert main(["process", str(made / "session.toml"), "--dry-run"]) == 0
     assert "planned" not in capsys.readouterr().out

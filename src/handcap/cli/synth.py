@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from handcap import demo
 from handcap.core.errors import HandcapError
 from handcap.layouts import SHIPPED
 from handcap.steps import synth
@@ -30,7 +31,7 @@ def _cmd_demo(a):
         return synth.demo_images(a.out or "demo-images")
     if a.markerless:
         return synth.demo_markerless(a.out or "demo-markerless")
-    return synth.demo(a.out or "demo-output")
+    return demo.demo(a.out or "demo-output")
 
 
 def add_synth(verbs) -> None:

@@ -298,3 +298,36 @@ def load_npz(path, required=(), what: str = "handcap .npz file") -> dict:
     if missing:
         raise HandcapError(f"{path}: not a {what}, missing {', '.join(missing)}")
     return arrays
+
+
+def file_stamps(folder) -> dict:
+    """Path -> (inode, modification time in ns) of every file under ``folder`` (empty if it does not exist).
+
+    Parameters
+    ----------
+    folder : str or Path
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return {}
+    return {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.rglob("*") if p.is_file()}
+
+
+def written_since(folder, before: dict) -> list[str]:
+    """Files under ``folder`` that are new or rewritten since ``before`` (:func:`file_stamps`), sorted.
+
+    Every handcap write renames a new file into place, so a rewritten file has a new inode or time.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Folder searched recursively.
+    before : dict
+        Earlier :func:`file_stamps` of the same folder.
+
+    Returns
+    -------
+    list of str
+        Paths, sorted.
+    """
+    return sorted(str(p) for p, stamp in file_stamps(folder).items() if before.get(p) != stamp)

@@ -32,6 +32,8 @@ from handcap.steps import multiview as multiview_step
 from handcap.steps import report as report_step
 from handcap.steps import solve as solve_step
 
+#: Kinds of take whose markers the runner triangulates and cleans itself.
+CAMERA_KINDS = ("images", "detections")
 #: Each stage's output file in the take's folder.
 OUTPUTS = {"detect": "detections.npz", "triangulate": "triangulated.c3d", "clean": "cleaned.c3d",
            "calibrate": "attachment.npz", "solve": "motion.npz", "fit": "motion.npz", "metrics": "metrics.json",
@@ -71,7 +73,9 @@ def file_hash(path) -> str:
 
 def _markers_of(session: Session, take: Take):
     """The labelled markers a take's solve reads: its cleaned corners (images) or its markers file."""
-    return session.results / take.name / OUTPUTS["clean"] if take.kind == "images" else take.inputs.get("markers")
+    if take.kind in CAMERA_KINDS:
+        return session.results / take.name / OUTPUTS["clean"]
+    return take.inputs.get("markers")
 
 
 def _calibration_of(session: Session, take: Take):
@@ -87,27 +91,39 @@ def _calibration_of(session: Session, take: Take):
     return _markers_of(session, next(t for t in session.takes if t.name == source))
 
 
+def _calibrated_by(session: Session, take: Take) -> str:
+    """The take whose calibrate stage makes ``take``'s attachment: another take named as its calibration take
+    (calibrated once, on its own markers), else ``take`` itself."""
+    source = take.calibration_take
+    if source is None or source == take.name or {"calibration", "attachment"} & set(take.inputs):
+        return take.name
+    return source
+
+
 def _inputs(session: Session, take: Take, stage: str, folder: Path) -> dict:
     """The files a stage reads, by role."""
-    attachment = take.inputs.get("attachment", folder / OUTPUTS["calibrate"])
+    attachment = take.inputs.get("attachment",
+                                 session.results / _calibrated_by(session, take) / OUTPUTS["calibrate"])
     markers = _markers_of(session, take)
     return {"detect": {"images": take.inputs.get("images"), "cameras": take.inputs.get("cameras"),
                        "pattern": take.inputs.get("pattern")},
-            "triangulate": {"detections": folder / OUTPUTS["detect"], "cameras": take.inputs.get("cameras")},
+            "triangulate": {"detections": take.inputs.get("detections", folder / OUTPUTS["detect"]),
+                            "cameras": take.inputs.get("cameras")},
             "clean": {"markers": folder / OUTPUTS["triangulate"]},
             "calibrate": {"calibration": _calibration_of(session, take)},
             "solve": {"markers": markers, "attachment": attachment},
             "fit": {"keypoints": take.inputs.get("keypoints")},
             "metrics": {"motion": folder / OUTPUTS["solve"], "markers": markers or take.inputs.get("keypoints"),
-                        "truth": take.inputs.get("truth")},
+                        "truth": take.inputs.get("truth"), "object": take.inputs.get("object"),
+                        "object_mesh": take.inputs.get("object_mesh")},
             "report": {"motion": folder / OUTPUTS["solve"], "metrics": folder / OUTPUTS["metrics"]}}[stage]
 
 
 def _stages(session: Session, take: Take) -> list[str]:
     """The stages that apply to ``take``: its kind's, those the session runs, calibrate only with something to
-    calibrate on."""
-    return [s for s in KIND_STAGES[take.kind] if s in session.stages and (s != "calibrate"
-                                                                          or _calibration_of(session, take))]
+    calibrate on and not when its calibration take calibrates it."""
+    return [s for s in KIND_STAGES[take.kind] if s in session.stages and (
+        s != "calibrate" or (_calibration_of(session, take) and _calibrated_by(session, take) == take.name))]
 
 
 def _layout(take: Take, settings: dict, stage: str) -> str:
@@ -131,8 +147,8 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path, 
         layout = _layout(take, settings, stage)
         options = {k: v for k, v in settings.items() if k != "layout"}
         calibrated_on = next((t for t in session.takes if _markers_of(session, t) == inputs["calibration"]), take)
-        # Corners of dense patches that no two cameras saw are normal: an images take calibrates on those seen.
-        options.setdefault("drop_unseen", calibrated_on.kind == "images")
+        # Corners of dense patches that no two cameras saw are normal: a camera take calibrates on those seen.
+        options.setdefault("drop_unseen", calibrated_on.kind in CAMERA_KINDS)
         return solve_step.calibrate_markers(inputs["calibration"], out, layout=layout, **options)
     if stage == "solve":
         return solve_step.solve(inputs["markers"], inputs["attachment"], out, **settings)
@@ -140,7 +156,7 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path, 
         return markerless_step.fit_keypoints(inputs["keypoints"], out, **settings)
     if stage == "metrics":
         return metrics_step.metrics(inputs["motion"], truth=inputs.get("truth"), markers=inputs["markers"], out=out,
-                                    **settings)
+                                    obj=inputs.get("object"), object_mesh=inputs.get("object_mesh"), **settings)
     return report_step.report(out.parent, out)
 
 
@@ -198,11 +214,14 @@ def run_take(job) -> list[StageRun]:
         step = _run_stage(stage, take, settings, inputs, out, session)
         seconds = time.perf_counter() - start
         figures = step.result if isinstance(step.result, dict) else {}
+        if hasattr(step.result, "mre"):  # a calibration
+            figures = {"mre_mm": round(1000 * float(step.result.mre), 4)}
         manifest = {"stage": stage, "take": take.name, "settings": settings, "inputs": hashes,
                     "input_paths": {k: str(p) for k, p in inputs.items()}, "version": __version__,
                     "outputs": {OUTPUTS[stage]: file_hash(out)}, "seconds": round(seconds, 3),
                     "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(step.warnings),
-                    "figures": {k: v for k, v in figures.items() if k in ("mre_mm", "joint_error_mm", "msnr_db")}}
+                    "figures": {k: v for k, v in figures.items() if k in ("mre_mm", "joint_error_mm", "msnr_db")},
+                    "lines": list(step.lines)}
         with atomic_output(manifest_path, "w") as fh:
             json.dump(manifest, fh, indent=2)
         runs.append(StageRun(take.name, stage, "done", seconds, tuple(step.warnings), str(out)))

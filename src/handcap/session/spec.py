@@ -64,14 +64,18 @@ STAGES = {
     "report": {},
 }
 #: Kinds of take the runner knows, the inputs each takes (required, optional) and the stages it goes through:
-#: camera images of coded patches (detect, triangulate, clean, calibrate, solve), labelled markers (calibrate,
-#: solve) and 3D hand keypoints (fit the hand model to them). ``layout`` and ``calibration_take`` are names, not
-#: files; ``images`` is a folder with one sub-folder of images (or one video) per camera of ``cameras``.
-KINDS = {"images": (("images", "cameras", "pattern"),
-                    ("calibration", "attachment", "calibration_take", "truth", "layout")),
-         "markers": (("markers",), ("calibration", "attachment", "calibration_take", "truth", "layout")),
+#: camera images of coded patches (detect, triangulate, clean, calibrate, solve), 2D detections of named
+#: markers (triangulate, clean, ...), labelled markers (calibrate, solve) and 3D hand keypoints (fit the hand
+#: model to them). ``layout`` and ``calibration_take`` are names, not files; ``images`` is a folder with one
+#: sub-folder of images (or one video) per camera of ``cameras``; ``object`` and ``object_mesh`` (an object's
+#: motion and surface) add the hand's penetration of it to the metrics.
+_CALIBRATION = ("calibration", "attachment", "calibration_take", "truth", "layout", "object", "object_mesh")
+KINDS = {"images": (("images", "cameras", "pattern"), _CALIBRATION),
+         "detections": (("detections", "cameras"), _CALIBRATION),
+         "markers": (("markers",), _CALIBRATION),
          "keypoints": (("keypoints",), ("truth",))}
 KIND_STAGES = {"images": ("detect", "triangulate", "clean", "calibrate", "solve", "metrics", "report"),
+               "detections": ("triangulate", "clean", "calibrate", "solve", "metrics", "report"),
                "markers": ("calibrate", "solve", "metrics", "report"),
                "keypoints": ("fit", "metrics", "report")}
 #: Inputs that name something other than a file.

@@ -31,9 +31,8 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.camera_rig import CameraRig
 from handcap.core.errors import HandcapWarning
-from handcap.core.files import atomic_output, save_npz
+from handcap.core.files import atomic_output, file_stamps, save_npz, written_since
 from handcap.core.transforms import homogeneous
-from handcap.demo import file_stamps, written_since
 from handcap.io import read_hand_motion, read_object_motion, write_rig
 from handcap.markerless.contact import contact_figures
 from handcap.markerless.keypoints import hand_names

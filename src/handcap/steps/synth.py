@@ -1,4 +1,5 @@
-"""Steps ``synth`` (a synthetic capture with its truth) and ``demo`` (the end-to-end job on built-in data)."""
+"""Steps ``synth`` (a synthetic capture with its truth) and the image and markerless demos (the plain demo is a
+session: :func:`handcap.demo.demo`)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,6 @@ from dataclasses import replace
 from pathlib import Path
 
 from handcap.core.errors import HandcapError
-from handcap.demo import run_demo
 from handcap.steps.markerless_demo import run_markerless_demo
 from handcap.io import check_output_folder
 from handcap.quality import plausibility as q
@@ -60,21 +60,6 @@ def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = F
         lines.append(f"images: {filmed['images']} frames in {Path(out) / 'images'}, {filmed['visible']} visible "
                      f"corners and {filmed['blocks']} visible tags in image_truth.npz, template pattern.toml")
     return Step(tuple(lines), m.warnings, (str(out),), capture)
-
-
-def demo(out="demo-output") -> Step:
-    """Run :func:`handcap.demo.run_demo` into ``out`` (rewritten on every run) and summarise it."""
-    check_output_folder(out, force=True)  # demo-output/ is rewritten on every run
-    summary = run_demo(out)
-    lines = [f"{key:28s} {value}" for key, value in summary.items()
-             if key not in ("files", "seen_per_camera_fraction", "metrics", "warnings")]
-    warnings = tuple(summary["warnings"])
-    files = [Path(f) for f in summary["files"]]
-    lines += ["\nsolved motion against the ground truth:", summary["metrics"],
-              f"\nwrote {len(files)} files to {out}/ (picture of the truth beside the solve: {out}/hand.png); "
-              + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings")]
-    lines += [f"  {path.relative_to(out) if path.is_relative_to(out) else path}" for path in files]
-    return Step(tuple(lines), warnings, tuple(map(str, files)), summary)
 
 
 def demo_markerless(out="demo-markerless") -> Step:

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import threading
 import uuid
+from pathlib import Path
 
 import numpy as np
 
@@ -75,6 +77,8 @@ class LslOutput:
     """
 
     def __init__(self, name: str, rate: float, joint_names, angle_names):
+        # liblsl reads its settings when loaded: only errors in its log, unless the user names a settings file
+        os.environ.setdefault("LSLAPICFG", str(Path(__file__).with_name("lsl_api.cfg")))
         try:
             import pylsl  # noqa: PLC0415 (optional extra 'stream')
         except (ImportError, RuntimeError):
