@@ -42,6 +42,20 @@ def test_take_report_is_self_contained_and_complete(session, tmp_path, capsys):
         assert heading in page, heading
     assert "motion.npz" in page and "truth.npz" in page and "scene.toml" in page
     assert "joint error (mm)" in page  # the figures, computed against the synthetic truth
+    # beside the published ones: this take's MSNR in the row of DexterCap's 9.31 (Table 2)
+    row = re.search(r"<tr><td>MSNR \(dB\)</td><td>([0-9.]+)</td><td>9\.31 ± 0\.22</td>", page)
+    assert row and "Against the published figures" in page and "ARCTIC (Vicon)" in page
+
+
+def test_published_rows_hold_this_takes_figures():
+    from handcap.report.metrics import PAPER_COLUMNS, metrics_table, paper_rows
+
+    figures = {"msnr_db": 24.5678, "jerk_m_s3": [8.1, 4.3], "diversity": 0.94, "frames": 120}
+    rows = paper_rows(figures)
+    assert [r[0] for r in rows] == ["MSNR (dB)", "jerk (m/s^3)", "diversity"]
+    assert rows[0][:3] == ("MSNR (dB)", "24.568", "9.31 ± 0.22") and rows[1][1] == "8.100 ± 4.300"
+    assert all(len(r) == 2 + len(PAPER_COLUMNS) for r in rows)
+    assert "MSNR (dB)              24.568" in metrics_table(figures)
 
 
 def test_session_report_links_every_take(session, tmp_path):

@@ -18,7 +18,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.hand.anatomy import JOINT_NAMES, PARENTS, PHI_NAMES, TIP_NAMES, TIP_PARENTS
-from handcap.report.metrics import metrics_table, motion_metrics
+from handcap.report.metrics import PAPER_COLUMNS, PAPER_NOTE, metrics_table, motion_metrics, paper_rows
 from handcap.report.take import TakeFiles, read_take
 
 #: Most frames the 3D view animates (longer takes are subsampled evenly).
@@ -166,6 +166,12 @@ def take_page(take: TakeFiles, title: str | None = None, figures: dict | None = 
     table = metrics_table(figures) if any(k in figures for k in ("msnr_db", "mre_mm")) else ""
     parts.append("<h2>Quality</h2>" + (f"<pre>{html.escape(table)}</pre>" if table else
                                         _table((k, v) for k, v in figures.items() if k != "warnings")))
+    rows = paper_rows(figures)
+    if rows:
+        head = "".join(f"<th>{html.escape(c)}</th>" for c in ("", "this take", *PAPER_COLUMNS))
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in rows)
+        parts.append(f"<h3>Against the published figures</h3><table class='paper'><tr>{head}</tr>{body}</table>"
+                     f"<p>{html.escape(PAPER_NOTE)}</p>")
     parts.append("<h2>Warnings</h2>" + ("<ul>" + "".join(f"<li class='warn'>{html.escape(w)}</li>" for w in warnings)
                                         + "</ul>" if warnings else "<p>none</p>"))
     parts.append("<h2>Settings</h2>" + ("".join(f"<h3>{html.escape(n)}</h3><pre>{html.escape(t)}</pre>"

@@ -135,24 +135,63 @@ def _hand_for(motion, hand):
     return OpenHand(motion.side)
 
 
-def metrics_table(metrics: dict) -> str:
-    """A human-readable table of :func:`motion_metrics`."""
-    lines = []
-    fmt = {"mre_mm": "MRE (mm)", "joint_error_mm": "joint error (mm)", "msnr_db": "MSNR (dB)",
+#: The published figures a take's quality is shown against (``../shared/papers``): DexterCap's section 5 and Table 2
+#: (its own captures and, as it measured them, GRAB and ARCTIC, both Vicon). Keys as :func:`motion_metrics`'s; each
+#: value is (DexterCap, GRAB, ARCTIC), text.
+PAPER_COLUMNS = ("DexterCap", "GRAB (Vicon)", "ARCTIC (Vicon)")
+PAPER_FIGURES = {
+    "mre_mm": ("0.77 ± 0.28 calibration, 2.06 ± 1.09 manipulation", "", ""),
+    "msnr_db": ("9.31 ± 0.22", "7.29 ± 1.51", "7.82 ± 0.40"),
+    "jerk_m_s3": ("0.76 ± 0.18", "3.68 ± 1.74", "0.91 ± 0.01"),
+    "diversity": ("0.97", "0.91", "0.90"),
+    "coherence": ("0.68", "0.70", "0.81"),
+    "penetration_mm": ("3.8 ± 3.1", "", ""),
+}
+#: Said under the comparison: the published figures come from other takes, rates and filters.
+PAPER_NOTE = ("Published figures are for the papers' own takes (their frame rates, filters and motions), "
+              "so they place this take, not grade it: MSNR and jerk depend on the frame rate and the low-pass, "
+              "diversity and coherence on how varied the take is.")
+
+
+def paper_rows(metrics: dict) -> list[tuple[str, ...]]:
+    """Rows (metric, this take, DexterCap, GRAB, ARCTIC) for the figures of ``metrics`` the papers report.
+
+    Parameters
+    ----------
+    metrics : dict
+        As :func:`motion_metrics` returns.
+    """
+    rows = []
+    for key, published in PAPER_FIGURES.items():
+        if key in metrics:
+            label, text = _row(key, metrics[key])
+            rows.append((label, text, *published))
+    return rows
+
+
+_LABELS = {"mre_mm": "MRE (mm)", "joint_error_mm": "joint error (mm)", "msnr_db": "MSNR (dB)",
            "jerk_m_s3": "jerk (m/s^3)", "diversity": "diversity", "coherence": "coherence",
            "penetration_mm": "penetration (mm)", "frames": "frames", "rate_hz": "rate (Hz)",
            "cube_msnr_db": "cube MSNR (dB)", "cube_jerk_m_s3": "cube jerk (m/s^3)", "cube_moves": "cube moves"}
-    for key, label in fmt.items():
-        if key not in metrics:
-            continue
-        value = metrics[key]
-        if isinstance(value, list):
-            text = f"{value[0]:.3f} ± {value[1]:.3f}" + (f"  ({value[2]} frames)" if len(value) > 2 else "")
-        elif isinstance(value, float):
-            text = f"{value:.3f}"
-        else:
-            text = str(value)
-        lines.append(f"{label:22s} {text}")
+
+
+def _row(key: str, value) -> tuple[str, str]:
+    if isinstance(value, list):
+        text = f"{value[0]:.3f} ± {value[1]:.3f}" + (f"  ({value[2]} frames)" if len(value) > 2 else "")
+    elif isinstance(value, float):
+        text = f"{value:.3f}"
+    else:
+        text = str(value)
+    return _LABELS[key], text
+
+
+def metrics_table(metrics: dict) -> str:
+    """A human-readable table of :func:`motion_metrics`."""
+    lines = []
+    for key in _LABELS:
+        if key in metrics:
+            label, text = _row(key, metrics[key])
+            lines.append(f"{label:22s} {text}")
     for name, value in metrics.get("leave_one_out_mm", {}).items():
         lines.append(f"{'leave-one-out ' + name:22s} {value:.2f} mm")
     return "\n".join(lines)
