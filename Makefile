@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# The CPU build of torch, pinned: an open range would pull the CUDA build (several GB).
 	$(BIN)/python -m pip install --quiet "torch==2.13.0"
-	$(BIN)/python -m pip install --quiet -e ".[test,images,markerless,report,stream]"
+	$(BIN)/python -m pip install --quiet -e ".[test,images,markerless,report,stream,usd]"
 	# MediaPipe's hand landmarker without its declared dependencies (see the markerless extra in pyproject.toml).
 	$(BIN)/python -m pip install --quiet --no-deps "mediapipe==0.10.14"
 	touch $(STAMP)

@@ -1,4 +1,4 @@
-"""``handcap export``: a solved hand motion to BVH, CSV, C3D/TRC or MANO ``.npz``."""
+"""``handcap export``: a solved hand motion to glTF, USD, BVH, CSV, C3D/TRC or MANO ``.npz``."""
 
 from __future__ import annotations
 
@@ -14,14 +14,15 @@ def _cmd_export(a):
 
 def add_export(verbs) -> None:
     formats = "; ".join(f"{suffix} {what}" for suffix, what in FORMATS.items())
-    p = verbs.add_parser("export", help="write a solved hand motion for other tools (BVH, CSV, C3D/TRC, MANO .npz)",
+    p = verbs.add_parser("export",
+                         help="write a solved hand motion for other tools (glTF, USD, BVH, CSV, C3D/TRC, MANO .npz)",
                          description=f"The suffix of --to chooses the format: {formats}.")
     p.add_argument("motion", help="hand motion .npz (handcap solve)")
-    p.add_argument("--to", required=True, help="the file to write (.bvh .csv .c3d .trc .npz)")
+    p.add_argument("--to", required=True, help="the file to write (.glb .usda .usdc .usd .bvh .csv .c3d .trc .npz)")
     p.add_argument("--units", choices=("cm", "mm", "m"), default="cm",
                    help="length unit of a BVH file (default %(default)s, as Blender and MotionBuilder take it)")
     p.add_argument("--object", action="append", metavar="MOTION",
-                   help="an object motion .npz (track-object) to animate in a .glb; repeat for several")
+                   help="an object motion .npz (track-object) to animate in a .glb or USD; repeat for several")
     p.add_argument("--object-mesh", action="append", metavar="MESH",
                    help="its mesh in its own frame (.obj .stl .ply ...), one per --object, in the same order")
     add_hand_model(p, default="the motion's")

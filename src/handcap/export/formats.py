@@ -10,6 +10,7 @@ from handcap.core.motion import HandMotion
 from handcap.export.bvh import write_bvh
 from handcap.export.gltf import write_glb
 from handcap.export.tables import write_angles_csv, write_joint_markers, write_mano_npz
+from handcap.export.usd import USD_SUFFIXES, write_usd
 
 #: What each output suffix gets.
 FORMATS = {".glb": "glTF binary: the skinned hand mesh with its animation (and objects as animated nodes)",
@@ -17,8 +18,9 @@ FORMATS = {".glb": "glTF binary: the skinned hand mesh with its animation (and o
            ".csv": "joint angles per frame (the 27 anatomical angles in degrees, and time in seconds)",
            ".c3d": "the 21 joints and the virtual markers as marker trajectories",
            ".trc": "the 21 joints and the virtual markers as marker trajectories",
-           ".npz": "MANO parameters: betas (10,), global_orient (T, 3), hand_pose (T, 45), transl (T, 3)"}
-
+           ".npz": "MANO parameters: betas (10,), global_orient (T, 3), hand_pose (T, 45), transl (T, 3)",
+           **{suffix: "USD (the extra 'usd'): the skinned hand (UsdSkel) with its animation, and objects as animated "
+                      "transforms" for suffix in USD_SUFFIXES}}
 
 
 def export_motion(motion: HandMotion, hand, path, *, units: str = "cm", objects=()) -> list[str]:
@@ -33,7 +35,7 @@ def export_motion(motion: HandMotion, hand, path, *, units: str = "cm", objects=
     units : {'cm', 'mm', 'm'}
         Length unit of a BVH file.
     objects : sequence of (ObjectMotion, vertices (V, 3), faces (F, 3))
-        Objects to animate in a ``.glb`` (their meshes in their own frames, metres).
+        Objects to animate in a ``.glb`` or USD (their meshes in their own frames, metres).
 
     Raises
     ------
@@ -45,8 +47,10 @@ def export_motion(motion: HandMotion, hand, path, *, units: str = "cm", objects=
         raise HandcapError(f"{path}: export to {', '.join(FORMATS)} (the suffix chooses the format)")
     if suffix == ".glb":
         return write_glb(motion, hand, path, objects)
+    if suffix in USD_SUFFIXES:
+        return write_usd(motion, hand, path, objects)
     if objects:
-        raise HandcapError(f"{path}: objects go into a .glb export only")
+        raise HandcapError(f"{path}: objects go into a .glb or USD export only")
     if suffix == ".bvh":
         return write_bvh(motion, hand, path, units=units)
     if suffix == ".csv":

@@ -19,7 +19,8 @@ from scipy.spatial.transform import Rotation
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.core.motion import HandMotion
-from handcap.export.bvh import filled_frames, nearest_found
+from handcap.export.bvh import nearest_found
+from handcap.export.skinning import skinned_take
 from handcap.hand.anatomy import JOINT_NAMES, PARENTS
 
 _FLOAT, _UINT, _USHORT = 5126, 5125, 5123
@@ -67,16 +68,9 @@ def glb_bytes(motion: HandMotion, hand, objects=()) -> tuple[bytes, list[str]]:
     HandcapError
         A motion without a frame with a pose, or an object of another length.
     """
-    global_orient, hand_pose, transl, warnings = filled_frames(motion)
-    out = hand.forward(motion.betas, global_orient, hand_pose, transl, vertices=False)
-    world = np.asarray(out.rotations)
-    local = world.copy()
-    local[:, 1:] = np.einsum("tnji,tnjk->tnik", world[:, PARENTS[1:]], world[:, 1:])
-    quats = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_quat().reshape(len(local), 16, 4)  # x y z w
-    # q and -q are one rotation: keep each joint's on one side from frame to frame, so that LINEAR blends well
-    quats[1:] *= np.cumprod(np.where(np.sum(quats[1:] * quats[:-1], axis=-1) < 0, -1.0, 1.0), axis=0)[..., None]
-    rest_vertices, rest_joints, _ = (np.asarray(a) for a in hand.rest(np.asarray(motion.betas, dtype=np.float64)))
-    times = np.arange(motion.n_frames, dtype=np.float64) / motion.rate
+    take = skinned_take(motion, hand)
+    warnings = list(take.warnings)
+    rest_vertices, rest_joints, quats, times = take.rest_vertices, take.rest_joints, take.local_quats, take.times
 
     gltf = gl.GLTF2(asset=gl.Asset(version="2.0", generator="handcap"), scene=0)
     buf = _Buffer(gltf)
@@ -85,11 +79,7 @@ def glb_bytes(motion: HandMotion, hand, objects=()) -> tuple[bytes, list[str]]:
         offset = rest_joints[j] - (rest_joints[PARENTS[j]] if j else 0.0)
         children = [int(c) for c in np.flatnonzero(PARENTS == j)]
         gltf.nodes.append(gl.Node(name=JOINT_NAMES[j], translation=offset.tolist(), children=children or None))
-    weights = np.asarray(hand.weights, dtype=np.float64)
-    top = np.argsort(-weights, axis=1)[:, :4]
-    strength = np.take_along_axis(weights, top, axis=1)
-    strength /= strength.sum(axis=1, keepdims=True)
-    top = np.where(strength > 0, top, 0)  # a joint given no weight is joint 0 (the validator asks for it)
+    top, strength = take.joint_index, take.joint_weight  # a joint given no weight is joint 0 (the validator asks)
     inverse_bind = np.tile(np.eye(4), (16, 1, 1))
     inverse_bind[:, :3, 3] = -rest_joints
     mesh = gl.Mesh(name="hand", primitives=[gl.Primitive(
@@ -110,7 +100,7 @@ def glb_bytes(motion: HandMotion, hand, objects=()) -> tuple[bytes, list[str]]:
         channels.append(gl.AnimationChannel(sampler=len(samplers) - 1, target=gl.AnimationChannelTarget(node=node,
                                                                                                        path=path)))
 
-    animate(0, "translation", np.asarray(out.joints)[:, 0], "VEC3")
+    animate(0, "translation", take.wrist, "VEC3")
     for j in range(16):
         animate(j, "rotation", quats[:, j], "VEC4")
     for om, vertices, faces in objects:

@@ -27,7 +27,7 @@ def export(motion, to, *, units: str = "cm", hand_model: str | None = None, mano
     hand_model, mano_dir : str or None
         The hand model (default: the motion's).
     objects, meshes : sequences of str or Path
-        Object motion ``.npz`` files (``track-object``) and each one's mesh in its own frame, for a ``.glb``.
+        Object motion ``.npz`` files (``track-object``) and each one's mesh in its own frame, for a ``.glb`` or USD.
 
     Returns
     -------
