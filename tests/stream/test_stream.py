@@ -183,3 +183,52 @@ def test_lsl_outlets_reach_an_inlet():
     assert len(samples[0]) == len(samples[1]) == 50
     np.testing.assert_allclose(np.array(samples[0][7]).reshape(21, 3), joints + 7, atol=1e-5)  # float32
     np.testing.assert_allclose(samples[1][49], np.full(27, 4.9), atol=1e-6)
+
+
+def test_qtm_labelled_trajectories_stream_live(capture, fake_qtm):
+    from handcap.stream.live import stream_source
+    from handcap.stream.sources import QtmSource
+
+    names = list(capture.markers.names)
+    server = fake_qtm(capture.markers.positions, ["Subject:" + n for n in names], 120.0)
+    source = QtmSource(f"127.0.0.1:{server.port}")
+    try:
+        assert source.rate == 120.0 and source.names[0] == "Subject:" + names[0]
+        stats = stream_source(source, capture.attachment, OpenHand("right"))
+    finally:
+        source.close()
+    assert stats.frames == 240 and "streamframes allframes 3d" in server.commands
+    replay = stream(capture.markers, capture.attachment, OpenHand("right"), realtime=False)
+    np.testing.assert_allclose(stats.solved, replay.solved, atol=1e-4)  # float32 millimetres on the wire
+    assert (stats.latency_ms > 0).all()
+
+
+def test_qtm_unlabelled_points_are_labelled_live(unlabelled, fake_qtm):
+    from handcap.stream.live import stream_source
+    from handcap.stream.sources import QtmSource
+
+    take, model = unlabelled
+    points = take.points.padded()[:240]
+    server = fake_qtm(points, [], 120.0)
+    source = QtmSource(f"127.0.0.1:{server.port}", labelled=False)
+    try:
+        stats = stream_source(source, take.attachment, OpenHand("right"), labeling=model, fill="joints-19")
+    finally:
+        source.close()
+    assert stats.frames == 240 and "streamframes allframes 3dnolabels" in server.commands
+    error = np.linalg.norm(stats.solved - take.hand_motion.joints[:240], axis=-1)
+    assert np.nanmedian(error) < 0.0015
+
+
+def test_stream_verb_from_qtm_and_its_bad_addresses(capture, fake_qtm, tmp_path, capsys):
+    server = fake_qtm(capture.markers.positions[:60], capture.markers.names, 120.0)
+    capture.attachment.save(tmp_path / "attachment.npz")
+    assert main(["stream", "--qtm", f"127.0.0.1:{server.port}", "--attachment", str(tmp_path / "attachment.npz"),
+                 "--seconds", "0.25"]) == 0
+    assert f"127.0.0.1:{server.port}: 30 frames, latency p50" in capsys.readouterr().out
+    closed = server.port
+    server.close()
+    for address, message in ((f"127.0.0.1:{closed}", "QTM did not answer"), ("127.0.0.1:http", "HOST:PORT")):
+        assert main(["stream", "--qtm", address, "--attachment", str(tmp_path / "attachment.npz")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err

@@ -20,8 +20,9 @@ from tqdm import tqdm
 
 from handcap.core.errors import HandcapError
 from handcap.core.points import PointCloudSequence
-from handcap.solve.motion import observed_markers
+from handcap.core.markers import MarkerSequence
 from handcap.stream.pipeline import LivePipeline
+from handcap.stream.sources import ReplaySource
 
 
 #: The interpreter's thread switch interval while a stream runs, seconds (default 0.005).
@@ -104,56 +105,111 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
     -------
     StreamStats
     """
-    names = list(attachment.marker_names)
     if labeling is not None:
-        frames = (markers.padded() if isinstance(markers, PointCloudSequence) else markers.positions)
+        frames, names = (markers.padded() if isinstance(markers, PointCloudSequence) else markers.positions), None
     else:
         if isinstance(markers, PointCloudSequence):
             raise HandcapError("unlabelled points: give a labelling model (--labeling) to stream them")
-        frames, absent = observed_markers(markers, names)
-        if len(absent) == len(names):
-            raise HandcapError(f"none of the attachment's markers ({', '.join(names[:4])}...) is in the replayed "
-                               "file; unlabelled points need a labelling model (--labeling)")
-    rate = markers.rate
-    n = len(frames) if seconds is None else min(len(frames), int(round(seconds * rate)))
-    pipeline = LivePipeline(attachment, hand, rate=rate, labeling=labeling, fill=fill)
-    latency, solved = np.zeros(n), np.full((n, 21, 3), np.nan)
-    stage_ms = {k: np.zeros(n) for k in (*pipeline.stages, "send")}
-    seen, filled = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
+        frames, names = markers.positions, markers.names
+    n = len(frames) if seconds is None else min(len(frames), int(round(seconds * markers.rate)))
+    source = ReplaySource(frames[:n], markers.rate, names, realtime=realtime)
+    return stream_source(source, attachment, hand, outputs, progress=progress, labeling=labeling, fill=fill)
+
+
+def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None = None,
+                  progress: bool | None = None, labeling=None, fill=None) -> StreamStats:
+    """Label, fill and solve every frame of a live source and send it to every output.
+
+    Parameters
+    ----------
+    source : ReplaySource, QtmSource or another iterable of ``(arrived, frame (K, 3))``
+        With ``names`` (the K markers' names, None for unlabelled points) and ``rate`` (see
+        :mod:`handcap.stream.sources`).
+    attachment : MarkerAttachment
+    hand : HandModel
+    outputs : sequence of callables ``(frame, time_s, joints, phi)``
+    seconds : float or None
+        Stop after this many seconds of frames.
+    progress : bool or None
+        Progress bar (default: on a terminal).
+    labeling, fill
+        A labelling model (needed for unlabelled points) and an occlusion model.
+
+    Returns
+    -------
+    StreamStats
+    """
+    names = list(attachment.marker_names)
+    columns = None
+    if labeling is None:
+        if source.names is None:
+            raise HandcapError("unlabelled points: give a labelling model (--labeling) to stream them")
+        columns = marker_columns(source.names, names)
+    limit = None if seconds is None else int(round(seconds * source.rate))
+    pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill)
+    rows = {k: [] for k in ("latency", "solved", "seen", "filled", *pipeline.stages, "send")}
     memory = [resident_mb(), resident_mb()]
     # The outputs' threads (the WebSocket server's event loop) share the interpreter: at the default 5 ms switch
     # interval one of them may hold a frame up for 5 ms. Shorter while the stream runs.
     interval = sys.getswitchinterval()
     sys.setswitchinterval(min(interval, SWITCH_INTERVAL))
+    minute = int(60 * source.rate)
     try:
-        _run(pipeline, frames, n, rate, outputs, realtime, progress, latency, solved, stage_ms, seen, filled,
-             memory)
+        frames = tqdm(source, desc="stream", unit="frame", total=len(source) if hasattr(source, "__len__") else limit,
+                      disable=None if progress is None else not progress, leave=False)
+        for t, (arrived, frame) in enumerate(frames):
+            if limit is not None and t >= limit:
+                break
+            if columns is not None:
+                frame = np.where(columns[:, None] >= 0, np.asarray(frame)[np.maximum(columns, 0)], np.nan)
+            live = pipeline.frame(frame)
+            sending = time.perf_counter()
+            for send in outputs:
+                send(t, t / source.rate, live.joints, live.phi)
+            sent = time.perf_counter()
+            rows["latency"].append((sent - arrived) * 1000)
+            for k in pipeline.stages:
+                rows[k].append(pipeline.last_ms[k])
+            rows["send"].append((sent - sending) * 1000)
+            rows["solved"].append(live.joints)
+            rows["seen"].append(live.seen)
+            rows["filled"].append(live.filled)
+            if t == minute:
+                memory[0] = resident_mb()
     finally:
         sys.setswitchinterval(interval)
-    return StreamStats(n, latency, tuple(memory), solved, stage_ms, seen, filled)
-
-
-def _run(pipeline, frames, n, rate, outputs, realtime, progress, latency, solved, stage_ms, seen, filled, memory):
-    """The stream's loop (see :func:`stream`); fills the arrays it is given."""
-    minute = min(n - 1, int(60 * rate))
-    start = time.perf_counter()
-    for t in tqdm(range(n), desc="stream", unit="frame", disable=None if progress is None else not progress,
-                  leave=False):
-        if realtime:
-            wait = start + t / rate - time.perf_counter()
-            if wait > 0:
-                time.sleep(wait)
-        arrived = time.perf_counter()
-        live = pipeline.frame(frames[t])
-        sending = time.perf_counter()
-        for send in outputs:
-            send(t, t / rate, live.joints, live.phi)
-        sent = time.perf_counter()
-        latency[t] = (sent - arrived) * 1000
-        for k in pipeline.stages:
-            stage_ms[k][t] = pipeline.last_ms[k]
-        stage_ms["send"][t] = (sent - sending) * 1000
-        solved[t], seen[t], filled[t] = live.joints, live.seen, live.filled
-        if t == minute:
-            memory[0] = resident_mb()
     memory[1] = resident_mb()
+    if not rows["latency"]:
+        raise HandcapError("the source sent no frame")
+    stage_ms = {k: np.array(rows[k]) for k in (*pipeline.stages, "send")}
+    return StreamStats(len(rows["latency"]), np.array(rows["latency"]), tuple(memory), np.array(rows["solved"]),
+                       stage_ms, np.array(rows["seen"]), np.array(rows["filled"]))
+
+
+def marker_columns(source_names, names) -> np.ndarray:
+    """For each of ``names``, its column among ``source_names`` (``Subject:`` prefixes allowed), -1 if absent.
+
+    Parameters
+    ----------
+    source_names : sequence of str
+        The K markers a source sends.
+    names : sequence of str
+        The markers wanted (an attachment's).
+
+    Raises
+    ------
+    HandcapError
+        None of ``names`` is sent.
+    """
+    probe = MarkerSequence(np.zeros((1, len(source_names), 3)), tuple(source_names), 100.0)
+    columns = []
+    for name in names:
+        try:
+            columns.append(probe.index(name))
+        except HandcapError:
+            columns.append(-1)
+    columns = np.array(columns)
+    if (columns < 0).all():
+        raise HandcapError(f"none of the attachment's markers ({', '.join(names[:4])}...) is in the stream "
+                           f"({', '.join(source_names[:4])}...); unlabelled points need a labelling model (--labeling)")
+    return columns
