@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
+import os
 import threading
 import time
 
@@ -33,6 +34,8 @@ def receivers(ws_port, lsl_ids, ports, counts, stop) -> None:
     from pythonosc.osc_server import BlockingOSCUDPServer
     from websockets.sync.client import connect
 
+    if hasattr(os, "sched_setaffinity") and os.cpu_count() > 1:
+        os.sched_setaffinity(0, {os.cpu_count() - 1})  # the last core: as if the receivers were other programs
     got = {"osc": 0, "ws": 0, "lsl": [0] * len(lsl_ids)}
     dispatcher = Dispatcher()
     dispatcher.map("/handcap/joints", lambda *_: got.__setitem__("osc", got["osc"] + 1))
@@ -118,7 +121,7 @@ def main() -> None:
           f"frames at {rate:g} Hz = {a.seconds:g} s, a {a.take_seconds:g} s take looped), "
           f"{'as fast as handled' if a.fast else 'at the take rate'}")
     start = time.perf_counter()
-    stats = stream(source, capture.attachment, OpenHand(capture.hand_motion.side), [osc, ws, lsl],
+    stats = stream(source, capture.attachment, OpenHand(capture.hand_motion.side), [osc, lsl, ws],
                    realtime=not a.fast, labeling=labeling, fill=fill)
     wall = time.perf_counter() - start
     stop.set()

@@ -293,7 +293,7 @@ def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, sca
 
 def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *, scale: float = 0.005,
                         iterations: int = 10, tolerance: float = 3e-5, gain_tolerance: float = 1e-3, held=None,
-                        lam: float = 1e-3):
+                        lam: float = 1e-3, return_parts: bool = False):
     """Fit poses to observed markers, every frame at once.
 
     Parameters
@@ -317,11 +317,18 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     held : ndarray (T, 27) bool, optional
         Angles kept at their initial value (default: :func:`held_angles` of
         these frames). Unconstrained angles not held are set by the priors.
+    lam : float
+        Initial damping.
+    return_parts : bool
+        Also return the final poses' pieces (see :func:`frame_costs`: their kinematics and marker residuals), so
+        that a caller needs no second forward pass.
 
     Returns
     -------
     poses : Poses
     cost : ndarray (T,)
+    parts : tuple
+        Only with ``return_parts``.
     """
     poses = poses.copy()
     n = len(poses.transl)
@@ -368,7 +375,7 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         converged = (np.abs(step).max(axis=1) < tolerance) | (better & (gain < gain_tolerance))
         active[idx[converged]] = False
         active[idx[damping[idx] > 1e8]] = False
-    return poses, cost
+    return (poses, cost, parts) if return_parts else (poses, cost)
 
 
 def _merge(parts, new_parts, idx, better):

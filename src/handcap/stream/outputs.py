@@ -47,17 +47,24 @@ class OscOutput:
 
     def __init__(self, target: str):
         try:
-            from pythonosc.udp_client import SimpleUDPClient  # noqa: PLC0415 (optional extra 'stream')
+            from pythonosc.osc_message_builder import OscMessageBuilder  # noqa: PLC0415 (optional extra 'stream')
+            from pythonosc.udp_client import SimpleUDPClient  # noqa: PLC0415
         except ImportError:
             raise HandcapError("OSC output needs python-osc: pip install 'handcap[stream]'") from None
         self.host, self.port = _endpoint(target)
-        self.client = SimpleUDPClient(self.host, self.port)
+        self.client, self.builder = SimpleUDPClient(self.host, self.port), OscMessageBuilder
 
     def __call__(self, frame: int, time_s: float, joints, phi) -> None:
         """Send one frame (see the module docstring)."""
-        values = np.nan_to_num(np.asarray(joints, dtype=np.float64)).ravel().tolist()
-        self.client.send_message("/handcap/joints", [int(frame), float(time_s), *values])
-        self.client.send_message("/handcap/angles", [int(frame), *np.nan_to_num(phi).tolist()])
+        for address, head, values in (("/handcap/joints", (int(frame), float(time_s)), joints),
+                                      ("/handcap/angles", (int(frame),), phi)):
+            message = self.builder(address)
+            message.add_arg(head[0], "i")
+            for value in head[1:]:
+                message.add_arg(value, "f")
+            for value in np.nan_to_num(np.asarray(values, dtype=np.float64)).ravel().tolist():
+                message.add_arg(value, "f")  # typed: python-osc need not guess 63 times
+            self.client.send(message.build())
 
     def close(self) -> None:
         """Nothing to release (UDP)."""
@@ -77,7 +84,8 @@ class LslOutput:
     """
 
     def __init__(self, name: str, rate: float, joint_names, angle_names):
-        # liblsl reads its settings when loaded: only errors in its log, unless the user names a settings file
+        # liblsl reads its settings when loaded: lsl_api.cfg asks for only errors in its log (it prints its version
+        # and configuration otherwise; the file takes no comments), unless the user names a settings file
         os.environ.setdefault("LSLAPICFG", str(Path(__file__).with_name("lsl_api.cfg")))
         try:
             import pylsl  # noqa: PLC0415 (optional extra 'stream')

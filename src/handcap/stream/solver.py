@@ -78,14 +78,14 @@ class FrameSolver:
             init, iterations = Poses(trans.copy(), rot.copy(), self.rest[None].copy()), FIRST_ITERATIONS
         else:
             init, iterations = self.pose, self.iterations
-        pose, _ = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
-                                      iterations=iterations, held=held_angles(self.model, observed))
-        kin = self.model.kinematics(pose.transl, pose.rot, pose.phi)  # once, for the joints and the markers
+        pose, _, parts = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
+                                             iterations=iterations, held=held_angles(self.model, observed),
+                                             return_parts=True)
+        kin, norms = parts[0], parts[2]  # of the final pose: no second forward pass
         world_rot, world_pos = kin[0], kin[1]  # the translation included
         tips = attached_points(world_rot, world_pos, self.rest_joints[None], self.rest_tips[None], TIP_PARENTS)
         joints = np.concatenate([world_pos, tips], axis=-2)[0]
-        fit = self.model.positions(pose.transl, pose.rot, pose.phi, kin=kin)[0]
-        distance = np.linalg.norm(fit - target[0], axis=-1)[observed[0]]
+        distance = norms[0][observed[0]]
         rms = float(np.sqrt(np.mean(distance ** 2)))
         # Lost when most markers are off, not when a few are (a mislabelled or swapped marker is an outlier
         # that the robust loss already discounts): the next frame then starts afresh.
