@@ -132,3 +132,19 @@ def test_a_folder_hash_sees_every_file_its_name_and_bytes(tmp_path):
     changed = file_hash(tmp_path)
     (tmp_path / "cam_0" / "0001.png").rename(tmp_path / "cam_0" / "0002.png")
     assert len({first, changed, file_hash(tmp_path)}) == 3
+
+
+def test_a_calibration_takes_own_attachment_solves_the_takes_naming_it(tmp_path):
+    from handcap.synth.scene import SynthConfig, synthesize, write_capture
+
+    capture = synthesize(SynthConfig(motion="grasp", frames=260, seed=3), progress=False)
+    write_capture(capture, tmp_path / "a")
+    capture.attachment.save(tmp_path / "a" / "attachment.npz")
+    (tmp_path / "session.toml").write_text(
+        '[session]\nstages = ["solve"]\n\n'
+        '[[takes]]\nname = "a"\nmarkers = "a/markers.c3d"\nattachment = "a/attachment.npz"\n\n'
+        '[[takes]]\nname = "b"\nmarkers = "a/markers.c3d"\ncalibration_take = "a"\n')
+    runs = process(load_session(tmp_path / "session.toml"), workers=1)
+    assert [(r.take, r.stage, r.status) for r in runs] == [("a", "solve", "done"), ("b", "solve", "done")]
+    manifest = json.loads((tmp_path / "results/b/solve.manifest.json").read_text())
+    assert manifest["input_paths"]["attachment"] == str(tmp_path / "a" / "attachment.npz")

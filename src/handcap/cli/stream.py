@@ -31,7 +31,7 @@ def _cmd_stream(a):
         outputs += [WebSocketOutput(port) for port in a.websocket or ()]
         outputs += [LslOutput(name, source.rate, JOINT_NAMES + TIP_NAMES, PHI_NAMES) for name in a.lsl or ()]
         stats = stream_source(source, attachment, hand, outputs, seconds=a.seconds, labeling=a.labeling,
-                              fill=a.fill)
+                              fill=a.fill, keep_solved=not a.qtm)  # live from QTM: no end known
     finally:
         for output in outputs:
             output.close()

@@ -102,8 +102,8 @@ def _calibrated_by(session: Session, take: Take) -> str:
 
 def _inputs(session: Session, take: Take, stage: str, folder: Path) -> dict:
     """The files a stage reads, by role."""
-    attachment = take.inputs.get("attachment",
-                                 session.results / _calibrated_by(session, take) / OUTPUTS["calibrate"])
+    owner = next(t for t in session.takes if t.name == _calibrated_by(session, take))
+    attachment = owner.inputs.get("attachment", session.results / owner.name / OUTPUTS["calibrate"])
     markers = _markers_of(session, take)
     return {"detect": {"images": take.inputs.get("images"), "cameras": take.inputs.get("cameras"),
                        "pattern": take.inputs.get("pattern")},

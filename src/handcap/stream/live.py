@@ -42,7 +42,7 @@ class StreamStats:
         Resident memory after the first minute of stream time (or the first frame of a shorter stream) and at
         the end, MiB.
     solved : ndarray (frames, 21, 3)
-        The joints sent, metres.
+        The joints sent, metres (empty when the stream was asked not to keep them).
     stage_ms : dict of str to ndarray (frames,)
         Each stage's time per frame (``label``, ``fill``, ``solve`` where they ran, and ``send``), milliseconds.
     seen, filled : ndarray (frames,) int
@@ -117,7 +117,7 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
 
 
 def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None = None,
-                  progress: bool | None = None, labeling=None, fill=None) -> StreamStats:
+                  progress: bool | None = None, labeling=None, fill=None, keep_solved: bool = True) -> StreamStats:
     """Label, fill and solve every frame of a live source and send it to every output.
 
     Parameters
@@ -134,6 +134,9 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
         Progress bar (default: on a terminal).
     labeling, fill
         A labelling model (needed for unlabelled points) and an occlusion model.
+    keep_solved : bool
+        Keep every frame's joints in the result (``solved``); a stream of no known end should not (its other
+        records take 40 bytes a frame).
 
     Returns
     -------
@@ -147,7 +150,10 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
         columns = marker_columns(source.names, names)
     limit = None if seconds is None else int(round(seconds * source.rate))
     pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill)
-    rows = {k: [] for k in ("latency", "solved", "seen", "filled", *pipeline.stages, "send")}
+    size = len(source) if hasattr(source, "__len__") else int(60 * source.rate)
+    if limit is not None:
+        size = min(size, limit)
+    rows = _Rows(size, (*pipeline.stages, "send"), keep_solved)
     memory = [resident_mb(), resident_mb()]
     # The outputs' threads (the WebSocket server's event loop) share the interpreter: at the default 5 ms switch
     # interval one of them may hold a frame up for 5 ms. Shorter while the stream runs.
@@ -167,23 +173,47 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
             for send in outputs:
                 send(t, t / source.rate, live.joints, live.phi)
             sent = time.perf_counter()
-            rows["latency"].append((sent - arrived) * 1000)
-            for k in pipeline.stages:
-                rows[k].append(pipeline.last_ms[k])
-            rows["send"].append((sent - sending) * 1000)
-            rows["solved"].append(live.joints)
-            rows["seen"].append(live.seen)
-            rows["filled"].append(live.filled)
+            rows.add(t, (sent - arrived) * 1000, {**pipeline.last_ms, "send": (sent - sending) * 1000}, live)
             if t == minute:
                 memory[0] = resident_mb()
     finally:
         sys.setswitchinterval(interval)
     memory[1] = resident_mb()
-    if not rows["latency"]:
+    if not rows.count:
         raise HandcapError("the source sent no frame")
-    stage_ms = {k: np.array(rows[k]) for k in (*pipeline.stages, "send")}
-    return StreamStats(len(rows["latency"]), np.array(rows["latency"]), tuple(memory), np.array(rows["solved"]),
-                       stage_ms, np.array(rows["seen"]), np.array(rows["filled"]))
+    n = rows.count
+    stage_ms = {k: v[:n].astype(np.float64) for k, v in rows.stage_ms.items()}
+    solved = rows.solved[:n] if keep_solved else np.zeros((0, 21, 3))
+    return StreamStats(n, rows.latency[:n].astype(np.float64), tuple(memory), solved, stage_ms, rows.seen[:n],
+                       rows.filled[:n])
+
+
+class _Rows:
+    """Per-frame records of a stream in arrays allocated ahead (a replay's length, else a minute, doubled when
+    full), so that the stream's own bookkeeping does not show as memory growing frame by frame."""
+
+    def __init__(self, size: int, stages, keep_solved: bool):
+        size = max(size, 1)
+        self.count, self.keep_solved = 0, keep_solved
+        self.latency, self.seen, self.filled = np.zeros(size, np.float32), np.zeros(size, int), np.zeros(size, int)
+        self.stage_ms = {k: np.zeros(size, np.float32) for k in stages}
+        self.solved = np.full((size if keep_solved else 0, 21, 3), np.nan)
+
+    def _grow(self) -> None:
+        for name in ("latency", "seen", "filled") + (("solved",) if self.keep_solved else ()):
+            old = getattr(self, name)
+            setattr(self, name, np.concatenate([old, np.zeros_like(old)]))
+        self.stage_ms = {k: np.concatenate([v, np.zeros_like(v)]) for k, v in self.stage_ms.items()}
+
+    def add(self, t: int, latency: float, stage_ms: dict, live) -> None:
+        if t >= len(self.latency):
+            self._grow()
+        self.latency[t], self.seen[t], self.filled[t] = latency, live.seen, live.filled
+        for k, v in self.stage_ms.items():
+            v[t] = stage_ms[k]
+        if self.keep_solved:
+            self.solved[t] = live.joints
+        self.count = t + 1
 
 
 def marker_columns(source_names, names) -> np.ndarray:
