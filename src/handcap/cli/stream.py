@@ -10,8 +10,8 @@ from handcap.io import read_markers, read_points
 from handcap.occlusion import SHIPPED_MODELS
 from handcap.steps.step import Step
 from handcap.stream import LslOutput, OscOutput, WebSocketOutput
-from handcap.stream.live import stream_source
-from handcap.stream.sources import QtmSource, ReplaySource
+from handcap.stream.live import stream, stream_source
+from handcap.stream.sources import QtmSource
 
 
 def _cmd_stream(a):
@@ -20,22 +20,25 @@ def _cmd_stream(a):
     if a.qtm:  # with a labelling model QTM's unlabelled points, else its labelled trajectories
         source = QtmSource(a.qtm, labelled=not a.labeling)
     elif a.labeling:
-        points = read_points(a.replay, units=a.units)  # unlabelled: whatever names the file has are ignored
-        source = ReplaySource(points.padded(), points.rate, realtime=not a.fast)
+        source = read_points(a.replay, units=a.units)  # unlabelled: whatever names the file has are ignored
     else:
-        markers = read_markers(a.replay, units=a.units, hand=attachment.marker_names)
-        source = ReplaySource(markers.positions, markers.rate, markers.names, realtime=not a.fast)
+        source = read_markers(a.replay, units=a.units, hand=attachment.marker_names)
     outputs = []
     try:
         outputs += [OscOutput(target) for target in a.osc or ()]
         outputs += [WebSocketOutput(port) for port in a.websocket or ()]
         outputs += [LslOutput(name, source.rate, JOINT_NAMES + TIP_NAMES, PHI_NAMES) for name in a.lsl or ()]
-        stats = stream_source(source, attachment, hand, outputs, seconds=a.seconds, labeling=a.labeling,
-                              fill=a.fill, keep_solved=not a.qtm)  # live from QTM: no end known
+        if a.qtm:  # live: no end known, so no joints kept
+            stats = stream_source(source, attachment, hand, outputs, seconds=a.seconds, labeling=a.labeling,
+                                  fill=a.fill, keep_solved=False)
+        else:
+            stats = stream(source, attachment, hand, outputs, realtime=not a.fast, seconds=a.seconds,
+                           labeling=a.labeling, fill=a.fill)
     finally:
         for output in outputs:
             output.close()
-        source.close()
+        if a.qtm:
+            source.close()
     return Step((f"{a.qtm or a.replay}: {stats.summary()}",), (), (), stats)
 
 

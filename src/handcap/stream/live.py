@@ -110,7 +110,10 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
     else:
         if isinstance(markers, PointCloudSequence):
             raise HandcapError("unlabelled points: give a labelling model (--labeling) to stream them")
-        frames, names = markers.positions, markers.names
+        names = tuple(attachment.marker_names)
+        columns = marker_columns(markers.names, names)
+        frames = markers.positions[:, np.maximum(columns, 0)]  # in the attachment's order once, not frame by frame
+        frames[:, columns < 0] = np.nan
     n = len(frames) if seconds is None else min(len(frames), int(round(seconds * markers.rate)))
     source = ReplaySource(frames[:n], markers.rate, names, realtime=realtime)
     return stream_source(source, attachment, hand, outputs, progress=progress, labeling=labeling, fill=fill)
@@ -147,7 +150,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     if labeling is None:
         if source.names is None:
             raise HandcapError("unlabelled points: give a labelling model (--labeling) to stream them")
-        columns = marker_columns(source.names, names)
+        if tuple(source.names) != tuple(names):  # a replay comes in the attachment's order already
+            columns = marker_columns(source.names, names)
     limit = None if seconds is None else int(round(seconds * source.rate))
     pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill)
     size = len(source) if hasattr(source, "__len__") else int(60 * source.rate)
