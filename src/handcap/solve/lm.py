@@ -37,6 +37,9 @@ COUPLED = np.array([(_I[f"{f}_dip_bend"], _I[f"{f}_pip_bend"]) for f in ("index"
 #: (pip, mcp) flexion indices of the four fingers and (ip, mcp) of the thumb for the synergy prior.
 SYNERGY = np.array([(_I[f"{f}_pip_bend"], _I[f"{f}_mcp_bend"]) for f in ("index", "middle", "pinky", "ring")]
                    + [(_I["thumb_ip_bend"], _I["thumb_mcp_bend"])])
+_RELAXED = relaxed_pose()  # built once: the priors are evaluated twice per frame of every solve
+#: Rows of the prior residuals: limits (27), coupling (4), synergy (5), rest pull (27).
+N_PRIOR_ROWS = 27 + len(COUPLED) + len(SYNERGY) + 27
 
 
 @dataclass(frozen=True)
@@ -82,7 +85,7 @@ class Priors:
         """The relaxed hand (27,) the weak pull draws towards, radians: ``rest``, else :func:`relaxed_pose`."""
         if self.rest is not None:
             return np.asarray(self.rest, dtype=np.float64)
-        return relaxed_pose()
+        return _RELAXED.copy()
 
 
 def robust_weights(norms, scale):
@@ -151,31 +154,27 @@ def prior_terms(phi, priors: Priors, held, free=None):
     """
     n = phi.shape[0]
     low, high = priors.limits[:, 0], priors.limits[:, 1]
-    clipped = np.clip(phi, low, high)
-    r_lim = priors.limit_weight * (clipped - phi)
-    j_lim = np.zeros((n, 27, 27))
-    outside = (phi < low) | (phi > high)
+    n_syn = len(SYNERGY)
+    residuals = np.empty((n, N_PRIOR_ROWS))
+    jacobian = np.zeros((n, N_PRIOR_ROWS, 27))  # rows: limits 27, coupling 4, synergy, rest 27 (one array)
     idx = np.arange(27)
-    j_lim[:, idx, idx] = np.where(outside, -priors.limit_weight, 0.0)
+    residuals[:, :27] = priors.limit_weight * (np.clip(phi, low, high) - phi)
+    jacobian[:, idx, idx] = np.where((phi < low) | (phi > high), -priors.limit_weight, 0.0)
     dip, pip = COUPLED[:, 0], COUPLED[:, 1]
     active = ~(held[:, dip] | held[:, pip])
-    r_cpl = priors.coupling_weight * (phi[:, dip] - priors.coupling * phi[:, pip]) * active
-    j_cpl = np.zeros((n, 4, 27))
-    rows = np.arange(4)
-    j_cpl[:, rows, dip] = priors.coupling_weight * active
-    j_cpl[:, rows, pip] = -priors.coupling_weight * priors.coupling * active
+    residuals[:, 27:31] = priors.coupling_weight * (phi[:, dip] - priors.coupling * phi[:, pip]) * active
+    rows = 27 + np.arange(4)
+    jacobian[:, rows, dip] = priors.coupling_weight * active
+    jacobian[:, rows, pip] = -priors.coupling_weight * priors.coupling * active
     distal, mcp = SYNERGY[:, 0], SYNERGY[:, 1]
-    follows = np.zeros((n, len(SYNERGY)), bool) if free is None else free[:, distal] & ~held[:, mcp]
-    r_syn = priors.synergy_weight * (phi[:, distal] - priors.synergy * phi[:, mcp]) * follows
-    j_syn = np.zeros((n, len(SYNERGY), 27))
-    rows = np.arange(len(SYNERGY))
-    j_syn[:, rows, distal] = priors.synergy_weight * follows
-    j_syn[:, rows, mcp] = -priors.synergy_weight * priors.synergy * follows
-    r_rest = priors.rest_weight * (phi - priors.rest_phi()) * ~held
-    j_rest = np.zeros((n, 27, 27))
-    j_rest[:, idx, idx] = priors.rest_weight * ~held
-    return (np.concatenate([r_lim, r_cpl, r_syn, r_rest], axis=1),
-            np.concatenate([j_lim, j_cpl, j_syn, j_rest], axis=1))
+    follows = np.zeros((n, n_syn), bool) if free is None else free[:, distal] & ~held[:, mcp]
+    residuals[:, 31:31 + n_syn] = priors.synergy_weight * (phi[:, distal] - priors.synergy * phi[:, mcp]) * follows
+    rows = 31 + np.arange(n_syn)
+    jacobian[:, rows, distal] = priors.synergy_weight * follows
+    jacobian[:, rows, mcp] = -priors.synergy_weight * priors.synergy * follows
+    residuals[:, 31 + n_syn:] = priors.rest_weight * (phi - priors.rest_phi()) * ~held
+    jacobian[:, 31 + n_syn + idx, idx] = priors.rest_weight * ~held
+    return residuals, jacobian
 
 
 #: A marker constrains a joint when at least this share of its skinning moves with the joint. A marker
@@ -255,7 +254,7 @@ class Poses:
         self.transl[index], self.rot[index], self.phi[index] = other.transl, other.rot, other.phi
 
 
-def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, scale, free=None):
+def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, scale, free=None, kin=None):
     """Total cost per frame (T,), and the pieces the next step needs.
 
     Parameters
@@ -273,6 +272,8 @@ def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, sca
         Scale of the Cauchy loss, metres.
     free : ndarray (T, 27) bool, optional
         Unconstrained angles, for the synergy prior.
+    kin : tuple, optional
+        :meth:`MarkerModel.kinematics` of ``poses``, when the caller has them (not computed again).
 
     Returns
     -------
@@ -282,7 +283,8 @@ def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, sca
         ``(kin, resid (T, M, 3) metres, norms (T, M) metres, prior residuals (T, R) metres,
         prior Jacobian (T, R, 27) metres per radian)``; ``kin`` is :meth:`MarkerModel.kinematics`.
     """
-    kin = model.kinematics(poses.transl, poses.rot, poses.phi)
+    if kin is None:
+        kin = model.kinematics(poses.transl, poses.rot, poses.phi)
     x = model.positions(poses.transl, poses.rot, poses.phi, kin=kin)
     resid = np.where(observed[..., None], x - target, 0.0)
     norms = np.linalg.norm(resid, axis=-1)
@@ -293,7 +295,7 @@ def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, sca
 
 def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *, scale: float = 0.005,
                         iterations: int = 10, tolerance: float = 3e-5, gain_tolerance: float = 1e-3, held=None,
-                        lam: float = 1e-3, return_parts: bool = False):
+                        lam: float = 1e-3, return_parts: bool = False, start_kin=None):
     """Fit poses to observed markers, every frame at once.
 
     Parameters
@@ -322,6 +324,9 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     return_parts : bool
         Also return the final poses' pieces (see :func:`frame_costs`: their kinematics and marker residuals), so
         that a caller needs no second forward pass.
+    start_kin : tuple, optional
+        :meth:`MarkerModel.kinematics` of the initial ``poses`` (a warm start from the poses an earlier call
+        returned, with their ``parts[0]``): the first cost then needs no forward pass.
 
     Returns
     -------
@@ -339,15 +344,16 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     fixed[blind] = True
     damping = np.full(n, lam)
     active = ~blind
-    cost, parts = frame_costs(model, poses, target, observed, held, priors, scale, free)
+    cost, parts = frame_costs(model, poses, target, observed, held, priors, scale, free, kin=start_kin)
     eye = np.eye(N_PARAMS)
     for _ in range(iterations):
         if not active.any():
             break
         idx = np.flatnonzero(active)
-        kin, resid, norms, r_p, j_p = (p[idx] if not isinstance(p, tuple) else tuple(k[idx] for k in p)
-                                       for p in parts)
-        sub = poses.take(idx)
+        whole = len(idx) == n  # every frame still active (always so for one frame): no copies of subsets
+        kin, resid, norms, r_p, j_p = parts if whole else (
+            p[idx] if not isinstance(p, tuple) else tuple(k[idx] for k in p) for p in parts)
+        sub = poses if whole else poses.take(idx)
         weights = robust_weights(norms, scale) * observed[idx]  # IRLS: J^T W J and J^T W r
         hess, grad = model.normal_equations(sub.transl, sub.rot, sub.phi, resid, weights, kin=kin)
         hess[:, 6:, 6:] += np.matmul(np.swapaxes(j_p, 1, 2), j_p)
@@ -360,14 +366,17 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         system = hess + (damping[idx, None] * np.maximum(diag, 1e-9))[:, :, None] * eye
         step = -np.linalg.solve(system, grad[..., None])[..., 0]
         trial = Poses(sub.transl + step[:, :3], matrix_from_axis_angle(step[:, 3:6]) @ sub.rot, sub.phi + step[:, 6:])
-        new_cost, new_parts = frame_costs(model, trial, target[idx], observed[idx], held[idx], priors, scale,
-                                          free[idx])
+        if whole:
+            new_cost, new_parts = frame_costs(model, trial, target, observed, held, priors, scale, free)
+        else:
+            new_cost, new_parts = frame_costs(model, trial, target[idx], observed[idx], held[idx], priors, scale,
+                                              free[idx])
         better = new_cost <= cost[idx]
         good = idx[better]
         gain = (cost[idx] - new_cost) / np.maximum(cost[idx], 1e-300)
         poses.put(good, trial.take(better))
         cost[good] = new_cost[better]
-        parts = _merge(parts, new_parts, idx, better)
+        parts = new_parts if whole and better.all() else _merge(parts, new_parts, idx, better)
         damping[good] = np.maximum(damping[good] / 3.0, 1e-7)
         damping[idx[~better]] *= 4.0
         # Done when the step is tiny, or an accepted step gained less than gain_tolerance of the cost

@@ -45,7 +45,7 @@ class FrameSolver:
         self.priors = Priors()
         self.rest = self.priors.rest_phi()
         self.iterations = iterations
-        self.pose = None
+        self.pose = self.kin = None  # the last pose and its kinematics (the next frame's start)
         self.restarts = 0  # frames after which the next started afresh
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
@@ -75,12 +75,12 @@ class FrameSolver:
         target = np.nan_to_num(target)
         if self.pose is None:
             rot, trans, _ = rigid_start(self.model, target, observed, self.rest)
-            init, iterations = Poses(trans.copy(), rot.copy(), self.rest[None].copy()), FIRST_ITERATIONS
-        else:
-            init, iterations = self.pose, self.iterations
+            init, iterations, kin = Poses(trans.copy(), rot.copy(), self.rest[None].copy()), FIRST_ITERATIONS, None
+        else:  # from the frame before, whose kinematics the last solve returned
+            init, iterations, kin = self.pose, self.iterations, self.kin
         pose, _, parts = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
                                              iterations=iterations, held=held_angles(self.model, observed),
-                                             return_parts=True)
+                                             return_parts=True, start_kin=kin)
         kin, norms = parts[0], parts[2]  # of the final pose: no second forward pass
         world_rot, world_pos = kin[0], kin[1]  # the translation included
         tips = attached_points(world_rot, world_pos, self.rest_joints[None], self.rest_tips[None], TIP_PARENTS)
@@ -91,5 +91,5 @@ class FrameSolver:
         # that the robust loss already discounts): the next frame then starts afresh.
         lost = float(np.median(distance)) > LOST
         self.restarts += lost
-        self.pose = None if lost else pose
+        self.pose, self.kin = (None, None) if lost else (pose, kin)
         return np.asarray(joints), pose.phi[0].copy(), rms
