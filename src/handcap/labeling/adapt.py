@@ -67,6 +67,8 @@ class StreamAdaptation:
         self.last_relearn = -(10**9)
         self.relearned = 0
         self.checked = False
+        self.deferred = False  # the labeler's defer: a due re-estimation waits for catch_up()
+        self.due = False
 
     @property
     def settled(self) -> bool:
@@ -149,6 +151,14 @@ class StreamAdaptation:
             self.local[slot] = row
             self.stamp[slot] = self.count
         if self.count % self.every == 0:
+            self.due = True
+            if not self.deferred:
+                self.catch_up()
+
+    def catch_up(self) -> None:
+        """Re-estimate now if a re-estimation is due (see :meth:`record`)."""
+        if self.due:
+            self.due = False
             self.update()
 
     def update(self) -> None:

@@ -117,6 +117,13 @@ class OnlineLabeler:
     forget : float
         Weight kept per frame of age by a labelled point (0.999: a half-life
         of about 700 frames; a short memory sees one pose only).
+    defer : bool
+        Leave the work that only the next frame needs (stepping the Kalman
+        filters, the periodic re-alignment to the take) for :meth:`idle`,
+        which a live stream calls once the frame's result is sent; the next
+        :meth:`update` does it first when :meth:`idle` was not called. The
+        labels are the same either way; only the moment the cost is paid
+        moves out of the frame's latency.
     birth : int
         A point the spatial model filters out for every label may still
         start a track (the tracking hypothesis) when it has moved as a marker
@@ -147,7 +154,8 @@ class OnlineLabeler:
     def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
                  max_coast: int = 10, warmup: int = 2, gate: float = 6.0, jump_cost: float = 6.0,
                  tracking: bool = True, max_hold: int = 10, objects=(), adapt: bool = True,
-                 adapt_every: int = 25, forget: float = 0.999, max_unlikely: int = 50, birth: int = 0):
+                 adapt_every: int = 25, forget: float = 0.999, max_unlikely: int = 50, birth: int = 0,
+                 defer: bool = False):
         if not (isinstance(hypotheses, (int, np.integer)) and hypotheses >= 1):
             raise HandcapError(f"hypotheses must be a whole number >= 1, got {hypotheses}")
         if not (isinstance(lag, (int, np.integer)) and lag >= 0):
@@ -191,6 +199,10 @@ class OnlineLabeler:
         self.spatial = model.spatial  # the spatial model in the take's hand frame (adapted when adapt)
         self.adapt = bool(adapt)
         self._adaptation = StreamAdaptation(self, int(adapt_every), float(forget)) if self.adapt else None
+        self.defer = bool(defer)
+        self._step_filters = None  # (back, obs) of the last frame while its filters wait for idle()
+        if self._adaptation is not None:
+            self._adaptation.deferred = self.defer
 
     # -- public ---------------------------------------------------------------------------
     def update(self, points, transform=None):
@@ -212,8 +224,19 @@ class OnlineLabeler:
             -1 for a point that is no marker. None while the first ``lag``
             frames are still open.
         """
+        self.idle()  # what the frame before left (defer)
         points, valid = frame_points(points)
         return self._push(self._step(points[valid], transform), valid)
+
+    def idle(self) -> None:
+        """Do the work the last frame left for later (``defer``): step the Kalman filters with its
+        observations, then re-align the spatial model when one is due. Cheap when nothing is left."""
+        if self._step_filters is not None:
+            back, obs = self._step_filters
+            self._step_filters = None
+            self._advance_filters(back, obs)
+        if self._adaptation is not None:
+            self._adaptation.catch_up()
 
     def _push(self, frame: "_Frame", valid) -> np.ndarray | None:
         """Keep a stepped frame open; return the labels of the frame decided now, if any."""
@@ -321,7 +344,10 @@ class OnlineLabeler:
                                        self.jump_cost)  # (N_prev, N)
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
-        self._advance_filters(back, obs)
+        if self.defer:
+            self._step_filters = (back, obs)
+        else:
+            self._advance_filters(back, obs)
         if pose is not None and len(world):
             f = np.arange(n_free)
             unlikely = seen & (self._last_ll[f, np.maximum(hyps, 0)] < self.theta_min)

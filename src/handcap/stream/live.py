@@ -3,8 +3,9 @@
 frame and of each stage, and the memory used.
 
 The latency of a frame runs from its arrival (the moment the replay hands it over) to the moment every output
-has sent it. Memory is the process's resident set (Linux ``/proc/self/statm``), read after the first minute
-of the stream and at its end.
+has sent it. The work that only the next frame needs (the labeler's filters and its periodic re-alignment) is
+done after the sending, between frames (:meth:`LivePipeline.idle`). Memory is the process's resident set
+(Linux ``/proc/self/statm``), read after the first minute of the stream and at its end.
 """
 
 from __future__ import annotations
@@ -177,6 +178,7 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
             for send in outputs:
                 send(t, t / source.rate, live.joints, live.phi)
             sent = time.perf_counter()
+            pipeline.idle()  # what only the next frame needs, between frames
             rows.add(t, (sent - arrived) * 1000, {**pipeline.last_ms, "send": (sent - sending) * 1000}, live)
             if t == minute:
                 memory[0] = resident_mb()

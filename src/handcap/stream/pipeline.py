@@ -99,7 +99,7 @@ class LivePipeline:
         if labeling is not None:
             model = labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)
             self.labeler = OnlineLabeler(model, lag=0, hypotheses=hypotheses,
-                                         adapt_every=max(1, int(round(adapt_seconds * rate))))
+                                         adapt_every=max(1, int(round(adapt_seconds * rate))), defer=True)
             self.label_columns = np.array([self.names.index(n) if n in self.names else -1
                                            for n in self.labeler.names])
             if (self.label_columns < 0).all():
@@ -164,3 +164,10 @@ class LivePipeline:
         self.last_ms = {"label": 1000 * (labelled - start), "fill": 1000 * (completed - labelled),
                         "solve": 1000 * (done - completed)}
         return LiveFrame(joints, phi, markers, seen, filled, rms)
+
+    def idle(self) -> None:
+        """The work the last frame left for before the next one (the labeler's filters and its periodic
+        re-alignment to the take, :meth:`OnlineLabeler.idle`): call it once the frame's result is sent, so that
+        its cost falls between frames. Without it, the next :meth:`frame` does it first (same labels)."""
+        if self.labeler is not None:
+            self.labeler.idle()
