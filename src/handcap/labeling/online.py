@@ -118,12 +118,9 @@ class OnlineLabeler:
         Weight kept per frame of age by a labelled point (0.999: a half-life
         of about 700 frames; a short memory sees one pose only).
     defer : bool
-        Leave the work that only the next frame needs (stepping the Kalman
-        filters, the periodic re-alignment to the take) for :meth:`idle`,
-        which a live stream calls once the frame's result is sent; the next
-        :meth:`update` does it first when :meth:`idle` was not called. The
-        labels are the same either way; only the moment the cost is paid
-        moves out of the frame's latency.
+        Leave what only the next frame needs (the filters' step, the
+        re-alignment) for :meth:`idle` (a live stream calls it once the frame
+        is sent), else for the next :meth:`update`; same labels either way.
     birth : int
         A point the spatial model filters out for every label may still
         start a track (the tracking hypothesis) when it has moved as a marker
@@ -229,8 +226,7 @@ class OnlineLabeler:
         return self._push(self._step(points[valid], transform), valid)
 
     def idle(self) -> None:
-        """Do the work the last frame left for later (``defer``): step the Kalman filters with its
-        observations, then re-align the spatial model when one is due. Cheap when nothing is left."""
+        """Do what the last frame left (``defer``): step its filters, then re-align the model if due."""
         if self._step_filters is not None:
             back, obs = self._step_filters
             self._step_filters = None
