@@ -140,3 +140,24 @@ def test_several_training_takes_and_strict_warnings(takes, capsys):
     err = capsys.readouterr().err
     assert "warning: hand frame lost in" in err
     assert (r / "no_back_labeled.c3d").exists()  # written all the same
+
+
+def test_offline_labels_are_checked_against_the_solved_hand(takes, capsys):
+    # --offline runs the check (a line says what it did) and stays as right as without it on the real glove;
+    # --no-hand-check leaves the labeler's labels.
+    r = takes
+    assert main(["corrupt", str(r / "test.c3d"), "--layout", "glove-13", "--ghost-rate", "2", "--dropout", "0.05",
+                 "--seed", "1", "--out", str(r / "off.c3d")]) == 0
+    scores = {}
+    for flags in ((), ("--no-hand-check",)):
+        capsys.readouterr()
+        assert main(["label", str(r / "off.c3d"), "--train", str(r / "rom.c3d"), "--layout", "glove-13", "--offline",
+                     *flags, "--out", str(r / "off-labeled.c3d")]) == 0
+        out = capsys.readouterr().out
+        assert ("checked against the solved hand" in out) == (not flags), out
+        assert main(["score-labels", str(r / "off-labeled.c3d"), "--truth", str(r / "off.truth.c3d"),
+                     "--json", str(r / "off.json")]) == 0
+        scores[flags] = json.loads((r / "off.json").read_text())
+    checked, plain = scores[()], scores[("--no-hand-check",)]
+    assert checked["correct_percent"] > 99.5 and checked["erroneous_percent"] <= plain["erroneous_percent"]
+    assert abs(checked["correct_percent"] - plain["correct_percent"]) < 0.2

@@ -10,7 +10,7 @@ from handcap.steps import label, markers
 def _cmd_label(a):
     return label.label(a.input, a.out, train=a.train, layouts=a.layout, model=a.model, method=a.method,
                        hypotheses=a.hypotheses, lag=a.lag, offline=a.offline, seed=a.seed, objects=a.object,
-                       units=a.units)
+                       units=a.units, hand_check=a.hand_check)
 
 
 def _cmd_score_labels(a):
@@ -41,7 +41,10 @@ def add_label(verbs) -> None:
     p.add_argument("--lag", type=int, default=0, help="look-ahead frames before deciding (default 0: online)")
     p.add_argument("--offline", action="store_true",
                    help="decide on the whole take, in two passes: the spatial model re-aligned to the take's labels "
-                        "between them")
+                        "between them; then the labels are checked against the hand solved from them (labels "
+                        "it cannot have made removed, points where it puts a missing marker labelled)")
+    p.add_argument("--no-hand-check", dest="hand_check", action="store_false",
+                   help="with --offline: leave the labels as the labeler gave them")
     p.add_argument("--method", choices=("viterbi", "nearest"), default="viterbi",
                    help="the labeler, or the nearest-neighbour baseline")
     p.add_argument("--model", help="also save the trained model here (.npz); if --train is such a model, use it")

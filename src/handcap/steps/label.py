@@ -3,17 +3,22 @@
 from __future__ import annotations
 
 import json
+import warnings
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, HandcapWarning
+from handcap.core.markers import MarkerSequence
 from handcap.io import atomic_output, check_not_input, check_output, read_markers, read_points, write_markers
 from handcap.labeling import LabelingModel, label_take, objects_from_take, score_labels as score
 from handcap.labeling.model import is_labeling_model
 from handcap.layouts import load_layout
+from handcap.solve import calibrate_attachment
+from handcap.solve.relabel import check_labels
 from handcap.steps.step import Step
 
 
 def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hypotheses: int = 5, lag: int = 0,
-          offline: bool = False, seed: int = 0, objects=None, units: str | None = None) -> Step:
+          offline: bool = False, seed: int = 0, objects=None, units: str | None = None,
+          hand_check: bool = True) -> Step:
     """Label the unlabeled points of a take (see :func:`handcap.labeling.label_take`) and write the labeled markers.
 
     Parameters
@@ -38,6 +43,9 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
         Rigid objects in the stream: each the comma-separated names (or a pattern) of its markers in ``train[0]``.
     units : {'mm', 'cm', 'm'} or None
         Unit of the input's and the training takes' coordinates, overriding what the files say.
+    hand_check : bool
+        With ``offline`` and one hand's layout: check the labels against the hand solved from them
+        (:func:`handcap.solve.relabel.check_labels`, its attachment calibrated on the labelled take).
     """
     train = list(train)
     check_not_input(out, path, *train)
@@ -63,12 +71,50 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
             raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
         options["objects"] = objects_from_take(read_markers(train[0]), objects)
     result = label_take(points, models[0] if len(models) == 1 else models, offline=offline, method=method, **options)
-    write_markers(result.markers, out)
+    labelled, lines = result.markers, (f"{out}: {result.summary()}",)
+    if offline and hand_check and method != "nearest" and len(marker_layouts) == 1:
+        labelled, line = checked_by_hand(labelled, points, marker_layouts[0])
+        lines += (line,)
+    write_markers(labelled, out)
     written = (str(out),)
     if model and not reuse:
         models[0].save(model)
         written += (str(model),)
-    return Step((f"{out}: {result.summary()}",), result.warnings, written, result)
+    return Step(lines, result.warnings, written, result)
+
+
+def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSequence, str]:
+    """A labelled take's hand markers checked against the hand solved from them.
+
+    The attachment is calibrated on the take itself (see :func:`handcap.solve.relabel.check_labels`); markers
+    of other layouts (objects) are left as they are.
+
+    Parameters
+    ----------
+    labelled : MarkerSequence
+        The labeler's output, metres.
+    points : PointCloudSequence or MarkerSequence
+        The take's unlabelled points, metres.
+    layout : MarkerLayout
+        The hand's layout.
+
+    Returns
+    -------
+    markers : MarkerSequence
+        The labels after the check.
+    line : str
+        What changed, or why nothing was checked.
+    """
+    try:
+        with warnings.catch_warnings():  # the calibration serves the check only: its own figures are no result
+            warnings.simplefilter("ignore", HandcapWarning)
+            attachment = calibrate_attachment(labelled.select(layout.names), layout).attachment
+            check = check_labels(labelled, points, attachment, rigid=layout.rigid)
+    except HandcapError as error:
+        return labelled, f"labels not checked against the solved hand: {error}"
+    positions = labelled.positions.copy()
+    positions[:, [labelled.index(n) for n in check.markers.names]] = check.markers.positions
+    return MarkerSequence(positions, labelled.names, labelled.rate, warnings=labelled.warnings), check.summary()
 
 
 def score_labels(labeled, truth, *, out=None, units: str | None = None) -> Step:
