@@ -74,3 +74,31 @@ def test_labels_swapped_between_two_fingertips_are_removed(turned):
     after = score_labels(check.markers, truth)
     assert after.erroneous.sum() == 0 and after.false_marker.sum() == 0
     assert check.removed.sum() < 2 * seen.sum() + 10  # the true labels elsewhere stay
+
+
+def test_labels_that_fit_no_hand_are_warnings(turned):
+    # The fingers' labels rotated among the fingers (each finger's given to the next): in bursts of 6 frames the
+    # check removes them and says that many labels did not fit; over a long stretch it cannot judge them and says
+    # so; in every frame it checks nothing and says why. Each warning is stored with the labels.
+    layout, _, unlabelled, truth = turned
+    fingers = slice(3, 19)  # index, middle, ring and pinky: 4 markers each
+
+    def rotated(frames):
+        positions = truth.positions.copy()
+        positions[frames, fingers] = np.roll(positions[frames, fingers], 4, axis=1)
+        return truth.__class__(positions, truth.names, truth.rate)
+
+    bursts = np.flatnonzero(np.arange(truth.n_frames) % 40 < 6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        attachment = calibrate_attachment(truth, layout).attachment
+        checks = [check_labels(rotated(frames), unlabelled, attachment, rigid=layout.rigid)
+                  for frames in (bursts, slice(0, 330), slice(None))]
+    burst, stretch, everywhere = checks
+    assert len(burst.warnings) == 1 and "removed" in burst.warnings[0]
+    assert score_labels(burst.markers, truth).erroneous.sum() < 0.1 * score_labels(rotated(bursts),
+                                                                                  truth).erroneous.sum()
+    assert any("not checked" in w for w in stretch.warnings) and stretch.judged[:300].sum() < 30
+    assert everywhere.removed.sum() == 0 and "explains" in everywhere.warnings[0]
+    for check in checks:
+        assert set(check.warnings) <= set(check.markers.warnings)

@@ -33,13 +33,19 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.motion import HandMotion
 from handcap.solve.motion import solve_hand
 
 #: Least share of frames the solve must explain for the check to judge anything.
 MIN_EXPLAINED = 0.5
+#: Share of the labels removed above which the labels are called into doubt (a warning): on synthetic takes of
+#: another day 0.4-0.9 % go, on another subject's (wrongly labelled) take 10 %.
+REMOVED_WARNING = 0.02
+#: Share of the frames left unjudged (the solve explains neither them nor frames near them) above which a warning
+#: says their labels went unchecked.
+UNJUDGED_WARNING = 0.05
 
 
 @dataclass(frozen=True)
@@ -58,6 +64,9 @@ class LabelCheck:
         Frames judged: explained, or carried over from explained frames around them.
     motion : HandMotion
         The solve of the labels before the check.
+    warnings : tuple of str
+        The solve explains too few frames to check any, leaves many unchecked, or the check removed many
+        labels.
     """
 
     markers: MarkerSequence
@@ -66,6 +75,7 @@ class LabelCheck:
     explained: np.ndarray
     judged: np.ndarray
     motion: HandMotion
+    warnings: tuple = ()
 
     def summary(self) -> str:
         """One line: labels removed and added, frames explained."""
@@ -126,7 +136,10 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
     n = len(explained)
     removed, added = np.zeros_like(seen), np.zeros_like(seen)
     if explained.mean() < MIN_EXPLAINED:
-        return LabelCheck(labelled, removed, added, explained, explained.copy(), motion)
+        line = warn(f"the hand solved from the labels explains {100 * explained.mean():.0f} % of the frames (median "
+                    f"residual under {1000 * frame_ok:g} mm; plausible >= {100 * MIN_EXPLAINED:.0f} %): labels not "
+                    f"checked; check the labels and the layout")
+        return LabelCheck(labelled.with_warnings(line), removed, added, explained, explained.copy(), motion, (line,))
     judged = explained.copy()
     good = np.flatnonzero(explained)
     after = np.searchsorted(good, np.arange(n))
@@ -172,5 +185,15 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
         marker = missing[near][rows[ok]]
         pos[t, marker] = free[cols[ok]]
         added[t, marker] = True
-    out = MarkerSequence(pos, tuple(names), labelled.rate, warnings=tuple(labelled.warnings))
-    return LabelCheck(out, removed, added, explained, judged, motion)
+    lines = ()
+    if (~judged).mean() > UNJUDGED_WARNING:
+        lines += (warn(f"the hand solved from the labels does not explain {100 * (~judged).mean():.0f} % of the "
+                       f"frames (median residual over {1000 * frame_ok:g} mm, none explained within {carry} frames; "
+                       f"plausible <= {100 * UNJUDGED_WARNING:g} %): their labels were not checked and may be wrong"),)
+    if removed.sum() > REMOVED_WARNING * max(seen.sum(), 1):
+        lines += (warn(f"the check against the solved hand removed {int(removed.sum())} labels ("
+                      f"{100 * removed.sum() / seen.sum():.1f} % of them; plausible < {100 * REMOVED_WARNING:g} %): "
+                      f"many labels did not fit the hand (another subject or marker placement? train on a take of "
+                      f"it)"),)
+    out = MarkerSequence(pos, tuple(names), labelled.rate, warnings=(*labelled.warnings, *lines))
+    return LabelCheck(out, removed, added, explained, judged, motion, lines)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import warnings
 
-from handcap.core.errors import HandcapError, HandcapWarning
+from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings
 from handcap.core.markers import MarkerSequence
 from handcap.io import atomic_output, check_not_input, check_output, read_markers, read_points, write_markers
 from handcap.labeling import LabelingModel, label_take, objects_from_take, score_labels as score
@@ -71,16 +71,16 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
             raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
         options["objects"] = objects_from_take(read_markers(train[0]), objects)
     result = label_take(points, models[0] if len(models) == 1 else models, offline=offline, method=method, **options)
-    labelled, lines = result.markers, (f"{out}: {result.summary()}",)
+    labelled, lines, found = result.markers, (f"{out}: {result.summary()}",), result.warnings
     if offline and hand_check and method != "nearest" and len(marker_layouts) == 1:
         labelled, line = checked_by_hand(labelled, points, marker_layouts[0])
-        lines += (line,)
+        lines, found = lines + (line,), merge_warnings(found, labelled.warnings)
     write_markers(labelled, out)
     written = (str(out),)
     if model and not reuse:
         models[0].save(model)
         written += (str(model),)
-    return Step(lines, result.warnings, written, result)
+    return Step(lines, found, written, result)
 
 
 def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSequence, str]:
@@ -101,7 +101,7 @@ def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSeq
     Returns
     -------
     markers : MarkerSequence
-        The labels after the check.
+        The labels after the check, with its warnings (many labels removed, too few frames explained).
     line : str
         What changed, or why nothing was checked.
     """
