@@ -366,11 +366,9 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         system = hess + (damping[idx, None] * np.maximum(diag, 1e-9))[:, :, None] * eye
         step = -np.linalg.solve(system, grad[..., None])[..., 0]
         trial = Poses(sub.transl + step[:, :3], matrix_from_axis_angle(step[:, 3:6]) @ sub.rot, sub.phi + step[:, 6:])
-        if whole:
-            new_cost, new_parts = frame_costs(model, trial, target, observed, held, priors, scale, free)
-        else:
-            new_cost, new_parts = frame_costs(model, trial, target[idx], observed[idx], held[idx], priors, scale,
-                                              free[idx])
+        sel = slice(None) if whole else idx  # a slice takes views, the indices copies
+        new_cost, new_parts = frame_costs(model, trial, target[sel], observed[sel], held[sel], priors, scale,
+                                          free[sel])
         better = new_cost <= cost[idx]
         good = idx[better]
         gain = (cost[idx] - new_cost) / np.maximum(cost[idx], 1e-300)

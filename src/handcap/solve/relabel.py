@@ -127,7 +127,7 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
     pos = labelled.positions.copy()
     model = motion.marker_fit.copy()
     seen = np.isfinite(pos[..., 0])
-    residual = np.where(seen, np.linalg.norm(np.nan_to_num(pos) - model, axis=-1), np.nan)
+    residual = motion.marker_residuals.copy()  # NaN where no label
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # frames or markers with no label
         frame_median = np.nanmedian(residual, axis=1)
