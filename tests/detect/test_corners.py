@@ -10,7 +10,46 @@ import torch
 from handcap import HandcapError
 from handcap.detect import corners
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners, find_corners, targets
+from handcap.detect.samples import CornerBatches
 from handcap.detect.train import crops, load_corner_net, save_net, score_corners, train_corners
+
+
+def _reference_targets(shape, corners, sigma=0.8):
+    """The targets corner by corner: each corner's Gaussian skirt, its own cell set to 1, and in every cell
+    within one cell of a corner the offset of the nearest such corner (the first on a tie)."""
+    h, w = shape[0] // 2, shape[1] // 2
+    heat, offset = np.zeros((h, w), np.float32), np.zeros((2, h, w), np.float32)
+    best = np.full((h, w), np.inf)
+    for x, y in corners:
+        cx, cy = (x - 0.5) / 2, (y - 0.5) / 2
+        for i in range(int(np.floor(cy)) - 2, int(np.floor(cy)) + 4):
+            for j in range(int(np.floor(cx)) - 2, int(np.floor(cx)) + 4):
+                if 0 <= i < h and 0 <= j < w:
+                    d2 = (cx - j) ** 2 + (cy - i) ** 2
+                    heat[i, j] = max(heat[i, j], np.float32(np.exp(-d2 / (2 * sigma ** 2))))
+                    if d2 <= 1.0 + 1e-9 and d2 < best[i, j]:
+                        best[i, j], offset[:, i, j] = d2, (2 * (cx - j), 2 * (cy - i))
+        i, j = int(np.rint(cy)), int(np.rint(cx))
+        if 0 <= i < h and 0 <= j < w:
+            heat[i, j] = 1.0
+    for x, y in corners:  # a later corner's skirt never lowers an earlier corner's peak
+        i, j = int(np.rint((y - 0.5) / 2)), int(np.rint((x - 0.5) / 2))
+        if 0 <= i < h and 0 <= j < w:
+            heat[i, j] = 1.0
+    return heat, offset, np.isfinite(best)
+
+
+def test_targets_match_a_corner_by_corner_reference():
+    rng = np.random.default_rng(5)
+    for k in range(150):
+        pts = rng.uniform(-4, 100, (int(rng.integers(0, 30)), 2))
+        if len(pts) > 2:
+            pts[1] = pts[0] + rng.normal(0, 0.4, 2)  # close pairs compete for cells
+            pts[2] = np.round(pts[0] * 2) / 2 if k % 2 else pts[0]  # equal distances: the first corner wins
+        got, want = targets((96, 96), pts), _reference_targets((96, 96), pts)
+        np.testing.assert_allclose(got[0], want[0], atol=1e-6)
+        np.testing.assert_allclose(got[1], want[1], atol=1e-6)
+        np.testing.assert_array_equal(got[2], want[2])
 
 
 def test_targets_decode_back_to_the_corners():
@@ -40,6 +79,31 @@ def test_the_network_is_light_and_tiles_give_the_same_corners():
     tiled = detect_corners(net, image, threshold=0.0, tile=128, halo=64)
     assert len(one[0]) > 100
     np.testing.assert_allclose(np.sort(one[0], axis=0), np.sort(tiled[0], axis=0), atol=1e-4)
+
+
+def test_a_wider_network_keeps_its_reach_inside_the_tile_halo():
+    torch.manual_seed(1)
+    net = CornerNet(width=8, stem=8, dilations=(1, 2, 4, 8))
+    assert net.reach() == 33 and CornerNet().reach() == 17
+    image = (np.random.default_rng(2).random((260, 300)) * 255).astype(np.uint8)
+    one = detect_corners(net, image, threshold=0.0, tile=1024)
+    tiled = detect_corners(net, image, threshold=0.0, tile=128)  # the default halo follows the reach
+    np.testing.assert_allclose(np.sort(one[0], axis=0), np.sort(tiled[0], axis=0), atol=1e-4)
+
+
+def test_crops_drawn_in_worker_processes_repeat_for_a_seed(scenes):
+    def draw(seed, count=3):
+        loader = torch.utils.data.DataLoader(CornerBatches(scenes, 4, seed), batch_size=None, num_workers=2)
+        stream = iter(loader)
+        return [next(stream) for _ in range(count)]
+
+    first, again, other = draw(7), draw(7), draw(8)
+    images, heat, offset, near = first[0]
+    assert images.shape == (4, 1, 96, 96) and heat.shape == near.shape == (4, 48, 48)
+    assert offset.shape == (4, 2, 48, 48) and near.dtype == torch.bool
+    assert all(torch.equal(a, b) for x, y in zip(first, again) for a, b in zip(x, y))
+    assert not torch.equal(first[0][0], first[1][0])  # the two workers draw different crops
+    assert not torch.equal(first[0][0], other[0][0])
 
 
 def test_the_network_runs_only_where_there_is_contrast(scenes, monkeypatch):

@@ -83,6 +83,10 @@ class CornerNet(nn.Module):
         mac += len(self.dilations) * 9 * self.width * self.width / 4 + 3 * self.width / 4
         return 2.0 * mac
 
+    def reach(self) -> int:
+        """How far an output cell sees into the input around it, pixels (half the receptive field)."""
+        return 1 + 2 + 2 * sum(self.dilations)
+
     def config(self) -> dict:
         """The constructor's arguments."""
         return {"width": self.width, "stem": self.stem_width, "dilations": list(self.dilations)}
@@ -133,26 +137,31 @@ def targets(shape, corners, sigma: float = 0.8):
     heat = np.zeros((h, w), np.float32)
     offset = np.zeros((2, h, w), np.float32)
     near = np.zeros((h, w), bool)
-    best = np.full((h, w), np.inf, np.float32)
-    for x, y in np.asarray(corners, dtype=np.float64).reshape(-1, 2):
-        cx, cy = (x - 0.5) / 2, (y - 0.5) / 2  # in cell units, cell centres at integers
-        j0, i0 = int(np.floor(cx)) - 2, int(np.floor(cy)) - 2
-        jj, ii = np.arange(j0, j0 + 6), np.arange(i0, i0 + 6)
-        jj, ii = jj[(jj >= 0) & (jj < w)], ii[(ii >= 0) & (ii < h)]
-        if len(jj) == 0 or len(ii) == 0:
-            continue
-        dx, dy = cx - jj[None, :], cy - ii[:, None]
-        d2 = dx ** 2 + dy ** 2
-        block = np.s_[ii[0]:ii[-1] + 1, jj[0]:jj[-1] + 1]
-        heat[block] = np.maximum(heat[block], np.exp(-d2 / (2 * sigma ** 2)))
-        i, j = int(np.rint(cy)), int(np.rint(cx))
-        if 0 <= i < h and 0 <= j < w:
-            heat[i, j] = 1.0  # the corner's own cell is the peak (the focal loss's positive)
-        closer = (d2 < best[block]) & (d2 <= 1.0 + 1e-9)
-        best[block] = np.where(closer, d2, best[block])
-        offset[0][block] = np.where(closer, 2 * dx, offset[0][block])
-        offset[1][block] = np.where(closer, 2 * dy, offset[1][block])
-        near[block] |= closer
+    xy = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    if len(xy) == 0:
+        return heat, offset, near
+    cx, cy = (xy[:, 0] - 0.5) / 2, (xy[:, 1] - 0.5) / 2  # in cell units, cell centres at integers
+    # Every corner's 6 x 6 cells around it (K, 6, 6), those inside the map kept.
+    ii = (np.floor(cy).astype(int) - 2)[:, None, None] + np.arange(6)[None, :, None]
+    jj = (np.floor(cx).astype(int) - 2)[:, None, None] + np.arange(6)[None, None, :]
+    ii, jj = np.broadcast_arrays(ii, jj)
+    dx, dy = cx[:, None, None] - jj, cy[:, None, None] - ii
+    d2 = dx ** 2 + dy ** 2
+    inside = (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
+    cell = (ii * w + jj)[inside]
+    np.maximum.at(heat.reshape(-1), cell, np.exp(-d2 / (2 * sigma ** 2))[inside].astype(np.float32))
+    pi, pj = np.rint(cy).astype(int), np.rint(cx).astype(int)
+    own = (pi >= 0) & (pi < h) & (pj >= 0) & (pj < w)
+    heat[pi[own], pj[own]] = 1.0  # the corner's own cell is the peak (the focal loss's positive)
+    # The offset of the nearest corner within one cell (the first corner on a tie).
+    close = inside & (d2 <= 1.0 + 1e-9)
+    which = np.broadcast_to(np.arange(len(xy))[:, None, None], d2.shape)[close]
+    cell, dist = (ii * w + jj)[close], d2[close]
+    order = np.lexsort((which, dist, cell))
+    first = order[np.diff(cell[order], prepend=-1) != 0]
+    offset[0].reshape(-1)[cell[first]] = 2 * dx[close][first]
+    offset[1].reshape(-1)[cell[first]] = 2 * dy[close][first]
+    near.reshape(-1)[cell[first]] = True
     return heat, offset, near
 
 
@@ -210,7 +219,7 @@ def find_corners(heatmap: np.ndarray, offsets: np.ndarray, threshold: float = 0.
 
 
 def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3, tile: int = 512,
-                   halo: int = 32) -> tuple[np.ndarray, np.ndarray]:
+                   halo: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run the corner network over a whole image, in tiles with a halo, and return its corners.
 
     Parameters
@@ -222,8 +231,9 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     tile : int
         Tile side, pixels (even); memory grows with its square (512 is the fastest on a laptop CPU: the
         tile stays in cache).
-    halo : int
-        Context kept around each tile and dropped from its output (more than half the receptive field).
+    halo : int, optional
+        Context kept around each tile and dropped from its output, pixels: more than the network's
+        :meth:`~CornerNet.reach` (default: 32, or the reach rounded up to 16 where it is more).
 
     Returns
     -------
@@ -233,6 +243,8 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     """
     if image.ndim != 2 or min(image.shape) < 8:
         raise HandcapError(f"a grey image of at least 8 x 8 pixels is needed, got shape {image.shape}")
+    if halo is None:
+        halo = max(32, -(-net.reach() // 16) * 16)
     img = normalise(image)
     h, w = img.shape
     ph, pw = (-h) % 2, (-w) % 2

@@ -12,12 +12,11 @@ are visible.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from handcap.core.cameras import Camera
 from handcap.core.errors import HandcapError
+from handcap.detect.scenefile import Scene
 from handcap.patterns.glyphs import GlyphLayout, load_font
 from handcap.patterns.session import session_pattern
 from handcap.hand import OpenHand
@@ -29,36 +28,6 @@ from handcap.synth.filming import scaled_camera
 from handcap.synth.images import ImageStyle, PatchRenderer
 from handcap.synth.pages import PageLook, PagePhotographer
 from handcap.synth.textures import build_atlas
-
-
-@dataclass(frozen=True)
-class Scene:
-    """One rendered image and its truth.
-
-    Attributes
-    ----------
-    image : ndarray (H, W) uint8
-    corners : ndarray (K, 2)
-        Visible corners, pixels.
-    corner_names : ndarray (K,) str
-    blocks : ndarray (B, 4, 2)
-        Visible tags' corners in reading order, pixels.
-    block_text : ndarray (B,) str
-    alphabet : str
-        Glyphs of the printed tags.
-    projected : dict, optional
-        Name -> pixels of every printed corner, hidden ones included (where the camera would see it):
-        a detection named so is right when it lies there, even if the truth calls it hidden (a
-        corner seen at a grazing angle, or at an occluder's edge).
-    """
-
-    image: np.ndarray
-    corners: np.ndarray
-    corner_names: np.ndarray
-    blocks: np.ndarray
-    block_text: np.ndarray
-    alphabet: str
-    projected: dict | None = None
 
 
 class SceneMaker:

@@ -18,100 +18,64 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import copy
 import sys
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
+from torch.utils.data import DataLoader
 
 from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
-from handcap.detect.blocks import candidate_quads
-from handcap.detect.corners import CornerNet, corner_loss, normalise, targets
+from handcap.detect.corners import CornerNet, corner_loss
 from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
                                        score_corners)
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
-from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, reader_loss
+from handcap.detect.reader import GLYPHS, BlockReader, reader_loss
 from handcap.detect.refine import CornerRefiner, false_candidates, refiner_loss, refiner_samples
+from handcap.detect.samples import CornerBatches, corner_batch, crops, non_blocks, reader_samples
+from handcap.detect.scenefile import load_scenes, save_scenes
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
 
-CROP = 96
 __all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "evaluate_reader", "load_corner_net",
            "load_net", "load_reader", "main", "reader_samples", "reader_scenes", "save_net",
            "score_corners", "train_corners", "train_reader", "train_refiner"]
 
 
-def crops(scenes, count: int, rng, size: int = CROP):
-    """Random training crops of the scenes: images (count, size, size) and their corners.
-
-    Parameters
-    ----------
-    scenes : sequence of Scene
-    count : int
-    rng : numpy.random.Generator
-    size : int
-        Crop side (even).
-
-    Returns
-    -------
-    images : ndarray (count, size, size) float32
-        Normalised (:func:`handcap.detect.corners.normalise`).
-    corners : list of ndarray (K, 2)
-        Pixels in each crop.
-    """
-    images, corners = np.zeros((count, size, size), np.float32), []
-    for k in range(count):
-        scene = scenes[int(rng.integers(len(scenes)))]
-        h, w = scene.image.shape
-        if len(scene.corners) and rng.random() < 0.8:
-            centre = scene.corners[int(rng.integers(len(scene.corners)))] + rng.uniform(-size / 3, size / 3, 2)
-        else:
-            centre = rng.uniform([0, 0], [w, h])
-        x0 = int(np.clip(centre[0] - size / 2, 0, max(w - size, 0))) // 2 * 2
-        y0 = int(np.clip(centre[1] - size / 2, 0, max(h - size, 0))) // 2 * 2
-        crop = np.zeros((size, size), np.uint8)
-        part = scene.image[y0:y0 + size, x0:x0 + size]
-        crop[:part.shape[0], :part.shape[1]] = part
-        if rng.random() < 0.3:
-            ok, code = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(40, 95))])
-            crop = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
-        images[k] = normalise(crop)
-        inside = scene.corners - [x0, y0]
-        keep = ((inside >= -0.5).all(axis=1) & (inside[:, 0] < part.shape[1] - 0.5)
-                & (inside[:, 1] < part.shape[0] - 0.5))
-        corners.append(inside[keep])
-    return images, corners
-
-
 @contextlib.contextmanager
-def _deterministic():
-    """torch's deterministic algorithms while training, the caller's setting restored afterwards."""
+def _deterministic(device: str = "cpu"):
+    """torch's deterministic algorithms while training, the caller's setting restored afterwards.
+
+    On a GPU an operation without a deterministic kernel warns instead of failing.
+    """
     before = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(True)
+    torch.use_deterministic_algorithms(True, warn_only=device != "cpu")
     try:
         yield
     finally:
         torch.use_deterministic_algorithms(before)
 
 
-def _fit(make_net, batch_loss, scenes, *, steps: int, seed: int, lr: float, label: str, progress: bool):
-    """The training loop both networks share: AdamW with cosine decay, deterministic for a seed.
+def _fit(make_net, batch_loss, scenes, *, steps: int, seed: int, lr: float, label: str, progress: bool,
+         device: str = "cpu"):
+    """The training loop the networks share: AdamW with cosine decay, deterministic for a seed.
 
     ``make_net()`` gives the network (after the seed is set, so its initial weights follow it) and
-    ``batch_loss(net, rng)`` the loss of one freshly drawn batch.
+    ``batch_loss(net, rng)`` the loss of one freshly drawn batch. The network trains on ``device``
+    and comes back on the CPU.
     """
     if not scenes:
         raise HandcapError("no scenes to train on")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    net = make_net()
+    net = make_net().to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=0.05 * lr)
     net.train()
-    with _deterministic():
+    with _deterministic(device):
         for step in range(steps):
             loss = batch_loss(net, rng)
             opt.zero_grad()
@@ -120,12 +84,12 @@ def _fit(make_net, batch_loss, scenes, *, steps: int, seed: int, lr: float, labe
             sched.step()
             if progress and (step % 100 == 0 or step == steps - 1):
                 print(f"{label} step {step:5d} loss {loss.item():.4f}", flush=True)
-    net.eval()
-    return net
+    return net.cpu().eval()
 
 
 def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, lr: float = 2e-3,
-                  net: CornerNet | None = None, progress: bool = False) -> CornerNet:
+                  net: CornerNet | None = None, progress: bool = False, device: str = "cpu",
+                  workers: int = 0, config: dict | None = None) -> CornerNet:
     """Train the corner network on crops of rendered scenes (deterministic for a seed).
 
     Parameters
@@ -142,19 +106,35 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
         Start from these weights (default: a new network).
     progress : bool
         Print the loss every 100 steps.
+    device : str
+        Where the network trains (``'cpu'``, ``'cuda'``).
+    workers : int
+        Processes drawing the crops (:class:`~handcap.detect.samples.CornerBatches`; 0: the training
+        process itself). The crops, and so the weights, depend on the seed and this number.
+    config : dict, optional
+        A new network's :class:`~handcap.detect.corners.CornerNet` arguments (made after the seed is set).
 
     Returns
     -------
     CornerNet
+        On the CPU.
     """
-    def loss(model, rng):
-        images, corners = crops(scenes, batch, rng)
-        made = [targets(images.shape[1:], c) for c in corners]
-        heat, offset, near = (torch.from_numpy(np.stack([m[k] for m in made])) for k in range(3))
-        return corner_loss(model(torch.from_numpy(images)[:, None]), heat, offset, near)
+    if workers > 0:
+        stream = iter(DataLoader(CornerBatches(scenes, batch, seed), batch_size=None, num_workers=workers,
+                                 prefetch_factor=8, persistent_workers=True))
 
-    return _fit(lambda: net or CornerNet(), loss, scenes, steps=steps, seed=seed, lr=lr, label="corners",
-                progress=progress)
+        def draw(rng):
+            return next(stream)
+    else:
+        def draw(rng):
+            return corner_batch(scenes, batch, rng)
+
+    def loss(model, rng):
+        images, heat, offset, near = (t.to(device, non_blocking=True) for t in draw(rng))
+        return corner_loss(model(images), heat, offset, near)
+
+    return _fit(lambda: net or CornerNet(**(config or {})), loss, scenes, steps=steps, seed=seed, lr=lr,
+                label="corners", progress=progress, device=device)
 
 
 def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: int = 256, seed: int = 0,
@@ -190,77 +170,6 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
                 progress=progress)
 
 
-def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None):
-    """Training views for the block reader: true blocks turned at random, and quads that are not blocks.
-
-    Parameters
-    ----------
-    scenes : sequence of Scene
-    count : int
-    rng : numpy.random.Generator
-    jitter : float
-        Corner noise, as a share of the block's side (detections are not exact).
-    negatives : list of ndarray (N, 4, 2), optional
-        Per scene, quads that are not blocks (default: made here, which is slow in a loop).
-
-    Returns
-    -------
-    views : ndarray (count, 32, 32) float32
-    first, second, turn : ndarray (count,) int
-        Classes of the three heads.
-    """
-    views = np.zeros((count, 32, 32), np.float32)
-    labels = np.zeros((3, count), np.int64)
-    negatives = [_negatives(scene) for scene in scenes] if negatives is None else negatives
-    for k in range(count):
-        pick = int(rng.integers(len(scenes)))
-        scene = scenes[pick]
-        if len(scene.blocks) and rng.random() < 0.7:
-            b = int(rng.integers(len(scene.blocks)))
-            reading = scene.blocks[b]
-            shift = int(rng.integers(4))
-            quad = np.roll(reading, -shift, axis=0)  # quad[j] = reading[(j + shift) % 4]
-            text = scene.block_text[b]
-            labels[:, k] = (GLYPHS.index(text[0]), GLYPHS.index(text[1]), (-shift) % 4)
-        else:
-            pool = negatives[pick]
-            if len(pool) and rng.random() < 0.8:
-                quad = pool[int(rng.integers(len(pool)))]
-            else:  # a random small quadrilateral anywhere
-                centre = rng.uniform([0, 0], scene.image.shape[::-1])
-                side = rng.uniform(5, 30)
-                quad = centre + side * (np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-                                        + rng.normal(0, 0.1, (4, 2)))
-            labels[:, k] = (NONE, NONE, 4)
-        side = np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).mean()
-        noisy = quad + rng.normal(0, jitter * side, quad.shape)
-        views[k] = block_views(_photometric(scene.image, noisy, rng), noisy[None])[0]
-    return views, labels[0], labels[1], labels[2]
-
-
-def _negatives(scene) -> np.ndarray:
-    """Quads of the scene's true corners that are not its white squares (black squares, odd shapes)."""
-    quads = candidate_quads(scene.corners)
-    truth = {frozenset(map(tuple, np.round(b, 4))) for b in scene.blocks}
-    pts = scene.corners[quads] if len(quads) else np.zeros((0, 4, 2))
-    return np.array([q for q in pts if frozenset(map(tuple, np.round(q, 4))) not in truth]).reshape(-1, 4, 2)
-
-
-def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:
-    """Sometimes JPEG artefacts around the quad (a phone photo), else the image as it is."""
-    if rng.random() >= 0.3:
-        return image
-    lo = np.clip(np.floor(quad.min(axis=0)).astype(int) - 24, 0, None) // 8 * 8
-    hi = np.clip(np.ceil(quad.max(axis=0)).astype(int) + 24, 0, image.shape[::-1])
-    out = image.copy()
-    part = np.ascontiguousarray(image[lo[1]:hi[1], lo[0]:hi[0]])
-    if part.size == 0:
-        return image
-    ok, code = cv2.imencode(".jpg", part, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 95))])
-    out[lo[1]:hi[1], lo[0]:hi[0]] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
-    return out
-
-
 def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, lr: float = 2e-3,
                  net: BlockReader | None = None, progress: bool = False) -> BlockReader:
     """Train the block reader on views of rendered scenes (deterministic for a seed).
@@ -281,7 +190,7 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
     -------
     BlockReader
     """
-    negatives = [_negatives(scene) for scene in scenes]
+    negatives = [non_blocks(scene) for scene in scenes]
 
     def loss(model, rng):
         views, first, second, turn = reader_samples(scenes, batch, rng, negatives=negatives)
@@ -358,33 +267,47 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s)")
     p.add_argument("--out", default=str(WEIGHTS), help="folder for corners.npz, refiner.npz and reader.npz "
                                                        "(default: the shipped weights)")
+    p.add_argument("--scenes-file", help="the corner network's and refiner's scenes: read from this .npz when it "
+                                         "exists, rendered and written there when not (train where nothing renders)")
+    p.add_argument("--device", default="cpu", help="where the corner network trains: cpu or cuda (default cpu)")
+    p.add_argument("--workers", type=int, default=0, help="processes drawing the corner network's crops "
+                                                          "(default 0: the training process)")
+    p.add_argument("--batch", type=int, help="crops per step of the corner network (default 32)")
+    p.add_argument("--lr", type=float, default=2e-3, help="learning rate (default %(default)s)")
+    p.add_argument("--width", type=int, default=24, help="a new corner network's channels at half resolution")
+    p.add_argument("--stem", type=int, default=16, help="a new corner network's channels at full resolution")
+    p.add_argument("--dilations", default="1,2,4", help="a new corner network's dilations (default %(default)s)")
+    p.add_argument("--seconds", type=float, help="time 200 steps first and train only as many as fit this long")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
-    command = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
-               f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     if a.init and a.what == "all":
         raise HandcapError("--init starts one network: name it with --what")
     init = load_net(a.init, {"corners": "CornerNet", "refiner": "CornerRefiner", "reader": "BlockReader"}[a.what]) \
         if a.init else None
     if a.what in ("corners", "all"):
-        scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
-        tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
-        print(f"rendered {len(scenes)} + {len(tests)} scenes in {time.time() - started:.0f} s", flush=True)
-        net = train_corners(scenes, steps=a.steps, seed=a.seed, net=init, progress=True)
+        scenes, tests = _scenes(a)
+        print(f"{len(scenes)} + {len(tests)} scenes ready in {time.time() - started:.0f} s", flush=True)
+        shape = {"width": a.width, "stem": a.stem, "dilations": [int(d) for d in a.dilations.split(",")]}
+        settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 32, "device": a.device, "workers": a.workers}
+        if a.seconds:
+            probe = time.time()
+            train_corners(scenes, steps=200, net=copy.deepcopy(init), config=shape, **settings)
+            a.steps = min(a.steps, int(200 * a.seconds / (time.time() - probe)))
+            print(f"corners: {a.steps} steps fit in {a.seconds:.0f} s", flush=True)
+        net = train_corners(scenes, steps=a.steps, net=init, config=shape, progress=True, **settings)
         score = evaluate_corners(net, tests)
         print(score.summary(), flush=True)
-        save_net(net, out / "corners.npz", {"source": command, "score": score.summary()})
+        save_net(net, out / "corners.npz", {"source": _command(a), "score": score.summary()})
     if a.what in ("refiner", "all"):
         corner_net = load_corner_net(out / "corners.npz" if (out / "corners.npz").is_file() else None)
-        scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
-        tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
+        scenes, tests = _scenes(a)
         net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, net=init, progress=True)
         score = evaluate_corners(corner_net, tests, refiner=net)
         print(score.summary(), flush=True)
-        save_net(net, out / "refiner.npz", {"source": command, "score": score.summary()})
+        save_net(net, out / "refiner.npz", {"source": _command(a), "score": score.summary()})
     if a.what in ("reader", "all"):
         fonts = [None] + [f for f in FONTS if Path(f).is_file()]
         held_out, trained = fonts[-1:], fonts[:-1] if len(fonts) > 1 else fonts
@@ -401,9 +324,35 @@ def main(argv=None) -> int:
                  for gate in (net.min_score,)}
         line = reader_line(score, held_out[0])
         print(line, flush=True)
-        save_net(net, out / "reader.npz", {"source": command, "score": line})
+        save_net(net, out / "reader.npz", {"source": _command(a), "score": line})
     print(f"wrote {out} ({time.time() - started:.0f} s in all)")
     return 0
+
+
+def _command(a) -> str:
+    """The command that made the weights, as stored with them (options at their defaults left out)."""
+    words = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
+             f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
+    for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
+                            ("stem", 16), ("dilations", "1,2,4")):
+        if getattr(a, option) != default:
+            words += f" --{option} {getattr(a, option)}"
+    return words
+
+
+def _scenes(a) -> tuple[list, list]:
+    """The corner network's training and test scenes: rendered, or read from ``--scenes-file``."""
+    made = {"scenes": a.scenes, "test_scenes": a.test_scenes, "seed": a.seed, "pages": a.pages}
+    if a.scenes_file and Path(a.scenes_file).is_file():
+        groups, info = load_scenes(a.scenes_file)
+        if {k: info.get(k) for k in made} != made or set(groups) != {"train", "test"}:
+            raise HandcapError(f"{a.scenes_file}: holds scenes made with {info}, not {made}")
+        return groups["train"], groups["test"]
+    scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
+    tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
+    if a.scenes_file:
+        save_scenes(a.scenes_file, {"train": scenes, "test": tests}, made)
+    return scenes, tests
 
 
 def corner_scenes(count: int, seed: int, *, pages: float = 0.0, fonts=(None,)) -> list:
@@ -439,4 +388,8 @@ def corner_scenes(count: int, seed: int, *, pages: float = 0.0, fonts=(None,)) -
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except HandcapError as err:
+        print(f"handcap: {err}", file=sys.stderr)
+        sys.exit(2)

@@ -1,0 +1,186 @@
+"""Training samples drawn from rendered scenes: crops for the corner network, block views for the reader.
+
+Each function draws from a numpy random generator only, so a stream of batches is
+fixed by its seed. :class:`CornerBatches` runs :func:`corner_batch` in worker
+processes (torch's DataLoader), each with its own seed, for training where the
+network is faster than one process can draw crops (a GPU).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import torch
+from torch.utils.data import IterableDataset
+
+from handcap.detect.blocks import candidate_quads
+from handcap.detect.corners import normalise, targets
+from handcap.detect.reader import GLYPHS, NONE, block_views
+
+#: Side of the corner network's training crops, pixels.
+CROP = 96
+
+
+def crops(scenes, count: int, rng, size: int = CROP):
+    """Random training crops of the scenes: images (count, size, size) and their corners.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+    rng : numpy.random.Generator
+    size : int
+        Crop side (even).
+
+    Returns
+    -------
+    images : ndarray (count, size, size) float32
+        Normalised (:func:`handcap.detect.corners.normalise`).
+    corners : list of ndarray (K, 2)
+        Pixels in each crop.
+    """
+    images, corners = np.zeros((count, size, size), np.float32), []
+    for k in range(count):
+        scene = scenes[int(rng.integers(len(scenes)))]
+        h, w = scene.image.shape
+        if len(scene.corners) and rng.random() < 0.8:
+            centre = scene.corners[int(rng.integers(len(scene.corners)))] + rng.uniform(-size / 3, size / 3, 2)
+        else:
+            centre = rng.uniform([0, 0], [w, h])
+        x0 = int(np.clip(centre[0] - size / 2, 0, max(w - size, 0))) // 2 * 2
+        y0 = int(np.clip(centre[1] - size / 2, 0, max(h - size, 0))) // 2 * 2
+        crop = np.zeros((size, size), np.uint8)
+        part = scene.image[y0:y0 + size, x0:x0 + size]
+        crop[:part.shape[0], :part.shape[1]] = part
+        if rng.random() < 0.3:
+            ok, code = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(40, 95))])
+            crop = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+        images[k] = normalise(crop)
+        inside = scene.corners - [x0, y0]
+        keep = ((inside >= -0.5).all(axis=1) & (inside[:, 0] < part.shape[1] - 0.5)
+                & (inside[:, 1] < part.shape[0] - 0.5))
+        corners.append(inside[keep])
+    return images, corners
+
+
+def corner_batch(scenes, count: int, rng, size: int = CROP):
+    """One training batch for the corner network: crops (:func:`crops`) and their targets.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+    rng : numpy.random.Generator
+    size : int
+
+    Returns
+    -------
+    images : Tensor (count, 1, size, size)
+    heat : Tensor (count, size / 2, size / 2)
+    offset : Tensor (count, 2, size / 2, size / 2)
+    near : Tensor (count, size / 2, size / 2) bool
+        As :func:`handcap.detect.corners.targets` gives them.
+    """
+    images, corners = crops(scenes, count, rng, size)
+    made = [targets(images.shape[1:], c) for c in corners]
+    heat, offset, near = (torch.from_numpy(np.stack([m[k] for m in made])) for k in range(3))
+    return torch.from_numpy(images)[:, None], heat, offset, near
+
+
+class CornerBatches(IterableDataset):
+    """An endless stream of :func:`corner_batch` batches; each DataLoader worker draws with seed ``(seed, id)``.
+
+    With a fixed number of workers the DataLoader takes their batches in turn, so the stream is fixed by
+    the seed and the worker count.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+        Crops per batch.
+    seed : int
+    """
+
+    def __init__(self, scenes, count: int, seed: int):
+        super().__init__()
+        self.scenes, self.count, self.seed = scenes, count, seed
+
+    def __iter__(self):
+        """Batches, forever."""
+        worker = torch.utils.data.get_worker_info()
+        rng = np.random.default_rng([self.seed, 0 if worker is None else worker.id])
+        while True:
+            yield corner_batch(self.scenes, self.count, rng)
+
+
+def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None):
+    """Training views for the block reader: true blocks turned at random, and quads that are not blocks.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+    rng : numpy.random.Generator
+    jitter : float
+        Corner noise, as a share of the block's side (detections are not exact).
+    negatives : list of ndarray (N, 4, 2), optional
+        Per scene, quads that are not blocks (default: made here, which is slow in a loop).
+
+    Returns
+    -------
+    views : ndarray (count, 32, 32) float32
+    first, second, turn : ndarray (count,) int
+        Classes of the three heads.
+    """
+    views = np.zeros((count, 32, 32), np.float32)
+    labels = np.zeros((3, count), np.int64)
+    negatives = [non_blocks(scene) for scene in scenes] if negatives is None else negatives
+    for k in range(count):
+        pick = int(rng.integers(len(scenes)))
+        scene = scenes[pick]
+        if len(scene.blocks) and rng.random() < 0.7:
+            b = int(rng.integers(len(scene.blocks)))
+            reading = scene.blocks[b]
+            shift = int(rng.integers(4))
+            quad = np.roll(reading, -shift, axis=0)  # quad[j] = reading[(j + shift) % 4]
+            text = scene.block_text[b]
+            labels[:, k] = (GLYPHS.index(text[0]), GLYPHS.index(text[1]), (-shift) % 4)
+        else:
+            pool = negatives[pick]
+            if len(pool) and rng.random() < 0.8:
+                quad = pool[int(rng.integers(len(pool)))]
+            else:  # a random small quadrilateral anywhere
+                centre = rng.uniform([0, 0], scene.image.shape[::-1])
+                side = rng.uniform(5, 30)
+                quad = centre + side * (np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+                                        + rng.normal(0, 0.1, (4, 2)))
+            labels[:, k] = (NONE, NONE, 4)
+        side = np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).mean()
+        noisy = quad + rng.normal(0, jitter * side, quad.shape)
+        views[k] = block_views(_photometric(scene.image, noisy, rng), noisy[None])[0]
+    return views, labels[0], labels[1], labels[2]
+
+
+def non_blocks(scene) -> np.ndarray:
+    """Quads of the scene's true corners that are not its white squares (black squares, odd shapes)."""
+    quads = candidate_quads(scene.corners)
+    truth = {frozenset(map(tuple, np.round(b, 4))) for b in scene.blocks}
+    pts = scene.corners[quads] if len(quads) else np.zeros((0, 4, 2))
+    return np.array([q for q in pts if frozenset(map(tuple, np.round(q, 4))) not in truth]).reshape(-1, 4, 2)
+
+
+def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:
+    """Sometimes JPEG artefacts around the quad (a phone photo), else the image as it is."""
+    if rng.random() >= 0.3:
+        return image
+    lo = np.clip(np.floor(quad.min(axis=0)).astype(int) - 24, 0, None) // 8 * 8
+    hi = np.clip(np.ceil(quad.max(axis=0)).astype(int) + 24, 0, image.shape[::-1])
+    out = image.copy()
+    part = np.ascontiguousarray(image[lo[1]:hi[1], lo[0]:hi[0]])
+    if part.size == 0:
+        return image
+    ok, code = cv2.imencode(".jpg", part, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 95))])
+    out[lo[1]:hi[1], lo[0]:hi[0]] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+    return out
+
+

@@ -1,0 +1,196 @@
+"""Rendered training scenes and their truth, kept in one ``.npz`` so they are rendered once.
+
+Rendering is most of the cost of training the detector's networks on the CPU
+(about half a second per scene), and a machine that trains (a GPU machine, say)
+may have no OpenGL at all. ``python -m handcap.detect.train --scenes-file F``
+renders its scenes into ``F`` once and reads them from there afterwards. Images
+are stored as lossless PNG, so a scene read back is the scene rendered, bit for
+bit. This module imports no renderer.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+import zipfile
+
+import cv2
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One rendered image and its truth.
+
+    Attributes
+    ----------
+    image : ndarray (H, W) uint8
+    corners : ndarray (K, 2)
+        Visible corners, pixels.
+    corner_names : ndarray (K,) str
+    blocks : ndarray (B, 4, 2)
+        Visible tags' corners in reading order, pixels.
+    block_text : ndarray (B,) str
+    alphabet : str
+        Glyphs of the printed tags.
+    projected : dict, optional
+        Name -> pixels of every printed corner, hidden ones included (where the camera would see it):
+        a detection named so is right when it lies there, even if the truth calls it hidden (a
+        corner seen at a grazing angle, or at an occluder's edge).
+    """
+
+    image: np.ndarray
+    corners: np.ndarray
+    corner_names: np.ndarray
+    blocks: np.ndarray
+    block_text: np.ndarray
+    alphabet: str
+    projected: dict | None = None
+
+
+def _ragged(parts, dtype, shape=()):
+    """Parts concatenated along their first axis, and the offsets of each part's start (N + 1,).
+
+    Strings are stored as UTF-8 bytes (a quarter of numpy's unicode for ASCII).
+    """
+    sizes = [len(p) for p in parts]
+    if dtype is str:  # the longest string sets the width
+        parts = [np.char.encode(np.asarray(p, str).reshape(-1), "utf-8") for p in parts]
+        joined = np.concatenate(parts) if parts else np.zeros(0, "S1")
+    else:
+        joined = np.concatenate([np.asarray(p, dtype).reshape((-1,) + shape) for p in parts]) if parts \
+            else np.zeros((0,) + shape, dtype)
+    return joined, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
+
+def _text(array: np.ndarray) -> np.ndarray:
+    """Stored strings as numpy unicode."""
+    return np.char.decode(array, "utf-8") if array.dtype.kind == "S" else array
+
+
+def save_scenes(path, groups: dict, info: dict | None = None) -> None:
+    """Write groups of scenes (``{"train": [...], "test": [...]}``) to an ``.npz``, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    groups : dict of str -> list of Scene
+    info : dict, optional
+        What made them (seeds, counts): stored as JSON and returned by :func:`load_scenes`.
+    """
+    arrays = {"info": np.array(json.dumps(info or {})), "groups": np.array(sorted(groups))}
+    for name, scenes in groups.items():
+        pngs = [np.frombuffer(cv2.imencode(".png", s.image, [cv2.IMWRITE_PNG_COMPRESSION, 9])[1], np.uint8)
+                for s in scenes]
+        arrays[f"{name}.png"], arrays[f"{name}.png_at"] = _ragged(pngs, np.uint8)
+        arrays[f"{name}.corners"], arrays[f"{name}.corners_at"] = _ragged([s.corners for s in scenes], float, (2,))
+        arrays[f"{name}.corner_names"], _ = _ragged([s.corner_names for s in scenes], str)
+        arrays[f"{name}.blocks"], arrays[f"{name}.blocks_at"] = _ragged([s.blocks for s in scenes], float, (4, 2))
+        arrays[f"{name}.block_text"], _ = _ragged([s.block_text for s in scenes], str)
+        arrays[f"{name}.alphabet"] = np.array([s.alphabet for s in scenes], str)
+        projected = [s.projected or {} for s in scenes]
+        arrays[f"{name}.projected_names"], arrays[f"{name}.projected_at"] = _ragged(
+            [list(p) for p in projected], str)
+        arrays[f"{name}.projected_xy"], _ = _ragged([list(p.values()) for p in projected], float, (2,))
+    with atomic_output(path) as fh:
+        np.savez(fh, **arrays)
+
+
+def load_scenes(path) -> tuple[dict, dict]:
+    """The groups of scenes written by :func:`save_scenes`, and their ``info``.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    groups : dict of str -> list of Scene
+    info : dict
+
+    Raises
+    ------
+    HandcapError
+        A missing file, or one that holds no scenes.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise HandcapError(f"{path}: no scenes file there")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            info = json.loads(str(data["info"]))
+            groups = {str(name): _group(data, str(name)) for name in data["groups"]}
+    except (KeyError, ValueError, OSError, zipfile.BadZipFile, cv2.error) as err:
+        raise HandcapError(f"{path}: not a scenes file ({err})") from None
+    return groups, info
+
+
+def _group(data, name: str) -> list:
+    """One group's scenes from an open scenes file."""
+    png, png_at = data[f"{name}.png"], data[f"{name}.png_at"]
+    corners, corners_at = data[f"{name}.corners"], data[f"{name}.corners_at"]
+    corner_names = _text(data[f"{name}.corner_names"])
+    blocks, blocks_at = data[f"{name}.blocks"], data[f"{name}.blocks_at"]
+    block_text, alphabet = _text(data[f"{name}.block_text"]), data[f"{name}.alphabet"]
+    p_names, p_at, p_xy = (_text(data[f"{name}.projected_names"]), data[f"{name}.projected_at"],
+                           data[f"{name}.projected_xy"])
+    out = []
+    for k in range(len(png_at) - 1):
+        image = cv2.imdecode(png[png_at[k]:png_at[k + 1]], cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            raise ValueError(f"scene {k} of {name!r}: its image does not decode")
+        c, b, p = slice(corners_at[k], corners_at[k + 1]), slice(blocks_at[k], blocks_at[k + 1]), \
+            slice(p_at[k], p_at[k + 1])
+        out.append(Scene(image, corners[c], corner_names[c], blocks[b], block_text[b], str(alphabet[k]),
+                         dict(zip(p_names[p].tolist(), p_xy[p])) or None))
+    return out
+
+
+def join_scenes(paths, path) -> None:
+    """Join scenes files written in parts into one, each group's scenes in the order of the parts.
+
+    A scenes file too large to move in one piece (a transfer limit) is written as parts whose ``info``
+    holds ``part: [k, n]`` and the whole's ``info``; the joined file has the whole's ``info`` without it.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Every part, in order.
+    path : str or Path
+        The joined file (written atomically).
+
+    Raises
+    ------
+    HandcapError
+        A part missing, repeated, out of order, or of another whole.
+    """
+    arrays, whole = {}, None
+    for k, part in enumerate(paths):
+        try:
+            with np.load(part, allow_pickle=False) as data:
+                info = json.loads(str(data["info"]))
+                got = {key: data[key] for key in data.files}
+        except (KeyError, ValueError, OSError, zipfile.BadZipFile) as err:
+            raise HandcapError(f"{part}: not a scenes file ({err})") from None
+        rest = {key: v for key, v in info.items() if key != "part"}
+        if info.get("part") != [k + 1, len(paths)] or (whole is not None and rest != whole):
+            raise HandcapError(f"{part}: part {info.get('part')} of {rest}, expected part {[k + 1, len(paths)]}"
+                               f" of {whole or rest}")
+        whole = rest
+        for key, value in got.items():
+            if key in ("info", "groups"):
+                continue
+            if key not in arrays:
+                arrays[key] = value
+            elif key.endswith("_at"):
+                arrays[key] = np.concatenate([arrays[key], value[1:] + arrays[key][-1]])
+            else:
+                arrays[key] = np.concatenate([arrays[key], value])
+    groups = sorted({key.split(".")[0] for key in arrays})
+    arrays["info"], arrays["groups"] = np.array(json.dumps(whole)), np.array(groups)
+    with atomic_output(path) as fh:
+        np.savez(fh, **arrays)

@@ -1,0 +1,82 @@
+"""Scenes files: rendered scenes written once and read back bit for bit, joined from parts, bad files refused."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from handcap import HandcapError
+from handcap.detect.scenefile import Scene, join_scenes, load_scenes, save_scenes
+
+
+def _scene(rng, projected=True) -> Scene:
+    h, w = rng.integers(40, 90, 2) * 2
+    image = rng.integers(0, 256, (h, w)).astype(np.uint8)
+    k, b = int(rng.integers(0, 9)), int(rng.integers(0, 4))
+    names = np.array([f"R.p{i:02d}.c{rng.integers(99)}" for i in range(k)])
+    return Scene(image, rng.uniform(0, w, (k, 2)), names, rng.uniform(0, w, (b, 4, 2)),
+                 np.array(["AB", "C7", "Y0", "EΩ"][:b]), "0123456789ACEFHPUY",
+                 {n: rng.uniform(0, w, 2) for n in names} if projected and k else None)
+
+
+def _same(a: Scene, b: Scene) -> bool:
+    return (np.array_equal(a.image, b.image) and np.array_equal(a.corners, b.corners)
+            and list(a.corner_names) == list(b.corner_names) and np.array_equal(a.blocks, b.blocks)
+            and list(a.block_text) == list(b.block_text) and a.alphabet == b.alphabet
+            and (a.projected or {}).keys() == (b.projected or {}).keys()
+            and all(np.array_equal(a.projected[n], b.projected[n]) for n in a.projected or {}))
+
+
+def test_scenes_come_back_bit_for_bit_and_parts_join_into_the_whole(tmp_path):
+    rng = np.random.default_rng(4)
+    train, test = [_scene(rng, k % 2 == 0) for k in range(7)], [_scene(rng) for _ in range(2)]
+    info = {"scenes": 7, "seed": 3}
+    save_scenes(tmp_path / "all.npz", {"train": train, "test": test}, info)
+    groups, got = load_scenes(tmp_path / "all.npz")
+    assert got == info and len(groups["train"]) == 7 and len(groups["test"]) == 2
+    assert all(_same(a, b) for a, b in zip(train + test, groups["train"] + groups["test"]))
+    assert groups["train"][1].projected is None and groups["train"][0].projected is not None
+    # Three parts (the test group only in the last) join into the same scenes.
+    save_scenes(tmp_path / "p1.npz", {"train": train[:3]}, dict(info, part=[1, 3]))
+    save_scenes(tmp_path / "p2.npz", {"train": train[3:4]}, dict(info, part=[2, 3]))
+    save_scenes(tmp_path / "p3.npz", {"train": train[4:], "test": test}, dict(info, part=[3, 3]))
+    join_scenes([tmp_path / f"p{k}.npz" for k in (1, 2, 3)], tmp_path / "joined.npz")
+    joined, got = load_scenes(tmp_path / "joined.npz")
+    assert got == info
+    assert all(_same(a, b) for a, b in zip(train + test, joined["train"] + joined["test"]))
+    # Parts out of order, missing, or of another whole are refused.
+    with pytest.raises(HandcapError, match="expected part"):
+        join_scenes([tmp_path / "p2.npz", tmp_path / "p1.npz", tmp_path / "p3.npz"], tmp_path / "x.npz")
+    with pytest.raises(HandcapError, match="expected part"):
+        join_scenes([tmp_path / "p1.npz", tmp_path / "p3.npz"], tmp_path / "x.npz")
+    save_scenes(tmp_path / "q2.npz", {"train": train[3:4]}, dict(info, seed=4, part=[2, 3]))
+    with pytest.raises(HandcapError, match="expected part"):
+        join_scenes([tmp_path / "p1.npz", tmp_path / "q2.npz", tmp_path / "p3.npz"], tmp_path / "x.npz")
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_bad_scenes_files_are_one_clear_error(tmp_path):
+    with pytest.raises(HandcapError, match="no scenes file"):
+        load_scenes(tmp_path / "missing.npz")
+    (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    with pytest.raises(HandcapError, match="not a scenes file"):
+        load_scenes(tmp_path / "junk.npz")
+    np.savez(tmp_path / "other.npz", x=np.zeros(3))
+    with pytest.raises(HandcapError, match="not a scenes file"):
+        load_scenes(tmp_path / "other.npz")
+    rng = np.random.default_rng(0)
+    save_scenes(tmp_path / "one.npz", {"train": [_scene(rng)]})
+    with np.load(tmp_path / "one.npz") as data:
+        arrays = dict(data)
+    arrays["train.png"] = np.zeros_like(arrays["train.png"])  # an image that no longer decodes
+    np.savez(tmp_path / "broken.npz", **arrays)
+    with pytest.raises(HandcapError, match="does not decode"):
+        load_scenes(tmp_path / "broken.npz")
+    # A scene without corners or blocks is kept as it is.
+    empty = dataclasses.replace(_scene(rng), corners=np.zeros((0, 2)), corner_names=np.array([], str),
+                                blocks=np.zeros((0, 4, 2)), block_text=np.array([], str), projected=None)
+    save_scenes(tmp_path / "empty.npz", {"train": [empty]})
+    back = load_scenes(tmp_path / "empty.npz")[0]["train"][0]
+    assert _same(empty, back) and back.corners.shape == (0, 2) and back.blocks.shape == (0, 4, 2)
