@@ -134,6 +134,25 @@ def main() -> None:
     print("refined: " + score.summary())
     print(f"targets: recall >= 97 % ({100 * score.recall:.1f}), median <= 0.15 px ({score.median_px:.3f}), "
           f"RMS <= 0.3 px ({score.rms_px:.3f})")
+    # Where the missed corners are: recall by the shortest side of the squares around each corner in the image
+    # (its nearest printed neighbour, hidden ones included), a corner seen obliquely or from afar has short sides.
+    from scipy.spatial import cKDTree
+    from handcap.detect.evaluation import score_corners
+
+    side, found = [], []
+    for scene in scenes:
+        every = np.array(list(scene.projected.values()))
+        side.append(cKDTree(every).query(scene.corners, 2)[0][:, 1])
+        pairs, _ = score_corners(locate_corners(net, refiner, scene.image)[0], scene.corners)
+        hit = np.zeros(len(scene.corners), bool)
+        hit[pairs[:, 1]] = True
+        found.append(hit)
+    side, found = np.concatenate(side), np.concatenate(found)
+    bins = [(0, 3), (3, 5), (5, 8), (8, np.inf)]
+    print("refined recall by the squares' shortest side in the image: " + ", ".join(
+        (f"{lo:g}-{hi:g} px " if np.isfinite(hi) else f">= {lo:g} px ")
+        + f"{100 * found[(side >= lo) & (side < hi)].mean():.1f} % "
+        f"({100 * ((side >= lo) & (side < hi)).mean():.0f} % of corners)" for lo, hi in bins))
 
     from handcap.detect.evaluation import evaluate_detector
     from handcap.detect.scenes import PageMaker

@@ -80,3 +80,27 @@ def test_bad_scenes_files_are_one_clear_error(tmp_path):
     save_scenes(tmp_path / "empty.npz", {"train": [empty]})
     back = load_scenes(tmp_path / "empty.npz")[0]["train"][0]
     assert _same(empty, back) and back.corners.shape == (0, 2) and back.blocks.shape == (0, 4, 2)
+
+
+def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkeypatch):
+    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
+    from handcap.detect import train
+
+    args = ["--what", "corners", "--scenes", "2", "--test-scenes", "1", "--steps", "2", "--threads", "1",
+            "--scenes-file", str(tmp_path / "scenes.npz"), "--out", str(tmp_path / "w")]
+    try:
+        assert train.main(args) == 0
+    except HandcapError as err:
+        pytest.skip(f"no headless OpenGL here: {err}")
+    first = np.load(tmp_path / "w" / "corners.npz")["w.head.weight"]
+    groups, info = load_scenes(tmp_path / "scenes.npz")
+    assert len(groups["train"]) == 2 and len(groups["test"]) == 1 and info["scenes"] == 2
+
+    def no_rendering(*args, **kwargs):
+        raise AssertionError("rendered again")
+
+    monkeypatch.setattr(train, "corner_scenes", no_rendering)
+    assert train.main(args) == 0  # read back, not rendered: the same scenes give the same weights
+    assert np.array_equal(np.load(tmp_path / "w" / "corners.npz")["w.head.weight"], first)
+    with pytest.raises(HandcapError, match="holds scenes made with"):
+        train.main([a if a != "2" else "3" for a in args])

@@ -277,7 +277,7 @@ def main(argv=None) -> int:
     p.add_argument("--width", type=int, default=24, help="a new corner network's channels at half resolution")
     p.add_argument("--stem", type=int, default=16, help="a new corner network's channels at full resolution")
     p.add_argument("--dilations", default="1,2,4", help="a new corner network's dilations (default %(default)s)")
-    p.add_argument("--seconds", type=float, help="time 200 steps first and train only as many as fit this long")
+    p.add_argument("--seconds", type=float, help="time a few steps first and train only as many as fit this long")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
     out = Path(a.out)
@@ -292,10 +292,13 @@ def main(argv=None) -> int:
         print(f"{len(scenes)} + {len(tests)} scenes ready in {time.time() - started:.0f} s", flush=True)
         shape = {"width": a.width, "stem": a.stem, "dilations": [int(d) for d in a.dilations.split(",")]}
         settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 32, "device": a.device, "workers": a.workers}
-        if a.seconds:
-            probe = time.time()
-            train_corners(scenes, steps=200, net=copy.deepcopy(init), config=shape, **settings)
-            a.steps = min(a.steps, int(200 * a.seconds / (time.time() - probe)))
+        if a.seconds:  # two short runs: their difference leaves out the start (workers, device)
+            took = []
+            for steps in (40, 240):
+                probe = time.time()
+                train_corners(scenes, steps=steps, net=copy.deepcopy(init), config=shape, **settings)
+                took.append(time.time() - probe)
+            a.steps = min(a.steps, int(200 * a.seconds / max(took[1] - took[0], 1e-3)))
             print(f"corners: {a.steps} steps fit in {a.seconds:.0f} s", flush=True)
         net = train_corners(scenes, steps=a.steps, net=init, config=shape, progress=True, **settings)
         score = evaluate_corners(net, tests)
