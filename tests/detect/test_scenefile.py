@@ -102,5 +102,10 @@ def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkey
     monkeypatch.setattr(train, "corner_scenes", no_rendering)
     assert train.main(args) == 0  # read back, not rendered: the same scenes give the same weights
     assert np.array_equal(np.load(tmp_path / "w" / "corners.npz")["w.head.weight"], first)
+    assert train.main(args + ["--lr", "0.02"]) == 0  # the learning rate is used and recorded
+    with np.load(tmp_path / "w" / "corners.npz") as saved:
+        assert not np.array_equal(saved["w.head.weight"], first) and "--lr 0.02" in str(saved["info.source"])
     with pytest.raises(HandcapError, match="holds scenes made with"):
         train.main([a if a != "2" else "3" for a in args])
+    with pytest.raises(HandcapError, match="--seconds plans the corner network"):
+        train.main(["--what", "reader", "--seconds", "5", "--out", str(tmp_path / "w")])

@@ -277,7 +277,8 @@ def main(argv=None) -> int:
     p.add_argument("--width", type=int, default=24, help="a new corner network's channels at half resolution")
     p.add_argument("--stem", type=int, default=16, help="a new corner network's channels at full resolution")
     p.add_argument("--dilations", default="1,2,4", help="a new corner network's dilations (default %(default)s)")
-    p.add_argument("--seconds", type=float, help="time a few steps first and train only as many as fit this long")
+    p.add_argument("--seconds", type=float,
+                   help="the corner network: time a few steps first and train only as many as fit this long")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
     out = Path(a.out)
@@ -285,10 +286,12 @@ def main(argv=None) -> int:
     started = time.time()
     if a.init and a.what == "all":
         raise HandcapError("--init starts one network: name it with --what")
+    if a.seconds and a.what != "corners":
+        raise HandcapError("--seconds plans the corner network's steps: give it with --what corners")
     init = load_net(a.init, {"corners": "CornerNet", "refiner": "CornerRefiner", "reader": "BlockReader"}[a.what]) \
         if a.init else None
     if a.what in ("corners", "all"):
-        scenes, tests = _scenes(a)
+        scenes, tests = corner_data = _scenes(a)
         print(f"{len(scenes)} + {len(tests)} scenes ready in {time.time() - started:.0f} s", flush=True)
         shape = {"width": a.width, "stem": a.stem, "dilations": [int(d) for d in a.dilations.split(",")]}
         settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 32, "device": a.device, "workers": a.workers}
@@ -306,8 +309,8 @@ def main(argv=None) -> int:
         save_net(net, out / "corners.npz", {"source": _command(a), "score": score.summary()})
     if a.what in ("refiner", "all"):
         corner_net = load_corner_net(out / "corners.npz" if (out / "corners.npz").is_file() else None)
-        scenes, tests = _scenes(a)
-        net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, net=init, progress=True)
+        scenes, tests = corner_data if a.what == "all" else _scenes(a)
+        net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, lr=a.lr, net=init, progress=True)
         score = evaluate_corners(corner_net, tests, refiner=net)
         print(score.summary(), flush=True)
         save_net(net, out / "refiner.npz", {"source": _command(a), "score": score.summary()})
@@ -317,7 +320,7 @@ def main(argv=None) -> int:
         scenes = reader_scenes(a.scenes, a.seed, trained)
         tests = reader_scenes(a.test_scenes, a.seed + 1_000_003, held_out)
         print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
-        net = train_reader(scenes, steps=a.steps, seed=a.seed, net=init, progress=True)
+        net = train_reader(scenes, steps=a.steps, seed=a.seed, lr=a.lr, net=init, progress=True)
         validation = reader_scenes(a.test_scenes, a.seed + 2_000_003, trained)
         net.min_score = reader_gate(net, validation)
         print(f"reader: trusted alone from confidence {net.min_score:.4f} (at most 0.1 % wrong on "
