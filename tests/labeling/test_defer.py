@@ -10,15 +10,15 @@ from handcap.synth.scene import SynthConfig, synthesize
 
 def test_deferred_work_gives_the_same_labels():
     layout = load_layout("joints-19")
-    rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=1200, rate=120.0, seed=11,
+    rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=600, rate=120.0, seed=11,
                                  subject_seed=3), progress=False)
-    take = synthesize(SynthConfig(layout=layout.name, motion="grasp", frames=400, rate=120.0, seed=4,
+    take = synthesize(SynthConfig(layout=layout.name, motion="grasp", frames=310, rate=120.0, seed=4,
                                   subject_seed=3), progress=False)
     model = LabelingModel.train(rom.markers, layout.names, layout.rigid)
     points = take.points.padded()
     runs = []
     for defer, idle in ((False, False), (True, False), (True, True)):
-        labeler = OnlineLabeler(model, hypotheses=2, adapt_every=50, defer=defer)
+        labeler = OnlineLabeler(model, hypotheses=2, adapt_every=38, defer=defer)
         labels = []
         for frame in points:
             labels.append(labeler.update(frame))
