@@ -128,9 +128,10 @@ def test_triad_moved_relative_to_the_fingers_adapted(takes, triad_13):
     online = score_labels(label_take(unlabeled, model).markers, truth)
     offline = label_take(unlabeled, model, offline=True)
     two_pass = score_labels(offline.markers, truth)
-    # Measured on this take: online 95.1 % correct / 1.5 % wrong, offline two passes 98.6 % / 0.06 % (the
-    # issue's goal, 99 % / 0.1 %, is not met; the same-day take scores 98.0 % / 0.9 % here, see benchmark 7).
-    assert online.fraction("correct") > 0.93
+    # Measured on this take: online 92.7 % correct / 0.90 % wrong (its first 25 frames, before the model is
+    # aligned, fit too poorly to be trusted: withheld; labelled, they gave 95.1 % / 1.5 %), offline two passes
+    # 98.6 % / 0.06 % (the issue's goal, 99 % / 0.1 %, is met with the hand check: benchmark 7).
+    assert online.fraction("correct") > 0.9 and online.fraction("erroneous") < 0.012
     assert two_pass.fraction("correct") > 0.98 and two_pass.fraction("erroneous") < 0.005
     assert offline.model is not None
 
@@ -170,6 +171,25 @@ def test_a_rigid_set_relearned_from_the_take_is_a_warning(takes):
         said = float(line.split("by up to ")[1].split(" mm")[0])
         assert abs(said - 1000 * grown.max()) < 1.5  # the largest change, as the take shows it
         assert result.rigid is not None and result.rigid is not model.rigid
+
+
+def test_online_frames_in_doubt_are_withheld_not_mislabelled(takes):
+    # Issue 14, live: a triad put back 8 % larger is not found at its trained distances, and a look-alike set of
+    # knuckle and finger markers is taken for it. Its frames fit the model far worse than the model typically
+    # fits (SpatialModel.typical_fit): their labels are withheld and they count as lost, so the rigid set is
+    # re-learned from the take within the first second. Measured on this take: 77.97 % correct / 7.38 % wrong
+    # labelling them; 91.16 % / 0.90 % withholding them (36 frames, all in the first 100).
+    _, model, _, test = takes
+    unlabeled, truth = corrupt(moved_triad(test, np.eye(3), np.zeros(3), scale=1.08), ghost_rate=2.0,
+                               dropout=0.05, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        result = label_take(unlabeled, model)
+    score = score_labels(result.markers, truth)
+    assert score.fraction("erroneous") < 0.015 and score.fraction("correct") > 0.88
+    assert 10 <= len(result.lost_frames) <= 60 and result.lost_frames.max() < 120
+    withheld = [lab for t, lab in enumerate(result.labels) if t in set(result.lost_frames.tolist())]
+    assert all((lab < 0).all() for lab in withheld)  # none rather than wrong
 
 
 def test_a_lost_hand_frame_is_a_warning_stored_with_the_result(takes):

@@ -21,3 +21,23 @@ def test_spatial_model_matches_scikit_learn():
         np.testing.assert_allclose(model.log_likelihood(query)[i], ref.score_samples(query), rtol=1e-9)
     again = SpatialModel.from_arrays(model.to_arrays())
     np.testing.assert_array_equal(again.log_likelihood(query), model.log_likelihood(query))
+
+
+def test_typical_fit_of_one_gaussian_is_its_density_at_the_median_distance():
+    # Independent computation: for one label with one Gaussian component, a point's log-likelihood is
+    # log N(0) - d^2 / 2 with d^2 chi-squared with 3 degrees of freedom, so the median is at chi2's median.
+    from scipy.stats import chi2
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(3, 3))
+    cov = (a @ a.T + 3 * np.eye(3)) * 1e-5  # a few millimetres, not axis-aligned
+    chol = np.linalg.cholesky(np.linalg.inv(cov))  # precision = P P^T
+    log_norm = -1.5 * np.log(2 * np.pi) + np.log(np.diag(chol)).sum()
+    model = SpatialModel(("m",), np.ones((1, 1)), np.array([[[0.01, -0.02, 0.03]]]), chol[None, None],
+                         np.array([[log_norm]]))
+    want = log_norm - 0.5 * chi2.ppf(0.5, 3)
+    assert abs(model.typical_fit(samples=20000) - want) < 0.05
+    # A rigid move of the model's frame changes nothing; the value is reproducible for a seed.
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert abs(model.moved(turn, np.array([0.1, 0.0, 0.0])).typical_fit(samples=20000) - want) < 0.05
+    assert model.typical_fit() == model.typical_fit()

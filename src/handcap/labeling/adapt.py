@@ -69,6 +69,7 @@ class StreamAdaptation:
         self.checked = False
         self.deferred = False  # the labeler's defer: a due re-estimation waits for catch_up()
         self.due = False
+        self.typical = self.base.typical_fit() if labeler.finder is not None else None
 
     @property
     def settled(self) -> bool:
@@ -100,6 +101,34 @@ class StreamAdaptation:
                 found = lab.finder.find(points, lab._frame_fit)
                 self.lost.clear()
         return found
+
+    def doubtful(self, ll) -> bool:
+        """Whether a frame's hand frame is in doubt, before the adaptation has settled: its points fit the
+        model far worse (median best log-likelihood more than the labeler's ``suspect_drop`` below) than the
+        model's points typically do (:meth:`SpatialModel.typical_fit`): a model not yet aligned to the take,
+        or a set of points that looks like the rigid one (its markers moved, another subject). Once the model
+        is aligned, such a frame counts as lost, so that the rigid set is re-learned when most recent frames
+        are (before, a take whose glove sits otherwise fits poorly in the right frame too). Strictly online
+        only (``lag`` 0): with a look-ahead the frame is decided later, and offline a second pass labels
+        every frame again with the model refit to the take.
+
+        Parameters
+        ----------
+        ll : ndarray (F, K)
+            Log-likelihood of every free label for each of the frame's candidate points in the hand frame.
+
+        Returns
+        -------
+        bool
+        """
+        lab = self.labeler
+        if self.typical is None or lab.lag or self.settled or ll.shape[1] < max(3, lab.n_free // 2):
+            return False
+        if float(np.median(ll.max(axis=0))) >= self.typical - lab.suspect_drop:
+            return False
+        if self.lost and self.aligned:
+            self.lost[-1] = True
+        return True
 
     def relearn_rigid(self, frames) -> bool:
         """Re-learn the rigid set from ``frames`` (:func:`rigid_from_take`); True when it changed."""

@@ -18,7 +18,8 @@ and translation that map hand-frame coordinates to the world:
 When only two markers can be tracked, they correct the previous transform
 (the missing ones are held weakly where they were); with fewer, the previous
 transform is kept for a few frames and the frame is reported as lost after
-that.
+that. :func:`find_objects` finds each rigid object's markers in a frame
+(before the hand's, by the labelers).
 
 The rigid set itself (its shape and tolerance, learned from labeled takes)
 is :mod:`handcap.labeling.rigid_set`'s.
@@ -315,3 +316,36 @@ class HandFrameFinder:
             key = bad.sum(axis=1) + np.tanh(dist[f, index[f]] / self.search_radius)  # count, then distance
             index[f[np.argmax(key)]] = -1
         return index
+
+
+def find_objects(finders, points, n_markers):
+    """Each rigid object's markers among the points.
+
+    Parameters
+    ----------
+    finders : sequence of HandFrameFinder
+        One per rigid object, in the order of the object labels.
+    points : ndarray (K, 3)
+        The frame's points, metres.
+    n_markers : int
+        Object labels in all (the sum of the objects' marker counts).
+
+    Returns
+    -------
+    rest : ndarray (R,) int
+        Indices of the points that no object took.
+    object_points : ndarray (n_markers,) int
+        The point of every object label, -1 where not found.
+    """
+    rest = np.arange(len(points))
+    object_points = np.full(n_markers, -1)
+    at = 0
+    for finder in finders:
+        found = finder.find(points[rest])
+        n = len(finder.rigid.names)
+        if found is not None and found.found:
+            got = found.points >= 0
+            object_points[at:at + n][got] = rest[found.points[got]]
+            rest = np.delete(rest, found.points[got])
+        at += n
+    return rest, object_points

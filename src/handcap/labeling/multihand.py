@@ -8,7 +8,8 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.labeling.frame import HandFrameFinder
-from handcap.labeling.online import OnlineLabeler, find_objects, frame_points
+from handcap.labeling.frame import find_objects
+from handcap.labeling.online import OnlineLabeler, frame_points
 
 
 class MultiHandLabeler:

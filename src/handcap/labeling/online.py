@@ -46,7 +46,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.labeling.adapt import StreamAdaptation
 from handcap.labeling.birth import PointChains, birth_pairings
-from handcap.labeling.frame import HandFrameFinder
+from handcap.labeling.frame import HandFrameFinder, find_objects
 from handcap.labeling.hypotheses import emission_scores, spatial_hypotheses, tracking_hypothesis, transition_scores
 from handcap.labeling.kalman import KalmanBatch
 from handcap.labeling.model import LabelingModel
@@ -64,6 +64,7 @@ class _Frame:
     scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
     valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K,) rows that were points
     object_points: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # (O,) point per object label
+    doubtful: bool = False  # the hand frame unconfirmed: its hand labels are withheld
 
 
 class OnlineLabeler:
@@ -307,6 +308,7 @@ class OnlineLabeler:
         self._log_norm_all = -1.5 * np.log(2 * np.pi * var)  # (P, F): Gaussian normaliser of each filter
         self._at_gate_all = self._log_norm_all - 0.5 * self.gate**2
         self._born = None
+        doubtful = False
         if pose is None:
             self.lost_frames.append(self.frame_index)
             hyps = np.full((1, n_free), -1)
@@ -316,6 +318,12 @@ class OnlineLabeler:
             world = points[rest]
             hyps, emission = self._spatial_hypotheses((world - pose[1]) @ pose[0], ll)
             self._watch_frame()
+            # Until the adaptation settles, a frame that fits the model far worse than it typically fits is in a
+            # hand frame not confirmed (a look-alike set, a model not yet aligned): none of its labels rather
+            # than wrong ones, and it counts as lost.
+            doubtful = self._adaptation is not None and self._adaptation.doubtful(self._last_ll)
+            if doubtful:
+                self.lost_frames.append(self.frame_index)
             if self.tracking and len(world):
                 best = int(np.argmax(self._scores))
                 if self._chains is not None:
@@ -357,7 +365,8 @@ class OnlineLabeler:
             self._adaptation.record(world, pose, hyps[int(np.argmax(scores))])
         # Store point indices of the frame (rest maps hypothesis indices back to points).
         mapped = np.where(seen, rest[np.maximum(hyps, 0)] if len(rest) else -1, -1)
-        return _Frame(len(points), rigid_points, mapped, back, scores, object_points=object_points)
+        return _Frame(len(points), rigid_points, mapped, back, scores, object_points=object_points,
+                      doubtful=doubtful)
 
     def _frame_fit(self, rot, trans, used) -> float:
         """How well the other points fit the spatial model in a candidate hand frame."""
@@ -414,15 +423,17 @@ class OnlineLabeler:
     def _labels(self, frame: _Frame, h: int) -> np.ndarray:
         valid_index = np.flatnonzero(frame.valid)
         labels = np.full(frame.n_points, -1)
+        for o, p in enumerate(frame.object_points):
+            if p >= 0:
+                labels[valid_index[p]] = len(self.model.names) + o
+        if frame.doubtful:  # the hand's labels withheld
+            return labels
         for r, p in enumerate(frame.rigid_points):
             if p >= 0:
                 labels[valid_index[p]] = r
         for f, p in enumerate(frame.hypotheses[h]):
             if p >= 0:
                 labels[valid_index[p]] = self.n_rigid + f
-        for o, p in enumerate(frame.object_points):
-            if p >= 0:
-                labels[valid_index[p]] = len(self.model.names) + o
         return labels
 
 
@@ -434,36 +445,3 @@ def frame_points(points):
     if points.ndim != 2 or points.shape[1] != 3:
         raise HandcapError(f"points must have shape (K, 3), got {points.shape}")
     return points, ~np.isnan(points).any(axis=1)
-
-
-def find_objects(finders, points, n_markers):
-    """Each rigid object's markers among the points.
-
-    Parameters
-    ----------
-    finders : sequence of HandFrameFinder
-        One per rigid object, in the order of the object labels.
-    points : ndarray (K, 3)
-        The frame's points, metres.
-    n_markers : int
-        Object labels in all (the sum of the objects' marker counts).
-
-    Returns
-    -------
-    rest : ndarray (R,) int
-        Indices of the points that no object took.
-    object_points : ndarray (n_markers,) int
-        The point of every object label, -1 where not found.
-    """
-    rest = np.arange(len(points))
-    object_points = np.full(n_markers, -1)
-    at = 0
-    for finder in finders:
-        found = finder.find(points[rest])
-        n = len(finder.rigid.names)
-        if found is not None and found.found:
-            got = found.points >= 0
-            object_points[at:at + n][got] = rest[found.points[got]]
-            rest = np.delete(rest, found.points[got])
-        at += n
-    return rest, object_points

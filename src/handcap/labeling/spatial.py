@@ -102,6 +102,39 @@ class SpatialModel:
         top = np.where(np.isfinite(top), top, 0.0)
         return (top + np.log(np.exp(terms - top).sum(axis=2, keepdims=True)))[..., 0].T
 
+    def typical_fit(self, samples: int = 200, seed: int = 0) -> float:
+        """How well points fit the model when the hand frame is right: the median, over points drawn from
+        every label's mixture, of their best label's log-likelihood.
+
+        A frame whose points fit this model far worse (their median best
+        log-likelihood several units below) is seen in a wrong hand frame,
+        or the model is not the take's yet. The value is unchanged by
+        :meth:`moved`; it needs no training data (a model read from a file
+        has it too).
+
+        Parameters
+        ----------
+        samples : int
+            Points drawn per label.
+        seed : int
+            Seed of the draw (the value is reproducible).
+
+        Returns
+        -------
+        float
+            Log density per cubic metre (about +11 to +13 for finger markers; see the module).
+        """
+        rng = np.random.default_rng(seed)
+        m, n_comp = self.weights.shape
+        drawn = []
+        for i in range(m):
+            comp = rng.choice(n_comp, size=samples, p=self.weights[i] / self.weights[i].sum())
+            z = rng.standard_normal((samples, 3))
+            # x = mu + L^-T z, with P = L the precision's Cholesky factor: covariance (P P^T)^-1.
+            offsets = np.linalg.solve(np.swapaxes(self.precision_chol[i, comp], -1, -2), z[..., None])[..., 0]
+            drawn.append(self.means[i, comp] + offsets)
+        return float(np.median(self.log_likelihood(np.concatenate(drawn)).max(axis=0)))
+
     def moved(self, rotation, translation) -> "SpatialModel":
         """The same mixtures expressed in another hand frame.
 
