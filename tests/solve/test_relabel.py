@@ -102,3 +102,26 @@ def test_labels_that_fit_no_hand_are_warnings(turned):
     assert everywhere.removed.sum() == 0 and "explains" in everywhere.warnings[0]
     for check in checks:
         assert set(check.warnings) <= set(check.markers.warnings)
+
+
+def test_a_marker_never_labelled_leaves_the_check_to_the_others(turned):
+    # Another subject's pinky_mcp may never be labelled (it sits where the trained model expects no marker): the
+    # calibration cannot place it, so the check leaves it out and checks every other marker, saying so. The true
+    # labels, without pinky_mcp and with the index and middle tips swapped for 30 frames: the swap still goes.
+    from handcap.steps.label import checked_by_hand
+
+    layout, _, unlabelled, truth = turned
+    names = list(truth.names)
+    labels = truth.positions.copy()
+    labels[:, names.index("pinky_mcp")] = np.nan
+    i, j = names.index("index_tip"), names.index("middle_tip")
+    labels[300:330, [i, j]] = labels[300:330, [j, i]]
+    labelled = truth.__class__(labels, truth.names, truth.rate)
+    assert score_labels(labelled, truth).erroneous.sum() > 50
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        checked, line = checked_by_hand(labelled, unlabelled, layout)
+    assert line.startswith("checked against the solved hand") and "pinky_mcp never labelled: not checked" in line
+    after = score_labels(checked, truth)
+    assert after.erroneous.sum() == 0
+    assert np.isnan(checked.positions[:, names.index("pinky_mcp")]).all()  # nothing guessed for it

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import warnings
 
+import numpy as np
+
 from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings
 from handcap.core.markers import MarkerSequence
 from handcap.io import atomic_output, check_not_input, check_output, read_markers, read_points, write_markers
@@ -105,16 +107,22 @@ def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSeq
     line : str
         What changed, or why nothing was checked.
     """
+    # A marker the labeler never gave (another subject's, far from where the model expects it) is left out of
+    # the check rather than stopping it.
+    given = {n for n in labelled.names if not np.isnan(labelled.positions[:, labelled.index(n)]).all()}
+    never = [n for n in layout.names if n not in given]
     try:
         with warnings.catch_warnings():  # the calibration serves the check only: its own figures are no result
             warnings.simplefilter("ignore", HandcapWarning)
+            layout = layout.subset(n for n in layout.names if n not in never)
             attachment = calibrate_attachment(labelled.select(layout.names), layout).attachment
             check = check_labels(labelled, points, attachment, rigid=layout.rigid)
     except HandcapError as error:
         return labelled, f"labels not checked against the solved hand: {error}"
     positions = labelled.positions.copy()
     positions[:, [labelled.index(n) for n in check.markers.names]] = check.markers.positions
-    return MarkerSequence(positions, labelled.names, labelled.rate, warnings=labelled.warnings), check.summary()
+    line = check.summary() + (f" ({', '.join(never)} never labelled: not checked)" if never else "")
+    return MarkerSequence(positions, labelled.names, labelled.rate, warnings=labelled.warnings), line
 
 
 def score_labels(labeled, truth, *, out=None, units: str | None = None) -> Step:
