@@ -35,8 +35,9 @@ REFIT_SHIFT = 0.003
 #: wrong born track is outvoted by the take's other labels (synthetic triad moved 13 deg / 13 mm: offline wrong
 #: 0.87 -> 0.03 %; same-day, triad +3.5 mm, another subject and the real glove unchanged).
 FIRST_PASS_BIRTH = 5
-#: Offline, the rigid set an online pass re-learned (frame by frame, judged once the model is aligned) replaces
-#: the one searched for over the whole take when its two passes label this much more of the take's points. The
+#: Offline, where the rigid set searched for over the whole take is not the trained one (or its labels leave more
+#: than 5 % of the points), the set an online pass re-learned (frame by frame, judged once the model is aligned)
+#: replaces it when its two passes label this much more of the take's points. The
 #: search can take a look-alike set of knuckle and finger markers for the back of another subject's hand
 #: (synthetic subject 7, its triad 12 mm off: 54.1 -> 93.7 % correct, 76 -> 94 % of the points labelled), and
 #: the online pass can too (subject 9: 73 % labelled against the search's 94 %).
@@ -139,7 +140,9 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
     if two_pass:
         searched = _rigid_from_take(model, points.frames)
         result, adapted = _two_passes(points, searched, progress, options)
-        online = _run(points, model, None, False, method, progress, {**options, "adapt": True}).rigid
+        # A second opinion on the rigid set where the take's is not the trained one, or few points got a label.
+        doubt = searched.rigid is not model.rigid or _labelled_share(result, points) < LABELLED_WARNING
+        online = _run(points, model, None, False, method, progress, {**options, "adapt": True}).rigid if doubt else None
         if online is not None and largest_change(online, searched.rigid) > 0.5 * model.rigid.tolerance:
             other = _two_passes(points, replace(model, rigid=online), progress, options)
             if _labelled_share(other[0], points) > _labelled_share(result, points) + ONLINE_RIGID_MARGIN:
