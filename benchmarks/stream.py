@@ -5,13 +5,15 @@ A synthetic take (layout ``joints-19``: 19 markers and the 3 on the back of the 
 long, default 20 s; dropouts, ghost points and swaps as ``handcap synth`` makes them) is replayed in a loop for
 ``--seconds`` (default 600: ten minutes) at the take's rate, as live (``--fast``: as fast as it is handled). Its
 points are unlabelled: the labelling model is trained on another take of the same subject (its range of
-motion), and the hidden markers are filled by the shipped ``joints-19`` occlusion model. The receivers (an OSC
-server, a WebSocket client and two LSL inlets) run in a process of their own. Printed: frames, latency per
+motion, ``--rom-seconds`` long, default 30 s), and the hidden markers are filled by the shipped ``joints-19``
+occlusion model. The receivers (an OSC server, a WebSocket client and two LSL inlets) run in a process of their
+own. Printed: frames, latency per
 frame (p50, p99, p99.9, worst; from a frame's arrival to its sending by every output; goal p99 < 5 ms) and each
 stage's, the process's resident memory after the first minute and at the end (goal: growth < 5 %), messages
 the receivers got, and the streamed joints against the synthetic truth.
 
-    .venv/bin/python benchmarks/stream.py [--seconds 600] [--take-seconds 20] [--fast] [--labelled]
+    .venv/bin/python benchmarks/stream.py [--seconds 600] [--take-seconds 20] [--rom-seconds 30] [--fast]
+                                          [--labelled]
 """
 
 from __future__ import annotations
@@ -73,6 +75,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=600.0)
     parser.add_argument("--take-seconds", type=float, default=20.0)
+    parser.add_argument("--rom-seconds", type=float, default=30.0,
+                        help="the range of motion the labelling model is trained on (another take of the subject)")
     parser.add_argument("--fast", action="store_true", help="as fast as frames are handled, not at the take's rate")
     parser.add_argument("--labelled", action="store_true", help="replay the labelled markers: no label, no fill")
     a = parser.parse_args()
@@ -100,8 +104,8 @@ def main() -> None:
         points = capture.points.padded()
         source = MarkerSequence(np.tile(points, (loops, 1, 1))[:count],
                                 tuple(f"p{k}" for k in range(points.shape[1])), rate)  # names unused: unlabelled
-        rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=int(30 * rate), rate=rate, seed=11,
-                                     subject_seed=3), progress=False)
+        rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=int(a.rom_seconds * rate), rate=rate,
+                                     seed=11, subject_seed=3), progress=False)
         labeling = LabelingModel.train(rom.markers, layout.names, layout.rigid)
         fill = layout.name
     truth = np.tile(capture.hand_motion.joints, (loops, 1, 1))[:count]

@@ -94,7 +94,7 @@ def test_stream_verb_and_bad_inputs(capture, tmp_path, capsys):
 
 def test_the_benchmarks_20_second_version_runs():
     run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "stream.py"), "--seconds", "20",
-                          "--take-seconds", "10"], capture_output=True, text=True, timeout=300)
+                          "--take-seconds", "10", "--rom-seconds", "10"], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "label + fill + solve" in run.stdout
     assert "received            OSC 2400 / 2400, WebSocket 2400 / 2400, LSL 2400 and 2400 / 2400" in run.stdout
