@@ -109,6 +109,10 @@ class OnlineLabeler:
         recent frames (weighted by ``forget`` per frame of age) and the
         mixture means moved toward them. When the hand frame is lost in most
         recent frames, the rigid markers' shape is re-learned from them.
+        Strictly online (``lag`` 0), until this has settled, a frame whose
+        points fit the model far worse than it typically fits
+        (:meth:`StreamAdaptation.doubtful`) gets no hand labels and counts as
+        lost: none rather than wrong.
     adapt_every : int
         Frames between re-estimations.
     max_unlikely : int

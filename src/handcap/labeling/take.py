@@ -110,7 +110,11 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         training, a first labeling (adapting as it goes, with track births:
         ``FIRST_PASS_BIRTH``), the spatial model
         registered to that pass's labels and its means moved toward them
-        (:mod:`handcap.labeling.adapt`), and a second labeling with it.
+        (:mod:`handcap.labeling.adapt`), and a second labeling with it. Where
+        the re-learned set is not the trained one (or the labels leave over
+        5 % of the points), the set a strictly online pass re-learned is tried
+        too and kept when its labels cover ``ONLINE_RIGID_MARGIN`` more of the
+        points.
     method : {"viterbi", "nearest"}
         The labeler, or the nearest-neighbour baseline
         (:class:`handcap.labeling.baseline.NearestNeighbourLabeler`).
@@ -197,7 +201,6 @@ def refit_to_labels(model: LabelingModel, labeled: MarkerSequence) -> LabelingMo
         or ``model`` itself when that frame is within ``REFIT_TURN_DEG`` and
         ``REFIT_SHIFT`` of the trained one.
     """
-
     n_rigid = len(model.rigid.names)
     positions = np.stack([labeled.positions[:, labeled.index(n)] for n in model.names], axis=1)
     rot, trans, ok = rigid_transforms(model.rigid.canonical, positions[:, :n_rigid])
