@@ -22,11 +22,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/handcap demo --out demo-output
 
-# The suite on two processes (pytest-xdist): 447 s against 593-624 s in one on the 2-core VM. Whole files to each
-# process (a module's fixtures built once), the longest files first (tests/conftest.py, LONGEST_FIRST).
+# The suite on two processes (pytest-xdist): 447 s against 593-624 s in one on the 2-core VM.
 JOBS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(JOBS) --dist loadfile
+	$(BIN)/python -m pytest -q -n $(JOBS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks tools

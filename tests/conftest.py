@@ -42,20 +42,10 @@ _ran_realdata: list = []
 _failures: list = []
 
 
-#: The test files that take longest (about a minute or more on the 2-core VM), longest first. They run first, so
-#: that the two processes of ``make test`` (pytest-xdist, ``--dist loadfile``: a file's tests share one process and
-#: its module fixtures are built once) end together rather than one waiting on a long file started last.
-LONGEST_FIRST = ("tests/stream/test_stream.py", "tests/session/test_session.py", "tests/solve/test_relabel.py",
-                 "tests/labeling/test_adapt.py", "tests/test_demo_images.py", "tests/markerless/test_grasp.py",
-                 "tests/labeling/test_cli_label.py", "tests/occlusion/test_train.py")
-
-
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if "shared_data" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.realdata)
-    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))  # stable: the rest keep order
 
 
 _seen_realdata: list = []
