@@ -167,9 +167,9 @@ def _two_passes(points, model, progress, options) -> tuple[LabelResult, Labeling
 
 
 def _labelled_share(result: LabelResult, points) -> float:
-    """The share of the take's points that got a label."""
+    """The share of the take's points that got a label (NaN for a take without points)."""
     total = sum(int(np.isfinite(f).all(axis=1).sum()) for f in points.frames)
-    return sum(int((lab >= 0).sum()) for lab in result.labels) / max(total, 1)
+    return sum(int((lab >= 0).sum()) for lab in result.labels) / total if total else float("nan")
 
 
 def _rigid_from_take(model: LabelingModel, frames) -> LabelingModel:
@@ -270,10 +270,9 @@ def _with_warnings(result: LabelResult, points, model, trained=None) -> LabelRes
                           f"plausible <= {100 * LOST_WARNING:.0f} %): the rigid markers were not found at their "
                           f"trained distances; check the layout's rigid markers or train on a take of this session",
                           stacklevel=3))
-    total = sum(int(np.isfinite(f).all(axis=1).sum()) for f in points.frames)
-    labelled = sum(int((lab >= 0).sum()) for lab in result.labels)
-    if total and labelled < LABELLED_WARNING * total:
-        lines.append(warn(f"labels for {100 * labelled / total:.1f} % of the points in the stream (plausible >= "
+    share = _labelled_share(result, points)
+    if share < LABELLED_WARNING:  # False for NaN: no points, nothing to label
+        lines.append(warn(f"labels for {100 * share:.1f} % of the points in the stream (plausible >= "
                           f"{100 * LABELLED_WARNING:.0f} %): many points fit no label; check the layout and the "
                           f"training take", stacklevel=3))
     return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)
