@@ -145,11 +145,12 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         searched = _rigid_from_take(model, points.frames)
         result, adapted = _two_passes(points, searched, progress, options)
         # A second opinion on the rigid set where the take's is not the trained one, or few points got a label.
-        doubt = searched.rigid is not model.rigid or _labelled_share(result, points) < LABELLED_WARNING
+        share = _labelled_share(result, points)
+        doubt = searched.rigid is not model.rigid or share < LABELLED_WARNING
         online = _run(points, model, None, False, method, progress, {**options, "adapt": True}).rigid if doubt else None
         if online is not None and largest_change(online, searched.rigid) > 0.5 * model.rigid.tolerance:
             other = _two_passes(points, replace(model, rigid=online), progress, options)
-            if _labelled_share(other[0], points) > _labelled_share(result, points) + ONLINE_RIGID_MARGIN:
+            if _labelled_share(other[0], points) > share + ONLINE_RIGID_MARGIN:
                 result, adapted = other
     else:
         if method == "viterbi":
