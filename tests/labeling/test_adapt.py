@@ -143,7 +143,8 @@ def test_adaptation_does_not_hurt_a_take_of_the_same_day(takes):
     online_result = label_take(unlabeled, model)
     offline_result = label_take(unlabeled, model, offline=True)
     online, offline = (score_labels(r.markers, truth) for r in (online_result, offline_result))
-    assert not any("rigid markers' distances" in w for w in online_result.warnings + offline_result.warnings)
+    assert not any("rigid markers' distances" in w or "not found where" in w
+                   for w in online_result.warnings + offline_result.warnings)
     assert online.fraction("correct") >= plain.fraction("correct") - 0.003
     assert offline.fraction("correct") >= plain.fraction("correct") - 0.001
     assert offline.fraction("erroneous") <= plain.fraction("erroneous") + 0.001
@@ -197,7 +198,7 @@ def test_offline_another_subject_takes_the_rigid_set_the_online_pass_found(takes
     # takes a look-alike set of knuckle and finger markers for it (8.4 mm off), the online pass (its re-learned
     # sets judged once the model is aligned) finds the triad, and the offline labeling keeps whichever labels
     # more points. Measured on this take: 37.64 % correct / 32.80 % wrong with the search's set, 92.90 % / 1.25 %
-    # now.
+    # with the online pass's, 96.58 % / 1.30 % once its pinky_mcp is searched for wider.
     layout, model, _, _ = takes
     other = synthesize(SynthConfig(layout="joints-19", motion="random", object="none", frames=500, seed=21,
                                    subject_seed=7, cameras=8)).labeled_points(layout.names)
@@ -206,7 +207,9 @@ def test_offline_another_subject_takes_the_rigid_set_the_online_pass_found(takes
         warnings.simplefilter("ignore", HandcapWarning)
         result = label_take(unlabeled, model, offline=True)
     score = score_labels(result.markers, truth)
-    assert score.fraction("correct") > 0.9 and score.fraction("erroneous") < 0.02
+    assert score.fraction("correct") > 0.95 and score.fraction("erroneous") < 0.02
+    # Its pinky_mcp sits 15 mm from where the trained model puts it: found by the wider search, and said so.
+    assert any(w.startswith("pinky_mcp not found where the training take puts it") for w in result.warnings)
     # The set it labelled with is the subject's triad: the warning gives its change from training, which the
     # truth's triad distances give independently.
     idx = [other.index(n) for n in RIGID]
@@ -216,6 +219,29 @@ def test_offline_another_subject_takes_the_rigid_set_the_online_pass_found(takes
                     - np.linalg.norm(model.rigid.canonical[i] - model.rigid.canonical[j], axis=1)).max()
     line = next(w for w in result.warnings if "rigid markers' distances" in w)  # never silent
     assert change > 0.01 and abs(float(line.split("by up to ")[1].split(" mm")[0]) - 1000 * change) < 1.5
+
+
+def test_a_marker_stuck_on_elsewhere_is_found_by_a_wider_search(takes):
+    # Issue 14: one marker 15 mm from its trained place (in the hand frame), the rest as trained. Its components
+    # are about 1 mm wide, so the trained model never gives its label; the offline labeling searches again with
+    # every component widened, moves that label alone, and says so. The label's truth is the moved marker.
+    layout, model, _, test = takes
+    take = test.select(test.names)
+    rot, _, _ = _rigid_transforms(model.rigid.canonical, take.positions[:, [take.index(n) for n in RIGID]])
+    column = take.index("pinky_mcp")
+    take.positions[:, column] += rot @ np.array([0.012, 0.0, -0.009])
+    unlabeled, truth = corrupt(take, ghost_rate=2.0, dropout=0.05, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        result = label_take(unlabeled, model, offline=True)
+    score = score_labels(result.markers, truth)
+    k = score.names.index("pinky_mcp")
+    seen = score.correct[k] + score.erroneous[k] + score.false_occlusion[k]
+    assert score.correct[k] >= 0.95 * seen and score.erroneous[k] == 0
+    assert score.fraction("correct") > 0.98 and score.fraction("erroneous") < 0.002
+    assert [w for w in result.warnings if "not found where the training take puts" in w] == [
+        "pinky_mcp not found where the training take puts it; labelled after a search 5 mm wider (another subject "
+        "or marker placement): check this label, or train on a take of this subject"]
 
 
 def test_a_lost_hand_frame_is_a_warning_stored_with_the_result(takes):

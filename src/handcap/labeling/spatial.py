@@ -81,10 +81,7 @@ class SpatialModel:
             means.append(mu)
             chols.append(pc)
         weights, means, chols = np.array(weights), np.array(means), np.array(chols)
-        log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)
-        with np.errstate(divide="ignore"):
-            log_norm = np.log(weights) - 1.5 * np.log(2 * np.pi) + log_det
-        return cls(tuple(names), weights, means, chols, log_norm)
+        return cls(tuple(names), weights, means, chols, _log_norm(weights, chols))
 
     def __post_init__(self):
         # Whitening of every component as one matrix: y = (x - mu) P = x P - mu P for all of them at once.
@@ -157,6 +154,28 @@ class SpatialModel:
         chol = np.linalg.cholesky(rot.T @ precision @ rot)  # a rotation keeps the determinant
         return SpatialModel(self.names, self.weights, means, chol, self.log_norm)
 
+    def widened(self, spread: float) -> "SpatialModel":
+        """The same mixtures, every component widened by ``spread`` of isotropic standard deviation.
+
+        A search wider than training allows: another subject's marker can sit
+        15 mm from where the training subject's did, many standard deviations
+        of a knuckle marker's 1 mm wide components away.
+
+        Parameters
+        ----------
+        spread : float
+            Metres; each covariance becomes ``Sigma + spread^2 I``.
+
+        Returns
+        -------
+        SpatialModel
+            Same names, weights and means.
+        """
+        precision = self.precision_chol @ np.swapaxes(self.precision_chol, -1, -2)
+        covariance = np.linalg.inv(precision) + float(spread) ** 2 * np.eye(3)
+        chol = np.linalg.cholesky(np.linalg.inv(covariance))
+        return SpatialModel(self.names, self.weights, self.means, chol, _log_norm(self.weights, chol))
+
     def to_arrays(self, prefix: str = "gmm_") -> dict:
         """The mixtures as ``.npz`` entries (``log_norm`` is recomputed on reading).
 
@@ -193,8 +212,12 @@ class SpatialModel:
         """
         weights = np.asarray(data[f"{prefix}weights"], dtype=np.float64)
         chols = np.asarray(data[f"{prefix}precision_chol"], dtype=np.float64)
-        log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)
-        with np.errstate(divide="ignore"):
-            log_norm = np.log(weights) - 1.5 * np.log(2 * np.pi) + log_det
         return cls(tuple(str(n) for n in data[f"{prefix}names"]), weights,
-                   np.asarray(data[f"{prefix}means"], dtype=np.float64), chols, log_norm)
+                   np.asarray(data[f"{prefix}means"], dtype=np.float64), chols, _log_norm(weights, chols))
+
+
+def _log_norm(weights, chols) -> np.ndarray:
+    """``log w - 1.5 log(2 pi) + log det P`` (M, L) of weights (M, L) and precision Cholesky factors (M, L, 3, 3)."""
+    log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)
+    with np.errstate(divide="ignore"):  # components of zero weight: -inf, never chosen
+        return np.log(weights) - 1.5 * np.log(2 * np.pi) + log_det
