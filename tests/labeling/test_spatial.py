@@ -41,3 +41,24 @@ def test_typical_fit_of_one_gaussian_is_its_density_at_the_median_distance():
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     assert abs(model.moved(turn, np.array([0.1, 0.0, 0.0])).typical_fit(samples=20000) - want) < 0.05
     assert model.typical_fit() == model.typical_fit()
+
+
+def test_widened_mixture_is_the_mixture_of_wider_gaussians():
+    # Independent computation: each component's density with covariance Sigma + s^2 I (scipy), weighted and summed.
+    from scipy.stats import multivariate_normal
+    rng = np.random.default_rng(3)
+    local = np.stack([rng.normal([0.05, 0.0, 0.0], [0.01, 0.002, 0.004], (300, 3)),
+                      rng.normal([0.0, 0.08, 0.0], 0.001, (300, 3))], axis=1)
+    model = SpatialModel.fit(["a", "b"], local, components=2, seed=0)
+    wide = model.widened(0.005)
+    query = rng.normal(0.03, 0.03, (7, 3))
+    precision = model.precision_chol @ np.swapaxes(model.precision_chol, -1, -2)
+    for i in range(2):
+        density = sum(model.weights[i, k] * multivariate_normal(model.means[i, k], np.linalg.inv(precision[i, k])
+                                                                + 0.005 ** 2 * np.eye(3)).pdf(query)
+                      for k in range(2))
+        np.testing.assert_allclose(wide.log_likelihood(query)[i], np.log(density), rtol=1e-9)
+    np.testing.assert_array_equal(wide.means, model.means)
+    # A point 15 mm from a 1 mm wide label: hopeless before, plausible after.
+    far = model.means[1, 0] + [0.015, 0.0, 0.0]
+    assert model.log_likelihood(far[None])[1, 0] < -30 < 0 < wide.log_likelihood(far[None])[1, 0]  # theta_min: -2
