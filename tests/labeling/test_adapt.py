@@ -143,7 +143,7 @@ def test_adaptation_does_not_hurt_a_take_of_the_same_day(takes):
     online_result = label_take(unlabeled, model)
     offline_result = label_take(unlabeled, model, offline=True)
     online, offline = (score_labels(r.markers, truth) for r in (online_result, offline_result))
-    assert not any("rigid markers' distances" in w or "not found where" in w
+    assert not any("rigid markers' distances" in w or "not found where" in w or "for the median label" in w
                    for w in online_result.warnings + offline_result.warnings)
     assert online.fraction("correct") >= plain.fraction("correct") - 0.003
     assert offline.fraction("correct") >= plain.fraction("correct") - 0.001
@@ -242,6 +242,24 @@ def test_a_marker_stuck_on_elsewhere_is_found_by_a_wider_search(takes):
     assert [w for w in result.warnings if "not found where the training take puts" in w] == [
         "pinky_mcp not found where the training take puts it; labelled after a search 5 mm wider (another subject "
         "or marker placement): check this label, or train on a take of this subject"]
+
+
+def test_a_marker_missing_from_the_take_is_a_warning(takes):
+    # A glove that lost a marker: its label is given in (almost) no frame, and the result says so instead of
+    # quietly leaving a column empty. The figures in the line are the labelled shares of the result itself.
+    layout, model, _, test = takes
+    take = test.select(test.names)
+    take.positions[:, take.index("index_tip")] = np.nan
+    unlabeled, _ = corrupt(take, ghost_rate=2.0, dropout=0.05, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        result = label_take(unlabeled, model)
+    given = np.mean(~np.isnan(result.markers.positions[..., 0]), axis=0)
+    median = np.median([given[result.markers.index(n)] for n in model.spatial.names])
+    line = next(w for w in result.warnings if " % for the median label" in w)
+    assert line.startswith(f"index_tip labelled in {100 * given[result.markers.index('index_tip')]:.0f} % of the "
+                           f"frames, against {100 * median:.0f} % for the median label: missing from this take")
+    assert line in result.markers.warnings
 
 
 def test_a_lost_hand_frame_is_a_warning_stored_with_the_result(takes):

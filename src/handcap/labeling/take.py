@@ -312,6 +312,18 @@ def _with_warnings(result: LabelResult, points, model, trained=None, found_wider
                               f"{1000 * change:.1f} mm (re-learned from the take; plausible <= "
                               f"{1000 * RIGID_CHANGE_WARNING:.0f} mm): a marker moved, or another glove or subject; "
                               f"check the labels, or train on a take of this session", stacklevel=3))
+    if isinstance(trained, LabelingModel) and result.markers.n_frames:
+        missing = _missing_labels(result.markers, trained)
+        if missing.any():
+            names = [n for n, m in zip(trained.spatial.names, missing) if m]
+            given = np.mean(~np.isnan(result.markers.positions[..., 0]), axis=0)
+            given = {n: given[result.markers.index(n)] for n in trained.spatial.names}
+            share = [given[n] for n in names]
+            lines.append(warn(f"{', '.join(names)} labelled in {', '.join(f'{100 * g:.0f}' for g in share)} % of the "
+                              f"frames, against {100 * np.median(list(given.values())):.0f} % for the median label: "
+                              "missing from this take, or far from where the training take puts "
+                              f"{'them' if len(names) > 1 else 'it'}; check the markers, or train on a take of this "
+                              "subject", stacklevel=3))
     n_frames = max(points.n_frames, 1)
     lost = len(result.lost_frames)
     if lost > LOST_WARNING * n_frames:
