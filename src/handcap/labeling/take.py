@@ -3,8 +3,10 @@
 Issue 14 (takes of other days): the spatial model is re-aligned to the take
 (:mod:`handcap.labeling.adapt`; online every ``adapt_every`` frames, offline in
 two passes), the rigid set is re-learned from the take when its distances
-changed, and a hand frame lost in many frames or few labelled points are
-warnings stored on the :class:`LabelResult`.
+changed, offline a label the take hardly gets is searched for with wider
+components (``MISSING_SPREAD``), and a hand frame lost in many frames, few
+labelled points or a label given in few frames are warnings stored on the
+:class:`LabelResult`.
 """
 
 from __future__ import annotations
