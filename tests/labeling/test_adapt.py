@@ -258,7 +258,8 @@ def test_a_marker_missing_from_the_take_is_a_warning(takes):
     median = np.median([given[result.markers.index(n)] for n in model.spatial.names])
     line = next(w for w in result.warnings if " % for the median label" in w)
     assert line.startswith(f"index_tip labelled in {100 * given[result.markers.index('index_tip')]:.0f} % of the "
-                           f"frames, against {100 * median:.0f} % for the median label: missing from this take")
+                           f"frames, against {100 * median:.0f} % for the median label: hidden most of the take, "
+                           "missing from it")
     assert line in result.markers.warnings
 
 

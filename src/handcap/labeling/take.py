@@ -323,7 +323,7 @@ def _with_warnings(result: LabelResult, points, model, trained=None, found_wider
             share = [given[n] for n in names]
             lines.append(warn(f"{', '.join(names)} labelled in {', '.join(f'{100 * g:.0f}' for g in share)} % of the "
                               f"frames, against {100 * np.median(list(given.values())):.0f} % for the median label: "
-                              "missing from this take, or far from where the training take puts "
+                              "hidden most of the take, missing from it, or far from where the training take puts "
                               f"{'them' if len(names) > 1 else 'it'}; check the markers, or train on a take of this "
                               "subject", stacklevel=3))
     n_frames = max(points.n_frames, 1)
