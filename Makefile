@@ -22,12 +22,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/handcap demo --out demo-output
 
-# The suite on two processes (pytest-xdist): 447 s against 593-624 s in one on the 2-core VM. Tests that share an
-# expensive module fixture carry one xdist_group mark, so that one process builds it (--dist loadgroup; the
-# others are shared out as with --dist load).
+# The suite on two processes (pytest-xdist): 447 s against 593-624 s in one on the 2-core VM.
 JOBS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(JOBS) --dist loadgroup
+	$(BIN)/python -m pytest -q -n $(JOBS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks tools

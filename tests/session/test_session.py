@@ -12,8 +12,6 @@ from handcap.session import load_session, process
 from handcap.session.example import new_session
 from handcap.steps import metrics as metrics_step
 
-pytestmark = pytest.mark.xdist_group("session")  # one process builds the example session (make test: loadgroup)
-
 
 @pytest.fixture(scope="module")
 def made(tmp_path_factory, gl_ok):

@@ -16,9 +16,6 @@ from handcap.steps.label import checked_by_hand
 from handcap.synth.scene import SynthConfig, synthesize
 
 
-pytestmark = pytest.mark.xdist_group("relabel")  # one process builds the labelled take (make test: loadgroup)
-
-
 @pytest.fixture(scope="module")
 def turned():
     """A joints-19 take of another day (its back triad turned 13 degrees and moved 13 mm), its unlabelled points

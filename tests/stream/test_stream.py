@@ -117,7 +117,6 @@ def unlabelled():
     return take, LabelingModel.train(rom.markers, layout.names, layout.rigid)
 
 
-@pytest.mark.xdist_group("unlabelled")  # one process builds the fixture (make test: loadgroup)
 def test_unlabelled_points_are_labelled_filled_and_solved_frame_by_frame(unlabelled):
     take, model = unlabelled
     hand = OpenHand("right")
@@ -134,7 +133,6 @@ def test_unlabelled_points_are_labelled_filled_and_solved_frame_by_frame(unlabel
     assert stats.filled.sum() > 0 and (stats.seen + stats.filled >= 19).mean() > 0.95
 
 
-@pytest.mark.xdist_group("unlabelled")  # one process builds the fixture (make test: loadgroup)
 def test_a_hidden_marker_is_filled_near_where_it_is(unlabelled):
     take, _ = unlabelled
     from handcap.stream import LivePipeline
