@@ -161,13 +161,14 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         online = _run(points, model, None, False, method, progress, {**options, "adapt": True}).rigid if doubt else None
         if online is not None and largest_change(online, chosen.rigid) > 0.5 * model.rigid.tolerance:
             other = _two_passes(points, replace(model, rigid=online), progress, options)
-            if _labelled_share(other[0], points) > share + ONLINE_RIGID_MARGIN:
-                result, adapted, chosen = other + (replace(model, rigid=online),)
+            other_share = _labelled_share(other[0], points)
+            if other_share > share + ONLINE_RIGID_MARGIN:
+                result, adapted, chosen, share = other + (replace(model, rigid=online), other_share)
         # Labels the take (almost) never gave: searched for wider.
         missing = _missing_labels(result.markers, chosen)
         if missing.any():
             other = _two_passes(points, chosen, progress, options, missing=missing)
-            if _labelled_share(other[0], points) > _labelled_share(result, points) + ONLINE_RIGID_MARGIN:
+            if _labelled_share(other[0], points) > share + ONLINE_RIGID_MARGIN:
                 result, adapted = other
                 found_wider = tuple(np.array(chosen.spatial.names)[missing])
     else:
@@ -191,11 +192,16 @@ def _two_passes(points, model, progress, options, missing=None) -> tuple[LabelRe
     return _run(points, adapted, None, True, "viterbi", progress, {**options, "adapt": False}), adapted
 
 
+def _given_shares(markers: MarkerSequence, model: LabelingModel) -> np.ndarray:
+    """Share of the frames (M,) each of ``model.spatial.names`` is given in."""
+    columns = [markers.index(n) for n in model.spatial.names]
+    return np.mean(~np.isnan(markers.positions[:, columns, 0]), axis=0)
+
+
 def _missing_labels(markers: MarkerSequence, model: LabelingModel) -> np.ndarray:
     """Mask (M,) over ``model.spatial.names``: labels given in under ``MISSING_SHARE`` of the frames the median
     label is given in."""
-    given = np.array([np.count_nonzero(~np.isnan(markers.positions[:, markers.index(n), 0]))
-                      for n in model.spatial.names])
+    given = _given_shares(markers, model)
     return given < MISSING_SHARE * np.median(given)
 
 
@@ -318,11 +324,9 @@ def _with_warnings(result: LabelResult, points, model, trained=None, found_wider
         missing = _missing_labels(result.markers, trained)
         if missing.any():
             names = [n for n, m in zip(trained.spatial.names, missing) if m]
-            given = np.mean(~np.isnan(result.markers.positions[..., 0]), axis=0)
-            given = {n: given[result.markers.index(n)] for n in trained.spatial.names}
-            share = [given[n] for n in names]
-            lines.append(warn(f"{', '.join(names)} labelled in {', '.join(f'{100 * g:.0f}' for g in share)} % of the "
-                              f"frames, against {100 * np.median(list(given.values())):.0f} % for the median label: "
+            given = _given_shares(result.markers, trained)
+            lines.append(warn(f"{', '.join(names)} labelled in {', '.join(f'{100 * g:.0f}' for g in given[missing])} "
+                              f"% of the frames, against {100 * np.median(given):.0f} % for the median label: "
                               "hidden most of the take, missing from it, or far from where the training take puts "
                               f"{'them' if len(names) > 1 else 'it'}; check the markers, or train on a take of this "
                               "subject", stacklevel=3))
