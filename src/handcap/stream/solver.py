@@ -3,9 +3,9 @@
 The batch solver (:func:`handcap.solve.solve_hand`) sees the whole take; a live stream sees one frame and
 must answer before the next. :class:`FrameSolver` keeps the last pose, starts the next frame's fit from it and
 runs a Gauss-Newton iteration (:data:`ITERATIONS`); it starts afresh (rigid start, many iterations) on the
-first frame, and whenever a frame's median marker residual says the hand was lost. The warm-started
-iterations run compiled (:mod:`handcap.stream.kernel`, numba) where they can: the same steps, about 20 times
-faster on one frame than the batch code, which is the fallback.
+first frame, and whenever a frame's median marker residual says the hand was lost. The iterations,
+warm-started or fresh, run compiled (:mod:`handcap.stream.kernel`, numba) where they can: the same steps,
+about 20 times faster on one frame than the batch code, which is the fallback.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ ITERATIONS = 1
 FIRST_ITERATIONS = 60
 #: Median marker residual (metres) above which the next frame starts afresh.
 LOST = 0.01
+#: Scale of the robust (Cauchy) marker loss, metres.
+SCALE = 0.005
 
 
 class FrameSolver:
@@ -41,7 +43,7 @@ class FrameSolver:
     iterations : int
         Per frame, warm-started.
     compiled : bool
-        Run the warm-started iterations compiled where numba and the model allow (:class:`FrameKernel`);
+        Run the iterations compiled where numba and the model allow (:class:`FrameKernel`);
         False: always the batch code.
 
     Attributes
@@ -65,7 +67,7 @@ class FrameSolver:
         self.compiled = bool(self.kernel is not None and self.kernel.available)
         if self.compiled:  # compiled (or loaded from numba's cache) now, not on the stream's first frame
             m = self.model.n_markers
-            self.kernel.solve(np.zeros(3), np.eye(3), self.rest, np.zeros((m, 3)), np.ones(m, bool), scale=0.005,
+            self.kernel.solve(np.zeros(3), np.eye(3), self.rest, np.zeros((m, 3)), np.ones(m, bool), scale=SCALE,
                               iterations=1)
 
     def solve(self, positions) -> tuple[np.ndarray, np.ndarray, float]:
@@ -90,21 +92,16 @@ class FrameSolver:
         if observed.sum() < 3:
             return np.full((21, 3), np.nan), np.full(27, np.nan), float("nan")
         target = np.nan_to_num(target)
-        if self.compiled:
-            if self.pose is None:
-                rot, trans, _ = rigid_start(self.model, target, observed, self.rest)
-                start, iterations = (trans[0], rot[0], self.rest), FIRST_ITERATIONS
-            else:
-                start, iterations = (self.pose.transl[0], self.pose.rot[0], self.pose.phi[0]), self.iterations
-            transl, rot, phi, joints, norms = self.kernel.solve(*start, target[0], observed[0], scale=0.005,
-                                                                iterations=iterations)
-            return self._finish(Poses(transl[None], rot[None], phi[None]), None, joints, norms[observed[0]])
         if self.pose is None:
             rot, trans, _ = rigid_start(self.model, target, observed, self.rest)
             init, iterations, kin = Poses(trans.copy(), rot.copy(), self.rest[None].copy()), FIRST_ITERATIONS, None
         else:  # from the frame before, whose kinematics the last solve returned
             init, iterations, kin = self.pose, self.iterations, self.kin
-        pose, _, parts = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=0.005,
+        if self.compiled:
+            transl, rot, phi, joints, norms = self.kernel.solve(init.transl[0], init.rot[0], init.phi[0], target[0],
+                                                                observed[0], scale=SCALE, iterations=iterations)
+            return self._finish(Poses(transl[None], rot[None], phi[None]), None, joints, norms[observed[0]])
+        pose, _, parts = levenberg_marquardt(self.model, target, observed, init, self.priors, scale=SCALE,
                                              iterations=iterations, held=held_angles(self.model, observed),
                                              return_parts=True, start_kin=kin)
         kin, norms = parts[0], parts[2]  # of the final pose: no second forward pass
