@@ -178,3 +178,10 @@ def k_best_compiled(cost, k: int) -> list[tuple[np.ndarray, float]]:
     out_total = np.empty(k)
     found = _k_best(cost, k, out_cols, out_total)
     return [(out_cols[i].astype(np.intp), float(out_total[i])) for i in range(found)]
+
+
+def prepare() -> None:
+    """Compile the ranking now (or load it from numba's cache): a live stream calls this before its first frame,
+    which would otherwise wait for the compiler (about 6 s once per machine)."""
+    if AVAILABLE:
+        k_best_compiled(np.array([[0.0, 1.0], [1.0, 0.0]]), 2)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.labeling import LabelingModel, OnlineLabeler
+from handcap.labeling import LabelingModel, OnlineLabeler, lap
 from handcap.occlusion import OcclusionFiller, OcclusionModel
 from handcap.stream.solver import ITERATIONS, FrameSolver
 
@@ -100,6 +100,7 @@ class LivePipeline:
             model = labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)
             self.labeler = OnlineLabeler(model, lag=0, hypotheses=hypotheses,
                                          adapt_every=max(1, int(round(adapt_seconds * rate))), defer=True)
+            lap.prepare()  # the compiled ranking of assignments, before the first frame
             self.label_columns = np.array([self.names.index(n) if n in self.names else -1
                                            for n in self.labeler.names])
             if (self.label_columns < 0).all():
