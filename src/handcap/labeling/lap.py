@@ -19,14 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:  # the extra 'stream' brings it; AVAILABLE is then False and the scipy code is used
-    numba = None
-
-#: Whether the compiled ranking can be used (numba installed).
-AVAILABLE = numba is not None
-_njit = numba.njit(cache=True, nogil=True) if numba is not None else (lambda f: f)
+from handcap.core.compiled import AVAILABLE  # noqa: F401 (whether the ranking runs compiled; else scipy's code)
+from handcap.core.compiled import njit as _njit
 
 
 @_njit
@@ -119,8 +113,10 @@ def _k_best(cost, k, out_cols, out_total):
         if found == k:
             break
         free[:] = True
+        forced = 0.0  # the cost of rows < r, kept at the node's columns
         for r in range(fixed[node]):
             free[cols[node, r]] = False
+            forced += cost[r, cols[node, r]]
         for r in range(fixed[node], n_rows):  # the solutions agreeing on rows < r, row r elsewhere
             own = cols[node, r]
             n_free = 0
@@ -142,17 +138,15 @@ def _k_best(cost, k, out_cols, out_total):
                     child = made
                     made += 1
                     cols[child, :r] = cols[node, :r]
-                    t = 0.0
-                    for i in range(r):
-                        t += cost[i, cols[node, i]]
                     for i in range(r, n_rows):
                         cols[child, i] = free_cols[sub_cols[i - r]]
-                    total[child] = t + sub_total
+                    total[child] = forced + sub_total
                     fixed[child] = r
                     excluded[child] = excluded[node]
                     excluded[child, r, own] = True
                     is_open[child] = True
             free[own] = False
+            forced += cost[r, own]
     return found
 
 
@@ -174,10 +168,10 @@ def k_best_compiled(cost, k: int) -> list[tuple[np.ndarray, float]]:
     cost = np.ascontiguousarray(cost, dtype=np.float64)
     if k < 1 or cost.shape[0] == 0:
         return [] if k < 1 else [(np.zeros(0, dtype=np.intp), 0.0)]
-    out_cols = np.empty((k, cost.shape[0]), np.int64)
+    out_cols = np.empty((k, cost.shape[0]), np.intp)
     out_total = np.empty(k)
     found = _k_best(cost, k, out_cols, out_total)
-    return [(out_cols[i].astype(np.intp), float(out_total[i])) for i in range(found)]
+    return [(out_cols[i], float(out_total[i])) for i in range(found)]
 
 
 def prepare() -> None:

@@ -23,12 +23,8 @@ import numpy as np
 from handcap.hand.anatomy import PARENTS, PHI_AXIS, PHI_JOINT, TIP_PARENTS
 from handcap.solve.lm import COUPLED, SYNERGY, unconstrained_angles
 
-try:
-    import numba
-except ImportError:  # the extra 'stream' brings it; FrameKernel.available is then False
-    numba = None
-
-_njit = numba.njit(cache=True, nogil=True) if numba is not None else (lambda f: f)
+from handcap.core.compiled import AVAILABLE as NUMBA
+from handcap.core.compiled import njit as _njit
 
 
 @_njit
@@ -268,7 +264,7 @@ class FrameKernel:
 
     def __init__(self, model, priors, rest_tips):
         self.model = model
-        self.available = numba is not None and not model.has_correctives
+        self.available = NUMBA and not model.has_correctives
         if not self.available:
             return
         self.mc = (np.ascontiguousarray(model.frames, dtype=np.float64), np.ascontiguousarray(model.rest_joints),
