@@ -10,7 +10,7 @@ import torch
 from handcap import HandcapError
 from handcap.detect import corners
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners, find_corners, targets
-from handcap.detect.samples import CornerBatches
+from handcap.detect.samples import Batches, corner_batch
 from handcap.detect.train import crops, load_corner_net, save_net, score_corners, train_corners
 
 
@@ -93,7 +93,7 @@ def test_a_wider_network_keeps_its_reach_inside_the_tile_halo():
 
 def test_crops_drawn_in_worker_processes_repeat_for_a_seed(scenes):
     def draw(seed, count=3):
-        loader = torch.utils.data.DataLoader(CornerBatches(scenes, 4, seed), batch_size=None, num_workers=2)
+        loader = torch.utils.data.DataLoader(Batches(corner_batch, scenes, 4, seed), batch_size=None, num_workers=2)
         stream = iter(loader)
         return [next(stream) for _ in range(count)]
 

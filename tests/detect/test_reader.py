@@ -67,6 +67,23 @@ def test_a_few_reader_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
         load_reader(tmp_path / "c.npz")
 
 
+def test_cut_scenes_give_the_same_views_and_views_drawn_in_workers_repeat(scenes):
+    for scene in scenes:
+        cut = scene.cropped()
+        assert cut.image.size < scene.image.size and len(cut.blocks) == len(scene.blocks)
+        np.testing.assert_allclose(block_views(cut.image, cut.blocks), block_views(scene.image, scene.blocks),
+                                   atol=1e-3)
+        assert all(np.allclose(cut.projected[k] + scene.corners[0] - cut.corners[0], v)
+                   for k, v in scene.projected.items())
+    cut = [s.cropped() for s in scenes]
+    one = train_reader(cut, steps=3, batch=8, seed=4, workers=2)
+    again = train_reader(cut, steps=3, batch=8, seed=4, workers=2)
+    other = train_reader(cut, steps=3, batch=8, seed=5, workers=2)
+    state = [(a.state_dict(), b.state_dict(), c.state_dict()) for a, b, c in [(one, again, other)]][0]
+    assert all(torch.equal(state[0][k], state[1][k]) for k in state[0])
+    assert not all(torch.equal(state[0][k], state[2][k]) for k in state[0])
+
+
 def test_the_gate_keeps_at_most_the_allowed_share_of_wrong_readings():
     from handcap.detect.evaluation import gate_for
 

@@ -107,5 +107,5 @@ def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkey
         assert not np.array_equal(saved["w.head.weight"], first) and "--lr 0.02" in str(saved["info.source"])
     with pytest.raises(HandcapError, match="holds scenes made with"):
         train.main([a if a != "2" else "3" for a in args])
-    with pytest.raises(HandcapError, match="--seconds plans the corner network"):
-        train.main(["--what", "reader", "--seconds", "5", "--out", str(tmp_path / "w")])
+    with pytest.raises(HandcapError, match="--seconds plans one network"):
+        train.main(["--what", "refiner", "--seconds", "5", "--out", str(tmp_path / "w")])

@@ -1,9 +1,10 @@
 """Training samples drawn from rendered scenes: crops for the corner network, block views for the reader.
 
 Each function draws from a numpy random generator only, so a stream of batches is
-fixed by its seed. :class:`CornerBatches` runs :func:`corner_batch` in worker
-processes (torch's DataLoader), each with its own seed, for training where the
-network is faster than one process can draw crops (a GPU).
+fixed by its seed. :class:`Batches` runs :func:`corner_batch` or
+:func:`reader_samples` in worker processes (torch's DataLoader), each with its
+own seed, for training where the network is faster than one process can draw
+samples (a GPU).
 """
 
 from __future__ import annotations
@@ -87,30 +88,34 @@ def corner_batch(scenes, count: int, rng, size: int = CROP):
     return torch.from_numpy(images)[:, None], heat, offset, near
 
 
-class CornerBatches(IterableDataset):
-    """An endless stream of :func:`corner_batch` batches; each DataLoader worker draws with seed ``(seed, id)``.
+class Batches(IterableDataset):
+    """An endless stream of batches ``draw(scenes, count, rng, **options)``; worker ``i`` draws with seed ``(seed, i)``.
 
     With a fixed number of workers the DataLoader takes their batches in turn, so the stream is fixed by
     the seed and the worker count.
 
     Parameters
     ----------
+    draw : callable
+        A module-level function (it travels to the workers): :func:`corner_batch` or :func:`reader_samples`.
     scenes : sequence of Scene
     count : int
-        Crops per batch.
+        Samples per batch.
     seed : int
+    **options
+        Passed on to ``draw``.
     """
 
-    def __init__(self, scenes, count: int, seed: int):
+    def __init__(self, draw, scenes, count: int, seed: int, **options):
         super().__init__()
-        self.scenes, self.count, self.seed = scenes, count, seed
+        self.draw, self.scenes, self.count, self.seed, self.options = draw, scenes, count, seed, options
 
     def __iter__(self):
         """Batches, forever."""
         worker = torch.utils.data.get_worker_info()
         rng = np.random.default_rng([self.seed, 0 if worker is None else worker.id])
         while True:
-            yield corner_batch(self.scenes, self.count, rng)
+            yield self.draw(self.scenes, self.count, rng, **self.options)
 
 
 def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None):

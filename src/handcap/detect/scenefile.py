@@ -51,6 +51,29 @@ class Scene:
     alphabet: str
     projected: dict | None = None
 
+    def cropped(self, margin: int = 32) -> "Scene":
+        """The scene cut to the box of its visible corners widened by ``margin`` pixels (coordinates moved).
+
+        What the reader learns from lies there, and a cut scene is about a third smaller to keep and ship.
+
+        Parameters
+        ----------
+        margin : int
+            Pixels kept around the corners.
+
+        Returns
+        -------
+        Scene
+            This scene where it has no corners.
+        """
+        if not len(self.corners):
+            return self
+        lo = np.clip(np.floor(self.corners.min(axis=0)).astype(int) - margin, 0, None)
+        hi = np.minimum(np.ceil(self.corners.max(axis=0)).astype(int) + margin + 1, self.image.shape[::-1])
+        projected = {k: v - lo for k, v in self.projected.items()} if self.projected else self.projected
+        return Scene(np.ascontiguousarray(self.image[lo[1]:hi[1], lo[0]:hi[0]]), self.corners - lo,
+                     self.corner_names, self.blocks - lo, self.block_text, self.alphabet, projected)
+
 
 def _ragged(parts, dtype, shape=()):
     """Parts concatenated along their first axis, and the offsets of each part's start (N + 1,).

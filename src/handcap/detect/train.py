@@ -35,7 +35,7 @@ from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_r
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
 from handcap.detect.reader import GLYPHS, BlockReader, reader_loss
 from handcap.detect.refine import CornerRefiner, false_candidates, refiner_loss, refiner_samples
-from handcap.detect.samples import CornerBatches, corner_batch, crops, non_blocks, reader_samples
+from handcap.detect.samples import Batches, corner_batch, crops, non_blocks, reader_samples
 from handcap.detect.scenefile import load_scenes, save_scenes
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
@@ -59,6 +59,16 @@ def _deterministic(device: str = "cpu"):
         torch.use_deterministic_algorithms(before)
 
 
+def _stream(draw, scenes, batch: int, seed: int, workers: int, **options):
+    """``next_batch(rng)``: ``draw(scenes, batch, rng, **options)`` as tensors, in this process
+    (``workers`` 0, from ``rng``) or in worker processes (from ``seed`` and the worker count)."""
+    if workers > 0:
+        stream = iter(DataLoader(Batches(draw, scenes, batch, seed, **options), batch_size=None,
+                                 num_workers=workers, prefetch_factor=8, persistent_workers=True))
+        return lambda rng: next(stream)
+    return lambda rng: tuple(map(torch.as_tensor, draw(scenes, batch, rng, **options)))
+
+
 def _fit(make_net, batch_loss, scenes, *, steps: int, seed: int, lr: float, label: str, progress: bool,
          device: str = "cpu"):
     """The training loop the networks share: AdamW with cosine decay, deterministic for a seed.
@@ -67,7 +77,7 @@ def _fit(make_net, batch_loss, scenes, *, steps: int, seed: int, lr: float, labe
     ``batch_loss(net, rng)`` the loss of one freshly drawn batch. The network trains on ``device``
     and comes back on the CPU.
     """
-    if not scenes:
+    if steps > 0 and not scenes:
         raise HandcapError("no scenes to train on")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -109,7 +119,7 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
     device : str
         Where the network trains (``'cpu'``, ``'cuda'``).
     workers : int
-        Processes drawing the crops (:class:`~handcap.detect.samples.CornerBatches`; 0: the training
+        Processes drawing the crops (:class:`~handcap.detect.samples.Batches`; 0: the training
         process itself). The crops, and so the weights, depend on the seed and this number.
     config : dict, optional
         A new network's :class:`~handcap.detect.corners.CornerNet` arguments (made after the seed is set).
@@ -119,15 +129,7 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
     CornerNet
         On the CPU.
     """
-    if workers > 0:
-        stream = iter(DataLoader(CornerBatches(scenes, batch, seed), batch_size=None, num_workers=workers,
-                                 prefetch_factor=8, persistent_workers=True))
-
-        def draw(rng):
-            return next(stream)
-    else:
-        def draw(rng):
-            return corner_batch(scenes, batch, rng)
+    draw = _stream(corner_batch, scenes, batch, seed, workers)
 
     def loss(model, rng):
         images, heat, offset, near = (t.to(device, non_blocking=True) for t in draw(rng))
@@ -171,7 +173,8 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
 
 
 def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, lr: float = 2e-3,
-                 net: BlockReader | None = None, progress: bool = False) -> BlockReader:
+                 net: BlockReader | None = None, progress: bool = False, device: str = "cpu",
+                 workers: int = 0, negatives=None) -> BlockReader:
     """Train the block reader on views of rendered scenes (deterministic for a seed).
 
     Parameters
@@ -185,20 +188,28 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
     net : BlockReader, optional
     progress : bool
         Print the loss every 100 steps.
+    device : str
+        Where the network trains (``'cpu'``, ``'cuda'``).
+    workers : int
+        Processes drawing the views (0: the training process). The views, and so the weights,
+        depend on the seed and this number.
+    negatives : list of ndarray (N, 4, 2), optional
+        Per scene, quads of its corners that are not blocks (default: :func:`non_blocks`, made here).
 
     Returns
     -------
     BlockReader
+        On the CPU.
     """
-    negatives = [non_blocks(scene) for scene in scenes]
+    negatives = [non_blocks(s) for s in scenes] if negatives is None else negatives
+    draw = _stream(reader_samples, scenes, batch, seed, workers, negatives=negatives)
 
     def loss(model, rng):
-        views, first, second, turn = reader_samples(scenes, batch, rng, negatives=negatives)
-        return reader_loss(model(torch.from_numpy(views)[:, None]), torch.from_numpy(first),
-                           torch.from_numpy(second), torch.from_numpy(turn))
+        views, first, second, turn = (t.to(device, non_blocking=True) for t in draw(rng))
+        return reader_loss(model(views[:, None]), first, second, turn)
 
     return _fit(lambda: net or BlockReader(), loss, scenes, steps=steps, seed=seed, lr=lr, label="reader",
-                progress=progress)
+                progress=progress, device=device)
 
 
 #: Bold monospace fonts tried for training the reader (Debian's font packages; missing ones are skipped).
@@ -214,6 +225,7 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5) -> list:
     Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
     them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
     photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
+    Each scene is cut to its corners (:meth:`Scene.cropped`).
 
     Parameters
     ----------
@@ -244,7 +256,7 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5) -> list:
             maker = make(seed * 1000 + k + (0 if kind == "hand" else 500), font=font, alphabet=alphabet,
                          layout=layout, **extra)
             try:
-                batch = [maker.scene() for _ in range(min(per, total - made))]
+                batch = [maker.scene().cropped() for _ in range(min(per, total - made))]
             finally:
                 maker.close()
             out += batch
@@ -269,16 +281,22 @@ def main(argv=None) -> int:
                                                        "(default: the shipped weights)")
     p.add_argument("--scenes-file", help="the corner network's and refiner's scenes: read from this .npz when it "
                                          "exists, rendered and written there when not (train where nothing renders)")
-    p.add_argument("--device", default="cpu", help="where the corner network trains: cpu or cuda (default cpu)")
-    p.add_argument("--workers", type=int, default=0, help="processes drawing the corner network's crops "
-                                                          "(default 0: the training process)")
-    p.add_argument("--batch", type=int, help="crops per step of the corner network (default 32)")
+    p.add_argument("--device", default="cpu", help="where the corner network or the reader trains: cpu or cuda "
+                                                   "(default cpu)")
+    p.add_argument("--workers", type=int, default=0, help="processes drawing the corner network's crops or the "
+                                                          "reader's views (default 0: the training process)")
+    p.add_argument("--batch", type=int, help="samples per step (default 32 crops for the corner network, 128 "
+                                             "views for the reader)")
+    p.add_argument("--no-score", action="store_true",
+                   help="the reader: train only (where nothing renders); set its confidence gate and scores "
+                        "afterwards with --steps 0 --init on the weights written")
     p.add_argument("--lr", type=float, default=2e-3, help="learning rate (default %(default)s)")
     p.add_argument("--width", type=int, default=24, help="a new corner network's channels at half resolution")
     p.add_argument("--stem", type=int, default=16, help="a new corner network's channels at full resolution")
     p.add_argument("--dilations", default="1,2,4", help="a new corner network's dilations (default %(default)s)")
     p.add_argument("--seconds", type=float,
-                   help="the corner network: time a few steps first and train only as many as fit this long")
+                   help="the corner network or the reader: time a few steps first and train only as many as fit "
+                        "this long")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
     out = Path(a.out)
@@ -286,8 +304,8 @@ def main(argv=None) -> int:
     started = time.time()
     if a.init and a.what == "all":
         raise HandcapError("--init starts one network: name it with --what")
-    if a.seconds and a.what != "corners":
-        raise HandcapError("--seconds plans the corner network's steps: give it with --what corners")
+    if a.seconds and a.what not in ("corners", "reader"):
+        raise HandcapError("--seconds plans one network's steps: give it with --what corners or --what reader")
     init = load_net(a.init, {"corners": "CornerNet", "refiner": "CornerRefiner", "reader": "BlockReader"}[a.what]) \
         if a.init else None
     if a.what in ("corners", "all"):
@@ -295,14 +313,8 @@ def main(argv=None) -> int:
         print(f"{len(scenes)} + {len(tests)} scenes ready in {time.time() - started:.0f} s", flush=True)
         shape = {"width": a.width, "stem": a.stem, "dilations": [int(d) for d in a.dilations.split(",")]}
         settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 32, "device": a.device, "workers": a.workers}
-        if a.seconds:  # two short runs: their difference leaves out the start (workers, device)
-            took = []
-            for steps in (40, 240):
-                probe = time.time()
-                train_corners(scenes, steps=steps, net=copy.deepcopy(init), config=shape, **settings)
-                took.append(time.time() - probe)
-            a.steps = min(a.steps, int(200 * a.seconds / max(took[1] - took[0], 1e-3)))
-            print(f"corners: {a.steps} steps fit in {a.seconds:.0f} s", flush=True)
+        if a.seconds:
+            a.steps = _plan(train_corners, scenes, a, init, config=shape, **settings)
         net = train_corners(scenes, steps=a.steps, net=init, config=shape, progress=True, **settings)
         score = evaluate_corners(net, tests)
         print(score.summary(), flush=True)
@@ -317,32 +329,70 @@ def main(argv=None) -> int:
     if a.what in ("reader", "all"):
         fonts = [None] + [f for f in FONTS if Path(f).is_file()]
         held_out, trained = fonts[-1:], fonts[:-1] if len(fonts) > 1 else fonts
-        scenes = reader_scenes(a.scenes, a.seed, trained)
-        tests = reader_scenes(a.test_scenes, a.seed + 1_000_003, held_out)
+        scenes = _reader_scenes(a, trained) if a.steps > 0 else []
         print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
-        net = train_reader(scenes, steps=a.steps, seed=a.seed, lr=a.lr, net=init, progress=True)
-        validation = reader_scenes(a.test_scenes, a.seed + 2_000_003, trained)
-        net.min_score = reader_gate(net, validation)
-        print(f"reader: trusted alone from confidence {net.min_score:.4f} (at most 0.1 % wrong on "
-              f"{len(validation)} validation scenes in the training fonts)", flush=True)
-        score = {name: evaluate_reader(net, [t for t in tests if t.alphabet == alphabet], min_score=gate)
-                 for name, alphabet in (("handcap", ALPHABET), ("dextercap", DEXTERCAP_ALPHABET))
-                 for gate in (net.min_score,)}
-        line = reader_line(score, held_out[0])
+        settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 128, "device": a.device, "workers": a.workers,
+                    "negatives": [non_blocks(s) for s in scenes]}
+        if a.seconds:
+            a.steps = _plan(train_reader, scenes, a, init, **settings)
+        net = train_reader(scenes, steps=a.steps, net=init, progress=True, **settings)
+        line = "not scored (trained with --no-score)"
+        if not a.no_score:
+            validation = reader_scenes(a.test_scenes, a.seed + 2_000_003, trained)
+            net.min_score = reader_gate(net, validation)
+            print(f"reader: trusted alone from confidence {net.min_score:.4f} (at most 0.1 % wrong on "
+                  f"{len(validation)} validation scenes in the training fonts)", flush=True)
+            tests = reader_scenes(a.test_scenes, a.seed + 1_000_003, held_out)
+            score = {name: evaluate_reader(net, [t for t in tests if t.alphabet == alphabet], min_score=net.min_score)
+                     for name, alphabet in (("handcap", ALPHABET), ("dextercap", DEXTERCAP_ALPHABET))}
+            line = reader_line(score, held_out[0])
         print(line, flush=True)
         save_net(net, out / "reader.npz", {"source": _command(a), "score": line})
     print(f"wrote {out} ({time.time() - started:.0f} s in all)")
     return 0
 
 
+def _plan(train, scenes, a, init, **settings) -> int:
+    """The steps of ``train`` that fit in ``a.seconds``, from two short runs (their difference leaves out the
+    start: workers, device), at most ``a.steps``."""
+    took = []
+    for steps in (40, 240):
+        probe = time.time()
+        train(scenes, steps=steps, net=copy.deepcopy(init), **settings)
+        took.append(time.time() - probe)
+    steps = min(a.steps, int(200 * a.seconds / max(took[1] - took[0], 1e-3)))
+    print(f"{a.what}: {steps} steps fit in {a.seconds:.0f} s", flush=True)
+    return steps
+
+
+def _reader_scenes(a, fonts) -> list:
+    """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file`` (written there
+    when it does not exist)."""
+    made = {"what": "reader", "scenes": a.scenes, "seed": a.seed}
+    if a.scenes_file and Path(a.scenes_file).is_file():
+        groups, info = load_scenes(a.scenes_file)
+        if {k: info.get(k) for k in made} != made or "train" not in groups:
+            raise HandcapError(f"{a.scenes_file}: holds scenes made with {info}, not {made}")
+        return groups["train"]
+    scenes = reader_scenes(a.scenes, a.seed, fonts)
+    if a.scenes_file:
+        save_scenes(a.scenes_file, {"train": scenes}, made)
+    return scenes
+
+
 def _command(a) -> str:
-    """The command that made the weights, as stored with them (options at their defaults left out)."""
+    """The command that made the weights, as stored with them (options at their defaults left out); after
+    the command that made the ``--init`` weights, where they say."""
     words = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
-                            ("stem", 16), ("dilations", "1,2,4")):
+                            ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False)):
         if getattr(a, option) != default:
-            words += f" --{option} {getattr(a, option)}"
+            words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
+    if a.init:
+        with np.load(a.init, allow_pickle=False) as data:
+            if "info.source" in data.files and str(data["info.source"]) not in words:
+                words = f"{data['info.source']}; then {words}"
     return words
 
 
