@@ -109,3 +109,37 @@ def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkey
         train.main([a if a != "2" else "3" for a in args])
     with pytest.raises(HandcapError, match="--seconds plans one network"):
         train.main(["--what", "refiner", "--seconds", "5", "--out", str(tmp_path / "w")])
+
+
+def test_the_reader_trains_from_its_scenes_file_and_is_scored_afterwards(tmp_path, monkeypatch):
+    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
+    from handcap.detect import train
+
+    args = ["--what", "reader", "--scenes", "2", "--steps", "2", "--threads", "1", "--cut", "--no-score",
+            "--scenes-file", str(tmp_path / "scenes.npz"), "--out", str(tmp_path / "w")]
+    try:
+        assert train.main(args) == 0
+    except HandcapError as err:
+        pytest.skip(f"no headless OpenGL here: {err}")
+    groups, info = load_scenes(tmp_path / "scenes.npz")
+    assert len(groups["train"]) == 2 and info == {"what": "reader", "scenes": 2, "seed": 0, "cut": True}
+    with np.load(tmp_path / "w" / "reader.npz") as saved:
+        first, unscored = saved["w.turn.weight"], str(saved["info.score"])
+    assert "not scored" in unscored
+
+    def no_rendering(*args, **kwargs):
+        raise AssertionError("rendered again")
+
+    monkeypatch.setattr(train, "reader_scenes", no_rendering)
+    assert train.main(args) == 0  # read back, not rendered
+    assert np.array_equal(np.load(tmp_path / "w" / "reader.npz")["w.turn.weight"], first)
+    with pytest.raises(HandcapError, match="holds scenes made with"):
+        train.main([a for a in args if a != "--cut"])
+    monkeypatch.undo()
+    # No steps: the weights are kept, their gate is set on validation scenes, and the chain of commands recorded.
+    assert train.main(["--what", "reader", "--steps", "0", "--test-scenes", "1", "--threads", "1",
+                       "--init", str(tmp_path / "w" / "reader.npz"), "--out", str(tmp_path / "s")]) == 0
+    with np.load(tmp_path / "s" / "reader.npz") as saved:
+        assert np.array_equal(saved["w.turn.weight"], first)
+        assert "right" in str(saved["info.score"]) and "; then " in str(saved["info.source"])
+        assert "--cut" in str(saved["info.source"])

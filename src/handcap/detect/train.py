@@ -219,13 +219,13 @@ FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
          "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf")
 
 
-def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5) -> list:
+def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool = False) -> list:
     """Scenes for the reader: hand renders and photographed sheets in each font, many alphabets and layouts.
 
     Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
     them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
     photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
-    Each scene is cut to its corners (:meth:`Scene.cropped`).
+    ``cut`` cuts each scene to its corners (:meth:`Scene.cropped`).
 
     Parameters
     ----------
@@ -235,6 +235,8 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5) -> list:
         Font files (None: the default font).
     pages : float
         Share of photographed sheets among the scenes.
+    cut : bool
+        Cut each scene to its corners: the same views, a third smaller to keep in a scenes file.
 
     Returns
     -------
@@ -256,7 +258,8 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5) -> list:
             maker = make(seed * 1000 + k + (0 if kind == "hand" else 500), font=font, alphabet=alphabet,
                          layout=layout, **extra)
             try:
-                batch = [maker.scene().cropped() for _ in range(min(per, total - made))]
+                batch = [maker.scene() for _ in range(min(per, total - made))]
+                batch = [b.cropped() for b in batch] if cut else batch
             finally:
                 maker.close()
             out += batch
@@ -294,6 +297,8 @@ def main(argv=None) -> int:
     p.add_argument("--width", type=int, default=24, help="a new corner network's channels at half resolution")
     p.add_argument("--stem", type=int, default=16, help="a new corner network's channels at full resolution")
     p.add_argument("--dilations", default="1,2,4", help="a new corner network's dilations (default %(default)s)")
+    p.add_argument("--cut", action="store_true", help="the reader: cut its training scenes to their corners "
+                                                      "(the same views, a third smaller in --scenes-file)")
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
@@ -368,13 +373,13 @@ def _plan(train, scenes, a, init, **settings) -> int:
 def _reader_scenes(a, fonts) -> list:
     """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file`` (written there
     when it does not exist)."""
-    made = {"what": "reader", "scenes": a.scenes, "seed": a.seed}
+    made = {"what": "reader", "scenes": a.scenes, "seed": a.seed, "cut": a.cut}
     if a.scenes_file and Path(a.scenes_file).is_file():
         groups, info = load_scenes(a.scenes_file)
         if {k: info.get(k) for k in made} != made or "train" not in groups:
             raise HandcapError(f"{a.scenes_file}: holds scenes made with {info}, not {made}")
         return groups["train"]
-    scenes = reader_scenes(a.scenes, a.seed, fonts)
+    scenes = reader_scenes(a.scenes, a.seed, fonts, cut=a.cut)
     if a.scenes_file:
         save_scenes(a.scenes_file, {"train": scenes}, made)
     return scenes
@@ -386,7 +391,8 @@ def _command(a) -> str:
     words = (f"python -m handcap.detect.train --what {a.what} --scenes {a.scenes} --test-scenes {a.test_scenes} "
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
-                            ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False)):
+                            ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False),
+                            ("cut", False)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.init:
