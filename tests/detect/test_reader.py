@@ -47,6 +47,14 @@ def test_samples_label_the_turn_and_the_glyphs(scenes):
     assert set(GLYPHS[i] for i in first[tags]) <= set("0123456789ACEFHPUY")
 
 
+def test_blocks_with_a_corner_moved_are_shown_as_no_block(scenes):
+    same = reader_samples(scenes, 64, np.random.default_rng(0), displaced=0.0)
+    np.testing.assert_array_equal(same[0], reader_samples(scenes, 64, np.random.default_rng(0))[0])
+    views, first, second, turn = reader_samples(scenes, 64, np.random.default_rng(0), displaced=1.0)
+    assert (turn == 4).all() and (first == NONE).all() and (second == NONE).all()
+    assert not np.allclose(views, same[0])  # the moved corners change what the reader sees
+
+
 def test_a_few_reader_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
     from handcap.detect.reader import reader_loss
     views, *labels = reader_samples(scenes, 48, np.random.default_rng(5))

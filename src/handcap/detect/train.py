@@ -174,7 +174,7 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
 
 def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, lr: float = 2e-3,
                  net: BlockReader | None = None, progress: bool = False, device: str = "cpu",
-                 workers: int = 0, negatives=None) -> BlockReader:
+                 workers: int = 0, negatives=None, displaced: float = 0.0) -> BlockReader:
     """Train the block reader on views of rendered scenes (deterministic for a seed).
 
     Parameters
@@ -195,6 +195,8 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
         depend on the seed and this number.
     negatives : list of ndarray (N, 4, 2), optional
         Per scene, quads of its corners that are not blocks (default: :func:`non_blocks`, made here).
+    displaced : float
+        Share of the true blocks shown with one corner moved, as no block (:func:`reader_samples`).
 
     Returns
     -------
@@ -202,7 +204,7 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
         On the CPU.
     """
     negatives = [non_blocks(s) for s in scenes] if negatives is None else negatives
-    draw = _stream(reader_samples, scenes, batch, seed, workers, negatives=negatives)
+    draw = _stream(reader_samples, scenes, batch, seed, workers, negatives=negatives, displaced=displaced)
 
     def loss(model, rng):
         views, first, second, turn = (t.to(device, non_blocking=True) for t in draw(rng))
@@ -299,6 +301,8 @@ def main(argv=None) -> int:
     p.add_argument("--dilations", default="1,2,4", help="a new corner network's dilations (default %(default)s)")
     p.add_argument("--cut", action="store_true", help="the reader: cut its training scenes to their corners "
                                                       "(the same views, a third smaller in --scenes-file)")
+    p.add_argument("--displaced", type=float, default=0.0,
+                   help="the reader: share of true blocks shown with one corner moved, as no block (default 0)")
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
@@ -337,7 +341,7 @@ def main(argv=None) -> int:
         scenes = _reader_scenes(a, trained) if a.steps > 0 else []
         print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
         settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 128, "device": a.device, "workers": a.workers,
-                    "negatives": [non_blocks(s) for s in scenes]}
+                    "negatives": [non_blocks(s) for s in scenes], "displaced": a.displaced}
         if a.seconds:
             a.steps = _plan(train_reader, scenes, a, init, **settings)
         net = train_reader(scenes, steps=a.steps, net=init, progress=True, **settings)
@@ -392,7 +396,7 @@ def _command(a) -> str:
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
                             ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False),
-                            ("cut", False)):
+                            ("cut", False), ("displaced", 0.0)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.init:
