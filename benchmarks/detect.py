@@ -170,7 +170,7 @@ def main() -> None:
     from scipy.spatial import cKDTree as _Tree
     from handcap.detect.blocks import candidate_quads, white_blocks
     from handcap.detect.reader import read_blocks
-    from handcap.detect.voting import unconfirmed, vote
+    from handcap.detect.voting import unconfirmed, uncrossed, vote
 
     funnel, fixed, lost = np.zeros(6, int), 0, 0
     for scene in hands:
@@ -181,6 +181,7 @@ def main() -> None:
         tags, turns, _ = vote(pattern, quads, text, turn, bscore, reader.min_score, xy)
         trusted = (bscore >= reader.min_score) & (text == tags) & (turn == turns)
         tags[unconfirmed(quads, tags, xy, trusted, cscore)] = ""
+        tags[uncrossed(pattern, scene.image, quads, tags, turns, xy)] = ""
         at = {frozenset(q): k for k, q in enumerate(quads.tolist())}
         made = {frozenset(q) for q in candidates.tolist()}
         tree = _Tree(xy) if len(xy) else None

@@ -171,3 +171,33 @@ def test_unconfirmed_blocks_must_be_parallelograms():
     assert not unconfirmed(quads, tags, moved, np.ones(len(quads), bool), score).any()
     score[0] = 0.8
     assert list(np.flatnonzero(unconfirmed(quads, tags, moved, np.ones(len(quads), bool), score))) == [0]
+
+
+def test_a_lone_corner_must_show_the_white_square_across_it():
+    from handcap.detect.voting import uncrossed
+    from handcap.patterns.pattern import Pattern, Patch
+
+    # One patch of 2 x 2 squares: white "AC" at (0, 0) and "EF" at (1, 1) meet at vertex (1, 1).
+    pattern = Pattern((Patch("p", "right", "palm", (("AC", ""), ("", "EF"))),))
+    image = np.full((100, 100), 128, np.uint8)
+    image[20:60, 20:60] = 30  # the patch's black squares ...
+    image[20:40, 20:40] = 230  # ... and its two white ones, 20 px each
+    image[40:60, 40:60] = 230
+    xy = np.array([[20, 20], [40, 20], [40, 40], [20, 40]], float) - 0.5  # AC's corners, reading order
+    quads, tags, turns = np.array([[0, 1, 2, 3]]), np.array(["AC"]), np.array([0])
+    # Only AC is voted, so its corner (1, 1) is lone; the template puts EF across it, and the image shows it.
+    assert not uncrossed(pattern, image, quads, tags, turns, xy).any()
+    hidden = image.copy()
+    hidden[40:70, 40:70] = 60  # a dark occluder over EF (a mid-grey one, 110, would pass: 0.25 of the contrast)
+    assert uncrossed(pattern, hidden, quads, tags, turns, xy).all()
+    # The same turned block (its corners listed from another one) is judged the same.
+    turned = np.array([[1, 2, 3, 0]])
+    assert uncrossed(pattern, hidden, turned, tags, np.array([3]), xy).all()
+    assert not uncrossed(pattern, image, turned, tags, np.array([3]), xy).any()
+    # A corner on the patch's edge is not checked, nor one another voted block confirms, nor an unvoted block.
+    edge = Pattern((Patch("p", "right", "palm", (("AC", ""), ("", ""))),))
+    assert not uncrossed(edge, hidden, quads, tags, turns, xy).any()
+    assert not uncrossed(pattern, hidden, quads, np.array([""]), turns, xy).any()
+    both = np.array([[0, 1, 2, 3], [2, 4, 5, 6]])
+    xy2 = np.vstack([xy, np.array([[60, 40], [60, 60], [40, 60]]) - 0.5])
+    assert not uncrossed(pattern, hidden, both, np.array(["AC", "EF"]), np.array([0, 0]), xy2).any()

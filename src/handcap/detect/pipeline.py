@@ -22,7 +22,7 @@ from handcap.detect.corners import CornerNet
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
 from handcap.detect.refine import CornerRefiner, locate_corners
-from handcap.detect.voting import name_corners, unconfirmed, vote
+from handcap.detect.voting import name_corners, unconfirmed, uncrossed, vote
 
 @dataclass(frozen=True)
 class ImageDetections:
@@ -106,6 +106,8 @@ class Detector:
             tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
             trusted = (bscore >= self.reader.min_score) & (text == tags) & (rotation == turns)
             drop = unconfirmed(quads, tags, xy, trusted, cscore)
+            tags[drop], turns[drop] = "", -1
+            drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
             tags[drop], turns[drop] = "", -1
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
