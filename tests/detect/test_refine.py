@@ -129,3 +129,26 @@ def test_candidates_that_are_no_corner_give_none_and_no_error():
     xy = np.random.default_rng(1).uniform(10, 100, (40, 2))
     found, score = refine_corners(load_refiner(), noise, xy, min_score=0.99)
     assert found.shape == (0, 2) and score.shape == (0,)
+
+
+def test_candidates_without_a_printed_corners_contrast_are_not_refined(monkeypatch):
+    from handcap.detect import refine
+
+    # A dim, noisy backdrop (a few grey levels of noise) with one printed corner in it.
+    rng = np.random.default_rng(3)
+    image = np.clip(70 + rng.normal(0, 4, (200, 240)), 0, 255).astype(np.uint8)
+    image[60:100, 60:100], image[100:140, 100:140] = 220, 220  # two white squares meeting at (100, 100)
+    image[60:100, 100:140], image[100:140, 60:100] = 25, 25
+    backdrop = rng.uniform([20, 160], [220, 190], (300, 2))  # below the squares: backdrop only
+    candidates = np.vstack([[[99.5, 99.5]], backdrop])
+    keep = refine._contrasted(image, np.rint(candidates).astype(int))
+    assert keep[0] and not keep[1:].any()
+    # The refiner sees only what passes: its result is the same as on the printed corner alone.
+    looked = []
+    views = refine._views
+    monkeypatch.setattr(refine, "_views", lambda net, img, centres, *a: looked.append(len(centres)) or views(
+        net, img, centres, *a))
+    found, _ = refine_corners(load_refiner(), image, candidates)
+    assert looked[0] == 1
+    alone, _ = refine_corners(load_refiner(), image, candidates[:1])
+    np.testing.assert_allclose(found, alone)
