@@ -82,16 +82,22 @@ def test_bad_scenes_files_are_one_clear_error(tmp_path):
     assert _same(empty, back) and back.corners.shape == (0, 2) and back.blocks.shape == (0, 4, 2)
 
 
-def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkeypatch):
+def _trained_once(args):
+    """``handcap.detect.train`` after one run of its command with ``args`` (skipped where nothing renders)."""
     pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
     from handcap.detect import train
 
-    args = ["--what", "corners", "--scenes", "2", "--test-scenes", "1", "--steps", "2", "--threads", "1",
-            "--scenes-file", str(tmp_path / "scenes.npz"), "--out", str(tmp_path / "w")]
     try:
         assert train.main(args) == 0
     except HandcapError as err:
         pytest.skip(f"no headless OpenGL here: {err}")
+    return train
+
+
+def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkeypatch):
+    args = ["--what", "corners", "--scenes", "2", "--test-scenes", "1", "--steps", "2", "--threads", "1",
+            "--scenes-file", str(tmp_path / "scenes.npz"), "--out", str(tmp_path / "w")]
+    train = _trained_once(args)
     first = np.load(tmp_path / "w" / "corners.npz")["w.head.weight"]
     groups, info = load_scenes(tmp_path / "scenes.npz")
     assert len(groups["train"]) == 2 and len(groups["test"]) == 1 and info["scenes"] == 2
@@ -112,15 +118,9 @@ def test_the_training_command_renders_into_the_scenes_file_once(tmp_path, monkey
 
 
 def test_the_reader_trains_from_its_scenes_file_and_is_scored_afterwards(tmp_path, monkeypatch):
-    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
-    from handcap.detect import train
-
     args = ["--what", "reader", "--scenes", "2", "--steps", "2", "--threads", "1", "--cut", "--no-score",
             "--scenes-file", str(tmp_path / "scenes.npz"), "--out", str(tmp_path / "w")]
-    try:
-        assert train.main(args) == 0
-    except HandcapError as err:
-        pytest.skip(f"no headless OpenGL here: {err}")
+    train = _trained_once(args)
     groups, info = load_scenes(tmp_path / "scenes.npz")
     assert len(groups["train"]) == 2 and info == {"what": "reader", "scenes": 2, "seed": 0, "cut": True}
     with np.load(tmp_path / "w" / "reader.npz") as saved:

@@ -219,6 +219,13 @@ def name_corners(pattern: Pattern, quads: np.ndarray, tags, turns, n_corners: in
     return names
 
 
+def _uses(quads, tags, n_corners: int):
+    """Blocks as (B, 4) corner indices, which of them are voted (B,), and how many voted blocks use each corner (K,)."""
+    quads = np.asarray(quads, dtype=int).reshape(-1, 4)
+    voted = np.array([bool(t) for t in tags], bool).reshape(-1)
+    return quads, voted, np.bincount(quads[voted].ravel(), minlength=n_corners)
+
+
 #: Largest distance of a block's fourth corner from where the other three put it (the corner that closes their
 #: parallelogram), in sides of the block, for a block not confirmed by its neighbours. A printed square seen over a
 #: few millimetres of skin is nearly a parallelogram in the image; a false corner beside a missed one bends it.
@@ -270,11 +277,9 @@ def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=Non
     ndarray (B,) bool
         True for a block to drop.
     """
-    quads = np.asarray(quads, dtype=int).reshape(-1, 4)
-    voted = np.array([bool(t) for t in tags], bool).reshape(-1)
+    quads, voted, uses = _uses(quads, tags, len(xy))
     if not voted.any():
         return np.zeros(len(quads), bool)
-    uses = np.bincount(quads[voted].ravel(), minlength=len(xy))
     confirmed = (uses[quads] > 1).all(axis=1)
     pts = np.asarray(xy, dtype=np.float64)[quads]
     side = np.linalg.norm(np.roll(pts, -1, axis=1) - pts, axis=2).mean(axis=1)
@@ -328,12 +333,10 @@ def uncrossed(pattern: Pattern, image: np.ndarray, quads: np.ndarray, tags, turn
     ndarray (B,) bool
         True for a block to drop.
     """
-    quads = np.asarray(quads, dtype=int).reshape(-1, 4)
-    voted = np.array([bool(t) for t in tags], bool).reshape(-1)
+    quads, voted, uses = _uses(quads, tags, len(xy))
     out = np.zeros(len(quads), bool)
     if not voted.any():
         return out
-    uses = np.bincount(quads[voted].ravel(), minlength=len(xy))
     share = np.asarray(CROSS_AT)[:, None]
 
     def sample(points):
