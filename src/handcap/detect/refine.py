@@ -184,8 +184,9 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
         return xy, np.zeros(0)
     if not 1 <= views <= 8:
         raise HandcapError(f"views must be 1 to 8, got {views}")
-    xy = xy[_contrasted(image, np.rint(xy).astype(int))]
     centres = np.rint(xy).astype(int)
+    keep = _contrasted(image, centres)
+    xy, centres = xy[keep], centres[keep]
     if len(xy) == 0:
         return xy, np.zeros(0)
     logit, offset = _views(net, image, centres, range(1), batch)

@@ -375,18 +375,24 @@ def _plan(train, scenes, a, init, **settings) -> int:
 
 
 def _reader_scenes(a, fonts) -> list:
-    """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file`` (written there
-    when it does not exist)."""
+    """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file``."""
     made = {"what": "reader", "scenes": a.scenes, "seed": a.seed, "cut": a.cut}
-    if a.scenes_file and Path(a.scenes_file).is_file():
-        groups, info = load_scenes(a.scenes_file)
-        if {k: info.get(k) for k in made} != made or "train" not in groups:
-            raise HandcapError(f"{a.scenes_file}: holds scenes made with {info}, not {made}")
-        return groups["train"]
-    scenes = reader_scenes(a.scenes, a.seed, fonts, cut=a.cut)
-    if a.scenes_file:
-        save_scenes(a.scenes_file, {"train": scenes}, made)
-    return scenes
+    return _kept(a.scenes_file, made, ("train",),
+                 lambda: {"train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut)})["train"]
+
+
+def _kept(path, made: dict, names, render) -> dict:
+    """Groups ``names`` of scenes read from the scenes file ``path`` where it exists (made as ``made`` says),
+    else ``render()``'s, written there when ``path`` is given."""
+    if path and Path(path).is_file():
+        groups, info = load_scenes(path)
+        if {k: info.get(k) for k in made} != made or set(groups) != set(names):
+            raise HandcapError(f"{path}: holds scenes made with {info}, not {made}")
+        return groups
+    groups = render()
+    if path:
+        save_scenes(path, groups, made)
+    return groups
 
 
 def _command(a) -> str:
@@ -401,7 +407,7 @@ def _command(a) -> str:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.init:
         with np.load(a.init, allow_pickle=False) as data:
-            if "info.source" in data.files and str(data["info.source"]) not in words:
+            if "info.source" in data.files:
                 words = f"{data['info.source']}; then {words}"
     return words
 
@@ -409,16 +415,11 @@ def _command(a) -> str:
 def _scenes(a) -> tuple[list, list]:
     """The corner network's training and test scenes: rendered, or read from ``--scenes-file``."""
     made = {"scenes": a.scenes, "test_scenes": a.test_scenes, "seed": a.seed, "pages": a.pages}
-    if a.scenes_file and Path(a.scenes_file).is_file():
-        groups, info = load_scenes(a.scenes_file)
-        if {k: info.get(k) for k in made} != made or set(groups) != {"train", "test"}:
-            raise HandcapError(f"{a.scenes_file}: holds scenes made with {info}, not {made}")
-        return groups["train"], groups["test"]
-    scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=[None] + [f for f in FONTS if Path(f).is_file()])
-    tests = corner_scenes(a.test_scenes, a.seed + 1_000_003)
-    if a.scenes_file:
-        save_scenes(a.scenes_file, {"train": scenes, "test": tests}, made)
-    return scenes, tests
+    fonts = [None] + [f for f in FONTS if Path(f).is_file()]
+    groups = _kept(a.scenes_file, made, ("train", "test"),
+                   lambda: {"train": corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=fonts),
+                            "test": corner_scenes(a.test_scenes, a.seed + 1_000_003)})
+    return groups["train"], groups["test"]
 
 
 def corner_scenes(count: int, seed: int, *, pages: float = 0.0, fonts=(None,)) -> list:
