@@ -194,11 +194,10 @@ def test_online_frames_in_doubt_are_withheld_not_mislabelled(takes):
 
 
 def test_offline_another_subject_takes_the_rigid_set_the_online_pass_found(takes):
-    # Issue 14: on another subject's take the triad's distances are 12 mm off; the search over the whole take
-    # takes a look-alike set of knuckle and finger markers for it (8.4 mm off), the online pass (its re-learned
-    # sets judged once the model is aligned) finds the triad, and the offline labeling keeps whichever labels
-    # more points. Measured on this take: 37.64 % correct / 32.80 % wrong with the search's set, 92.90 % / 1.25 %
-    # with the online pass's, 96.58 % / 1.30 % once its pinky_mcp is searched for wider.
+    # Issue 14: on another subject's take the triad's distances are 8 mm off (12 mm before joints-19's top
+    # triad marker moved off the knuckles); the search over the whole take can take a look-alike set of knuckle
+    # and finger markers for it, the online pass (its re-learned sets judged once the model is aligned) finds
+    # the triad, and the offline labeling keeps whichever labels more points.
     layout, model, _, _ = takes
     other = synthesize(SynthConfig(layout="joints-19", motion="random", object="none", frames=500, seed=21,
                                    subject_seed=7, cameras=8)).labeled_points(layout.names)
@@ -218,7 +217,7 @@ def test_offline_another_subject_takes_the_rigid_set_the_online_pass_found(takes
     change = np.abs(np.linalg.norm(true[i] - true[j], axis=1)
                     - np.linalg.norm(model.rigid.canonical[i] - model.rigid.canonical[j], axis=1)).max()
     line = next(w for w in result.warnings if "rigid markers' distances" in w)  # never silent
-    assert change > 0.01 and abs(float(line.split("by up to ")[1].split(" mm")[0]) - 1000 * change) < 1.5
+    assert change > 0.005 and abs(float(line.split("by up to ")[1].split(" mm")[0]) - 1000 * change) < 1.5
 
 
 def test_a_marker_stuck_on_elsewhere_is_found_by_a_wider_search(takes):

@@ -146,6 +146,32 @@ def test_rigid_markers_in_a_line_or_on_two_segments_are_warned():
     assert any("several segments (index_proximal, palm)" in w for w in mixed.warnings)
 
 
+def test_touching_spheres_and_a_look_alike_of_the_rigid_set_are_warned():
+    layout = load_layout("joints-19")
+    by = {m.name: m for m in layout.markers}
+    ring = by["ring_mcp"].position
+    # hand_top 5.8 mm from ring_mcp: two 6 mm spheres (3 mm radius) 1 mm apart at least, so closer than 7 mm.
+    toward = (by["hand_top"].position - ring) / np.linalg.norm(by["hand_top"].position - ring)
+    touching = LayoutMarker("hand_top", "palm", ring + 0.0058 * toward)
+    result = quiet_check(MarkerLayout("mine", "right", tuple(edited(layout, hand_top=touching)), layout.rigid,
+                                      layout.marker_radius))
+    assert len(result.warnings) == 1
+    assert "closer than their 7 mm spheres allow" in result.warnings[0]
+    assert "hand_top-ring_mcp 5.8 mm" in result.warnings[0]
+    # 10 mm apart the spheres are clear, but the triangle with ring_mcp looks like the rigid set's own.
+    near = LayoutMarker("hand_top", "palm", ring + 0.010 * toward)
+    result = quiet_check(MarkerLayout("mine", "right", tuple(edited(layout, hand_top=near)), layout.rigid,
+                                      layout.marker_radius))
+    assert len(result.warnings) == 1
+    assert "rigid markers within 12 mm of another marker of their segment: hand_top-ring_mcp 10.0 mm" in \
+        result.warnings[0]
+    # The same spot is fine when hand_top is not a rigid marker: two markers 10 mm apart are no look-alike.
+    assert quiet_check(MarkerLayout("mine", "right", tuple(edited(layout, hand_top=near)),
+                                    ("hand_left", "hand_right", "middle_mcp"), layout.marker_radius)).warnings == ()
+    glove = load_layout("glove-13")  # 14 mm spheres: its markers are all farther apart than 15 mm
+    assert quiet_check(glove).warnings == ()
+
+
 def test_no_rigid_set_is_a_warning_for_spheres_only():
     glove = load_layout("glove-13")
     assert any("no rigid set" in w for w in quiet_check(MarkerLayout("m", "right", glove.markers)).warnings)

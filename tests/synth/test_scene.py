@@ -12,7 +12,8 @@ from handcap.hand import OpenHand
 from handcap.hand.anatomy import PHI_LIMITS
 from handcap.io import read_hand_motion, read_markers, read_points
 from handcap.synth.objects import make_object
-from handcap.synth.scene import SynthConfig, synthesize, write_capture
+from handcap.layouts import MARKER_GAP, load_layout
+from handcap.synth.scene import SynthConfig, misplaced, synthesize, write_capture
 
 FILES = ("markers.c3d", "markers.npz", "points.npz", "detections.npz", "cameras.toml", "truth.npz", "scene.toml")
 
@@ -133,6 +134,26 @@ def test_every_layout_and_motion_make_a_capture(tmp_path, layout, motion):
     assert np.abs(np.diff(phi, axis=0)).max() * config.rate < 20
     assert np.linalg.norm(np.diff(capture.hand_motion.transl, axis=0), axis=1).max() * config.rate < 3
     assert 0.2 < capture.truth["visible"].mean() <= 1.0
+
+
+@pytest.mark.parametrize("name", ["joints-19", "glove-13"])
+def test_misplaced_spheres_never_touch(name):
+    """Placement moves each sphere on its own (3 mm sd here, 8 mm: far more than a lab's); none comes nearer
+    another than their two radii plus MARKER_GAP, or than the layout's own distance where that is less."""
+    layout, hand = load_layout(name), OpenHand()
+    nominal = layout.positions()
+    floor = np.minimum(2 * layout.marker_radius + MARKER_GAP,
+                       np.linalg.norm(nominal[:, None] - nominal[None], axis=-1))
+    moved_most, skin = 0.0, hand.forward().vertices
+    for seed in range(12):
+        placed = misplaced(layout, hand, 0.008, np.random.default_rng(seed)).positions()
+        dist = np.linalg.norm(placed[:, None] - placed[None], axis=-1)
+        np.fill_diagonal(dist, np.inf)
+        assert (dist >= floor - 1e-9).all()
+        moved_most = max(moved_most, np.linalg.norm(placed - nominal, axis=1).max())
+        on_skin = np.linalg.norm(closest_points_on_mesh(placed, skin, hand.faces)[0] - placed, axis=1)
+        assert on_skin.max() < 1e-6
+    assert moved_most > 0.01  # the markers did move
 
 
 def test_clean_capture_equals_truth_where_seen():

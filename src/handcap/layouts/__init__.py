@@ -13,7 +13,10 @@ Shipped layouts (``handcap.layouts.SHIPPED``):
     named as in that recording (``little`` is the pinky).
 ``joints-19``
     A marker over every finger joint (MCP, PIP, DIP; thumb MCP, IP) and on
-    every nail, 19 in all, plus the glove's back-of-hand triad.
+    every nail, 19 in all, plus a back-of-hand triad: the glove's two wrist-side
+    markers and a third 2 cm short of the index and middle knuckles, clear of
+    their markers (the glove's own third marker, on the knuckles between the
+    middle and ring fingers, would touch ``ring_mcp``).
 ``tips-5``
     The five nail markers plus the back-of-hand triad.
 ``active-9``
@@ -36,9 +39,9 @@ Positions are on the right hand of :class:`handcap.hand.OpenHand` at
 ``betas = 0`` in its flat pose; a left-hand layout mirrors them (z negated).
 """
 
-from handcap.layouts.file import MARKER_KINDS, SHIPPED, LayoutMarker, MarkerLayout, load_layout
+from handcap.layouts.file import MARKER_GAP, MARKER_KINDS, SHIPPED, LayoutMarker, MarkerLayout, load_layout
 from handcap.layouts.template import SEGMENT_HELP, layout_template
 from handcap.layouts.check import LayoutCheck, check_layout
 
-__all__ = ["MARKER_KINDS", "SEGMENT_HELP", "SHIPPED", "LayoutCheck", "LayoutMarker", "MarkerLayout", "check_layout",
-           "layout_template", "load_layout"]
+__all__ = ["MARKER_GAP", "MARKER_KINDS", "SEGMENT_HELP", "SHIPPED", "LayoutCheck", "LayoutMarker", "MarkerLayout",
+           "check_layout", "layout_template", "load_layout"]

@@ -38,7 +38,7 @@ from handcap.core.geometry import closest_points_on_mesh
 from handcap.core.markers import MarkerSequence
 from handcap.hand import OpenHand
 from handcap.hand.anatomy import SEGMENT_NAMES
-from handcap.layouts.file import MarkerLayout
+from handcap.layouts.file import MARKER_GAP, MarkerLayout
 
 #: Farthest a given position may lie from the skin of its own segment on the template, metres.
 MAX_SEGMENT_DISTANCE = 0.02
@@ -50,6 +50,10 @@ MIN_RIGID_SPREAD = 0.005
 RIGID_TOLERANCE = (0.10, 0.005)
 #: Plausible size of a subject's hand against the template (adult hand lengths span about +-20 %).
 HAND_SCALE = (0.75, 1.33)
+#: A rigid marker this near another marker of the back of the hand makes a look-alike of the rigid set, metres:
+#: the triangle with the other marker in its place has nearly the set's own distances (another subject's, or
+#: another day's placement, can fit it better), and the labeler may take it for the hand frame.
+LOOK_ALIKE = 0.012
 #: Positions farther than this from the template's wrist are not metres on a hand.
 _NOT_A_HAND = 1.0
 
@@ -206,7 +210,7 @@ def check_layout(layout: MarkerLayout, markers: MarkerSequence | None = None, *,
     hand_markers = layout_for_hand.hand_markers
     estimated = tuple(m.name for m in hand_markers if m.position is None)
     distance, far = _segment_distances(layout_for_hand, hand)
-    messages += far
+    messages += far + _crowded(layout_for_hand)
 
     rigid_spread, rigid_distances = None, []
     messages += _check_rigid(layout_for_hand, markers, matched, take or "the take")
@@ -295,6 +299,36 @@ def _segment_distances(layout: MarkerLayout, hand) -> tuple[dict, list]:
                              f"template hand: {'; '.join(described)}; correct the segment or the position, or "
                              "remove the position to have it estimated from a calibration take"))
     return distance, messages
+
+
+def _crowded(layout: MarkerLayout) -> list:
+    """Warnings for sphere markers whose given positions touch (:data:`MARKER_GAP`), and for a marker rigid with
+    the back of the hand so near a rigid marker that their triangles look alike (:data:`LOOK_ALIKE`)."""
+    given = [m for m in layout.hand_markers if m.position is not None]
+    if layout.marker_kind == "patch" or len(given) < 2:
+        return []
+    points = np.array([m.position for m in given])
+    dist = np.linalg.norm(points[:, None] - points[None], axis=-1)
+    touch = 2 * layout.marker_radius + MARKER_GAP
+    pairs, alike = [], []
+    for i, j in zip(*np.triu_indices(len(given), 1)):
+        a, b = given[i], given[j]
+        if dist[i, j] < touch:
+            pairs.append(f"{a.name}-{b.name} {1000 * dist[i, j]:.1f} mm")
+        elif (dist[i, j] < LOOK_ALIKE and (a.name in layout.rigid) != (b.name in layout.rigid)
+              and a.segment == b.segment):
+            alike.append(f"{a.name}-{b.name} {1000 * dist[i, j]:.1f} mm")
+    messages = []
+    if pairs:
+        messages.append(warn(f"markers closer than their {1000 * touch:.0f} mm spheres allow (centre to centre): "
+                             f"{_listed(pairs)}; they would touch and merge into one blob in the cameras: move "
+                             "one of each pair"))
+    if alike:
+        messages.append(warn(f"rigid markers within {1000 * LOOK_ALIKE:.0f} mm of another marker of their segment: "
+                             f"{_listed(alike)}; the triangle with the other marker looks like the rigid set's own, "
+                             "and another subject's placement can make the labeler take it for the hand frame: "
+                             "keep the rigid set clear of the knuckle markers"))
+    return messages
 
 
 def _check_rigid(layout: MarkerLayout, markers, matched, where) -> list:

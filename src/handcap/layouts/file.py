@@ -20,6 +20,9 @@ from handcap.hand.anatomy import SEGMENT_NAMES
 
 SHIPPED = ("dense-patches", "glove-13", "joints-19", "tips-5", "active-9")
 MARKER_KINDS = ("sphere", "patch")
+#: Least space between two sphere markers' surfaces, metres: no one sticks a marker on where it touches another,
+#: and two that do merge into one blob in the cameras.
+MARKER_GAP = 0.001
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
 from handcap.io import write_c3d, write_markers_npz, write_points_npz
 from handcap.io.npz import write_hand_motion
-from handcap.layouts import LayoutMarker, MarkerLayout, load_layout
+from handcap.layouts import MARKER_GAP, LayoutMarker, MarkerLayout, load_layout
 from handcap.objects.articulated import load_articulated
 from handcap.objects.cube import format_moves, random_moves
 from handcap.synth.cameras import cage_rig
@@ -126,6 +126,10 @@ def misplaced(layout, hand, sigma: float, rng):
     skin of its own segment (closest point), so it stays where a marker can be.
     A patch (in a patch layout) moves as one piece and also turns about the
     skin normal, by a normal angle of 3 degrees per millimetre of ``sigma``.
+    Sphere markers keep :data:`~handcap.layouts.MARKER_GAP` between their surfaces (or their
+    nominal distance, where the layout puts them closer): one that would come
+    nearer a marker already stuck on, or the nominal spot of one still to
+    come, is moved half as far, then a quarter..., then not at all.
 
     Parameters
     ----------
@@ -147,6 +151,7 @@ def misplaced(layout, hand, sigma: float, rng):
         return layout
     template = hand.forward().vertices
     positions = layout.positions()
+    gap = 2 * layout.marker_radius + MARKER_GAP
     moved = positions.copy()
     groups = {}
     for i, m in enumerate(layout.markers):
@@ -165,14 +170,24 @@ def misplaced(layout, hand, sigma: float, rng):
         angle = rng.normal(0, np.deg2rad(3.0) * sigma * 1000) if len(members) > 1 else 0.0
         turn = Rotation.from_rotvec(angle * normal).as_matrix()
         moved[members] = (pts - centre) @ turn.T + centre + shift
-    markers = []
+    markers, placed = [], []
     for i, m in enumerate(layout.markers):
         if m.on_object:
             markers.append(m)
             continue
         seg_faces = hand.segment_faces(m.segment)
-        point, _, _ = closest_points_on_mesh(moved[i][None], template, hand.faces[seg_faces])
-        markers.append(LayoutMarker(m.name, m.segment, point[0], m.patch))
+        # A sphere that would touch one already stuck on, or the nominal spot of one still to come, goes nearer
+        # its own nominal spot (which always keeps clear of both).
+        others = [] if layout.marker_kind == "patch" else placed + [
+            (j, positions[j]) for j in range(i + 1, len(positions)) if not layout.markers[j].on_object]
+        for k in range(5):
+            spot = positions[i] + (moved[i] - positions[i]) * (0.5 ** k if k < 4 else 0.0)
+            point = closest_points_on_mesh(spot[None], template, hand.faces[seg_faces])[0][0]
+            if all(np.linalg.norm(point - q) >= min(gap, np.linalg.norm(positions[i] - positions[j]))
+                   for j, q in others):
+                break
+        placed.append((i, point))
+        markers.append(LayoutMarker(m.name, m.segment, point, m.patch))
     return MarkerLayout(layout.name, layout.side, tuple(markers), layout.rigid, layout.marker_radius,
                         layout.marker_kind, layout.description)
 
