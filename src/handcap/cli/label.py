@@ -41,8 +41,10 @@ def add_label(verbs) -> None:
     p.add_argument("--lag", type=int, default=0, help="look-ahead frames before deciding (default 0: online)")
     p.add_argument("--offline", action="store_true",
                    help="decide on the whole take, in two passes: the spatial model re-aligned to the take's labels "
-                        "between them; then the labels are checked against the hand solved from them (labels "
-                        "it cannot have made removed, points where it puts a missing marker labelled)")
+                        "between them; then the labels are checked against the fingers' anatomy (labels moved "
+                        "between fingers whose markers do not lie in a line, keep their spans or bend one way) and "
+                        "against the hand solved from them (labels it cannot have made removed, points where it "
+                        "puts a missing marker labelled)")
     p.add_argument("--no-hand-check", dest="hand_check", action="store_false",
                    help="with --offline: leave the labels as the labeler gave them")
     p.add_argument("--method", choices=("viterbi", "nearest"), default="viterbi",

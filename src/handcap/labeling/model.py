@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,12 +28,17 @@ class LabelingModel:
     spatial : SpatialModel
         Mixtures of the other markers in the hand frame.
     kalman : KalmanSettings
+    spans : ndarray (M, M, 2) or None
+        Between every two labels of ``spatial`` in training: the median and the
+        standard deviation of their distance (metres), pooled over the takes;
+        None in models saved before they were kept.
     """
 
     names: tuple
     rigid: RigidSet | None
     spatial: SpatialModel
     kalman: KalmanSettings
+    spans: np.ndarray | None = field(default=None, compare=False)
 
     @property
     def free_names(self) -> tuple:
@@ -125,7 +130,7 @@ class LabelingModel:
         gap = np.full((12, len(free), 3), np.nan)
         joined = np.concatenate([x for p in per_take for x in (p[:, n_rigid:], gap)][:-1])
         kalman = KalmanSettings.from_training(joined, takes[0].rate)
-        return cls(tuple(ordered), rigid_set, spatial, kalman)
+        return cls(tuple(ordered), rigid_set, spatial, kalman, label_spans(np.concatenate(per_take)[:, n_rigid:]))
 
     def save(self, path) -> None:
         """Write the model as a ``.npz`` (kind ``labeling_model``): names, mixtures, Kalman settings, rigid set.
@@ -141,6 +146,8 @@ class LabelingModel:
                 "kalman": np.array([self.kalman.dt, self.kalman.jerk, self.kalman.measurement])}
         if self.rigid is not None:
             data.update(self.rigid.to_arrays())
+        if self.spans is not None:
+            data["spans"] = self.spans
         save_npz(path, data)
 
     @classmethod
@@ -165,8 +172,34 @@ class LabelingModel:
                         what="labeling model")
         dt, jerk, measurement = (float(v) for v in data["kalman"])
         rigid = RigidSet.from_arrays(data) if "rigid_names" in data else None
+        spans = np.asarray(data["spans"], dtype=np.float64) if "spans" in data else None
         return cls(tuple(str(n) for n in data["names"]), rigid, SpatialModel.from_arrays(data),
-                   KalmanSettings(dt, jerk, measurement))
+                   KalmanSettings(dt, jerk, measurement), spans)
+
+
+def label_spans(positions) -> np.ndarray:
+    """Median and standard deviation of the distance between every two markers over labeled frames.
+
+    Parameters
+    ----------
+    positions : ndarray (T, M, 3)
+        Metres, NaN where missing.
+
+    Returns
+    -------
+    ndarray (M, M, 2)
+        Metres; NaN for a pair never seen together.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    m = positions.shape[1]
+    out = np.full((m, m, 2), np.nan)
+    for i in range(m):  # one label at a time: (T, M) distances, not (T, M, M)
+        dist = np.linalg.norm(positions - positions[:, i:i + 1], axis=-1)
+        seen = np.isfinite(dist).sum(axis=0) > 1
+        if seen.any():
+            out[i, seen, 0] = np.nanmedian(dist[:, seen], axis=0)
+            out[i, seen, 1] = np.nanstd(dist[:, seen], axis=0)
+    return out
 
 
 def rigid_transforms(canonical, positions):

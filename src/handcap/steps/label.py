@@ -11,8 +11,10 @@ from handcap.core.errors import HandcapError, HandcapWarning, merge_warnings
 from handcap.core.markers import MarkerSequence
 from handcap.io import atomic_output, check_not_input, check_output, read_markers, read_points, write_markers
 from handcap.labeling import LabelingModel, label_take, objects_from_take, score_labels as score
+from handcap.labeling.fingers import untangle
 from handcap.labeling.model import is_labeling_model
 from handcap.layouts import load_layout
+from handcap.layouts.chains import finger_chains
 from handcap.solve import calibrate_attachment
 from handcap.solve.relabel import check_labels
 from handcap.steps.step import Step
@@ -46,8 +48,10 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
     units : {'mm', 'cm', 'm'} or None
         Unit of the input's and the training takes' coordinates, overriding what the files say.
     hand_check : bool
-        With ``offline`` and one hand's layout: check the labels against the hand solved from them
-        (:func:`handcap.solve.relabel.check_labels`, its attachment calibrated on the labelled take).
+        With ``offline`` and one hand's layout: move labels between the fingers' markers where the fingers'
+        anatomy asks for it (:func:`handcap.labeling.fingers.untangle`), then check the labels against the hand
+        solved from them (:func:`handcap.solve.relabel.check_labels`, its attachment calibrated on the labelled
+        take).
     """
     train = list(train)
     check_not_input(out, path, *train)
@@ -75,6 +79,8 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
     result = label_take(points, models[0] if len(models) == 1 else models, offline=offline, method=method, **options)
     labelled, lines, found = result.markers, (f"{out}: {result.summary()}",), result.warnings
     if offline and hand_check and method != "nearest" and len(marker_layouts) == 1:
+        labelled, line = untangled(labelled, models[0], marker_layouts[0])
+        lines += (line,) if line else ()
         labelled, line = checked_by_hand(labelled, points, marker_layouts[0])
         lines, found = lines + (line,), merge_warnings(found, labelled.warnings)
     write_markers(labelled, out)
@@ -83,6 +89,33 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
         models[0].save(model)
         written += (str(model),)
     return Step(lines, found, written, result)
+
+
+def untangled(labelled: MarkerSequence, model: LabelingModel, layout) -> tuple[MarkerSequence, str]:
+    """A labelled take's finger labels checked against the fingers' anatomy (:func:`handcap.labeling.fingers.untangle`).
+
+    Parameters
+    ----------
+    labelled : MarkerSequence
+        The labeler's output, metres.
+    model : LabelingModel
+        The model that labelled it.
+    layout : MarkerLayout
+        The hand's layout: its long fingers with 3 or more markers are checked; its palm markers keep their labels.
+
+    Returns
+    -------
+    markers : MarkerSequence
+        The labels after the check.
+    line : str
+        What changed; empty when the layout has fewer than two such fingers or the model no rigid set.
+    """
+    chains = finger_chains(layout)
+    if len(chains) < 2 or model.rigid is None:
+        return labelled, ""
+    fixed = [m.name for m in layout.markers if m.segment == "palm"]
+    result = untangle(labelled, model, chains, fixed=fixed)
+    return result.markers, result.summary()
 
 
 def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSequence, str]:
