@@ -8,7 +8,7 @@ from handcap.labeling import LabelingModel, score_labels
 from handcap.labeling.fingers import untangle
 from handcap.labeling.model import label_spans
 from handcap.layouts import load_layout
-from handcap.layouts.chains import finger_chains
+from handcap.layouts.chains import finger_chains, thumb_chain
 from handcap.steps.label import untangled
 from handcap.synth.scene import SynthConfig, synthesize
 
@@ -43,6 +43,25 @@ def test_finger_chains_of_the_shipped_layouts():
     assert finger_chains(load_layout("joints-19", side="left")) == chains
     for name in ("glove-13", "tips-5", "active-9", "dense-patches"):  # no finger with 3 markers; patches
         assert finger_chains(load_layout(name)) == ()
+
+
+def test_thumb_chain_of_the_shipped_layouts():
+    assert thumb_chain(load_layout("joints-19")) == ("thumb_mcp", "thumb_ip", "thumb_tip")
+    assert thumb_chain(load_layout("glove-13")) == ("thumb_middle", "thumb_tip")
+    assert thumb_chain(load_layout("dense-patches")) == ()
+
+
+def test_a_circle_through_the_thumb_needs_the_thumb(takes):
+    # The circle seen on subject 7: index_tip, middle_dip and thumb_ip. Without the thumb's labels the thumb_ip
+    # label stays on the wrong point; with them, the whole circle is put back.
+    layout, model, test = takes
+    circle = [("index_tip", "middle_dip"), ("middle_dip", "thumb_ip"), ("thumb_ip", "index_tip")]
+    wrong = permuted(test, slice(200, 350), circle)
+    without = untangle(wrong, model, finger_chains(layout), fixed=palm(layout))
+    assert score_labels(without.markers, test).erroneous[test.names.index("thumb_ip")] == 150
+    result = untangle(wrong, model, finger_chains(layout), thumb=thumb_chain(layout), fixed=palm(layout))
+    assert score_labels(result.markers, test).fraction("erroneous") < 0.002
+    assert "thumb_ip<-" in result.summary()
 
 
 def test_label_spans_against_a_direct_computation(takes):

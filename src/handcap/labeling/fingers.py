@@ -11,8 +11,10 @@ the circle. :func:`untangle` looks at what the spatial model cannot see:
 - **straight fingers**: a long finger's markers lie in its flexion plane,
   which stands across the back of the hand, so seen from the back (projected
   along the normal of the rigid back-of-hand markers) they lie on a line; a
-  marker of the neighbouring finger sits a finger's width (15-20 mm) off it;
-- **constant spans**: consecutive markers of a finger keep their distance
+  marker of the neighbouring finger sits a finger's width (15-20 mm) off it
+  (not the thumb, which flexes across the palm: its labels take part in the
+  moves and are judged by the other terms);
+- **constant spans**: consecutive markers of a finger (thumb too) keep their distance
   (its length on this subject is the most frequent one in the take, within
   0.8-1.25 times the training's; its spread the training's);
 - **the spatial model** (trained, in the take's hand frame), and
@@ -94,7 +96,8 @@ class Untangled:
                 + (", ..." if len(self.changes) > 3 else "") + ")")
 
 
-def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, fixed=(), rounds: int = 20) -> Untangled:
+def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, thumb=(), fixed=(),
+             rounds: int = 20) -> Untangled:
     """Labels moved between the fingers' markers where the fingers' anatomy says they belong elsewhere.
 
     Parameters
@@ -106,6 +109,9 @@ def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, fixed=(),
     chains : sequence of sequence of str
         Each long finger's labels from the palm outward
         (:func:`handcap.layouts.chains.finger_chains`); 3 or more each.
+    thumb : sequence of str
+        The thumb's labels from its base outward (:func:`handcap.layouts.chains.thumb_chain`): they take part
+        in the moves, their spans and bends count, but not the line (the thumb flexes across the palm).
     fixed : sequence of str
         Labels that keep their points (markers of the palm).
     rounds : int
@@ -118,19 +124,20 @@ def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, fixed=(),
     chains = [tuple(c) for c in chains if len(c) >= 3]
     if model.rigid is None:
         raise HandcapError("untangling the fingers needs a model with rigid back-of-hand markers")
-    members = [n for c in chains for n in c]
+    thumb = tuple(thumb)
+    members = [n for c in chains for n in c] + list(thumb)
     missing = [n for n in members + list(model.rigid.names) if n not in markers.names]
     if missing:
         raise HandcapError(f"labels not in the take: {', '.join(missing)}")
     if len(chains) < 2:
         return Untangled(markers, ())
-    owner = np.concatenate([[k] * len(c) for k, c in enumerate(chains)])
+    owner = np.concatenate([[k] * len(c) for k, c in enumerate(chains + [thumb])])
     moves = _candidates([i for i, n in enumerate(members) if n not in set(fixed)], owner)
     columns = [markers.index(n) for n in members]
     x = markers.positions[:, columns].copy()
     frames = _HandFrames(markers, model)
     spatial = [model.spatial.names.index(n) for n in members]
-    terms = _Terms(model, chains, spatial)
+    terms = _Terms(model, chains, thumb, spatial)
     changes = []
     for _ in range(rounds):
         gain = terms.gain(x, frames, moves) - MARGIN
@@ -193,11 +200,12 @@ class _HandFrames:
 class _Terms:
     """The costs of labels on points: straight fingers, spans and the spatial model."""
 
-    def __init__(self, model, chains, spatial):
+    def __init__(self, model, chains, thumb, spatial):
         self.model, self.spatial = model, spatial
-        first = np.cumsum([0] + [len(c) for c in chains])
-        self.groups = [np.arange(first[k], first[k + 1]) for k in range(len(chains))]
-        pairs = [(g[i], g[i + 1]) for g in self.groups for i in range(len(g) - 1)]
+        first = np.cumsum([0] + [len(c) for c in chains] + [len(thumb)])
+        self.groups = [np.arange(first[k], first[k + 1]) for k in range(len(chains))]  # straight: the line test
+        self.bent = self.groups + ([np.arange(first[-2], first[-1])] if len(thumb) >= 2 else [])
+        pairs = [(g[i], g[i + 1]) for g in self.bent for i in range(len(g) - 1)]
         self.a, self.b = (np.array(p, dtype=np.intp) for p in zip(*pairs))
         self.spans = None
         if model.spans is not None:
@@ -253,7 +261,7 @@ class _Terms:
             spread[ok] = np.sqrt(np.maximum(np.linalg.eigvalsh(cov[ok])[:, 1], 0.0))  # in-plane minor axis
             add(spread[..., None] ** 2 / LINE_SD ** 2)
         # Fingers bend at most MAX_BEND at a joint: a chain of markers that turns back on itself is out of order.
-        for g in self.groups:
+        for g in (g for g in self.bent if len(g) >= 3):
             pts = x[:, perms[:, g]]  # (T, C+1, k, 3)
             u, v = pts[:, :, 1:-1] - pts[:, :, :-2], pts[:, :, 2:] - pts[:, :, 1:-1]
             turn = np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.einsum("tcki,tcki->tck", u, v))

@@ -6,8 +6,8 @@ another subject's proportions differ from training
 (:func:`handcap.labeling.fingers.untangle` sets them right). What it uses is
 anatomy: the markers of one long finger (index to little) lie in the finger's
 flexion plane, which stands across the back of the hand, and consecutive ones
-keep their distance. The thumb is left out: its flexion plane lies oblique to
-the palm.
+keep their distance. The thumb (:func:`thumb_chain`) is not in a line seen
+from the back: its flexion plane lies oblique to the palm.
 """
 
 from __future__ import annotations
@@ -71,3 +71,22 @@ def finger_chains(layout: MarkerLayout, hand=None) -> tuple[tuple[str, ...], ...
         if len(chain) >= 3:
             chains.append(tuple(chain))
     return tuple(chains)
+
+
+def thumb_chain(layout: MarkerLayout) -> tuple[str, ...]:
+    """The thumb's markers from its base outward (on ``thumb_proximal``, ``thumb_middle``, ``thumb_distal``).
+
+    Parameters
+    ----------
+    layout : MarkerLayout
+
+    Returns
+    -------
+    tuple of str
+        Empty for a layout of coded patches or with fewer than 2 thumb markers.
+    """
+    if layout.marker_kind == "patch":
+        return ()
+    chain = tuple(m.name for part in ("proximal", "middle", "distal") for m in layout.hand_markers
+                  if m.segment == f"thumb_{part}")
+    return chain if len(chain) >= 2 else ()

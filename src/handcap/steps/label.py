@@ -14,7 +14,7 @@ from handcap.labeling import LabelingModel, label_take, objects_from_take, score
 from handcap.labeling.fingers import untangle
 from handcap.labeling.model import is_labeling_model
 from handcap.layouts import load_layout
-from handcap.layouts.chains import finger_chains
+from handcap.layouts.chains import finger_chains, thumb_chain
 from handcap.solve import calibrate_attachment
 from handcap.solve.relabel import check_labels
 from handcap.steps.step import Step
@@ -114,7 +114,7 @@ def untangled(labelled: MarkerSequence, model: LabelingModel, layout) -> tuple[M
     if len(chains) < 2 or model.rigid is None:
         return labelled, ""
     fixed = [m.name for m in layout.markers if m.segment == "palm"]
-    result = untangle(labelled, model, chains, fixed=fixed)
+    result = untangle(labelled, model, chains, thumb=thumb_chain(layout), fixed=fixed)
     return result.markers, result.summary()
 
 
