@@ -132,7 +132,9 @@ def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, thumb=(),
     if len(chains) < 2:
         return Untangled(markers, ())
     owner = np.concatenate([[k] * len(c) for k, c in enumerate(chains + [thumb])])
-    moves = _candidates([i for i, n in enumerate(members) if n not in set(fixed)], owner)
+    fixed = set(fixed)
+    moves = _candidates([i for i, n in enumerate(members) if n not in fixed], owner)
+    perms = np.array([_permutation(mv, len(members)) for mv in moves])  # (C, M)
     columns = [markers.index(n) for n in members]
     x = markers.positions[:, columns].copy()
     frames = _HandFrames(markers, model)
@@ -140,14 +142,13 @@ def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, thumb=(),
     terms = _Terms(model, chains, thumb, spatial)
     changes = []
     for _ in range(rounds):
-        gain = terms.gain(x, frames, moves) - MARGIN
+        gain = terms.gain(x, frames, perms) - MARGIN
         enter, leave = _jumps(x, moves)
         total, chosen = _best_stretch(gain, enter, leave)
         k = int(np.argmax(total))
         if total[k] < MIN_GAIN:
             break
-        where = chosen(k)
-        perm = _permutation(moves[k], len(members))
+        where, perm = chosen(k), perms[k]
         x[where] = x[where][:, perm]
         at = np.flatnonzero(where)
         described = ", ".join(f"{members[a]}<-{members[perm[a]]}" for a in range(len(members)) if perm[a] != a)
@@ -214,15 +215,16 @@ class _Terms:
                 self.spans = s
         self.top = model.spatial.typical_fit()
 
-    def gain(self, x, frames, moves) -> np.ndarray:
-        """(C, T): cost of the labels as given minus as each candidate moves them, per frame (terms seen both
-        ways only)."""
+    def gain(self, x, frames, perms) -> np.ndarray:
+        """(C, T): cost of the labels as given minus as each candidate's permutation (C, M) gives them, per
+        frame (terms seen both ways only)."""
         t_all = len(x)
         length = self._lengths(x) if self.spans is not None else None
-        out = np.zeros((len(moves), t_all))
+        perms = np.vstack([np.arange(x.shape[1])[None], perms])  # the labels as given first
+        out = np.zeros((len(perms) - 1, t_all))
         for start in range(0, t_all, CHUNK):
             part = slice(start, min(start + CHUNK, t_all))
-            out[:, part] = self._gain(x[part], frames, part, moves, length)
+            out[:, part] = self._gain(x[part], frames, part, perms, length)
         return out
 
     def _lengths(self, x) -> np.ndarray:
@@ -238,9 +240,8 @@ class _Terms:
                 out[e] = np.median(v[k:k + n])
         return out
 
-    def _gain(self, x, frames, part, moves, length) -> np.ndarray:
+    def _gain(self, x, frames, part, perms, length) -> np.ndarray:
         m = x.shape[1]
-        perms = np.vstack([np.arange(m)[None], np.array([_permutation(mv, m) for mv in moves])])  # (C+1, M)
         cost = np.zeros((len(perms), len(x)))
 
         def add(z):  # z (C+1, T, ...): a term compared only where both the labels as given and permuted have it
