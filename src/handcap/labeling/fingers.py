@@ -141,8 +141,9 @@ def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, thumb=(),
     spatial = [model.spatial.names.index(n) for n in members]
     terms = _Terms(model, chains, thumb, spatial)
     changes = []
+    length = terms.lengths(x)  # measured once, on the take as labelled
+    gain = terms.gain(x, frames, perms, np.arange(len(x)), length) - MARGIN
     for _ in range(rounds):
-        gain = terms.gain(x, frames, perms) - MARGIN
         enter, leave = _jumps(x, moves)
         total, chosen = _best_stretch(gain, enter, leave)
         k = int(np.argmax(total))
@@ -150,6 +151,7 @@ def untangle(markers: MarkerSequence, model: LabelingModel, chains, *, thumb=(),
             break
         where, perm = chosen(k), perms[k]
         x[where] = x[where][:, perm]
+        gain[:, where] = terms.gain(x, frames, perms, np.flatnonzero(where), length) - MARGIN  # only those changed
         at = np.flatnonzero(where)
         described = ", ".join(f"{members[a]}<-{members[perm[a]]}" for a in range(len(members)) if perm[a] != a)
         changes.append((described, int(len(at)), int(at[0]), int(at[-1])))
@@ -215,20 +217,22 @@ class _Terms:
                 self.spans = s
         self.top = model.spatial.typical_fit()
 
-    def gain(self, x, frames, perms) -> np.ndarray:
-        """(C, T): cost of the labels as given minus as each candidate's permutation (C, M) gives them, per
-        frame (terms seen both ways only)."""
-        t_all = len(x)
-        length = self._lengths(x) if self.spans is not None else None
+    def gain(self, x, frames, perms, at, length) -> np.ndarray:
+        """(C, F): cost of the labels as given minus as each candidate's permutation (C, M) gives them, in the
+        frames ``at`` (F,) of ``x`` (T, M, 3), with the spans' ``length`` (:meth:`lengths`; terms seen both
+        ways only)."""
         perms = np.vstack([np.arange(x.shape[1])[None], perms])  # the labels as given first
-        out = np.zeros((len(perms) - 1, t_all))
-        for start in range(0, t_all, CHUNK):
-            part = slice(start, min(start + CHUNK, t_all))
-            out[:, part] = self._gain(x[part], frames, part, perms, length)
+        out = np.zeros((len(perms) - 1, len(at)))
+        for start in range(0, len(at), CHUNK):
+            part = at[start:start + CHUNK]
+            out[:, start:start + len(part)] = self._gain(x[part], frames, part, perms, length)
         return out
 
-    def _lengths(self, x) -> np.ndarray:
-        """Each span's length in the take: the middle of its densest stretch of distances in the band."""
+    def lengths(self, x) -> np.ndarray | None:
+        """Each span's length in the take (E,), metres: the middle of its densest stretch of distances in the
+        band; None without the training spans."""
+        if self.spans is None:
+            return None
         dist = np.linalg.norm(x[:, self.a] - x[:, self.b], axis=-1)
         out = self.spans[:, 0].copy()
         for e in range(len(out)):
@@ -256,11 +260,14 @@ class _Terms:
         for g in self.groups:
             pts = flat[:, perms[:, g]].transpose(1, 0, 2, 3)  # (C+1, T, k, 3)
             centred = pts - pts.mean(axis=2, keepdims=True)
-            cov = np.einsum("ctki,ctkj->ctij", centred, centred) / len(g)
-            ok = np.isfinite(cov).all(axis=(-1, -2))
-            spread = np.full(ok.shape, np.nan)
-            spread[ok] = np.sqrt(np.maximum(np.linalg.eigvalsh(cov[ok])[:, 1], 0.0))  # in-plane minor axis
-            add(spread[..., None] ** 2 / LINE_SD ** 2)
+            c = np.einsum("ctki,ctkj->ctij", centred, centred) / len(g)
+            # Projected points: eigenvalues 0 (the normal), then the two in the plane, whose sum is the trace and
+            # whose product is the sum of the principal 2 x 2 minors; the smaller is the spread off the line.
+            trace = c[..., 0, 0] + c[..., 1, 1] + c[..., 2, 2]
+            minors = (c[..., 0, 0] * c[..., 1, 1] - c[..., 0, 1] ** 2 + c[..., 0, 0] * c[..., 2, 2]
+                      - c[..., 0, 2] ** 2 + c[..., 1, 1] * c[..., 2, 2] - c[..., 1, 2] ** 2)
+            minor = 0.5 * (trace - np.sqrt(np.maximum(trace ** 2 - 4 * minors, 0.0)))
+            add(np.maximum(minor, 0.0)[..., None] / LINE_SD ** 2)
         # Fingers bend at most MAX_BEND at a joint: a chain of markers that turns back on itself is out of order.
         for g in (g for g in self.bent if len(g) >= 3):
             pts = x[:, perms[:, g]]  # (T, C+1, k, 3)
@@ -308,9 +315,13 @@ def _jumps(x, moves) -> tuple[np.ndarray, np.ndarray]:
         return np.where(np.isfinite(z), z, 0.0)
 
     label, source = moves[..., 0], moves[..., 1]  # (C, 3)
-    stay = jump(x, before)  # (T, M)
-    enter = (jump(x[:, source], before[:, label]) - stay[:, label]).sum(-1).T
-    leave = (jump(x[:, label], before[:, source]) - stay[:, label]).sum(-1).T
+    enter, leave = np.zeros((2, len(moves), len(x)))
+    for start in range(0, len(x), CHUNK):
+        part = slice(start, start + CHUNK)
+        now, was = x[part], before[part]
+        stay = jump(now, was)[:, label]  # (t, C, 3)
+        enter[:, part] = (jump(now[:, source], was[:, label]) - stay).sum(-1).T
+        leave[:, part] = (jump(now[:, label], was[:, source]) - stay).sum(-1).T
     return enter, leave
 
 
