@@ -42,8 +42,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
-from handcap.labeling.model import LabelingModel, rigid_transforms
-from handcap.objects.rigid import canonical_from_markers, kabsch
+from handcap.labeling.model import LabelingModel, own_shape, rigid_transforms
 
 #: Largest cost of one term (a squared z-score): beyond 3 standard deviations evidence counts no more.
 CAP = 9.0
@@ -187,12 +186,7 @@ class _HandFrames:
 
     def __init__(self, markers, model):
         rigid = np.stack([markers.positions[:, markers.index(n)] for n in model.rigid.names], axis=1)
-        seen = np.isfinite(rigid[..., 0]).sum(axis=1) >= 3
-        canonical = model.rigid.canonical
-        if seen.sum() >= 3:
-            shape = canonical_from_markers(rigid[seen])
-            r0, t0 = kabsch(shape, canonical)
-            canonical = shape @ r0.T + t0
+        canonical = own_shape(model.rigid.canonical, rigid)
         self.rotation, self.translation, self.ok = rigid_transforms(canonical, rigid)
         centred = canonical - canonical.mean(axis=0)
         normal = np.linalg.svd(centred)[2][-1]

@@ -102,9 +102,7 @@ class LabelingModel:
         if rigid:
             rigid_set = RigidSet.from_takes(rigid, [p[:, :n_rigid] for p in per_take])
             for p in per_take:
-                shape = canonical_from_markers(p[:, :n_rigid])
-                r0, t0 = kabsch(shape, rigid_set.canonical)  # this take's shape onto the reference
-                rot, trans, ok = rigid_transforms(shape @ r0.T + t0, p[:, :n_rigid])
+                rot, trans, ok = rigid_transforms(own_shape(rigid_set.canonical, p[:, :n_rigid]), p[:, :n_rigid])
                 local = np.full((len(p), len(free), 3), np.nan)
                 local[ok] = np.einsum("tji,tmj->tmi", rot[ok], p[ok, n_rigid:] - trans[ok, None])
                 locals_.append(local)
@@ -200,6 +198,31 @@ def label_spans(positions) -> np.ndarray:
             out[i, seen, 0] = np.nanmedian(dist[:, seen], axis=0)
             out[i, seen, 1] = np.nanstd(dist[:, seen], axis=0)
     return out
+
+
+def own_shape(canonical, positions) -> np.ndarray:
+    """The take's own shape of the rigid markers, turned onto ``canonical``.
+
+    A set put on again (another day, another subject) keeps its own distances; the hand frame it gives
+    (:func:`rigid_transforms`) moves as little as possible from the model's.
+
+    Parameters
+    ----------
+    canonical : ndarray (R, 3)
+        The model's rigid markers in the hand frame, metres.
+    positions : ndarray (T, R, 3)
+        The take's rigid markers, metres, NaN where missing.
+
+    Returns
+    -------
+    ndarray (R, 3)
+        Metres; ``canonical`` itself when fewer than 3 frames show 3 or more of the markers.
+    """
+    if (np.isfinite(positions[..., 0]).sum(axis=1) >= 3).sum() < 3:
+        return canonical
+    shape = canonical_from_markers(positions)
+    r0, t0 = kabsch(shape, canonical)  # this take's shape onto the reference
+    return shape @ r0.T + t0
 
 
 def rigid_transforms(canonical, positions):
