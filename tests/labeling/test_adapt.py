@@ -99,7 +99,9 @@ def test_rigid_set_relearned_from_a_take_with_other_distances(takes):
     want = np.linalg.norm(truth[i] - truth[j], axis=1)
     trained = np.linalg.norm(model.rigid.canonical[i] - model.rigid.canonical[j], axis=1)
     assert np.abs(want - trained).max() > 0.003  # the case of the issue
-    np.testing.assert_allclose(got, want, atol=0.0005)
+    # Within a third of the labeler's own distance tolerance (2.2 mm on this take): the skin under the triad
+    # is not rigid, so the take's mean shape is itself known to a few tenths of a millimetre.
+    np.testing.assert_allclose(got, want, atol=model.rigid.tolerance / 3)
 
 
 @pytest.fixture(scope="module")

@@ -58,7 +58,9 @@ def test_a_circle_through_the_thumb_needs_the_thumb(takes):
     circle = [("index_tip", "middle_dip"), ("middle_dip", "thumb_ip"), ("thumb_ip", "index_tip")]
     wrong = permuted(test, slice(200, 350), circle)
     without = untangle(wrong, model, finger_chains(layout), fixed=palm(layout))
-    assert score_labels(without.markers, test).erroneous[test.names.index("thumb_ip")] == 150
+    # thumb_ip's label on index_tip's point: wrong in every frame of the circle where both are seen
+    seen = ~np.isnan(test.positions[200:350, [test.index("thumb_ip"), test.index("index_tip")], 0]).any(axis=1)
+    assert score_labels(without.markers, test).erroneous[test.names.index("thumb_ip")] == seen.sum() > 100
     result = untangle(wrong, model, finger_chains(layout), thumb=thumb_chain(layout), fixed=palm(layout))
     assert score_labels(result.markers, test).fraction("erroneous") < 0.002
     assert "thumb_ip<-" in result.summary()

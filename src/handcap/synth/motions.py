@@ -30,6 +30,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.transforms import homogeneous
 from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
 from handcap.hand.anatomy import pose_from_degrees as _pose
+from handcap.synth.clearance import clear_keys
 
 MOTIONS = ("calibration", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
 WORK_CENTRE = np.array([0.0, 0.0, 1.0])
@@ -377,13 +378,13 @@ def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> M
         for k in range(n_keys):
             keys.append(relaxed if k % 2 == 0 else pinch_pose(hand, FINGERS[(k // 2) % 4], relaxed))
         turn, move = 15.0, 0.03
-    elif name == "wrist":
-        keys = [relaxed + np.deg2rad(rng.normal(0, 3, 27)) for _ in range(n_keys)]
-        turn, move = 70.0, 0.15
-    else:
-        keys = [natural_pose(rng) for _ in range(n_keys)]
-        turn, move = 35.0, 0.08
-    phi = spline(key_t, np.array(keys), t)
+    else:  # keys drawn at random: drawn again where they would put two fingers in one place
+        def draw():
+            return relaxed + np.deg2rad(rng.normal(0, 3, 27)) if name == "wrist" else natural_pose(rng)
+        keys = [draw() for _ in range(n_keys)]
+        turn, move = (70.0, 0.15) if name == "wrist" else (35.0, 0.08)
+    phi = clear_keys(hand, keys, key_t, t, draw, spline) if name in ("wrist", "random") else spline(
+        key_t, np.array(keys), t)
     rots, pos = wrist_keys(rng, n_keys, turn_deg=turn, move=move)
     orient = rotation_path(key_t, rots, t)
     transl = spline(key_t, pos, t)
