@@ -33,7 +33,7 @@ most ``max_unlikely`` frames (a swap kept by continuity alone ends there). A
 point no label accepts spatially but that has moved as a marker for ``birth``
 frames may start the track of the best label without one
 (:mod:`handcap.labeling.birth`; the paper's tracks started from temporally
-consistent, spatially unlikely points; on in the offline first pass).
+consistent, spatially unlikely points; off by default, offline too: ``label_take``'s ``FIRST_PASS_BIRTH``).
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ class OnlineLabeler:
         a 400-frame swap of two fingers on a synthetic take. 0 (default):
         never. Off by default online: on another subject's synthetic take,
         where many points fit no label, born tracks took wrong labels (wrong
-        0.14 -> 1.79 %); the offline first pass uses them (``label_take``).
+        0.14 -> 1.79 %); off in the offline first pass too (``label_take``'s ``FIRST_PASS_BIRTH``).
 
     Attributes
     ----------

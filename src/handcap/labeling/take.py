@@ -33,10 +33,12 @@ from handcap.labeling.rigid_set import RigidSet
 #: the take's poses, not the markers, and labels worse (99.96 -> 99.62 % correct).
 REFIT_TURN_DEG = 3.0
 REFIT_SHIFT = 0.003
-#: Track births (``OnlineLabeler(birth=...)``) in the offline first pass: its labels only feed the refit, where a
-#: wrong born track is outvoted by the take's other labels (synthetic triad moved 13 deg / 13 mm: offline wrong
-#: 0.87 -> 0.03 %; same-day, triad +3.5 mm, another subject and the real glove unchanged).
-FIRST_PASS_BIRTH = 5
+#: Track births (``OnlineLabeler(birth=...)``) in the offline first pass (0: none). They were 5 when synthetic
+#: takes let neighbouring fingers pass through each other (triad moved 13 deg / 13 mm: offline wrong 0.87 ->
+#: 0.03 %). On takes whose fingers keep apart (:mod:`handcap.synth.clearance`) they change nothing on the other
+#: day's takes nor on 10 of 11 other subjects, and on subject 3 of ``benchmarks/labeling.py`` section 8 took
+#: wrong points: 99.95 / 0.000 % correct / wrong without them, 98.52 / 0.195 with.
+FIRST_PASS_BIRTH = 0
 #: Offline, where the rigid set searched for over the whole take is not the trained one (or its labels leave more
 #: than 5 % of the points), the set an online pass re-learned (frame by frame, judged once the model is aligned)
 #: replaces it when its two passes label this much more of the take's points. The
@@ -117,8 +119,8 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         Decide every frame on the whole take (Viterbi over everything) instead
         of online. With ``adapt`` and one hand, in two passes: the rigid
         markers' shape re-learned from the take where it differs from
-        training, a first labeling (adapting as it goes, with track births:
-        ``FIRST_PASS_BIRTH``), the spatial model
+        training, a first labeling (adapting as it goes, track births as
+        ``FIRST_PASS_BIRTH`` says: none), the spatial model
         registered to that pass's labels and its means moved toward them
         (:mod:`handcap.labeling.adapt`), and a second labeling with it. Where
         the re-learned set is not the trained one (or the labels leave over
