@@ -7,8 +7,11 @@ from handcap import HandcapError
 from handcap.occlusion import OcclusionFiller, OcclusionModel
 from handcap.occlusion.evaluate import occlusion_windows, predict_gap_frames, predict_windows
 from handcap.occlusion.filler import MIRROR
+from handcap.occlusion.history import HISTORY_S
 
 RATE = 100.0
+# Frames the filler sees before a gap: the history correction's 2 s and more (the baselines need far less).
+LEAD = int(HISTORY_S * RATE) + 40
 
 
 def _run(filler, frames):
@@ -23,7 +26,7 @@ def test_streaming_equals_the_closed_form_of_the_evaluation(glove_model, glove_s
     batch = predict_windows(method, test, RATE, starts, frames, hidden, glove_model.predictor)
     for s, h, expected in zip(starts, hidden, batch):
         filler = OcclusionFiller(glove_model, rate=RATE, method=method)
-        for t in range(s - 40, s + frames):
+        for t in range(max(s - LEAD, 0), s + frames):
             x = test[t].copy()
             if t >= s:
                 x[h] = np.nan
@@ -45,7 +48,7 @@ def test_streaming_equals_the_evaluation_on_every_frame_of_a_gap(glove_model, gl
                                                              glove_model.predictor), atol=1e-8)  # float32 network
     for s, h, expected in zip(starts, hidden, batch):
         filler = OcclusionFiller(glove_model, rate=RATE, method=method)
-        for t in range(s - 40, s + frames):
+        for t in range(max(s - LEAD, 0), s + frames):
             x = test[t].copy()
             if t >= s:
                 x[h] = np.nan

@@ -14,7 +14,8 @@ two-hands mutual occlusions" (doi:10.1016/j.cagx.2019.100011)::
 
 Modules: :mod:`~handcap.occlusion.baselines` (LK, MA, AC),
 :mod:`~handcap.occlusion.register` (Kabsch to the template),
-:mod:`~handcap.occlusion.predictor` (autoencoder), :mod:`~handcap.occlusion.regressor`
+:mod:`~handcap.occlusion.predictor` (autoencoder), :mod:`~handcap.occlusion.history` (the
+network's error before a gap, learned and carried into it), :mod:`~handcap.occlusion.regressor`
 (joint angles), :mod:`~handcap.occlusion.filler` (streaming, discontinuities, mirroring),
 :mod:`~handcap.occlusion.fill` (batch), :mod:`~handcap.occlusion.evaluate` (Tables 3 and 4),
 :mod:`~handcap.occlusion.train`, :mod:`~handcap.occlusion.shipped` (the shipped weights).

@@ -20,6 +20,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.hand import OpenHand
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
+from handcap.occlusion.history import DELAY_FRAMES, HISTORY_S, history_correction, history_frames
 from handcap.occlusion.register import apply_registration, undo_registration
 
 DURATIONS = (0.1, 0.2, 0.5, 1.0, 2.0)
@@ -98,7 +99,7 @@ def predict_windows(method: str, positions, rate: float, starts, frames: int, hi
 
 
 def predict_gap_frames(method: str, positions, rate: float, starts, frames: int, hidden, predictor=None,
-                       *, offset: bool = True, steps=None) -> np.ndarray:
+                       *, offset: bool = True, steps=None, history_s: float = HISTORY_S) -> np.ndarray:
     """Each method's positions of every marker on hidden frames of each window.
 
     Parameters
@@ -108,6 +109,9 @@ def predict_gap_frames(method: str, positions, rate: float, starts, frames: int,
     steps : sequence of int (F,), optional
         Which hidden frames, counted from the first (0) to the last (``frames - 1``);
         default all of them.
+    history_s : float
+        Seconds before each window from which ``nn`` learns its error, as the filler does
+        (:mod:`~handcap.occlusion.history`); 0 (or ``offset=False``) leaves it out.
 
     Returns
     -------
@@ -146,8 +150,18 @@ def predict_gap_frames(method: str, positions, rate: float, starts, frames: int,
         correction = local_before - predictor.predict_local(local_before, shown) if offset else 0.0
         shown_f = np.broadcast_to(shown[:, None], at.shape[:3])
         pose = predictor.register(at, shown_f)
-        local = predictor.predict_local(apply_registration(at, *pose), shown_f)
-        world = undo_registration(local + (correction[:, None] if offset else 0.0), *pose)
+        measured = apply_registration(at, *pose)
+        local = predictor.predict_local(measured, shown_f)
+        if offset:
+            local = local + correction[:, None]
+            keep, step = history_frames(rate, history_s)
+            late = steps >= DELAY_FRAMES  # the filler learns the correction over the gap's first frames
+            for i in range(len(starts) if keep and late.any() else 0):
+                past = positions[max(starts[i] - keep, 0):starts[i]][::-1][::step][::-1]
+                w = history_correction(predictor, past, shown[i], local_before[i], correction[i])
+                change = (measured[i][late][:, shown[i]] - local_before[i][shown[i]]).reshape(late.sum(), -1) @ w
+                local[i, late[:, None] & hidden[i][None]] += change.reshape(-1, 3)
+        world = undo_registration(local, *pose)
         out[hidden_f] = world[hidden_f]
     else:
         raise HandcapError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
@@ -196,7 +210,7 @@ def marker_error_table(positions, rate: float, predictor=None, *, methods=METHOD
 
 
 def gap_error_table(positions, rate: float, predictor=None, *, methods=METHODS, counts=COUNTS,
-                    duration: float = 0.5, seeds=range(5), windows: int = 200) -> dict:
+                    duration: float = 0.5, seeds=range(5), windows: int = 200, history_s: float = HISTORY_S) -> dict:
     """Mean error over every hidden frame of whole gaps (issue 14's measure), not only the last one.
 
     A gap filler must be right all the way through a gap: this scores each of the
@@ -216,6 +230,8 @@ def gap_error_table(positions, rate: float, predictor=None, *, methods=METHODS, 
     seeds : iterable of int
     windows : int
         Windows per seed and count.
+    history_s : float
+        The history correction of ``nn`` (see :func:`predict_gap_frames`); 0 leaves it out.
 
     Returns
     -------
@@ -234,7 +250,8 @@ def gap_error_table(positions, rate: float, predictor=None, *, methods=METHODS, 
             truth = positions[starts[:, None] + np.arange(frames)[None]]
             hidden_f = np.broadcast_to(hidden[:, None], truth.shape[:3])
             for name in methods:
-                predicted = predict_gap_frames(name, positions, rate, starts, frames, hidden, predictor)
+                predicted = predict_gap_frames(name, positions, rate, starts, frames, hidden, predictor,
+                                               history_s=history_s)
                 error = np.linalg.norm(predicted[hidden_f] - truth[hidden_f], axis=-1).mean()
                 table[name][i] += error / len(seeds)
     return table

@@ -12,7 +12,10 @@ Per hand and frame (section 3 of the paper):
 3. **Discontinuity on occlusion**: whenever the set of visible markers changes,
    the predictor is run on the previous frame's output with the new set, and the
    difference to that output becomes an offset added to later predictions, so
-   the occluded markers do not jump (section 3.2.2, Fig. 8).
+   the occluded markers do not jump (section 3.2.2, Fig. 8). Beyond the paper,
+   the network's error on the hidden markers over the last 2 s is learned as a
+   linear function of the visible ones and added too
+   (:mod:`~handcap.occlusion.history`; ``history_s=0`` leaves it out).
 4. **Re-entry**: a marker that comes back starts where its fill was heading
    (in the hand's frame) and slides onto its measurement, the offset shrinking
    at ``reentry_speed`` metres per second (the paper's 25 cm/s).
@@ -37,7 +40,9 @@ from handcap.core.errors import HandcapError
 from handcap.core.checks import check_rate
 from handcap.core.motion import check_side
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
+from handcap.occlusion.history import HISTORY_S, MIN_FRAMES, fit_correction, history_frames
 from handcap.occlusion.model import OcclusionModel
+from handcap.occlusion.register import Registrar
 
 METHODS = ("nn", "ac", "lk", "ma")
 REENTRY_SPEED = 0.25  # metres per second (section 3.2.2)
@@ -74,44 +79,6 @@ class FillResult:
     global_orient: np.ndarray | None
     transl: np.ndarray | None
     lost: bool | np.ndarray
-
-
-class _Registrar:
-    """Single-frame registration (weighted Kabsch) with the per-visible-set terms cached.
-
-    With ``b_i = w_i (q_i - q_mean)`` summing to zero, the cross-covariance is simply
-    ``P^T B``: no centring of the measured points is needed.
-    """
-
-    def __init__(self, template, weights):
-        self.template, self.weights = template, weights
-        self.cache = {}
-
-    def fit(self, points, visible):
-        key = visible.tobytes()
-        entry = self.cache.get(key)
-        if entry is None:
-            if len(self.cache) > 4096:
-                self.cache.clear()
-            index = np.flatnonzero(visible)
-            w = self.weights[index] / self.weights[index].sum()
-            tc = w @ self.template[index]
-            entry = (index, w, tc, w[:, None] * (self.template[index] - tc), len(index) == len(visible))
-            self.cache[key] = entry
-        index, w, tc, b, full = entry
-        p = points if full else points[index]
-        c = w @ p
-        u, _, vt = np.linalg.svd(p.T @ b)
-        r = u @ vt
-        if _det(r) < 0:
-            u[:, 2] = -u[:, 2]
-            r = u @ vt
-        return r, c, tc
-
-
-def _det(m) -> float:
-    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
-    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def _pose_from_outputs(out, r, c, tc):
@@ -159,9 +126,10 @@ def _axis_angle_of(m) -> np.ndarray:
 class _HandState:
     """What one hand remembers between frames."""
 
-    def __init__(self, n_markers: int, history: int):
+    def __init__(self, n_markers: int, history: int, past: int):
         self.n = n_markers
         self.history = np.full((history, n_markers, 3), np.nan)
+        self.past = np.full((past, n_markers, 3), np.nan)  # measured frames for the history correction
         self.reset()
 
     def reset(self):
@@ -176,6 +144,10 @@ class _HandState:
         self.velocity = np.zeros((self.n, 3))
         self.history[:] = np.nan
         self.head = 0
+        self.past[:] = np.nan
+        self.past_head = 0
+        self.correction = None  # (weights (3V, 3K), reference (V, 3)) of the history correction
+        self.job = None  # the correction being learned, one stage a frame
 
 
 class OcclusionFiller:
@@ -200,10 +172,13 @@ class OcclusionFiller:
         model does not know are an error.
     regress : bool
         Run the joint regressor (if the model has one).
+    history_s : float
+        Seconds before a gap from which ``nn`` learns its own error on the hidden markers
+        (:mod:`~handcap.occlusion.history`); 0 uses the network and its offset alone.
     """
 
     def __init__(self, model, *, rate: float, hands=None, method: str = "nn", reentry_speed: float = REENTRY_SPEED,
-                 names=None, regress: bool = True):
+                 names=None, regress: bool = True, history_s: float = HISTORY_S):
         self.model = OcclusionModel.resolve(model)
         self.rate = check_rate(rate)
         if method not in METHODS:
@@ -240,16 +215,19 @@ class OcclusionFiller:
         self._absent = bool((self.columns < 0).any())
         self._reorder = self.input_names != self.names
         self._history = int(round(MA_WINDOW_S * self.rate)) + 1
-        self._states = [_HandState(len(self.names), self._history) for _ in self.hands]
+        if not (np.isscalar(history_s) and float(history_s) >= 0):
+            raise HandcapError(f"history_s must be a non-negative number of seconds, got {history_s!r}")
+        self._past, self._past_step = history_frames(self.rate, float(history_s)) if method == "nn" else (0, 1)
+        self._states = [_HandState(len(self.names), self._history, self._past) for _ in self.hands]
         # Cached arrays of the networks, for the one-frame path.
-        self._register = _Registrar(p.template, p.weights)
+        self._register = Registrar(p.template, p.weights)
         self._mean, self._scale, self._inv_scale = p.mean, p.scale, 1.0 / p.scale
         self._mask_input, self._ae = p.mask_input, p.net
         self._jr = None if self.model.regressor is None else self.model.regressor.net
         self._jr_inv_scale = None if self.model.regressor is None else 1.0 / self.model.regressor.scale
         jr = self.model.regressor
         same = jr is None or (np.array_equal(jr.template, p.template) and np.array_equal(jr.weights, p.weights))
-        self._regress_register = None if same else _Registrar(jr.template, jr.weights)
+        self._regress_register = None if same else Registrar(jr.template, jr.weights)
 
     @classmethod
     def load(cls, model="glove-13", **options) -> "OcclusionFiller":
@@ -327,6 +305,9 @@ class OcclusionFiller:
             local = self._fill(state, x, local, visible, hidden, changed, pose)
         if self.method == "ma":
             self._record_history(state, x)
+        if self._past:
+            state.past[state.past_head % self._past] = x
+            state.past_head += 1
 
         # 2. Markers coming back slide from where they were onto their measurement. The residual is
         #    kept apart from the filled positions ("clean") and shrinks every frame, seen or not. The
@@ -383,11 +364,20 @@ class OcclusionFiller:
                 pr, pc, ptc = self._register.fit(state.clean, visible)
                 before = (state.clean - pc) @ pr + ptc
                 state.offset[hidden] = before[hidden] - self._predict(before, visible)
-                local[hidden] = self._predict(local, visible) + state.offset[hidden]
-                return local
-            if state.visible is None:
+                state.correction = None
+                state.job = self._history_job(state, visible, hidden, before) if self._past else None
+            elif state.visible is None:
                 state.offset[:] = 0.0
+                state.correction = state.job = None
+            elif state.job is not None:
+                try:
+                    next(state.job)
+                except StopIteration as done:
+                    state.correction, state.job = done.value, None
             local[hidden] = self._predict(local, visible) + state.offset[hidden]
+            if state.correction is not None:
+                w, reference = state.correction
+                local[hidden] += ((local[visible] - reference).ravel() @ w).reshape(-1, 3)
             return local
         if state.visible is None:  # nothing seen before: the baselines have nothing to go on
             local[hidden] = np.nan
@@ -412,15 +402,43 @@ class OcclusionFiller:
         return local
 
     def _predict(self, local, visible):
-        """Predicted registered positions (K, 3) of the K hidden markers from one frame ``local`` (M, 3).
+        """Predicted registered positions (..., K, 3) of the K hidden markers from frames ``local`` (..., M, 3).
 
-        ``MarkerPredictor.predict_local`` for one frame (two single rows are faster than one pair).
+        ``MarkerPredictor.predict_local`` with one visible set (two single rows are faster than one pair).
         """
-        z = np.where(visible[:, None], (local - self._mean) * self._inv_scale, 0.0).ravel()
+        z = np.where(visible[:, None], (local - self._mean) * self._inv_scale, 0.0)
+        z = z.reshape(z.shape[:-2] + (-1,))
         if self._mask_input:
-            z = np.concatenate([z, visible])
-        out = self._ae(z).reshape(-1, 3) * self._scale + self._mean
-        return out[~visible]
+            z = np.concatenate([z, np.broadcast_to(visible, z.shape[:-1] + visible.shape)], axis=-1)
+        out = self._ae(z).reshape(z.shape[:-1] + (-1, 3)) * self._scale + self._mean
+        return out[..., ~visible, :]
+
+    def _history_job(self, state, visible, hidden, before):
+        """Learn :mod:`~handcap.occlusion.history`'s (weights, reference) for today's visible set, or None.
+
+        A generator run one stage a frame from the frame after the change (registration, network,
+        regression), so that no frame pays for all three: the correction applies from the
+        :data:`~handcap.occlusion.history.DELAY_FRAMES`-th frame of a gap.
+        """
+        order = (np.arange(self._past) + state.past_head) % self._past
+        past = state.past[order[::-1][::self._past_step][::-1]]
+        offset = state.offset[hidden]
+        return self._history_stages(past, visible, hidden, before, offset)
+
+    def _history_stages(self, past, visible, hidden, before, offset):
+        seen = ~np.isnan(past[..., 0])
+        rows = seen[:, visible].all(axis=1) & seen[:, hidden].any(axis=1)
+        if np.count_nonzero(rows) < MIN_FRAMES:
+            return None
+        frames = past[rows]
+        r, c, tc = self._register.fit_many(frames, visible)
+        local = (frames - c[:, None]) @ r + tc
+        yield
+        errors = local[:, hidden] - self._predict(local, visible) - offset
+        yield
+        w = fit_correction((local[:, visible] - before[visible]).reshape(len(frames), -1), errors,
+                           seen[rows][:, hidden])
+        return (w, before[visible]) if w.any() else None
 
     def _regress(self, world, visible, pose):
         jr = self.model.regressor

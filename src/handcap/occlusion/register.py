@@ -105,3 +105,93 @@ def undo_registration(local, rotation, centre, template_centre) -> np.ndarray:
         World, metres.
     """
     return (local - template_centre[..., None, :]) @ np.swapaxes(rotation, -1, -2) + centre[..., None, :]
+
+
+class Registrar:
+    """Registration of one frame (or several with one visible set) to a template, per-set terms cached.
+
+    The streaming filler's fast path of :func:`fit_registration` (same weighted Kabsch).
+
+    With ``b_i = w_i (q_i - q_mean)`` summing to zero, the cross-covariance is simply
+    ``P^T B``: no centring of the measured points is needed.
+
+    Parameters
+    ----------
+    template : ndarray (M, 3)
+        Metres.
+    weights : ndarray (M,)
+    """
+
+    def __init__(self, template, weights):
+        self.template, self.weights = template, weights
+        self.cache = {}
+
+    def _entry(self, visible):
+        key = visible.tobytes()
+        entry = self.cache.get(key)
+        if entry is None:
+            if len(self.cache) > 4096:
+                self.cache.clear()
+            index = np.flatnonzero(visible)
+            w = self.weights[index] / self.weights[index].sum()
+            tc = w @ self.template[index]
+            entry = (index, w, tc, w[:, None] * (self.template[index] - tc), len(index) == len(visible))
+            self.cache[key] = entry
+        return entry
+
+    def fit(self, points, visible):
+        """(rotation (3, 3), centre (3,), template_centre (3,)) of one frame ``points`` (M, 3), metres.
+
+        Parameters
+        ----------
+        points : ndarray (M, 3)
+            Metres; ignored where not visible.
+        visible : ndarray (M,) bool
+            At least 3 markers.
+
+        Returns
+        -------
+        tuple
+            As :func:`fit_registration` for one frame.
+        """
+        index, w, tc, b, full = self._entry(visible)
+        p = points if full else points[index]
+        c = w @ p
+        u, _, vt = np.linalg.svd(p.T @ b)
+        r = u @ vt
+        if _det(r) < 0:
+            u[:, 2] = -u[:, 2]
+            r = u @ vt
+        return r, c, tc
+
+    def fit_many(self, points, visible):
+        """:meth:`fit` of F frames with one visible set.
+
+        Parameters
+        ----------
+        points : ndarray (F, M, 3)
+            Metres; ignored where not visible.
+        visible : ndarray (M,) bool
+
+        Returns
+        -------
+        rotation : ndarray (F, 3, 3)
+        centre : ndarray (F, 3)
+            Metres.
+        template_centre : ndarray (3,)
+            Metres.
+        """
+        index, w, tc, b, _ = self._entry(visible)
+        p = points[:, index]
+        u, _, vt = np.linalg.svd(np.swapaxes(p, 1, 2) @ b)
+        r = u @ vt
+        flip = np.linalg.det(r) < 0
+        if flip.any():
+            u[flip, :, 2] *= -1.0
+            r[flip] = u[flip] @ vt[flip]
+        return r, w @ p, tc
+
+
+def _det(m) -> float:
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
