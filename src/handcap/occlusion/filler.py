@@ -417,8 +417,8 @@ class OcclusionFiller:
         """Learn :mod:`~handcap.occlusion.history`'s (weights, reference) for today's visible set, or None.
 
         A generator run one stage a frame from the frame after the change (registration, network,
-        regression), so that no frame pays for all three: the correction applies from the
-        :data:`~handcap.occlusion.history.DELAY_FRAMES`-th frame of a gap.
+        regression), so that no frame pays for all three: the correction applies once
+        :data:`~handcap.occlusion.history.DELAY_FRAMES` frames of a gap have passed.
         """
         order = (np.arange(self._past) + state.past_head) % self._past
         past = state.past[order[::-1][::self._past_step][::-1]]

@@ -16,13 +16,14 @@ the offset was taken on. In the gap the correction is then
 which is zero on the reference frame (no jump) and grows only as the visible
 markers move away from where they were. No weight of the network changes and
 nothing but frames before the gap is used, so it runs online; the streaming
-filler applies it from the gap's :data:`DELAY_FRAMES`-th frame.
+filler applies it once :data:`DELAY_FRAMES` frames of the gap have passed.
 
-Measured on the real glove (every frame of 0.5 s gaps, NN/AC, network trained on
-synthetic takes only): 0.68 without, 0.52 with. On synthetic takes of unseen
-subjects (8 motions, 2 seeds): 0.62 without, 0.46 with, where 2 s of history
-(0.46) beat 1 s (0.48 on 5 motions) and 4 s (0.47), and ridge ``(1 mm)**2`` beat
-``0.3 mm**2`` and ``(3 mm)**2``; those were chosen on the synthetic takes alone.
+Measured on the real glove (every frame of 0.5 s gaps, NN/AC, the shipped network,
+trained on synthetic takes only): 0.68 without, 0.53 with. The settings were chosen
+on synthetic takes of unseen subjects (NN/AC over 5 motions; 8 motions x 2 seeds for
+the last pair): history 1 s 0.45, 2 s 0.40, 4 s 0.41, 8 s 0.41 (2 s 0.46 and 4 s 0.47
+on the larger set; the network alone 0.62); ridge at 4 s: (0.3 mm)^2 0.41, (1 mm)^2
+0.41, (1.7 mm)^2 0.42, (3.2 mm)^2 0.44.
 """
 
 from __future__ import annotations
