@@ -64,6 +64,22 @@ def test_methods_on_real_gaps(punched, glove_model):
     assert errors["nn"] < 0.004, errors
 
 
+def test_the_history_brings_a_model_of_other_hands_closer(punched):
+    """The shipped model never saw the glove: learning its error before each gap lowers the fill's error.
+
+    Measured on the real glove, the two passes blended: 0.386 -> 0.309 mm over 0.3-0.6 s gaps; over
+    the 0.05-0.3 s gaps of ``punched``, which the two ends already hold, 0.174 -> 0.188 mm.
+    """
+    truth, markers, _ = punched
+    holed, mask = _punch(truth, np.random.default_rng(0), length=(30, 60))
+    errors = {}
+    for history_s in (0.0, 2.0):
+        filled, _ = fill_gaps(MarkerSequence(holed, markers.names, markers.rate), "nn", max_gap_s=1.0,
+                              model="glove-13", history_s=history_s)
+        errors[history_s] = np.linalg.norm(filled.positions[mask] - truth[mask], axis=-1).mean()
+    assert errors[2.0] < 0.9 * errors[0.0], errors
+
+
 @pytest.mark.parametrize("method", ["linear", "spline", "lk", "ma", "ac", "nn"])
 def test_max_gap_is_never_exceeded(punched, glove_model, method):
     _, markers, _ = punched
@@ -94,6 +110,9 @@ def test_bad_inputs(glove, glove_model):
     for bad in (0, -1, np.nan, "long"):
         with pytest.raises(HandcapError, match="max_gap"):
             fill_gaps(glove, "linear", max_gap_s=bad)
+    for bad in (-1, np.nan, np.inf, "2", True):
+        with pytest.raises(HandcapError, match="history"):
+            fill_gaps(glove, "nn", model=glove_model, history_s=bad)
     with pytest.raises(HandcapError, match="needs a trained model"):
         fill_gaps(glove, "nn")
     with pytest.raises(HandcapError, match="lacks marker"):
@@ -125,6 +144,7 @@ def test_cli_fill_and_train(tmp_path, glove, capsys):
         (("fill", take, "--method", "nn", "--out", tmp_path / "x.npz"), "needs a trained model"),
         (("fill", take, "--out", take), "input"),
         (("fill", take, "--method", "linear", "--max-gap", "-2", "--out", tmp_path / "y.npz"), "max_gap"),
+        (("fill", take, "--model", model, "--history", "-1", "--out", tmp_path / "y.npz"), "history"),
         (("fill", tmp_path / "missing.c3d", "--out", tmp_path / "z.npz"), "missing.c3d"),
         (("train-occlusion", take, "--layout", "tips-5", "--out", tmp_path / "m.npz"), "lacks marker"),
         (("train-occlusion", take, "--layout", "glove-13", "--poses", take, take, "--out", tmp_path / "m.npz"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 from handcap.cli.common import add_units, print_progress
 from handcap.layouts import SHIPPED
 from handcap.occlusion import FILL_METHODS, SHIPPED_MODELS
+from handcap.occlusion.history import HISTORY_S
 from handcap.occlusion.train import PAIR_SECONDS
 from handcap.steps import markers, occlusion
 
@@ -16,7 +17,8 @@ def _cmd_train_occlusion(a):
 
 
 def _cmd_fill(a):
-    return markers.fill(a.input, a.out, method=a.method, model=a.model, max_gap_s=a.max_gap, units=a.units)
+    return markers.fill(a.input, a.out, method=a.method, model=a.model, max_gap_s=a.max_gap, units=a.units,
+                        history_s=a.history)
 
 
 def add_occlusion(verbs) -> None:
@@ -55,6 +57,9 @@ def add_occlusion(verbs) -> None:
     p.add_argument("--model", help=f"occlusion model .npz, or a shipped one: {', '.join(SHIPPED_MODELS)} (nn)")
     p.add_argument("--max-gap", type=float, default=0.5, metavar="SECONDS",
                    help="longest gap to fill, seconds (default %(default)s)")
+    p.add_argument("--history", type=float, default=HISTORY_S, metavar="SECONDS",
+                   help="nn: learn the network's error on a hidden marker from this many seconds before its gap "
+                        "and carry it in (default %(default)s; 0: the network and its offset alone)")
     p.add_argument("--out", required=True, help="filled markers (.c3d .trc .npz)")
     add_units(p)
     p.set_defaults(run=_cmd_fill)

@@ -37,6 +37,7 @@ from handcap.core.markers import MarkerSequence, runs
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
 from handcap.occlusion.data import marker_columns
 from handcap.occlusion.filler import OcclusionFiller
+from handcap.occlusion.history import HISTORY_S, check_history
 from handcap.occlusion.model import OcclusionModel
 
 FILL_METHODS = ("linear", "spline", "lk", "ma", "ac", "nn")
@@ -89,7 +90,7 @@ def _gaps(missing: np.ndarray):
 
 
 def fill_gaps(markers: MarkerSequence, method: str, *, max_gap_s: float = MAX_GAP_S, model=None,
-              progress=None) -> tuple[MarkerSequence, FillReport]:
+              progress=None, history_s: float = HISTORY_S) -> tuple[MarkerSequence, FillReport]:
     """Fill the gaps of a labeled take, up to ``max_gap_s`` seconds long.
 
     Parameters
@@ -103,6 +104,8 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap_s: float = MAX_GA
         Needed by ``nn`` (a shipped layout name or a model file).
     progress : bool, optional
         Progress bar for ``nn`` (default: on a terminal only).
+    history_s : float
+        Seconds before a gap from which ``nn`` learns its error (:mod:`~handcap.occlusion.history`; 0: off).
 
     Returns
     -------
@@ -112,11 +115,13 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap_s: float = MAX_GA
     Raises
     ------
     HandcapError
-        Unknown method, bad ``max_gap_s``, ``nn`` without a model or with a take lacking the model's markers.
+        Unknown method, bad ``max_gap_s`` or ``history_s``, ``nn`` without a model or with a take lacking the
+        model's markers.
     """
     if method not in FILL_METHODS:
         raise HandcapError(f"unknown fill method {method!r}; choose one of {', '.join(FILL_METHODS)}")
     max_gap_s = check_positive(max_gap_s, "max_gap_s (seconds)")
+    history_s = check_history(history_s)
     limit = int(np.floor(max_gap_s * markers.rate + 1e-9))
     positions = markers.positions
     t_count = markers.n_frames
@@ -142,8 +147,8 @@ def fill_gaps(markers: MarkerSequence, method: str, *, max_gap_s: float = MAX_GA
         if method in ("linear", "spline"):
             values = _interpolate(sub, fillable, method)
         else:
-            forward = _causal(sub, method, markers.rate, model, progress)
-            backward = _causal(sub[::-1], method, markers.rate, model, progress)[::-1]
+            forward = _causal(sub, method, markers.rate, model, progress, history_s)
+            backward = _causal(sub[::-1], method, markers.rate, model, progress, history_s)[::-1]
             values = {}
             for m, s, n in fillable:
                 frames = np.arange(s, s + n)
@@ -197,12 +202,13 @@ def _interpolate(positions, gaps, method):
     return values
 
 
-def _causal(positions, method, rate, model, progress):
+def _causal(positions, method, rate, model, progress, history_s=HISTORY_S):
     """The forward (causal) prediction of every missing sample, (T, M, 3), NaN where none."""
     if method == "nn":
         from tqdm import tqdm
 
-        filler = OcclusionFiller(model, rate=rate, method="nn", reentry_speed=np.inf, regress=False)
+        filler = OcclusionFiller(model, rate=rate, method="nn", reentry_speed=np.inf, regress=False,
+                                 history_s=history_s)
         out = np.full(positions.shape, np.nan)
         hidden = None if progress is None else not progress
         for t in tqdm(range(len(positions)), desc="fill", unit="frame", disable=hidden, leave=False):

@@ -40,7 +40,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.checks import check_rate
 from handcap.core.motion import check_side
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
-from handcap.occlusion.history import HISTORY_S, MIN_FRAMES, fit_correction, history_frames
+from handcap.occlusion.history import HISTORY_S, MIN_FRAMES, check_history, fit_correction, history_frames
 from handcap.occlusion.model import OcclusionModel
 from handcap.occlusion.register import Registrar
 
@@ -215,9 +215,8 @@ class OcclusionFiller:
         self._absent = bool((self.columns < 0).any())
         self._reorder = self.input_names != self.names
         self._history = int(round(MA_WINDOW_S * self.rate)) + 1
-        if not (np.isscalar(history_s) and float(history_s) >= 0):
-            raise HandcapError(f"history_s must be a non-negative number of seconds, got {history_s!r}")
-        self._past, self._past_step = history_frames(self.rate, float(history_s)) if method == "nn" else (0, 1)
+        history_s = check_history(history_s)
+        self._past, self._past_step = history_frames(self.rate, history_s) if method == "nn" else (0, 1)
         self._states = [_HandState(len(self.names), self._history, self._past) for _ in self.hands]
         # Cached arrays of the networks, for the one-frame path.
         self._register = Registrar(p.template, p.weights)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from handcap.core.errors import HandcapError
 from handcap.occlusion.register import apply_registration
 
 #: Seconds of the take before a gap that the correction learns from.
@@ -45,6 +46,29 @@ MIN_FRAMES = 5
 #: (registration, network, regression) so that no frame pays for all of it (about 0.45 ms on 2 cores).
 #: Near the gap's start the visible markers have hardly moved, so the correction is small there anyway.
 DELAY_FRAMES = 3
+
+
+def check_history(history_s) -> float:
+    """``history_s`` as seconds, or one clear error.
+
+    Parameters
+    ----------
+    history_s : float
+        Seconds of history; 0 switches the correction off.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    HandcapError
+        Not a number, negative, NaN or infinite.
+    """
+    if isinstance(history_s, bool) or not isinstance(history_s, (int, float, np.number)) or not (
+            0 <= history_s < np.inf):
+        raise HandcapError(f"the history must be a non-negative, finite number of seconds, got {history_s!r}")
+    return float(history_s)
 
 
 def history_frames(rate: float, history_s: float = HISTORY_S) -> tuple:

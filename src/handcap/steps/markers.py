@@ -11,6 +11,7 @@ from handcap.io import check_not_input, check_output, read_markers, write_marker
 from handcap.labeling import corrupt as corrupt_labels
 from handcap.layouts import load_layout
 from handcap.occlusion import fill_gaps
+from handcap.occlusion.history import HISTORY_S
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
 
@@ -69,7 +70,8 @@ def corrupt(path, out, *, ghost_rate: float = 2.0, dropout: float = 0.05, seed: 
     return Step((line,), (), (str(out), str(truth_path)), unlabeled)
 
 
-def fill(path, out, *, method: str = "nn", model=None, max_gap_s: float = 0.5, units: str | None = None) -> Step:
+def fill(path, out, *, method: str = "nn", model=None, max_gap_s: float = 0.5, units: str | None = None,
+         history_s: float = HISTORY_S) -> Step:
     """Fill the gaps of a recorded take up to ``max_gap_s`` seconds (see :func:`handcap.occlusion.fill_gaps`).
 
     Parameters
@@ -84,11 +86,13 @@ def fill(path, out, *, method: str = "nn", model=None, max_gap_s: float = 0.5, u
         Longest gap to fill, seconds; longer ones stay missing.
     units : {'mm', 'cm', 'm'} or None
         Unit of the input's coordinates, overriding what the file says.
+    history_s : float
+        Seconds before a gap from which ``nn`` learns its error (:mod:`handcap.occlusion.history`).
     """
     check_not_input(out, path, *([model] if model else []))
     markers = read_markers(path, units=units)
     start = time.perf_counter()
-    filled, report = fill_gaps(markers, method, max_gap_s=max_gap_s, model=model)
+    filled, report = fill_gaps(markers, method, max_gap_s=max_gap_s, model=model, history_s=history_s)
     seconds = time.perf_counter() - start
     write_markers(filled, out)
     line = (f"{out}: {report.filled_samples} samples in {report.filled_gaps} gaps filled ({method}, gaps up to "
