@@ -15,8 +15,8 @@ from handcap.labeling.fingers import untangle
 from handcap.labeling.model import is_labeling_model
 from handcap.layouts import load_layout
 from handcap.layouts.chains import finger_chains, thumb_chain
-from handcap.solve import calibrate_attachment
-from handcap.solve.relabel import check_labels
+from handcap.solve import Priors, calibrate_attachment
+from handcap.solve.relabel import CALIBRATION_PRIOR, check_labels
 from handcap.steps.step import Step
 
 
@@ -121,7 +121,8 @@ def untangled(labelled: MarkerSequence, model: LabelingModel, layout) -> tuple[M
 def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSequence, str]:
     """A labelled take's hand markers checked against the hand solved from them.
 
-    The attachment is calibrated on the take itself (see :func:`handcap.solve.relabel.check_labels`); markers
+    The attachment is calibrated on the take itself, with only a slight pull to the open hand
+    (:data:`handcap.solve.relabel.CALIBRATION_PRIOR`; see :func:`handcap.solve.relabel.check_labels`); markers
     of other layouts (objects) are left as they are.
 
     Parameters
@@ -148,7 +149,8 @@ def checked_by_hand(labelled: MarkerSequence, points, layout) -> tuple[MarkerSeq
         with warnings.catch_warnings():  # the calibration serves the check only: its own figures are no result
             warnings.simplefilter("ignore", HandcapWarning)
             layout = layout.subset(n for n in layout.names if n not in never)
-            attachment = calibrate_attachment(labelled.select(layout.names), layout).attachment
+            attachment = calibrate_attachment(labelled.select(layout.names), layout, priors=Priors(
+                rest=np.zeros(27), rest_weight=CALIBRATION_PRIOR)).attachment
             check = check_labels(labelled, points, attachment, rigid=layout.rigid)
     except HandcapError as error:
         return labelled, f"labels not checked against the solved hand: {error}"
