@@ -40,7 +40,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.checks import check_rate
 from handcap.core.motion import check_side
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
-from handcap.occlusion.history import HISTORY_S, MIN_FRAMES, check_history, fit_correction, history_frames
+from handcap.occlusion.history import HISTORY_S, check_history, correction_stages, history_frames
 from handcap.occlusion.model import OcclusionModel
 from handcap.occlusion.register import Registrar
 
@@ -148,6 +148,7 @@ class _HandState:
         self.past_head = 0
         self.correction = None  # (weights (3V, 3K), reference (V, 3)) of the history correction
         self.job = None  # the correction being learned, one stage a frame
+        self.reference = None  # the visible markers (V, 3) on the frame the offset was taken on
 
 
 class OcclusionFiller:
@@ -364,7 +365,8 @@ class OcclusionFiller:
                 before = (state.clean - pc) @ pr + ptc
                 state.offset[hidden] = before[hidden] - self._predict(before, visible)
                 state.correction = None
-                state.job = self._history_job(state, visible, hidden, before) if self._past else None
+                state.job = self._history_job(state, visible, before) if self._past else None
+                state.reference = before[visible]
             elif state.visible is None:
                 state.offset[:] = 0.0
                 state.correction = state.job = None
@@ -372,7 +374,9 @@ class OcclusionFiller:
                 try:
                     next(state.job)
                 except StopIteration as done:
-                    state.correction, state.job = done.value, None
+                    w = done.value
+                    state.correction = (w, state.reference) if w.any() else None
+                    state.job = None
             local[hidden] = self._predict(local, visible) + state.offset[hidden]
             if state.correction is not None:
                 w, reference = state.correction
@@ -412,32 +416,18 @@ class OcclusionFiller:
         out = self._ae(z).reshape(z.shape[:-1] + (-1, 3)) * self._scale + self._mean
         return out[..., ~visible, :]
 
-    def _history_job(self, state, visible, hidden, before):
-        """Learn :mod:`~handcap.occlusion.history`'s (weights, reference) for today's visible set, or None.
-
-        A generator run one stage a frame from the frame after the change (registration, network,
-        regression), so that no frame pays for all three: the correction applies once
-        :data:`~handcap.occlusion.history.DELAY_FRAMES` frames of a gap have passed.
-        """
+    def _history_job(self, state, visible, before):
+        """:func:`~handcap.occlusion.history.correction_stages` for today's visible set, with the filler's fast
+        registration and network; run one stage a frame from the frame after the change, so that no frame
+        pays for all three (the correction applies once :data:`~handcap.occlusion.history.DELAY_FRAMES`
+        frames of a gap have passed)."""
         order = (np.arange(self._past) + state.past_head) % self._past
         past = state.past[order[::-1][::self._past_step][::-1]]
-        offset = state.offset[hidden]
-        return self._history_stages(past, visible, hidden, before, offset)
+        return correction_stages(past, visible, before, state.offset.copy(), self._register_many, self._predict)
 
-    def _history_stages(self, past, visible, hidden, before, offset):
-        seen = ~np.isnan(past[..., 0])
-        rows = seen[:, visible].all(axis=1) & seen[:, hidden].any(axis=1)
-        if np.count_nonzero(rows) < MIN_FRAMES:
-            return None
-        frames = past[rows]
+    def _register_many(self, frames, visible):
         r, c, tc = self._register.fit_many(frames, visible)
-        local = (frames - c[:, None]) @ r + tc
-        yield
-        errors = local[:, hidden] - self._predict(local, visible) - offset
-        yield
-        w = fit_correction((local[:, visible] - before[visible]).reshape(len(frames), -1), errors,
-                           seen[rows][:, hidden])
-        return (w, before[visible]) if w.any() else None
+        return (frames - c[:, None]) @ r + tc
 
     def _regress(self, world, visible, pose):
         jr = self.model.regressor

@@ -130,6 +130,46 @@ def fit_correction(features, errors, seen, *, ridge: float = RIDGE) -> np.ndarra
     return weights
 
 
+def correction_stages(past, visible, reference, offset, register, predict, *, ridge: float = RIDGE):
+    """:func:`history_correction` as a generator of three stages (registration, network, regression).
+
+    The streaming filler runs one stage a frame (:data:`DELAY_FRAMES`), with its own fast registration and
+    network; :func:`history_correction` runs them at once.
+
+    Parameters
+    ----------
+    past, visible, reference, offset, ridge
+        As :func:`history_correction`.
+    register : callable (frames (F, M, 3), visible (M,)) -> ndarray (F, M, 3)
+        The frames registered with ``visible`` (template frame, metres).
+    predict : callable (local (F, M, 3), visible (M,)) -> ndarray (F, K, 3)
+        The network's output for the K hidden markers (template frame, metres).
+
+    Yields
+    ------
+    None
+        After the registration and after the network.
+
+    Returns
+    -------
+    weights : ndarray (3V, 3K)
+        See :func:`fit_correction` (the generator's ``StopIteration.value``).
+    """
+    visible = np.asarray(visible, dtype=bool)
+    hidden = np.flatnonzero(~visible)
+    seen = ~np.isnan(np.asarray(past, dtype=np.float64)).any(axis=-1)
+    rows = seen[:, visible].all(axis=1) & seen[:, hidden].any(axis=1)
+    if np.count_nonzero(rows) < MIN_FRAMES or not len(hidden):
+        return np.zeros((3 * int(visible.sum()), 3 * len(hidden)))
+    frames = past[rows]
+    local = register(frames, visible)
+    yield
+    errors = local[:, hidden] - predict(local, visible) - offset[hidden]
+    yield
+    features = (local[:, visible] - reference[visible]).reshape(len(frames), -1)
+    return fit_correction(features, errors, seen[rows][:, hidden], ridge=ridge)
+
+
 def history_correction(predictor, past, visible, reference, offset, *, ridge: float = RIDGE):
     """The linear correction of the network's error on the hidden markers, learned from past frames.
 
@@ -154,15 +194,16 @@ def history_correction(predictor, past, visible, reference, offset, *, ridge: fl
         With V visible and K hidden markers: see :func:`fit_correction`. All zero when fewer than
         :data:`MIN_FRAMES` frames show every visible marker and a hidden one.
     """
-    visible = np.asarray(visible, dtype=bool)
-    hidden = np.flatnonzero(~visible)
-    seen = ~np.isnan(np.asarray(past, dtype=np.float64)).any(axis=-1)
-    rows = seen[:, visible].all(axis=1) & seen[:, hidden].any(axis=1)
-    if rows.sum() < MIN_FRAMES or not len(hidden):
-        return np.zeros((3 * int(visible.sum()), 3 * len(hidden)))
-    frames = past[rows]
-    shown = np.broadcast_to(visible, frames.shape[:2])
-    local = apply_registration(frames, *predictor.register(frames, shown))
-    errors = local[:, hidden] - predictor.predict_local(local, shown)[:, hidden] - offset[hidden]
-    features = (local[:, visible] - reference[visible]).reshape(len(frames), -1)
-    return fit_correction(features, errors, seen[rows][:, hidden], ridge=ridge)
+    def register(frames, shown):
+        shown = np.broadcast_to(shown, frames.shape[:2])
+        return apply_registration(frames, *predictor.register(frames, shown))
+
+    def predict(local, shown):
+        return predictor.predict_local(local, np.broadcast_to(shown, local.shape[:2]))[:, ~shown]
+
+    stages = correction_stages(past, visible, reference, offset, register, predict, ridge=ridge)
+    while True:
+        try:
+            next(stages)
+        except StopIteration as done:
+            return done.value
