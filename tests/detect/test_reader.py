@@ -39,6 +39,28 @@ def test_read_blocks_refuses_glyphs_it_does_not_know():
     assert text[0] == "" or all(ch in "0123456789" for ch in text[0])
 
 
+def test_a_reading_over_every_turn_does_not_depend_on_the_first_corner(scenes):
+    reader = load_reader()  # the shipped weights
+    scene = max(scenes, key=lambda s: len(s.blocks))
+    quads = scene.blocks[:12]
+    text, corners, rotation, score = read_blocks(reader, scene.image, quads, scene.alphabet, turns=4)
+    assert (text != "").sum() >= 6
+    for turns, shifts in ((4, (1, 2, 3)), (2, (2,))):
+        text, corners, _, score = read_blocks(reader, scene.image, quads, scene.alphabet, turns=turns)
+        for shift in shifts:
+            again, at, _, score_again = read_blocks(reader, scene.image, np.roll(quads, -shift, axis=1), scene.alphabet,
+                                                    turns=turns)
+            np.testing.assert_array_equal(again, text)
+            np.testing.assert_allclose(score_again, score, rtol=1e-4, atol=1e-6)
+            np.testing.assert_allclose(at[text != ""], corners[text != ""])  # the same corners in reading order
+    # One view alone is not turn-free: its confidences change when the corners start elsewhere.
+    one = read_blocks(reader, scene.image, quads, scene.alphabet, turns=1)[3]
+    other = read_blocks(reader, scene.image, np.roll(quads, -1, axis=1), scene.alphabet, turns=1)[3]
+    assert np.abs(one - other).max() > 1e-3
+    with pytest.raises(HandcapError, match="1, 2 or 4 turns"):
+        read_blocks(reader, scene.image, quads, scene.alphabet, turns=3)
+
+
 def test_samples_label_the_turn_and_the_glyphs(scenes):
     views, first, second, turn = reader_samples(scenes, 64, np.random.default_rng(0))
     tags = turn < 4
