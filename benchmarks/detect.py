@@ -179,8 +179,8 @@ def main() -> None:
         quads, _ = white_blocks(scene.image, xy, candidates)
         text, _, turn, bscore = read_blocks(reader, scene.image, xy[quads], pattern.alphabet)
         tags, turns, _ = vote(pattern, quads, text, turn, bscore, reader.min_score, xy)
-        trusted = (bscore >= reader.min_score) & (text == tags) & (turn == turns)
-        tags[unconfirmed(quads, tags, xy, trusted, cscore)] = ""
+        agreed = (text == tags) & (turn == turns)
+        tags[unconfirmed(quads, tags, xy, agreed & (bscore >= reader.min_score), cscore, agreed)] = ""
         tags[uncrossed(pattern, scene.image, quads, tags, turns, xy)] = ""
         at = {frozenset(q): k for k, q in enumerate(quads.tolist())}
         made = {frozenset(q) for q in candidates.tolist()}

@@ -171,6 +171,19 @@ def test_unconfirmed_blocks_must_be_parallelograms():
     assert not unconfirmed(quads, tags, moved, np.ones(len(quads), bool), score).any()
     score[0] = 0.8
     assert list(np.flatnonzero(unconfirmed(quads, tags, moved, np.ones(len(quads), bool), score))) == [0]
+    # A reading that agrees with the vote, below the reader's gate (not trusted), vouches for the shape when
+    # the lone corners are surer still (0.98); at 0.97 the bent block goes, and without the agreement too.
+    untrusted, agreed = np.zeros(len(quads), bool), np.ones(len(quads), bool)
+    score[0] = 0.985
+    assert not unconfirmed(quads, tags, moved, untrusted, score, agreed).any()
+    assert list(np.flatnonzero(unconfirmed(quads, tags, moved, untrusted, score))) == [0]
+    agreed[0] = False
+    assert list(np.flatnonzero(unconfirmed(quads, tags, moved, untrusted, score, agreed))) == [0]
+    agreed[0], score[0] = True, 0.97
+    assert list(np.flatnonzero(unconfirmed(quads, tags, moved, untrusted, score, agreed))) == [0]
+    # The weak-corner rule still wins over an agreeing reading.
+    score[0] = 0.6
+    assert list(np.flatnonzero(unconfirmed(quads, tags, xy, untrusted, score, agreed))) == [0]
 
 
 def test_a_lone_corner_must_show_the_white_square_across_it():

@@ -104,8 +104,8 @@ class Detector:
         corrected = 0
         if self.pattern is not None and len(quads):
             tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
-            trusted = (bscore >= self.reader.min_score) & (text == tags) & (rotation == turns)
-            drop = unconfirmed(quads, tags, xy, trusted, cscore)
+            agreed = (text == tags) & (rotation == turns)
+            drop = unconfirmed(quads, tags, xy, agreed & (bscore >= self.reader.min_score), cscore, agreed)
             tags[drop], turns[drop] = "", -1
             drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
             tags[drop], turns[drop] = "", -1
