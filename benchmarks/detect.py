@@ -170,7 +170,6 @@ def main() -> None:
     from scipy.spatial import cKDTree as _Tree
     from handcap.detect.blocks import candidate_quads, white_blocks
     from handcap.detect.reader import read_blocks
-    from handcap.detect.voting import unconfirmed, uncrossed, vote
 
     funnel, fixed, lost = np.zeros(6, int), 0, 0
     for scene in hands:
@@ -178,10 +177,7 @@ def main() -> None:
         candidates = candidate_quads(xy, score=cscore)
         quads, _ = white_blocks(scene.image, xy, candidates)
         text, _, turn, bscore = read_blocks(reader, scene.image, xy[quads], pattern.alphabet)
-        tags, turns, _ = vote(pattern, quads, text, turn, bscore, reader.min_score, xy)
-        agreed = (text == tags) & (turn == turns)
-        tags[unconfirmed(quads, tags, xy, agreed & (bscore >= reader.min_score), cscore, agreed)] = ""
-        tags[uncrossed(pattern, scene.image, quads, tags, turns, xy)] = ""
+        tags, _, _ = hand_detector.vote(scene.image, xy, cscore, quads, text, turn, bscore)
         at = {frozenset(q): k for k, q in enumerate(quads.tolist())}
         made = {frozenset(q) for q in candidates.tolist()}
         tree = _Tree(xy) if len(xy) else None

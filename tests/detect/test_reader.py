@@ -8,7 +8,7 @@ import torch
 
 from handcap import HandcapError
 from handcap.detect.corners import CornerNet
-from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks
+from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks, tag_probability
 from handcap.detect.train import load_reader, reader_samples, save_net, train_reader
 
 
@@ -59,6 +59,27 @@ def test_a_reading_over_every_turn_does_not_depend_on_the_first_corner(scenes):
     assert np.abs(one - other).max() > 1e-3
     with pytest.raises(HandcapError, match="1, 2 or 4 turns"):
         read_blocks(reader, scene.image, quads, scene.alphabet, turns=3)
+
+
+def test_the_probability_of_a_given_tag_is_the_readers_score_of_its_own_reading(scenes):
+    reader = load_reader()  # the shipped weights
+    scene = max(scenes, key=lambda s: len(s.blocks))
+    quads = np.asarray(scene.blocks[:12], dtype=np.float64)
+    text, _, rotation, score = read_blocks(reader, scene.image, quads, scene.alphabet)
+    read = np.flatnonzero(text != "")
+    assert len(read) >= 6
+    np.testing.assert_allclose(tag_probability(reader, scene.image, quads[read], scene.alphabet, text[read],
+                                               rotation[read]), score[read], rtol=1e-5)
+    # The same tag a quarter turn off, or another tag, is less likely than the reading.
+    turned = tag_probability(reader, scene.image, quads[read], scene.alphabet, text[read], (rotation[read] + 1) % 4)
+    assert (turned < score[read]).all()
+    other = [scene.alphabet[(scene.alphabet.index(t[0]) + 1) % len(scene.alphabet)] + t[1] for t in text[read]]
+    other = tag_probability(reader, scene.image, quads[read], scene.alphabet, other, rotation[read])
+    assert (other < score[read]).all()
+    with pytest.raises(HandcapError, match="not two glyphs"):
+        tag_probability(reader, scene.image, quads[:1], scene.alphabet, ["A"], [0])
+    with pytest.raises(HandcapError, match="one tag and one rotation"):
+        tag_probability(reader, scene.image, quads[:2], scene.alphabet, [text[read[0]]] * 2, [0, 4])
 
 
 def test_samples_label_the_turn_and_the_glyphs(scenes):

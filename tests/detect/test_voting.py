@@ -184,6 +184,36 @@ def test_unconfirmed_blocks_must_be_parallelograms():
     # The weak-corner rule still wins over an agreeing reading.
     score[0] = 0.6
     assert list(np.flatnonzero(unconfirmed(quads, tags, xy, untrusted, score, agreed))) == [0]
+    # An agreeing reading vouches for a bend up to AGREED_MAX_DEFECT (0.25 of a side) only: the corner moved
+    # 4 px (0.2 of a side) keeps the block, 6 px (0.3) drops it.
+    score[0] = 0.99
+    for shift, dropped in ((4.0, []), (6.0, [0])):
+        bent = xy.copy()
+        bent[0] += (shift, 0.0)
+        assert list(np.flatnonzero(unconfirmed(quads, tags, bent, untrusted, score, agreed))) == dropped
+
+
+def test_a_block_read_as_another_tag_needs_some_probability_of_its_voted_one():
+    grid = np.array([(c, r) for r in range(5) for c in range(5)], float)
+    xy = grid @ np.array([[20.0, 3.0], [4.0, 18.0]]) + 50.0
+    quads = np.array([(r * 5 + c, r * 5 + c + 1, (r + 1) * 5 + c + 1, (r + 1) * 5 + c)
+                      for r in range(4) for c in range(4) if (r + c) % 2 == 0])
+    tags, score = np.array(["AB"] * len(quads)), np.full(len(xy), 0.99)
+    agreed = np.ones(len(quads), bool)
+    unlikely = np.full(len(quads), 1e-6)
+    # Blocks the reader read as their voted tags: the probability does not matter.
+    assert not unconfirmed(quads, tags, xy, None, score, agreed, unlikely).any()
+    # Read as other tags, with the block at (0, 0) not voted: (0, 2) has two lone corners (used by no other voted
+    # block), the corner block (3, 3) three, (1, 1) one (the one it shared with (0, 0)), (2, 2) none. With its
+    # voted tag at 1e-6 a block with two or more goes; at 1e-3 none does.
+    agreed[:] = False
+    tags[0] = ""
+    uses = np.bincount(quads[1:].ravel(), minlength=len(xy))
+    lone = np.array([(uses[q] <= 1).sum() for q in quads])
+    assert list(lone[1:]) == [2, 1, 2, 2, 0, 2, 3]
+    assert list(np.flatnonzero(unconfirmed(quads, tags, xy, None, score, agreed, unlikely))) \
+        == [b for b in range(1, len(quads)) if lone[b] >= 2]
+    assert not unconfirmed(quads, tags, xy, None, score, agreed, np.full(len(quads), 1e-3)).any()
 
 
 def test_a_lone_corner_must_show_the_white_square_across_it():

@@ -20,7 +20,7 @@ from handcap.patterns.alphabet import ALPHABET, check_alphabet
 from handcap.detect.blocks import candidate_quads, white_blocks
 from handcap.detect.corners import CornerNet
 from handcap.patterns.pattern import Pattern
-from handcap.detect.reader import GLYPHS, BlockReader, read_blocks
+from handcap.detect.reader import GLYPHS, BlockReader, read_blocks, tag_probability
 from handcap.detect.refine import CornerRefiner, locate_corners
 from handcap.detect.voting import name_corners, unconfirmed, uncrossed, vote
 
@@ -103,12 +103,7 @@ class Detector:
         names = np.full(len(xy), None, dtype=object)
         corrected = 0
         if self.pattern is not None and len(quads):
-            tags, turns, corrected = vote(self.pattern, quads, text, rotation, bscore, self.reader.min_score, xy)
-            agreed = (text == tags) & (rotation == turns)
-            drop = unconfirmed(quads, tags, xy, agreed & (bscore >= self.reader.min_score), cscore, agreed)
-            tags[drop], turns[drop] = "", -1
-            drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
-            tags[drop], turns[drop] = "", -1
+            tags, turns, corrected = self.vote(image, xy, cscore, quads, text, rotation, bscore)
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
             order = (np.arange(4)[None] + np.maximum(turns, 0)[:, None]) % 4
@@ -117,3 +112,41 @@ class Detector:
         else:
             keep = (text != "") & (bscore >= self.reader.min_score)
         return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected)
+
+    def vote(self, image: np.ndarray, xy: np.ndarray, corner_score: np.ndarray, quads: np.ndarray, text, rotation,
+             score) -> tuple[np.ndarray, np.ndarray, int]:
+        """The template's vote over one image's read blocks, and the checks of the blocks it keeps.
+
+        Parameters
+        ----------
+        image : ndarray (H, W)
+        xy : ndarray (K, 2)
+            Corners, pixels.
+        corner_score : ndarray (K,)
+        quads : ndarray (B, 4) int
+            The white squares' corner indices in image order.
+        text, rotation, score : ndarrays (B,)
+            :func:`~handcap.detect.reader.read_blocks`'s readings of them.
+
+        Returns
+        -------
+        tags : ndarray (B,) str
+            Each block's voted tag, "" where it is dropped.
+        turns : ndarray (B,) int
+            Index of the tag's top-left among the block's corners (-1 where dropped).
+        corrected : int
+            Readings the vote changed.
+        """
+        tags, turns, corrected = vote(self.pattern, quads, text, rotation, score, self.reader.min_score, xy)
+        agreed = (text == tags) & (rotation == turns)
+        other = np.flatnonzero((tags != "") & ~agreed)
+        voted_probability = np.ones(len(quads))
+        if len(other):
+            voted_probability[other] = tag_probability(self.reader, image, xy[quads[other]], self.alphabet,
+                                                       tags[other], turns[other])
+        drop = unconfirmed(quads, tags, xy, agreed & (score >= self.reader.min_score), corner_score, agreed,
+                           voted_probability)
+        tags[drop], turns[drop] = "", -1
+        drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
+        tags[drop], turns[drop] = "", -1
+        return tags, turns, corrected

@@ -240,9 +240,18 @@ TRUSTED_CORNER_SCORE = 0.9
 #: and 0.95 tried, with one view and with two: 0.95 let a wrong block through that 0.98 did not) and checked on the
 #: 90 of ``benchmarks/detect.py``'s seeds 99, 7 and 123.
 AGREED_CORNER_SCORE = 0.98
+#: Largest parallelogram defect (as :data:`MAX_DEFECT`) of a block that its agreeing reading vouches for: nine in ten
+#: true squares on rendered hands bend less (0.24 measured on seed 7 of ``benchmarks/detect.py``); past it, a lone
+#: corner is more often one found where the finger's outline cuts the square's side.
+AGREED_MAX_DEFECT = 0.25
+#: Least probability the reader gives a voted block's tag and turn when it reads another tag there and two or more
+#: of its corners are lone: below it the quad is not that square (most often one shifted a square over, which the
+#: vote placed through its two shared corners).
+MIN_VOTED_PROBABILITY = 1e-4
 
 
-def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=None, agreed=None) -> np.ndarray:
+def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=None, agreed=None,
+                voted_probability=None) -> np.ndarray:
     """Voted blocks with a corner no other voted block confirms, no parallelogram shape, no trusted reading.
 
     A corner shared by two voted blocks (diagonal neighbours on a patch) was found where two squares,
@@ -259,10 +268,12 @@ def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=Non
     in the demo's 13-camera take, where blur leaves corners less sure, it also let 2 % wrong ones through, so its
     lone corners must score :data:`TRUSTED_CORNER_SCORE`).
     A block the reader read as its voted tag and turn (``agreed``), at any confidence, is also kept whatever
-    its shape when each of its lone corners scores :data:`AGREED_CORNER_SCORE`: a quad with a false corner
-    seldom shows the reader the very tag its neighbours put there, and a false corner is seldom that sure
-    (on rendered hands the true squares themselves are no parallelogram to 0.12 of their side in a quarter
-    of the views: the skin bends under them).
+    its shape when each of its lone corners scores :data:`AGREED_CORNER_SCORE` and it is no more bent than
+    :data:`AGREED_MAX_DEFECT`: a quad with a false corner seldom shows the reader the very tag its neighbours
+    put there, and a false corner is seldom that sure (on rendered hands the true squares themselves are no
+    parallelogram to 0.12 of their side in a quarter of the views: the skin bends under them).
+    Given ``voted_probability``, a block the reader reads as another tag, with two or more lone corners, is
+    dropped when the reader gives its voted tag and turn less than :data:`MIN_VOTED_PROBABILITY`.
     With corner ``score`` given, a block is also dropped, whatever its shape and reading, when a corner
     that no other voted block uses scored below :data:`MIN_LONE_SCORE`: an occluder's edge crossing the
     block's side two or three pixels from its hidden corner makes such a weak corner and only a slightly
@@ -283,6 +294,9 @@ def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=Non
         Each corner's probability (default: not tested).
     agreed : ndarray (B,) bool, optional
         Blocks the reader read as the voted tag and turn, at any confidence (default: none; needs ``score``).
+    voted_probability : ndarray (B,), optional
+        The reader's probability of each block's voted tag and turn
+        (:func:`~handcap.detect.reader.tag_probability`; anything where no tag is voted).
 
     Returns
     -------
@@ -302,10 +316,14 @@ def unconfirmed(quads: np.ndarray, tags, xy: np.ndarray, trusted=None, score=Non
     if trusted is not None:
         sure = (~lone | (corner_score >= TRUSTED_CORNER_SCORE)).all(axis=1)
         drop &= ~(np.asarray(trusted, bool).reshape(-1) & sure)
-    if agreed is not None and score is not None:
+    agreed = np.zeros(len(quads), bool) if agreed is None else np.asarray(agreed, bool).reshape(-1)
+    if score is not None:
         sure = (~lone | (corner_score >= AGREED_CORNER_SCORE)).all(axis=1)
-        drop &= ~(np.asarray(agreed, bool).reshape(-1) & sure)
+        drop &= ~(agreed & sure & (defect <= AGREED_MAX_DEFECT))
     drop |= voted & (lone & (corner_score < MIN_LONE_SCORE)).any(axis=1)
+    if voted_probability is not None:
+        unlike = np.asarray(voted_probability, dtype=np.float64).reshape(-1) < MIN_VOTED_PROBABILITY
+        drop |= voted & ~agreed & (lone.sum(axis=1) >= 2) & unlike
     return drop
 
 
