@@ -78,11 +78,14 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
     for b, quad in enumerate(quads):
         for p, corner in enumerate(quad):
             by_corner[corner].append((b, p))
+    # The blocks each block's walk may step to across each of its corners: (corner position, block, its position).
+    steps = [[[(b, q) for b, q in by_corner[corner] if b != a and text[b]] for corner in quads[a]] for a in range(n)]
     if xy is not None:
         pts = np.asarray(xy, dtype=float)[quads]
         centre = pts.mean(axis=1)
         side = np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=-1).mean(axis=1)
         along = _along(pts, centre, side)
+        steps = _mirrored(steps, quads, np.asarray(xy, dtype=float), centre, side)
     votes = [Counter() for _ in range(n)]
     for seed in range(n):
         located = pattern.locate(str(text[seed])) if text[seed] else None
@@ -94,16 +97,12 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
         while queue:
             a = queue.popleft()
             r, c, turn = placed[a]
-            for p, corner in enumerate(quads[a]):
+            for p in range(4):
                 k = (p - turn) % 4  # reading-order index of this corner in block a
                 dr, dc = STEP[k]
-                for b, q in by_corner[corner]:
-                    if b in placed or not text[b]:
-                        continue  # a quad the reader saw no tag in is not placed (a shifted quad over a black square)
-                    if xy is not None:
-                        mirror = 2 * np.asarray(xy[corner], dtype=float) - centre[a]
-                        if np.linalg.norm(centre[b] - mirror) > (side[a] + side[b]) / 6:
-                            continue
+                for b, q in steps[a][p]:
+                    if b in placed:
+                        continue
                     rb, cb = r + 2 * dr - 1, c + 2 * dc - 1
                     if not (0 <= rb < patch.rows and 0 <= cb < patch.cols) or not patch.tags[rb][cb]:
                         continue
@@ -135,6 +134,23 @@ def vote(pattern: Pattern, quads: np.ndarray, text, rotation, score=None, min_su
     return tags, turns, changed
 
 
+def _mirrored(steps, quads: np.ndarray, xy: np.ndarray, centre: np.ndarray, side: np.ndarray):
+    """``steps`` (per block, per corner position, the (block, its corner position) pairs sharing that corner) kept
+    only where the other block's centre lies within a third of a side of the mirror image of this block's centre
+    through the shared corner: where a diagonal neighbour must be (a false quad that shares a corner is not)."""
+    out = []
+    for a, per_corner in enumerate(steps):
+        kept = []
+        for p, pairs in enumerate(per_corner):
+            if pairs:
+                b = np.array([b for b, _ in pairs])
+                near = np.linalg.norm(centre[b] - (2 * xy[quads[a, p]] - centre[a]), axis=1) <= (side[a] + side[b]) / 6
+                pairs = [pair for pair, ok in zip(pairs, near) if ok]
+            kept.append(pairs)
+        out.append(kept)
+    return out
+
+
 #: Squares of the patch grid two along a block's row or column: (rows, columns) from it.
 ALONG = ((0, 2), (0, -2), (2, 0), (-2, 0))
 
@@ -145,36 +161,29 @@ def _along(pts: np.ndarray, centre: np.ndarray, side: np.ndarray):
     Block ``a`` read with turn ``t`` (its reading-order corners ``pts[a][(arange(4) + t) % 4]``) maps its
     square's grid to the image by the homography of its four corners; the blocks at ``ALONG`` must lie
     where it maps those squares: centre within a third of a side, and each corner within half a side
-    (which also gives their turn).
+    (which also gives their turn). Every block, turn and direction is mapped at once.
 
     Returns a function ``(a, t) -> {(dr, dc): (b, turn_b)}``.
     """
-    tree = cKDTree(centre)
+    n = len(pts)
+    roll = (np.arange(4)[None] + np.arange(4)[:, None]) % 4  # (turn, reading-order corner) -> corner
+    homs = unit_square_homographies(pts[:, roll].reshape(-1, 4, 2))  # (n * 4, 3, 3): block-major, then turn
     unit = np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
-    seen = {}
-
-    def found(a: int, turn: int) -> dict:
-        if (a, turn) not in seen:
-            seen[(a, turn)] = search(a, turn)
-        return seen[(a, turn)]
-
-    def search(a: int, turn: int) -> dict:
-        reading = pts[a][(np.arange(4) + turn) % 4]
-        h = unit_square_homographies(reading[None])[0]
-        out = {}
-        for dr, dc in ALONG:
-            grid = np.c_[unit + (dc, dr), np.ones(4)] @ h.T
-            guess = grid[:, :2] / grid[:, 2:]
-            distance, b = tree.query(guess.mean(axis=0))
-            if b == a or distance > (side[a] + side[b]) / 6:
-                continue
-            gap = [np.linalg.norm(pts[b][(np.arange(4) + k) % 4] - guess, axis=1).max() for k in range(4)]
-            k = int(np.argmin(gap))
-            if gap[k] <= (side[a] + side[b]) / 4:
-                out[(dr, dc)] = (int(b), k)
-        return out
-
-    return found
+    grid = np.array([unit + (dc, dr) for dr, dc in ALONG])  # (4 directions, 4 corners, 2)
+    mapped = np.einsum("hij,dkj->hdki", homs, np.concatenate([grid, np.ones((4, 4, 1))], axis=2))
+    guess = (mapped[..., :2] / mapped[..., 2:]).reshape(n, 4, len(ALONG), 4, 2)  # block, turn, direction, corner
+    distance, b = cKDTree(centre).query(guess.mean(axis=3)) if n else (np.zeros((0, 4, 4)), np.zeros((0, 4, 4), int))
+    a = np.arange(n)[:, None, None]
+    near = (b != a) & (distance <= (side[a] + side[b]) / 6)
+    # The other block's corners against the guess, in each of its four turns: the best turn and its largest gap.
+    other = pts[b][..., roll, :]  # (n, turn, direction, its turn, corner, 2)
+    gap = np.linalg.norm(other - guess[:, :, :, None], axis=-1).max(axis=-1)
+    turn_b = gap.argmin(axis=-1)
+    near &= np.take_along_axis(gap, turn_b[..., None], axis=-1)[..., 0] <= (side[a] + side[b]) / 4
+    found = {}
+    for i, t, d in zip(*np.nonzero(near)):
+        found.setdefault((int(i), int(t)), {})[ALONG[d]] = (int(b[i, t, d]), int(turn_b[i, t, d]))
+    return lambda block, turn: found.get((block, turn), {})
 
 
 def name_corners(pattern: Pattern, quads: np.ndarray, tags, turns, n_corners: int) -> np.ndarray:
