@@ -18,6 +18,9 @@ from handcap.core.geometry import segments_cross_triangles
 
 #: Marker-triangle pairs compared at once in the image (memory bound of the candidate search).
 PAIRS_AT_ONCE = 2_000_000
+#: Widening of the triangles' boxes in the image (share of the largest normalised coordinate) before their
+#: single-precision test: many times its rounding (6e-8), so no triangle a point lies in is left out.
+BOX_SLACK = 1e-5
 
 
 class _Surface:
@@ -80,19 +83,26 @@ def _occluded(surface: _Surface, camera, points, end_gap: float = 1e-4) -> np.nd
     px = cam[:, :2] / np.where(ahead, depth, 1.0)[:, None]  # normalised image coordinates
     x, y = np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1])
     xs, ys = (x[i[keep]], x[j[keep]], x[k[keep]]), (y[i[keep]], y[j[keep]], y[k[keep]])
+    # The boxes in single precision, widened by far more than its rounding: the box test only picks the
+    # triangles the exact test (double precision) tries, and half the bytes make it about twice as fast.
     x_low, x_high = np.minimum(np.minimum(*xs[:2]), xs[2]), np.maximum(np.maximum(*xs[:2]), xs[2])
     y_low, y_high = np.minimum(np.minimum(*ys[:2]), ys[2]), np.maximum(np.maximum(*ys[:2]), ys[2])
+    widen = BOX_SLACK * (1.0 + max(np.abs(x_low).max(), np.abs(x_high).max(), np.abs(y_low).max(),
+                                   np.abs(y_high).max()))
+    x_low, y_low = (x_low - widen).astype(np.float32), (y_low - widen).astype(np.float32)
+    x_high, y_high = (x_high + widen).astype(np.float32), (y_high + widen).astype(np.float32)
     pt_cam = points @ rot.T + trans
-    pt_x, pt_y = (pt_cam[:, 0] / pt_cam[:, 2])[:, None], (pt_cam[:, 1] / pt_cam[:, 2])[:, None]
+    pt_x = (pt_cam[:, 0] / pt_cam[:, 2]).astype(np.float32)[:, None]
+    pt_y = (pt_cam[:, 1] / pt_cam[:, 2]).astype(np.float32)[:, None]
     which, cand = [], []
     step = max(1, PAIRS_AT_ONCE // len(keep))
     for start in range(0, len(points), step):
         s = slice(start, start + step)
         # A point can only be behind a triangle it projects into: inside its bounding box in the image.
         inside = (pt_x[s] >= x_low) & (pt_x[s] <= x_high) & (pt_y[s] >= y_low) & (pt_y[s] <= y_high)
-        w, c = np.nonzero(inside)
-        which.append(w + start)
-        cand.append(c)
+        flat = np.flatnonzero(inside)
+        which.append(flat // len(keep) + start)
+        cand.append(flat % len(keep))
     which, cand = np.concatenate(which), keep[np.concatenate(cand)]
     if len(which) == 0:
         return hidden
