@@ -57,11 +57,15 @@ from handcap.synth.config import DEFAULT_OBJECT, SynthConfig, config_from_scene,
 from handcap.synth.faults import burst_dropouts, ghost_markers, swap_labels
 from handcap.synth.motions import WORK_CENTRE, make_motion
 from handcap.synth.objects import make_object
-from handcap.synth.visibility import camera_visibility
+from handcap.synth.visibility import take_visibility
 
 # The settings and their scene.toml live in handcap.synth.config; named here too, where they were first.
 __all__ = ["DEFAULT_OBJECT", "SynthCapture", "SynthConfig", "config_from_scene", "misplaced", "scene_table",
            "synthesize", "write_capture"]
+
+#: Frames whose visibility is tested together (memory: about 0.2 MB per frame of the hand's mesh).
+VISIBILITY_FRAMES = 64
+
 
 @dataclass(frozen=True, eq=False)
 class SynthCapture:
@@ -264,19 +268,23 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
         faces = np.concatenate([hand.faces, turning.surface(0)[1] + vertices.shape[1]])
     # tqdm: disable=None hides the bar when not on a terminal.
     hidden = None if progress is None else not progress
-    for t in tqdm(range(n_frames), desc="visibility", unit="frame", disable=hidden, leave=False):
-        surface = vertices[t]
-        if obj is not None:
-            turned = Rotation.from_rotvec(motion.object_rotation[t]).as_matrix()
-            surface = np.concatenate([surface, obj.vertices @ turned.T + motion.object_translation[t]])
-        elif turning is not None:
-            surface = np.concatenate([surface, turning.surface(t)[0]])
-        if max_angle is None:
-            seen_by[t] = camera_visibility(truth_markers[t], rig, surface, faces)
-        else:  # printed patches are on the hand; object markers stay spheres
-            seen_by[t, :, :n_hand] = camera_visibility(truth_markers[t, :n_hand], rig, surface, faces,
-                                                       normals=normals[t, :n_hand], max_view_angle=max_angle)
-            seen_by[t, :, n_hand:] = camera_visibility(truth_markers[t, n_hand:], rig, surface, faces)
+    with tqdm(total=n_frames, desc="visibility", unit="frame", disable=hidden, leave=False) as bar:
+        for start in range(0, n_frames, VISIBILITY_FRAMES):
+            t = np.arange(start, min(start + VISIBILITY_FRAMES, n_frames))
+            surface = vertices[t]
+            if obj is not None:
+                turned = Rotation.from_rotvec(motion.object_rotation[t]).as_matrix()
+                moved = obj.vertices @ turned.transpose(0, 2, 1) + motion.object_translation[t, None]
+                surface = np.concatenate([surface, moved], axis=1)
+            elif turning is not None:
+                surface = np.concatenate([surface, np.stack([turning.surface(f)[0] for f in t])], axis=1)
+            if max_angle is None:
+                seen_by[t] = take_visibility(truth_markers[t], rig, surface, faces)
+            else:  # printed patches are on the hand; object markers stay spheres
+                seen_by[t, :, :n_hand] = take_visibility(truth_markers[t, :n_hand], rig, surface, faces,
+                                                         normals=normals[t, :n_hand], max_view_angle=max_angle)
+                seen_by[t, :, n_hand:] = take_visibility(truth_markers[t, n_hand:], rig, surface, faces)
+            bar.update(len(t))
     reconstructed = seen_by.sum(axis=1) >= config.min_views
 
     # 4. What the capture system reports: jitter, dropouts, swaps, ghosts.

@@ -7,6 +7,8 @@ line between the camera centre and the marker: no triangle of the hand (its
 own skin included) or of the object. The ray test is exact (Moller-Trumbore,
 in camera coordinates); the triangles tried for each marker are found in the
 image first: those facing the camera whose bounding box holds its projection.
+Frames are tested together (arrays over frames, markers and triangles), one
+camera at a time.
 """
 
 from __future__ import annotations
@@ -24,16 +26,17 @@ BOX_SLACK = 1e-5
 
 
 class _Surface:
-    """The occluding triangles of one frame, shared by every camera: vertices (V, 3), the corners of each
-    face as three index columns (F,) and the face normals (F, 3) with their offsets ``n . a`` (F,), metres."""
+    """The occluding triangles of T frames, shared by every camera: vertices (T, V, 3), the corners of each
+    face as three index columns (F,) and the face normals (T, F, 3) with their offsets ``n . a`` (T, F),
+    metres."""
 
     def __init__(self, vertices, faces):
         self.vertices = np.asarray(vertices, dtype=np.float64)
-        self.faces = np.asarray(faces)
+        self.faces = np.asarray(faces).reshape(-1, 3)
         self.corner = tuple(np.ascontiguousarray(self.faces[:, k]) for k in range(3))
-        a, b, c = (self.vertices[i] for i in self.corner)
+        a, b, c = (self.vertices[:, i] for i in self.corner)
         self.normal = np.cross(b - a, c - a)
-        self.offset = np.einsum("fi,fi->f", self.normal, a)
+        self.offset = np.einsum("tfi,tfi->tf", self.normal, a)
 
 
 def occluded(camera, points, vertices, faces, *, end_gap: float = 1e-4) -> np.ndarray:
@@ -63,53 +66,124 @@ def occluded(camera, points, vertices, faces, *, end_gap: float = 1e-4) -> np.nd
     holds the point's projection (a point can only be behind a triangle it
     projects into).
     """
-    return _occluded(_Surface(vertices, faces), camera, points, end_gap)
+    points = np.asarray(points, dtype=np.float64).reshape(1, -1, 3)
+    return _hidden(_Surface(np.asarray(vertices)[None], faces), camera, points, end_gap)[0]
 
 
-def _occluded(surface: _Surface, camera, points, end_gap: float = 1e-4) -> np.ndarray:
-    points = np.asarray(points, dtype=np.float64)
-    hidden = np.zeros(len(points), bool)
-    if len(points) == 0 or len(surface.faces) == 0:
-        return hidden
-    rot, trans = camera.rotation_matrix, camera.translation
-    cam = surface.vertices @ rot.T + trans  # (V, 3) camera coordinates
-    depth = cam[:, 2]
+def _boxes(surface: _Surface, camera, cam: np.ndarray) -> tuple:
+    """The image boxes (T, F) of the triangles facing ``camera`` (normalised coordinates, single precision,
+    widened by ``BOX_SLACK``), empty (low +inf, high -inf) for the others."""
+    depth = cam[..., 2]
     ahead = depth > 1e-6
     i, j, k = surface.corner
     # In front of the camera, and facing it: the normal points against the line of sight (n . (a - centre) < 0).
-    keep = np.flatnonzero(ahead[i] & ahead[j] & ahead[k] & (surface.offset < surface.normal @ camera.center))
-    if len(keep) == 0:
+    facing = ahead[:, i] & ahead[:, j] & ahead[:, k] & (surface.offset < surface.normal @ camera.center)
+    # Normalised image coordinates in single precision, and the boxes from them, widened by far more than its
+    # rounding (rounding keeps the order, so a box's corners are its true corners rounded): the box test only
+    # picks the triangles the exact test (double precision) tries, and half the bytes make it faster.
+    px = (cam[..., :2] / np.where(ahead, depth, 1.0)[..., None]).astype(np.float32)
+    boxes = []
+    for axis in (0, 1):
+        c = np.ascontiguousarray(px[..., axis])
+        corners = c[:, i], c[:, j], c[:, k]
+        boxes.append([np.minimum(np.minimum(*corners[:2]), corners[2]),
+                      np.maximum(np.maximum(*corners[:2]), corners[2])])
+    largest = np.where(facing, np.maximum(np.maximum(np.abs(boxes[0][0]), np.abs(boxes[0][1])),
+                                          np.maximum(np.abs(boxes[1][0]), np.abs(boxes[1][1]))), 0.0)
+    widen = (BOX_SLACK * (1.0 + largest.max(axis=1, keepdims=True))).astype(np.float32)
+    out = (np.float32(np.inf), np.float32(-np.inf))
+    return tuple(np.where(facing, value + sign * widen, out[sign > 0])
+                 for low, high in boxes for value, sign in ((low, -1.0), (high, 1.0)))
+
+
+def _hidden(surface: _Surface, camera, points: np.ndarray, end_gap: float = 1e-4) -> np.ndarray:
+    """Whether each point (T, M, 3) of each frame is hidden from ``camera`` by its frame's surface (T, M);
+    NaN points are not tested (not hidden)."""
+    n_frames, n_points = points.shape[:2]
+    hidden = np.zeros((n_frames, n_points), bool)
+    tested = np.isfinite(points).all(axis=-1)
+    n_faces = len(surface.faces)
+    if not tested.any() or n_faces == 0:
         return hidden
-    px = cam[:, :2] / np.where(ahead, depth, 1.0)[:, None]  # normalised image coordinates
-    x, y = np.ascontiguousarray(px[:, 0]), np.ascontiguousarray(px[:, 1])
-    xs, ys = (x[i[keep]], x[j[keep]], x[k[keep]]), (y[i[keep]], y[j[keep]], y[k[keep]])
-    # The boxes in single precision, widened by far more than its rounding: the box test only picks the
-    # triangles the exact test (double precision) tries, and half the bytes make it about twice as fast.
-    x_low, x_high = np.minimum(np.minimum(*xs[:2]), xs[2]), np.maximum(np.maximum(*xs[:2]), xs[2])
-    y_low, y_high = np.minimum(np.minimum(*ys[:2]), ys[2]), np.maximum(np.maximum(*ys[:2]), ys[2])
-    widen = BOX_SLACK * (1.0 + max(np.abs(x_low).max(), np.abs(x_high).max(), np.abs(y_low).max(),
-                                   np.abs(y_high).max()))
-    x_low, y_low = (x_low - widen).astype(np.float32), (y_low - widen).astype(np.float32)
-    x_high, y_high = (x_high + widen).astype(np.float32), (y_high + widen).astype(np.float32)
-    pt_cam = points @ rot.T + trans
-    pt_x = (pt_cam[:, 0] / pt_cam[:, 2]).astype(np.float32)[:, None]
-    pt_y = (pt_cam[:, 1] / pt_cam[:, 2]).astype(np.float32)[:, None]
-    which, cand = [], []
-    step = max(1, PAIRS_AT_ONCE // len(keep))
-    for start in range(0, len(points), step):
+    rot, trans = camera.rotation_matrix, camera.translation
+    cam = surface.vertices @ rot.T + trans  # (T, V, 3) camera coordinates
+    x_low, x_high, y_low, y_high = _boxes(surface, camera, cam)
+    pt_cam = np.where(tested[..., None], points, 0.0) @ rot.T + trans
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pt_x = np.where(tested, pt_cam[..., 0] / pt_cam[..., 2], np.nan).astype(np.float32)
+        pt_y = np.where(tested, pt_cam[..., 1] / pt_cam[..., 2], np.nan).astype(np.float32)
+    frames, which, cand = [], [], []
+    step = max(1, PAIRS_AT_ONCE // (n_points * n_faces))
+    for start in range(0, n_frames, step):
         s = slice(start, start + step)
-        # A point can only be behind a triangle it projects into: inside its bounding box in the image.
-        inside = (pt_x[s] >= x_low) & (pt_x[s] <= x_high) & (pt_y[s] >= y_low) & (pt_y[s] <= y_high)
-        flat = np.flatnonzero(inside)
-        which.append(flat // len(keep) + start)
-        cand.append(flat % len(keep))
-    which, cand = np.concatenate(which), keep[np.concatenate(cand)]
+        # A point can only be behind a triangle it projects into: inside its bounding box in the image. Across
+        # first (every pair), then up and down (the few pairs left).
+        x = pt_x[s, :, None]
+        flat = np.flatnonzero((x >= x_low[s, None, :]) & (x <= x_high[s, None, :]))
+        t, rest = np.divmod(flat, n_points * n_faces)
+        m, f = np.divmod(rest, n_faces)
+        t += start
+        y = pt_y[t, m]
+        inside = (y >= y_low[t, f]) & (y <= y_high[t, f])
+        frames.append(t[inside])
+        which.append(m[inside])
+        cand.append(f[inside])
+    frames, which, cand = np.concatenate(frames), np.concatenate(which), np.concatenate(cand)
     if len(which) == 0:
         return hidden
-    ends = pt_cam[which] * (1.0 - end_gap / np.linalg.norm(pt_cam[which], axis=1, keepdims=True))
-    hit = segments_cross_triangles(np.zeros_like(ends), ends, cam[surface.faces[cand]])
-    hidden[np.unique(which[hit])] = True
+    seg = pt_cam[frames, which]
+    ends = seg * (1.0 - end_gap / np.linalg.norm(seg, axis=1, keepdims=True))
+    hit = segments_cross_triangles(np.zeros_like(ends), ends, cam[frames[:, None], surface.faces[cand]])
+    hidden[frames[hit], which[hit]] = True
     return hidden
+
+
+def take_visibility(points, rig, vertices, faces, *, normals=None, max_view_angle: float | None = None,
+                    end_gap: float = 1e-4) -> np.ndarray:
+    """Visibility of markers in every camera of a rig over T frames, tested together.
+
+    Parameters
+    ----------
+    points : ndarray (T, M, 3)
+        Marker centres in metres (NaN rows are never visible).
+    rig : CameraRig
+    vertices : ndarray (T, V, 3)
+        Each frame's closed occluding surfaces (hand and objects), metres.
+    faces : ndarray (F, 3)
+        The surfaces' triangles (vertex indices, the same in every frame).
+    normals : ndarray (T, M, 3), optional
+        Outward surface normals at the markers.
+    max_view_angle : float, optional
+        Radians; markers seen more obliquely than this are not detected
+        (needs ``normals``).
+    end_gap : float
+        The last stretch of each line of sight (metres) is not tested, so a
+        marker is not hidden by the skin it sits on.
+
+    Returns
+    -------
+    visible : ndarray (T, C, M) bool
+
+    Notes
+    -----
+    Memory grows with T x F and T x M x F / ``PAIRS_AT_ONCE``: give a long
+    take in chunks of frames (``handcap.synth.scene`` gives 64).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    valid = ~np.isnan(points).any(axis=-1)
+    out = np.zeros((points.shape[0], len(rig), points.shape[1]), bool)
+    surface = _Surface(vertices, faces)
+    safe = np.where(valid[..., None], points, 0.0)
+    for c, camera in enumerate(rig):
+        pixels, depth = camera.project(safe)
+        ok = valid & (depth > 0) & camera.in_image(pixels)
+        if normals is not None and max_view_angle is not None:
+            to_camera = camera.center - points
+            to_camera /= np.linalg.norm(to_camera, axis=-1, keepdims=True)
+            ok &= np.einsum("tmi,tmi->tm", normals, to_camera) > np.cos(max_view_angle)
+        ok &= ~_hidden(surface, camera, np.where(ok[..., None], points, np.nan), end_gap)
+        out[:, c] = ok
+    return out
 
 
 def camera_visibility(points, rig, vertices, faces, *, normals=None,
@@ -133,18 +207,6 @@ def camera_visibility(points, rig, vertices, faces, *, normals=None,
     -------
     visible : ndarray (C, M) bool
     """
-    points = np.asarray(points, dtype=np.float64)
-    valid = ~np.isnan(points).any(axis=1)
-    out = np.zeros((len(rig), len(points)), bool)
-    surface = _Surface(vertices, faces)
-    for c, camera in enumerate(rig):
-        pixels, depth = camera.project(np.where(valid[:, None], points, 0.0))
-        ok = valid & (depth > 0) & camera.in_image(pixels)
-        if normals is not None and max_view_angle is not None:
-            to_camera = camera.center - points
-            to_camera /= np.linalg.norm(to_camera, axis=1, keepdims=True)
-            ok &= np.einsum("mi,mi->m", normals, to_camera) > np.cos(max_view_angle)
-        idx = np.flatnonzero(ok)
-        ok[idx[_occluded(surface, camera, points[idx])]] = False
-        out[c] = ok
-    return out
+    return take_visibility(np.asarray(points, dtype=np.float64)[None], rig, np.asarray(vertices)[None], faces,
+                           normals=None if normals is None else np.asarray(normals)[None],
+                           max_view_angle=max_view_angle)[0]
