@@ -247,7 +247,7 @@ class ManoHand(HandModel):
         return hand
 
     # -- HandModel ---------------------------------------------------------------------
-    def rest(self, betas):
+    def _shape_rest(self, betas):
         """Flat hand for shape ``betas`` (MANO's shape blend shapes and joint regressor).
 
         Parameters

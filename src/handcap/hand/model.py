@@ -26,6 +26,10 @@ from handcap.hand.kinematics import (
 )
 
 
+#: Shapes whose rest pose a hand model keeps (see :meth:`HandModel.rest`).
+REST_SHAPES_KEPT = 8
+
+
 @dataclass(frozen=True)
 class HandOutput:
     """Result of :meth:`HandModel.forward`.
@@ -92,8 +96,19 @@ class HandModel(ABC):
 
     # -- to implement --------------------------------------------------------
     @abstractmethod
+    def _shape_rest(self, betas):
+        """Rest (flat) pose for shape ``betas``: what :meth:`rest` returns, made anew on every call."""
+
+    def pose_corrective(self, rotations):
+        """Vertex offsets (..., V, 3) added before skinning (MANO's pose blend shapes), or None."""
+        return None
+
+    # -- shared ------------------------------------------------------------
     def rest(self, betas):
         """Rest (flat) pose for shape ``betas``.
+
+        The last few numpy shapes (10,) are remembered, with their results as read-only arrays: a fit that
+        calls :meth:`forward` many times with one shape makes its rest mesh once.
 
         Parameters
         ----------
@@ -104,13 +119,23 @@ class HandModel(ABC):
         vertices : array (..., V, 3)
         joints : array (..., 16, 3)
         tips : array (..., 5, 3)
+            Metres.
         """
+        if is_torch_array(betas) or np.ndim(betas) != 1:
+            return self._shape_rest(betas)
+        betas = np.asarray(betas)
+        key = (betas.dtype.str, betas.tobytes())
+        cache = self.__dict__.setdefault("_rest_cache", {})
+        found = cache.get(key)
+        if found is None:
+            found = tuple(np.array(a) for a in self._shape_rest(betas))
+            for a in found:
+                a.setflags(write=False)
+            if len(cache) >= REST_SHAPES_KEPT:
+                cache.clear()
+            cache[key] = found
+        return found
 
-    def pose_corrective(self, rotations):
-        """Vertex offsets (..., V, 3) added before skinning (MANO's pose blend shapes), or None."""
-        return None
-
-    # -- shared ------------------------------------------------------------
     def constant(self, value, like):
         """A model array converted to the namespace, dtype and device of ``like``.
 

@@ -136,7 +136,7 @@ class OpenHand(HandModel):
         girth = xp.exp(xp.matmul(betas, mat(SHAPE_GIRTH).T))
         return palm, length, girth
 
-    def rest(self, betas):
+    def _shape_rest(self, betas):
         """Rest (flat) pose of the OpenHand for shape ``betas``.
 
         Parameters

@@ -26,6 +26,10 @@ STEPS = 8
 #: Joints of each long finger from its MCP to its tip (16 MANO joints, then the tips of thumb, index, middle,
 #: ring and pinky), in order across the hand.
 _CHAINS = ((1, 2, 3, 17), (4, 5, 6, 18), (10, 11, 12, 19), (7, 8, 9, 20))
+#: The bones compared (end joints of one, end joints of the other; 24 pairs): every bone of a finger against
+#: every bone of its neighbour, but for the two proximal phalanges, which the palm holds apart.
+_BONE_PAIRS = np.array([(a[i], a[i + 1], b[k], b[k + 1]) for a, b in zip(_CHAINS[:-1], _CHAINS[1:])
+                        for i in range(3) for k in range(3) if i or k]).T
 
 
 def segment_distance(p0, p1, q0, q1) -> np.ndarray:
@@ -42,8 +46,11 @@ def segment_distance(p0, p1, q0, q1) -> np.ndarray:
         Metres.
     """
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e = np.einsum("...i,...i", d1, d1), np.einsum("...i,...i", d2, d2)
-    b, c, f = np.einsum("...i,...i", d1, d2), np.einsum("...i,...i", d1, r), np.einsum("...i,...i", d2, r)
+
+    def dot(x, y):  # over the last axis of length 3, faster than a reduction over it
+        return x[..., 0] * y[..., 0] + x[..., 1] * y[..., 1] + x[..., 2] * y[..., 2]
+
+    a, e, b, c, f = dot(d1, d1), dot(d2, d2), dot(d1, d2), dot(d1, r), dot(d2, r)
     denom = a * e - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-18, np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
@@ -72,14 +79,10 @@ def finger_clearance(joints) -> np.ndarray:
         Metres.
     """
     joints = np.asarray(joints, dtype=np.float64)
-    out = np.full(joints.shape[0], np.inf)
-    for a, b in zip(_CHAINS[:-1], _CHAINS[1:]):
-        for i in range(3):
-            for k in range(3):
-                if i == 0 and k == 0:
-                    continue
-                d = segment_distance(joints[:, a[i]], joints[:, a[i + 1]], joints[:, b[k]], joints[:, b[k + 1]])
-                out = np.minimum(out, d)
+    out = np.empty(joints.shape[0])
+    for start in range(0, len(out), 128):  # every pair at once, a few frames at a time (in the cache)
+        by_joint = joints[start:start + 128].transpose(1, 0, 2)  # (21, t, 3)
+        out[start:start + 128] = segment_distance(*(by_joint[k] for k in _BONE_PAIRS)).min(axis=0)
     return out
 
 
