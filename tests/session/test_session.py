@@ -16,7 +16,7 @@ from handcap.steps import metrics as metrics_step
 @pytest.fixture(scope="module")
 def made(tmp_path_factory, gl_ok):
     folder = tmp_path_factory.mktemp("sess") / "lab"
-    new_session(folder, takes=2, frames=260, progress=False)
+    new_session(folder, takes=2, frames=260, image_frames=3, progress=False)
     return folder
 
 

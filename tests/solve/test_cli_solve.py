@@ -35,6 +35,24 @@ def test_calibrate_solve_metrics(session, capsys):
     assert values["joint_error_mm"][0] < 15 and values["mre_mm"][0] < 5
 
 
+def test_metrics_of_a_take_too_short_for_smoothness(session, tmp_path):
+    # 3 frames: joint error against the truth, but no MSNR or jerk (a third difference needs 4 frames).
+    from dataclasses import replace
+
+    from handcap.io import write_hand_motion
+    from handcap.report.metrics import motion_metrics
+
+    truth = read_hand_motion(session / "take" / "truth.npz")
+    short = truth.frames(0, 3)
+    write_hand_motion(short, tmp_path / "short.npz")
+    offset = np.array([0.003, 0.0, 0.004])
+    moved = replace(short, transl=short.transl + offset, joints=short.joints + offset)
+    write_hand_motion(moved, tmp_path / "moved.npz")
+    figures = motion_metrics(tmp_path / "moved.npz", truth=tmp_path / "short.npz")
+    assert figures["frames"] == 3 and abs(figures["joint_error_mm"][0] - 5.0) < 1e-6
+    assert "msnr_db" not in figures and "jerk_m_s3" not in figures
+
+
 def test_track_object_from_the_synthetic_object_markers(session, capsys):
     out = session / "object.npz"
     assert main(["track-object", str(session / "take" / "markers.npz"), "--markers", "sphere_*",

@@ -63,9 +63,10 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         out["joint_error_mm"] = [1000 * s.mean, 1000 * s.std]
         per_joint = np.linalg.norm(motion.joints - true.joints, axis=-1).mean(axis=0)
         out["joint_error_per_joint_mm"] = [round(1000 * float(v), 3) for v in per_joint]
-    out["msnr_db"] = q.msnr(motion.joints)
-    s = q.jerk(motion.joints, motion.rate)
-    out["jerk_m_s3"] = [s.mean, s.std]
+    if motion.n_frames >= 4:  # else too short a take for a third difference: smoothness left out, as diversity
+        out["msnr_db"] = q.msnr(motion.joints)
+        s = q.jerk(motion.joints, motion.rate)
+        out["jerk_m_s3"] = [s.mean, s.std]
     object_motion = read_object_motion(obj) if obj is not None else None
     if object_motion is not None and object_motion.n_frames != motion.n_frames:
         raise HandcapError(f"{obj}: the object moves for {object_motion.n_frames} frames, the hand motion "

@@ -104,12 +104,12 @@ def _keypoint_take(folder: Path, frames: int) -> list[str]:
     return [str(folder / "keypoints.c3d"), str(folder / "truth.npz")]
 
 
-def _image_takes(folder: Path, progress: bool | None) -> tuple[list[str], str]:
-    """Two filmed takes of printed patches, 6 cameras at 4 Hz: an open hand turned (the calibration) and a grasp;
-    the files and their [[takes]] tables."""
+def _image_takes(folder: Path, frames: int, progress: bool | None) -> tuple[list[str], str]:
+    """Two filmed takes of printed patches, 6 cameras at 4 Hz: an open hand turned (4 frames, the calibration)
+    and another take of ``frames``; the files and their [[takes]] tables."""
     configs = {"calib-images": SynthConfig(layout="dense-patches", motion="calibration", frames=4, rate=4.0, seed=8,
                                            subject_seed=21, cameras=6, min_views=2, object="none"),
-               "images1": SynthConfig(layout="dense-patches", motion="calibration", frames=6, rate=4.0, seed=9,
+               "images1": SynthConfig(layout="dense-patches", motion="calibration", frames=frames, rate=4.0, seed=9,
                                       subject_seed=21, cameras=6, min_views=2, object="none")}
     before = set(folder.rglob("*"))
     tables = ""
@@ -120,7 +120,7 @@ def _image_takes(folder: Path, progress: bool | None) -> tuple[list[str], str]:
     return sorted(str(p) for p in set(folder.rglob("*")) - before if p.is_file()), tables
 
 
-def new_session(folder, *, takes: int = 2, frames: int = 300, images: bool = True,
+def new_session(folder, *, takes: int = 2, frames: int = 300, images: bool = True, image_frames: int = 6,
                 progress: bool | None = None) -> list[str]:
     """Write a session into ``folder``: a calibration take, ``takes`` grasp takes (synthetic markers, one
     subject), a take of 3D hand keypoints, two filmed takes of printed patches (``images``), and a commented
@@ -134,6 +134,8 @@ def new_session(folder, *, takes: int = 2, frames: int = 300, images: bool = Tru
         Number of marker takes and frames of each (100 Hz).
     images : bool
         Film the image takes (needs the extra 'images' and headless OpenGL).
+    image_frames : int
+        Frames of the filmed take that is not the calibration (4 Hz, 6 cameras).
     progress : bool, optional
         Progress bars while filming (default: on a terminal).
 
@@ -155,7 +157,7 @@ def new_session(folder, *, takes: int = 2, frames: int = 300, images: bool = Tru
     tables = "".join(TAKE.format(name=n) for n in configs if n != "calibration") + KEYPOINTS.format(name="hands1")
     stages = ["calibrate", "solve", "fit", "metrics", "report"]
     if images:
-        files, image_tables = _image_takes(folder, progress)
+        files, image_tables = _image_takes(folder, image_frames, progress)
         written += files
         tables += image_tables
         stages = ["detect", "triangulate", "clean", *stages]
