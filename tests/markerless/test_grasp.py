@@ -179,7 +179,7 @@ def test_markerless_verb_with_an_object(grasp, tmp_path, capsys):
 def test_markerless_demo_meets_its_figures(tmp_path, capsys):
     from handcap.steps.markerless_demo import run_markerless_demo
 
-    summary = run_markerless_demo(tmp_path / "demo", frames=60)
+    summary = run_markerless_demo(tmp_path / "demo", frames=40)
     assert summary["keypoint_error_pa_mm"] < 5.0 and summary["joint_angle_error_deg"] < 8.0
     _, after = summary["contact_distance_mm_before_after"]
     assert after < 3.0
