@@ -8,7 +8,7 @@ from handcap import HandcapError, MarkerSequence
 from handcap.hand import OpenHand
 from handcap.solve import solve_hand
 from handcap.hand.anatomy import PHI_NAMES, relaxed_pose
-from handcap.solve.lm import held_angles, unconstrained_angles
+from handcap.solve.lm import Priors, held_angles, unconstrained_angles
 from handcap.solve.markers import MarkerModel
 
 
@@ -141,3 +141,29 @@ def test_bad_inputs(glove_session):
     part = take.markers.select([n for n in att.marker_names if n != "little_tip"])
     motion = solve_hand(part[:50], att)
     assert np.isnan(motion.marker_residuals[:, att.marker_names.index("little_tip")]).all()
+
+
+def test_frames_solved_compiled_match_the_numpy_solver(glove_session, monkeypatch):
+    # The compiled one-frame iterations (numba) against the numpy batch code, on the same take: the same fit to
+    # rounding (the batch code builds its normal equations in single precision), and a blind frame kept as is.
+    pytest.importorskip("numba", reason="the compiled frames need numba (extra 'stream')")
+    import handcap.solve.kernel as kernel
+
+    _, take = glove_session
+    positions = take.markers.positions.copy()
+    positions[40] = np.nan  # a frame with no marker at all (a key frame: 0.1 s apart at the take's rate)
+    markers = MarkerSequence(positions, take.markers.names, take.markers.rate)
+    assert kernel.FrameKernel(MarkerModel(OpenHand(take.attachment.side), take.attachment), Priors()).available
+    compiled = solve_hand(markers, take.attachment)
+    monkeypatch.setattr(kernel, "NUMBA", False)
+    numpy_code = solve_hand(markers, take.attachment)
+    assert np.abs(compiled.phi - numpy_code.phi).max() < np.radians(0.01)
+    assert np.abs(compiled.transl - numpy_code.transl).max() < 1e-6
+    assert np.nanmean(_joint_error(compiled, take)) < 0.006
+
+
+def test_models_that_are_not_plain_marker_models_are_not_compiled():
+    from handcap.markerless.joint_model import KeypointModel
+    from handcap.solve.kernel import FrameKernel
+
+    assert not FrameKernel(KeypointModel(OpenHand("right")), Priors()).available

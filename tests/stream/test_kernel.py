@@ -15,7 +15,7 @@ from handcap.stream.solver import FrameSolver
 from handcap.synth.scene import SynthConfig, synthesize
 
 pytest.importorskip("numba", reason="the compiled live solver needs numba (extra 'stream')")
-from handcap.stream.kernel import FrameKernel  # noqa: E402
+from handcap.solve.kernel import FrameKernel  # noqa: E402
 
 
 @pytest.mark.parametrize("side", ["right", "left"])

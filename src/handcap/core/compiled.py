@@ -1,6 +1,6 @@
 """Optional compiled loops: numba's ``njit`` where numba is installed (extra 'stream'), else plain Python.
 
-The live stream's per-frame code (:mod:`handcap.stream.kernel`, :mod:`handcap.labeling.lap`) is written as
+The live stream's per-frame code (:mod:`handcap.solve.kernel`, :mod:`handcap.labeling.lap`) is written as
 loops over one frame; compiled they run in microseconds, uncompiled they would be far too slow, so their
 callers check :data:`AVAILABLE` and use their numpy code otherwise.
 """

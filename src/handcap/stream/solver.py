@@ -4,7 +4,7 @@ The batch solver (:func:`handcap.solve.solve_hand`) sees the whole take; a live 
 must answer before the next. :class:`FrameSolver` keeps the last pose, starts the next frame's fit from it and
 runs a Gauss-Newton iteration (:data:`ITERATIONS`); it starts afresh (rigid start, many iterations) on the
 first frame, and whenever a frame's median marker residual says the hand was lost. The iterations,
-warm-started or fresh, run compiled (:mod:`handcap.stream.kernel`, numba) where they can: the same steps,
+warm-started or fresh, run compiled (:mod:`handcap.solve.kernel`, numba) where they can: the same steps,
 about 20 times faster on one frame than the batch code, which is the fallback.
 """
 
@@ -17,7 +17,7 @@ from handcap.hand.kinematics import attached_points
 from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
 from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
-from handcap.stream.kernel import FrameKernel
+from handcap.solve.kernel import FrameKernel
 
 #: Gauss-Newton iterations per streamed frame (from the frame before). One suffices: the frame before is close,
 #: and more fit the markers' noise. Measured on 20 s of synthetic random motion, 22 markers (joints vs truth,

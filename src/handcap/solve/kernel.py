@@ -1,9 +1,11 @@
-"""The live solver's Levenberg-Marquardt iterations for one frame, compiled with numba (extra 'stream').
+"""Levenberg-Marquardt iterations for one frame, compiled with numba (extra 'stream').
 
 :func:`handcap.solve.lm.levenberg_marquardt` is written for whole takes: each of its numpy operations covers
 every frame at once, and on one frame those operations' own overhead is most of the time (about 1.3 ms of a
-1.4 ms step on the 2-core VM). A live stream solves one frame at a time, so this module does the same
-iterations for a single frame in compiled loops: the same forward kinematics (``C E(phi) C^T`` joint
+1.4 ms step on the 2-core VM). The live stream solves one frame at a time, and so does
+:func:`handcap.solve.motion.solve_lm` (its key frames one after the other, then each frame between them from
+its neighbours), so this module does the same iterations for a single frame in compiled loops: the same forward
+kinematics (``C E(phi) C^T`` joint
 rotations down the tree), the same exact marker positions (skin spot from the segments' affine maps, plus the
 offset along the triangle's normal), the same Cauchy-weighted Gauss-Newton matrix from the same Jacobian (the
 translation, ``e x r`` for the wrist's rotation, ``axis x lever`` for each angle), the same anatomical priors
@@ -11,7 +13,9 @@ and the same damping schedule. It works in double precision throughout (the batc
 equations in single precision), so the two agree to rounding; a test compares them step by step.
 
 Only models without pose correctives (the OpenHand) are compiled; :class:`FrameKernel` says so with
-``available`` and the stream falls back to the batch code otherwise, or where numba is not installed.
+``available`` and the callers use the batch code otherwise, or where numba is not installed. The first use on
+a machine compiles the loops (about 20 s); numba keeps them in its cache, and a process then loads them in
+about 0.6 s.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 
 from handcap.hand.anatomy import PARENTS, PHI_AXIS, PHI_JOINT, TIP_PARENTS
 from handcap.solve.lm import COUPLED, SYNERGY, unconstrained_angles
+from handcap.solve.markers import MarkerModel
 
 from handcap.core.compiled import AVAILABLE as NUMBA
 from handcap.core.compiled import njit as _njit
@@ -253,20 +258,25 @@ class FrameKernel:
     ----------
     model : MarkerModel
     priors : Priors
-    rest_tips : ndarray (5, 3)
-        The fingertips at rest in the model's shape, metres (``hand.rest(betas)[2]``).
+    rest_tips : ndarray (5, 3), optional
+        The fingertips at rest in the model's shape, metres (default ``model.hand.rest(model.betas)[2]``).
 
     Attributes
     ----------
     available : bool
-        numba is installed and the model has no pose correctives: :meth:`solve` may be called.
+        numba is installed, and the model is a :class:`~handcap.solve.markers.MarkerModel` with its own marker
+        positions and normal equations and no pose correctives: :meth:`solve` may be called.
     """
 
-    def __init__(self, model, priors, rest_tips):
+    def __init__(self, model, priors, rest_tips=None):
         self.model = model
-        self.available = NUMBA and not model.has_correctives
+        same = isinstance(model, MarkerModel) and all(getattr(type(model), name) is getattr(MarkerModel, name)
+                                                      for name in ("kinematics", "positions", "normal_equations"))
+        self.available = NUMBA and same and not model.has_correctives
         if not self.available:
             return
+        if rest_tips is None:
+            rest_tips = model.hand.rest(model.betas)[2]
         self.mc = (np.ascontiguousarray(model.frames, dtype=np.float64), np.ascontiguousarray(model.rest_joints),
                    PARENTS.astype(np.int64), PHI_JOINT.astype(np.int64), PHI_AXIS.astype(np.int64),
                    np.ascontiguousarray(model._marker_affine), np.ascontiguousarray(model.attachment.offset,
