@@ -14,8 +14,9 @@ equations in single precision), so the two agree to rounding; a test compares th
 
 Only models without pose correctives (the OpenHand) are compiled; :class:`FrameKernel` says so with
 ``available`` and the callers use the batch code otherwise, or where numba is not installed. The first use on
-a machine compiles the loops (about 20 s); numba keeps them in its cache, and a process then loads them in
-about 0.6 s.
+a machine compiles the loops (16 s on the 2-core VM); numba keeps them in its cache, and a process then loads
+them in about 0.6 s. The loops are written element by element, without numba's array expressions, slice
+assignments or ``@``: each of those took seconds to compile (34 s in all before).
 """
 
 from __future__ import annotations
@@ -40,6 +41,69 @@ def _mat3(a, b, out):
 
 
 @_njit
+def _mat3t(a, b, out):
+    """``out = a @ b.T`` for 3 x 3 matrices."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
+
+
+@_njit
+def _matvec(a, x, y, z):
+    """``a @ (x, y, z)`` for a 3 x 3 matrix: a new (3,) array."""
+    out = np.empty(3)
+    for i in range(3):
+        out[i] = a[i, 0] * x + a[i, 1] * y + a[i, 2] * z
+    return out
+
+
+@_njit
+def _matmul(a, b):
+    """``a @ b`` written as loops: numba's BLAS-backed ``@`` takes many seconds to compile, these loops none."""
+    out = np.zeros((a.shape[0], b.shape[1]))
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            aik = a[i, k]
+            if aik != 0.0:
+                for j in range(b.shape[1]):
+                    out[i, j] += aik * b[k, j]
+    return out
+
+
+@_njit
+def _solve_linear(hess, grad, lam):
+    """The step ``-(H + lam diag(max(H_pp, 1e-9)))^-1 g`` (N,), by Gaussian elimination with partial pivoting."""
+    n = grad.shape[0]
+    a, x = np.empty((n, n)), np.empty(n)
+    for r in range(n):
+        x[r] = -grad[r]
+        for k in range(n):
+            a[r, k] = hess[r, k]
+        a[r, r] += lam * max(hess[r, r], 1e-9)
+    for c in range(n):
+        pivot = c
+        for r in range(c + 1, n):
+            if abs(a[r, c]) > abs(a[pivot, c]):
+                pivot = r
+        if pivot != c:
+            for k in range(n):
+                a[c, k], a[pivot, k] = a[pivot, k], a[c, k]
+            x[c], x[pivot] = x[pivot], x[c]
+        for r in range(c + 1, n):
+            f = a[r, c] / a[c, c]
+            if f != 0.0:
+                for k in range(c, n):
+                    a[r, k] -= f * a[c, k]
+                x[r] -= f * x[c]
+    for c in range(n - 1, -1, -1):
+        t = x[c]
+        for k in range(c + 1, n):
+            t -= a[c, k] * x[k]
+        x[c] = t / a[c, c]
+    return x
+
+
+@_njit
 def _kinematics(transl, rot, phi, mc):
     """World rotations (16, 3, 3), joint positions (16, 3) with the translation, and the angles (15, 3)."""
     frames, rest, parents, phi_joint, phi_axis = mc[0], mc[1], mc[2], mc[3], mc[4]
@@ -47,8 +111,10 @@ def _kinematics(transl, rot, phi, mc):
     for d in range(phi.shape[0]):
         angles[phi_joint[d] - 1, phi_axis[d]] = phi[d]
     world_rot, world_pos = np.empty((16, 3, 3)), np.empty((16, 3))
-    world_rot[0] = rot
-    world_pos[0] = rest[0]
+    for a in range(3):  # element by element: numba's array expressions take seconds each to compile
+        world_pos[0, a] = rest[0, a]
+        for b in range(3):
+            world_rot[0, a, b] = rot[a, b]
     e, ce, local = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
     for j in range(1, 16):
         ct, st = math.cos(angles[j - 1, 0]), math.sin(angles[j - 1, 0])
@@ -59,12 +125,15 @@ def _kinematics(transl, rot, phi, mc):
         e[1, 0], e[1, 1], e[1, 2] = sb * cs, sb * ss * st + cb * ct, sb * ss * ct - cb * st
         e[2, 0], e[2, 1], e[2, 2] = -ss, cs * st, cs * ct
         _mat3(frames[j - 1], e, ce)
-        _mat3(ce, frames[j - 1].T, local)
+        _mat3t(ce, frames[j - 1], local)
         p = parents[j]
         _mat3(world_rot[p], local, world_rot[j])
-        world_pos[j] = world_pos[p] + world_rot[p] @ (rest[j] - rest[p])
+        lever = _matvec(world_rot[p], rest[j, 0] - rest[p, 0], rest[j, 1] - rest[p, 1], rest[j, 2] - rest[p, 2])
+        for a in range(3):
+            world_pos[j, a] = world_pos[p, a] + lever[a]
     for j in range(16):
-        world_pos[j] += transl
+        for a in range(3):
+            world_pos[j, a] += transl[a]
     return world_rot, world_pos, angles
 
 
@@ -118,7 +187,7 @@ def _evaluate(transl, rot, phi, target, observed, held, free, scale, mc, pc):
     cols = _columns(world_rot, world_pos, mc[1])
     marker_affine, offset = mc[5], mc[6]
     m = offset.shape[0]
-    parts = marker_affine @ cols  # (3M, 3): skin spots, then the triangles' two edges
+    parts = _matmul(marker_affine, cols)  # (3M, 3): skin spots, then the triangles' two edges
     resid, norms = np.zeros((m, 3)), np.zeros(m)
     cost = 0.0
     for i in range(m):
@@ -133,7 +202,8 @@ def _evaluate(transl, rot, phi, target, observed, held, free, scale, mc, pc):
         norms[i] = math.sqrt(resid[i, 0] ** 2 + resid[i, 1] ** 2 + resid[i, 2] ** 2)
         cost += 0.5 * scale * scale * math.log1p((norms[i] / scale) ** 2)
     r_p, j_p = _priors(phi, held, free, pc)
-    cost += 0.5 * np.sum(r_p * r_p)
+    for k in range(r_p.shape[0]):
+        cost += 0.5 * r_p[k] * r_p[k]
     return cost, world_rot, world_pos, angles, cols, resid, norms, r_p, j_p
 
 
@@ -143,7 +213,7 @@ def _normal_equations(world_rot, angles, cols, resid, weights, mc):
     frames, parents, phi_joint, phi_axis = mc[0], mc[2], mc[3], mc[4]
     lever_affine, entry_lever, entry_dof, entry_marker, frame_sign = mc[7], mc[8], mc[9], mc[10], mc[11]
     m = resid.shape[0]
-    lever = lever_affine @ cols  # (L, 3): rows 0..M-1 are the markers from the wrist
+    lever = _matmul(lever_affine, cols)  # (L, 3): rows 0..M-1 are the markers from the wrist
     axes, local = np.empty((27, 3)), np.zeros(3)
     for d in range(27):  # each angle's world axis (see rotation_math.dof_axes)
         j, a = phi_joint[d], phi_axis[d]
@@ -155,7 +225,10 @@ def _normal_equations(world_rot, angles, cols, resid, weights, mc):
             local[0], local[1], local[2] = -sb, cb, 0.0
         else:
             local[0], local[1], local[2] = 0.0, 0.0, 1.0
-        axes[d] = world_rot[parents[j]] @ (frame_sign[j - 1] * (frames[j - 1] @ local))
+        f = _matvec(frames[j - 1], frame_sign[j - 1] * local[0], frame_sign[j - 1] * local[1],
+                    frame_sign[j - 1] * local[2])
+        axis = _matvec(world_rot[parents[j]], f[0], f[1], f[2])
+        axes[d, 0], axes[d, 1], axes[d, 2] = axis[0], axis[1], axis[2]
     jac = np.zeros((3 * m, 33))
     for i in range(m):
         rx, ry, rz = lever[i, 0], lever[i, 1], lever[i, 2]
@@ -218,19 +291,28 @@ def _solve(transl, rot, phi, target, observed, held, free, scale, lam, iteration
             if observed[i]:
                 weights[i] = 1.0 / (1.0 + (norms[i] / scale) ** 2)  # Cauchy IRLS
         hess, grad = _normal_equations(world_rot, angles, cols, resid, weights, mc)
-        hess[6:, 6:] += j_p.T @ j_p
-        grad[6:] += j_p.T @ r_p
+        for r in range(j_p.shape[0]):  # the priors: J_p^T J_p and J_p^T r_p
+            for p in range(27):
+                jp = j_p[r, p]
+                if jp != 0.0:
+                    grad[6 + p] += jp * r_p[r]
+                    for q in range(27):
+                        hess[6 + p, 6 + q] += jp * j_p[r, q]
         for d in range(27):
             if held[d]:
-                hess[6 + d, :] = 0.0
-                hess[:, 6 + d] = 0.0
+                for p in range(33):
+                    hess[6 + d, p] = 0.0
+                    hess[p, 6 + d] = 0.0
                 hess[6 + d, 6 + d] = 1.0
                 grad[6 + d] = 0.0
-        system = hess.copy()
-        for p in range(33):
-            system[p, p] += lam * max(hess[p, p], 1e-9)
-        step = -np.linalg.solve(system, grad)
-        new_transl, new_rot, new_phi = transl + step[:3], _rodrigues(step[3:6]) @ rot, phi + step[6:]
+        step = _solve_linear(hess, grad, lam)
+        new_rot = np.empty((3, 3))
+        _mat3(_rodrigues(step[3:6]), rot, new_rot)
+        new_transl, new_phi = np.empty(3), np.empty(27)
+        for a in range(3):
+            new_transl[a] = transl[a] + step[a]
+        for d in range(27):
+            new_phi[d] = phi[d] + step[6 + d]
         trial = _evaluate(new_transl, new_rot, new_phi, target, observed, held, free, scale, mc, pc)
         better = trial[0] <= cost
         if better:
@@ -239,15 +321,23 @@ def _solve(transl, rot, phi, target, observed, held, free, scale, lam, iteration
             lam = max(lam / 3.0, 1e-7)
         else:
             lam *= 4.0
-        if np.max(np.abs(step)) < tolerance or (better and gain < gain_tolerance) or lam > 1e8:
+        largest = 0.0
+        for p in range(33):
+            largest = max(largest, abs(step[p]))
+        if largest < tolerance or (better and gain < gain_tolerance) or lam > 1e8:
             break
     world_rot, world_pos = state[1], state[2]
     joints = np.empty((21, 3))
-    joints[:16] = world_pos
+    for j in range(16):
+        for a in range(3):
+            joints[j, a] = world_pos[j, a]
     rest = mc[1]
     for k in range(tip_parents.shape[0]):
         p = tip_parents[k]
-        joints[16 + k] = world_pos[p] + world_rot[p] @ (rest_tips[k] - rest[p])
+        tip = _matvec(world_rot[p], rest_tips[k, 0] - rest[p, 0], rest_tips[k, 1] - rest[p, 1],
+                      rest_tips[k, 2] - rest[p, 2])
+        for a in range(3):
+            joints[16 + k, a] = world_pos[p, a] + tip[a]
     return transl, rot, phi, joints, state[6]
 
 
