@@ -90,3 +90,33 @@ def test_noise_tuning_scores_every_setting_like_the_filters_do():
     np.testing.assert_allclose(_innovation_log_likelihoods(0.01, jerk, measurement, pos), expected, rtol=1e-10)
     tuned = KalmanSettings.from_training(pos, 100.0)
     assert np.isclose(np.sqrt(tuned.measurement), 3e-4, rtol=0.5)  # the noise put in
+
+
+def _smooth_tracks(seed=0, frames=600, markers=4, noise=3e-4, jerk=30.0):
+    """Markers driven by white jerk of density ``jerk`` (m^2/s^5) at 100 Hz, seen with ``noise`` metres of noise."""
+    rng = np.random.default_rng(seed)
+    dt = 0.01
+    acceleration = np.cumsum(rng.normal(0, np.sqrt(jerk * dt), (frames, markers, 3)), axis=0)
+    velocity = np.cumsum(acceleration * dt, axis=0)
+    return np.cumsum(velocity * dt, axis=0) + rng.normal(0, noise, (frames, markers, 3))
+
+
+def test_tuning_finds_the_noise_put_in_inside_the_grid_and_warns_of_nothing():
+    tuned = KalmanSettings.from_training(_smooth_tracks(), 100.0)
+    assert np.isclose(np.sqrt(tuned.measurement), 3e-4, rtol=0.3)
+    assert 10 <= tuned.jerk <= 100 and tuned.edge_warning() == ""
+
+
+def test_a_noise_below_the_first_grid_is_found_on_the_wider_one():
+    # 0.02 mm of noise: below the first grid's 0.05 mm, found on the wider grid, which still goes lower.
+    tuned = KalmanSettings.from_training(_smooth_tracks(noise=2e-5), 100.0)
+    assert np.isclose(np.sqrt(tuned.measurement), 2e-5, rtol=0.5) and tuned.edge_warning() == ""
+
+
+def test_tracks_that_jump_or_are_not_in_metres_are_a_warning():
+    tracks = _smooth_tracks() + np.array([0.0, 0.05, 0.1, 0.15])[None, :, None]
+    swapped = tracks.copy()
+    swapped[::2, [0, 1]] = tracks[::2, [1, 0]]  # two labels swapped back and forth every other frame
+    for bad in (swapped, tracks * 1000.0):  # and millimetres read as metres
+        line = KalmanSettings.from_training(bad, 100.0).edge_warning()
+        assert "at the edge of what is searched" in line and "Check the training take" in line

@@ -69,10 +69,13 @@ class KalmanSettings:
         """Noise levels that best explain labeled training trajectories (T, M, 3), metres, at ``rate`` Hz.
 
         Maximum likelihood over a grid: the filters are run over the training
-        trajectories for every pair of measurement noise (0.05 to 5 mm) and
-        jerk density (10 to 10^8 m^2/s^5), and the pair whose one-step
-        innovations are most likely wins (the innovation likelihood is the
-        exact likelihood of the data under the model).
+        trajectories for every pair of measurement noise (:data:`SIGMAS_MM`, 0.05 to
+        5 mm) and jerk density (:data:`JERKS`, 1 to 10^8.5 m^2/s^5), and the pair whose
+        one-step innovations are most likely wins (the innovation likelihood is the
+        exact likelihood of the data under the model). A best pair on the grid's edge
+        is searched again on a grid 3-10 times wider each way (:data:`WIDER_SIGMAS_MM`,
+        :data:`WIDER_JERKS`); one still on that grid's edge is what :meth:`edge_warning`
+        reports.
 
         Parameters
         ----------
@@ -91,22 +94,91 @@ class KalmanSettings:
         HandcapError
             Fewer than 30 pairs of consecutive samples.
         """
+        return cls.fit(positions, rate)[0]
+
+    @classmethod
+    def fit(cls, positions, rate: float) -> tuple["KalmanSettings", np.ndarray]:
+        """:meth:`from_training`, and the markers left out of it because their tracks jump.
+
+        Each marker's own best noise is found on the first grid too; a marker whose best noise is over
+        :data:`JUMPING_FACTOR` times the median marker's (and over 1 mm) jumps between frames, most often a label
+        swapped back and forth in the training take, and is left out of the pooled search (it would set every
+        filter's noise). Nothing is left out when most markers jump.
+
+        Parameters
+        ----------
+        positions : array_like of shape (T, M, 3)
+            Labeled trajectories, metres, NaN where missing.
+        rate : float
+            Frames per second.
+
+        Returns
+        -------
+        settings : KalmanSettings
+        jumping : ndarray (M,) bool
+            The markers left out.
+        """
         pos = np.asarray(positions, dtype=np.float64)
         dt = 1.0 / float(rate)
         seen = ~np.isnan(pos[..., 0])
         if (seen[1:] & seen[:-1]).sum() < 30:
             raise HandcapError("too few pairs of consecutive samples in the training take to tune the Kalman filters")
-        sigmas = np.array([0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0]) * 1e-3
-        jerks = 10.0 ** np.arange(1, 8.5, 0.5)
-        measurement = np.repeat(sigmas**2, len(jerks))
-        jerk = np.tile(jerks, len(sigmas))
-        ll = _innovation_log_likelihoods(dt, jerk, measurement, pos)
-        best = int(np.argmax(ll))
-        return cls(dt, float(jerk[best]), float(measurement[best]))
+        sigmas, jerks = np.asarray(SIGMAS_MM) * 1e-3, np.asarray(JERKS)
+        measurement, jerk = np.repeat(sigmas**2, len(jerks)), np.tile(jerks, len(sigmas))
+        each = _innovation_log_likelihoods(dt, jerk, measurement, pos, per_marker=True)  # (C, M)
+        counted = (seen[1:] & seen[:-1]).sum(axis=0) >= 30
+        own = np.sqrt(measurement[np.argmax(each, axis=0)])  # each marker's own best noise, metres
+        typical = np.median(own[counted]) if counted.any() else np.median(own)
+        jumping = counted & (own > max(JUMPING_FACTOR * typical, 1e-3))
+        if jumping.sum() * 2 > pos.shape[1]:
+            jumping[:] = False
+        kept = ~jumping
+        ll = each[:, kept].sum(axis=1)
+        for wider in (False, True):
+            if wider:
+                sigmas, jerks = np.asarray(WIDER_SIGMAS_MM) * 1e-3, np.asarray(WIDER_JERKS)
+                measurement, jerk = np.repeat(sigmas**2, len(jerks)), np.tile(jerks, len(sigmas))
+                ll = _innovation_log_likelihoods(dt, jerk, measurement, pos[:, kept])
+            best = int(np.argmax(ll))
+            row, column = divmod(best, len(jerks))
+            if 0 < row < len(sigmas) - 1 and 0 < column < len(jerks) - 1:
+                break
+        return cls(dt, float(jerk[best]), float(measurement[best])), jumping
+
+    def edge_warning(self) -> str:
+        """A warning line when these settings lie on the edge of the widest grid :meth:`from_training` searches.
+
+        Trajectories best explained by centimetres of noise or an extreme jerk are not a hand's markers tracked
+        by a camera system: most often labels swapped back and forth in the training take, or lengths not in
+        metres; a noise or jerk at the grid's low end, tracks smoother than any marker's.
+        """
+        sigma_mm = 1e3 * float(np.sqrt(self.measurement))
+        edges = (np.isclose(sigma_mm, WIDER_SIGMAS_MM[0]) or np.isclose(sigma_mm, WIDER_SIGMAS_MM[-1])
+                 or np.isclose(self.jerk, WIDER_JERKS[0]) or np.isclose(self.jerk, WIDER_JERKS[-1]))
+        if not edges:
+            return ""
+        return (f"the training take's marker tracks are best explained by {sigma_mm:.3g} mm of measurement noise "
+                f"and a jerk density of {self.jerk:.3g} m^2/s^5, at the edge of what is searched "
+                f"({WIDER_SIGMAS_MM[0]:g}-{WIDER_SIGMAS_MM[-1]:g} mm, {WIDER_JERKS[0]:.3g}-{WIDER_JERKS[-1]:.3g} "
+                f"m^2/s^5): labels swapped back and forth, or lengths not in metres? Check the training take")
 
 
-def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int = 10) -> np.ndarray:
-    """Log-likelihood (C,) of the one-step innovations of trajectories (T, M, 3) under C noise settings.
+#: Measurement noise (standard deviation per coordinate, mm) and jerk densities (m^2/s^5) that
+#: :meth:`KalmanSettings.from_training` searches first: optical markers at 0.05-5 mm; synthetic range-of-motion
+#: takes pick 10 (at 100 Hz), the real glove recording 31.6, the ezc3d samples 10^2-10^4.
+SIGMAS_MM = (0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 5.0)
+JERKS = tuple(10.0 ** np.arange(0.0, 8.75, 0.5))
+#: A marker whose own best noise is this many times the median marker's jumps (see :meth:`KalmanSettings.fit`).
+JUMPING_FACTOR = 5.0
+#: The grid searched when the best pair lies on the first grid's edge.
+WIDER_SIGMAS_MM = (0.01, 0.02, *SIGMAS_MM, 10.0, 20.0, 50.0)
+WIDER_JERKS = tuple(10.0 ** np.arange(-1.0, 10.25, 0.5))
+
+
+def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int = 10,
+                                per_marker: bool = False) -> np.ndarray:
+    """Log-likelihood (C,) of the one-step innovations of trajectories (T, M, 3) under C noise settings
+    ((C, M), each marker's own, with ``per_marker``).
 
     All settings run at once: filters (C, M) restarted after gaps longer than
     ``max_coast`` frames, innovations counted once a filter has had 2 updates.
@@ -124,7 +196,7 @@ def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int
     p00, p01, p02, p11, p12, p22 = (np.zeros(shape) for _ in range(6))
     age = np.zeros(n_markers, dtype=np.int64)
     missed = np.full(n_markers, 1 << 30)
-    total = np.zeros(n_settings)
+    total = np.zeros(shape)
     half = 0.5 * dt * dt
     for z in positions:
         has = ~np.isnan(z[:, 0])
@@ -141,7 +213,7 @@ def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int
         innovation = np.where(update[:, None], np.where(has[:, None], z, 0.0) - pos, 0.0)  # (C, M, 3)
         if use.any():
             ll = -1.5 * np.log(2 * np.pi * s) - 0.5 * (innovation**2).sum(-1) / s
-            total += np.where(use, ll, 0.0).sum(axis=1)
+            total += np.where(use, ll, 0.0)
         if update.any():
             g0, g1, g2 = (np.where(update, p / s, 0.0) for p in (p00, p01, p02))
             pos = pos + g0[..., None] * innovation
@@ -159,7 +231,7 @@ def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int
         age = np.where(has, age + 1, age)
         age[fresh] = 1
         missed = np.where(has, 0, missed + 1)
-    return total
+    return total if per_marker else total.sum(axis=1)
 
 
 class KalmanBatch:

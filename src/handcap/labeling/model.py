@@ -6,10 +6,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
 from handcap.core.files import load_npz, save_npz
 from handcap.core.markers import MarkerSequence
-from handcap.labeling.kalman import KalmanSettings
+from handcap.labeling.kalman import JUMPING_FACTOR, KalmanSettings
 from handcap.labeling.rigid_set import RigidSet
 from handcap.labeling.spatial import SpatialModel
 from handcap.objects.rigid import canonical_from_markers, kabsch
@@ -32,6 +32,8 @@ class LabelingModel:
         Between every two labels of ``spatial`` in training: the median and the
         standard deviation of their distance (metres), pooled over the takes;
         None in models saved before they were kept.
+    warnings : tuple of str
+        What looked implausible in training (:meth:`KalmanSettings.edge_warning`), kept with the model.
     """
 
     names: tuple
@@ -39,6 +41,7 @@ class LabelingModel:
     spatial: SpatialModel
     kalman: KalmanSettings
     spans: np.ndarray | None = field(default=None, compare=False)
+    warnings: tuple = field(default=(), compare=False)
 
     @property
     def free_names(self) -> tuple:
@@ -127,8 +130,14 @@ class LabelingModel:
         # The filters see the takes one after the other, a gap longer than any coasting between them.
         gap = np.full((12, len(free), 3), np.nan)
         joined = np.concatenate([x for p in per_take for x in (p[:, n_rigid:], gap)][:-1])
-        kalman = KalmanSettings.from_training(joined, takes[0].rate)
-        return cls(tuple(ordered), rigid_set, spatial, kalman, label_spans(np.concatenate(per_take)[:, n_rigid:]))
+        kalman, jumping = KalmanSettings.fit(joined, takes[0].rate)
+        lines = [kalman.edge_warning()]
+        if jumping.any():
+            lines.append(f"{', '.join(np.array(free)[jumping])} jump between frames in the training take (their "
+                         f"tracks fit no filter with under {JUMPING_FACTOR:g} times the other labels' noise): labels "
+                         f"swapped back and forth? The filters were tuned without them; check the training take")
+        return cls(tuple(ordered), rigid_set, spatial, kalman, label_spans(np.concatenate(per_take)[:, n_rigid:]),
+                   tuple(warn(line) for line in lines if line))
 
     def save(self, path) -> None:
         """Write the model as a ``.npz`` (kind ``labeling_model``): names, mixtures, Kalman settings, rigid set.
@@ -146,6 +155,8 @@ class LabelingModel:
             data.update(self.rigid.to_arrays())
         if self.spans is not None:
             data["spans"] = self.spans
+        if self.warnings:
+            data["warnings"] = np.array(self.warnings, dtype=str)
         save_npz(path, data)
 
     @classmethod
@@ -171,8 +182,9 @@ class LabelingModel:
         dt, jerk, measurement = (float(v) for v in data["kalman"])
         rigid = RigidSet.from_arrays(data) if "rigid_names" in data else None
         spans = np.asarray(data["spans"], dtype=np.float64) if "spans" in data else None
+        warnings = tuple(str(w) for w in np.atleast_1d(data["warnings"])) if "warnings" in data else ()
         return cls(tuple(str(n) for n in data["names"]), rigid, SpatialModel.from_arrays(data),
-                   KalmanSettings(dt, jerk, measurement), spans)
+                   KalmanSettings(dt, jerk, measurement), spans, warnings)
 
 
 def label_spans(positions) -> np.ndarray:

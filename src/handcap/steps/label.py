@@ -77,7 +77,9 @@ def label(path, out, *, train, layouts, model=None, method: str = "viterbi", hyp
             raise HandcapError("--object learns the object's shape from a labeled take: give one as --train")
         options["objects"] = objects_from_take(read_markers(train[0]), objects)
     result = label_take(points, models[0] if len(models) == 1 else models, offline=offline, method=method, **options)
-    labelled, lines, found = result.markers, (f"{out}: {result.summary()}",), result.warnings
+    trained = [w for m in models for w in m.warnings]  # issued when trained; stored with the labels too
+    labelled = result.markers.with_warnings(*trained) if trained else result.markers
+    lines, found = (f"{out}: {result.summary()}",), merge_warnings(trained, result.warnings)
     if offline and hand_check and method != "nearest" and len(marker_layouts) == 1:
         labelled, line = untangled(labelled, models[0], marker_layouts[0])
         lines += (line,) if line else ()
