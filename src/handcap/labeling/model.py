@@ -33,7 +33,9 @@ class LabelingModel:
         standard deviation of their distance (metres), pooled over the takes;
         None in models saved before they were kept.
     warnings : tuple of str
-        What looked implausible in training (:meth:`KalmanSettings.edge_warning`), kept with the model.
+        What looked implausible in training, kept with the model: labels whose tracks jump (left out of the
+        Kalman tuning, :meth:`KalmanSettings.fit`) and a tuning on the edge of its search
+        (:meth:`KalmanSettings.edge_warning`).
     """
 
     names: tuple
