@@ -131,7 +131,8 @@ def test_cli_fill_and_train(tmp_path, glove, capsys):
     write_markers(glove.frames(0, 1500), take)
     before = take.read_bytes()
     model = tmp_path / "model.npz"
-    assert main(["train-occlusion", str(take), "--layout", "glove-13", "--epochs", "2", "--out", str(model)]) == 0
+    assert main(["train-occlusion", str(take), "--layout", "glove-13", "--epochs", "2", "--samples-per-epoch", "10000",
+                 "--out", str(model)]) == 0
     assert "markers only" in capsys.readouterr().out
     out = tmp_path / "filled.c3d"
     r = _cli("fill", take, "--method", "nn", "--model", model, "--max-gap", "0.3", "--out", out)  # a real process
@@ -147,6 +148,8 @@ def test_cli_fill_and_train(tmp_path, glove, capsys):
         (("fill", take, "--model", model, "--history", "-1", "--out", tmp_path / "y.npz"), "history"),
         (("fill", tmp_path / "missing.c3d", "--out", tmp_path / "z.npz"), "missing.c3d"),
         (("train-occlusion", take, "--layout", "tips-5", "--out", tmp_path / "m.npz"), "lacks marker"),
+        (("train-occlusion", take, "--layout", "glove-13", "--samples-per-epoch", "0", "--out", tmp_path / "m.npz"),
+         "--samples-per-epoch take a number >= 1"),
         (("train-occlusion", take, "--layout", "glove-13", "--poses", take, take, "--out", tmp_path / "m.npz"),
          "one hand motion per take"),
     ]:

@@ -136,7 +136,8 @@ def test_cli_trains_the_joint_regressor_from_poses(tmp_path, small_take):
     write_hand_motion(HandMotion(small_take.betas, small_take.global_orient, hand_pose, small_take.transl, 100.0,
                                  phi=small_take.phi), poses)
     r = subprocess.run([sys.executable, "-m", "handcap.cli", "train-occlusion", str(take), "--poses", str(poses),
-                        "--layout", "active-9", "--epochs", "1", "--out", str(out)], capture_output=True, text=True)
+                        "--layout", "active-9", "--epochs", "1", "--samples-per-epoch", "5000", "--out", str(out)],
+                       capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "joint regressor on 400 posed frames" in r.stdout
     assert OcclusionModel.load(out).regressor is not None
@@ -203,7 +204,7 @@ def test_cli_trains_on_synthetic_subjects_and_says_so(tmp_path, capsys):
 
     out = tmp_path / "generic.npz"
     assert main(["train-occlusion", "--synthetic", "1", "--augment", "--speed-copies", "1", "--layout", "active-9",
-                 "--epochs", "1", "--out", str(out)]) == 0
+                 "--epochs", "1", "--samples-per-epoch", "5000", "--out", str(out)]) == 0
     r = capsys.readouterr()
     assert "saw 9 take(s) (0 recorded, 9 synthetic) of 9 subject(s), 5400 frames; 9 augmented copies" in r.out
     assert "augmentation: every sample: scale 12 %" in r.out and "1 time-warped copy per take" in r.out

@@ -6,14 +6,14 @@ from handcap.cli.common import add_units, print_progress
 from handcap.layouts import SHIPPED
 from handcap.occlusion import FILL_METHODS, SHIPPED_MODELS
 from handcap.occlusion.history import HISTORY_S
-from handcap.occlusion.train import PAIR_SECONDS
+from handcap.occlusion.train import PAIR_SECONDS, SAMPLES_PER_EPOCH
 from handcap.steps import markers, occlusion
 
 
 def _cmd_train_occlusion(a):
     return occlusion.train_occlusion(a.takes, a.out, layout=a.layout, poses=a.poses, seed=a.seed, epochs=a.epochs,
-                                     synthetic=a.synthetic, augment=a.augment, speed_copies=a.speed_copies,
-                                     pair_seconds=a.pair_seconds, progress=print_progress)
+                                     samples_per_epoch=a.samples_per_epoch, synthetic=a.synthetic, augment=a.augment,
+                                     speed_copies=a.speed_copies, pair_seconds=a.pair_seconds, progress=print_progress)
 
 
 def _cmd_fill(a):
@@ -34,6 +34,8 @@ def add_occlusion(verbs) -> None:
                                                                  "transl) to train the joint regressor")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--epochs", type=int, default=60, help="training epochs of each network (default %(default)s)")
+    p.add_argument("--samples-per-epoch", type=int, default=SAMPLES_PER_EPOCH, metavar="N",
+                   help="knocked-out samples the marker predictor sees per epoch (default %(default)s)")
     p.add_argument("--synthetic", type=int, default=0, metavar="SUBJECTS",
                    help="also train on synthetic takes: SUBJECTS x every synthetic motion, each take a new subject "
                         "(default %(default)s)")

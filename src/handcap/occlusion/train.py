@@ -98,8 +98,12 @@ def _columns(take: PosedTake, names, source: str) -> np.ndarray:
     return take.positions[:, marker_columns(take.names, names, source)]
 
 
+#: Knocked-out samples the marker predictor sees per epoch, by default.
+SAMPLES_PER_EPOCH = 50_000
+
+
 def train_occlusion_model(takes, layout, *, seed: int = 0, epochs: int = 60, regressor_epochs: int = 60,
-                          samples_per_epoch: int = 50_000, side: str | None = None,
+                          samples_per_epoch: int = SAMPLES_PER_EPOCH, side: str | None = None,
                           augmentation: Augmentation | None = None, pair_seconds: float = PAIR_SECONDS,
                           progress=None) -> OcclusionModel:
     """Train the marker predictor on every take and the joint regressor on the takes with poses.

@@ -11,13 +11,13 @@ from handcap.layouts import load_layout
 from handcap.occlusion import read_take, train_occlusion_model
 from handcap.occlusion.augment import NO_AUGMENTATION, SUBJECT_AUGMENTATION
 from handcap.occlusion.data import synthetic_hand_takes
-from handcap.occlusion.train import PAIR_SECONDS
+from handcap.occlusion.train import PAIR_SECONDS, SAMPLES_PER_EPOCH
 from handcap.steps.step import Step
 
 
-def train_occlusion(takes, out, *, layout: str, poses=None, seed: int = 0, epochs: int = 60, synthetic: int = 0,
-                    augment: bool = False, speed_copies: int = 0, pair_seconds: float = PAIR_SECONDS,
-                    progress=None) -> Step:
+def train_occlusion(takes, out, *, layout: str, poses=None, seed: int = 0, epochs: int = 60,
+                    samples_per_epoch: int = SAMPLES_PER_EPOCH, synthetic: int = 0, augment: bool = False,
+                    speed_copies: int = 0, pair_seconds: float = PAIR_SECONDS, progress=None) -> Step:
     """Train an occlusion model (see :func:`handcap.occlusion.train_occlusion_model`) and save it.
 
     Parameters
@@ -35,6 +35,8 @@ def train_occlusion(takes, out, *, layout: str, poses=None, seed: int = 0, epoch
         Deterministic for a seed.
     epochs : int
         Training epochs of each network.
+    samples_per_epoch : int
+        Knocked-out samples the marker predictor sees per epoch.
     synthetic : int
         Also train on synthetic takes of this many subjects (each doing every synthetic motion).
     augment : bool
@@ -52,6 +54,8 @@ def train_occlusion(takes, out, *, layout: str, poses=None, seed: int = 0, epoch
         raise HandcapError(f"--poses needs one hand motion per take: {len(takes)} takes, {len(poses)} poses")
     if synthetic < 0 or speed_copies < 0:
         raise HandcapError("--synthetic and --speed-copies take a number >= 0")
+    if epochs < 1 or samples_per_epoch < 1:
+        raise HandcapError(f"--epochs and --samples-per-epoch take a number >= 1, got {epochs} and {samples_per_epoch}")
     if not takes and not synthetic:
         raise HandcapError("give takes to train on, or --synthetic SUBJECTS, or both")
     augmentation = replace(SUBJECT_AUGMENTATION if augment else NO_AUGMENTATION, copies=speed_copies)
@@ -60,7 +64,8 @@ def train_occlusion(takes, out, *, layout: str, poses=None, seed: int = 0, epoch
     if synthetic:
         data += synthetic_hand_takes(layout, subjects=synthetic, seed=seed, side=load_layout(layout).side)
     model = train_occlusion_model(data, layout, seed=seed, epochs=epochs, regressor_epochs=epochs, progress=progress,
-                                  augmentation=augmentation, pair_seconds=pair_seconds)
+                                  samples_per_epoch=samples_per_epoch, augmentation=augmentation,
+                                  pair_seconds=pair_seconds)
     model.save(out)
     first, _, rest = model.summary().partition("\n")
     line = f"{out}: {first}, {time.perf_counter() - start:.0f} s\n{rest}"
