@@ -75,24 +75,17 @@ class KalmanSettings:
         exact likelihood of the data under the model). A best pair on the grid's edge
         is searched again on a grid 3-10 times wider each way (:data:`WIDER_SIGMAS_MM`,
         :data:`WIDER_JERKS`); one still on that grid's edge is what :meth:`edge_warning`
-        reports.
+        reports. Labels whose tracks jump are left out (see :meth:`fit`, which also says which).
 
         Parameters
         ----------
-        positions : array_like of shape (T, M, 3)
-            Labeled trajectories, metres, NaN where missing.
-        rate : float
-            Frames per second.
+        positions, rate
+            As :meth:`fit`.
 
         Returns
         -------
         KalmanSettings
             ``dt = 1 / rate`` seconds, the best ``jerk`` (m^2/s^5) and ``measurement`` (m^2).
-
-        Raises
-        ------
-        HandcapError
-            Fewer than 30 pairs of consecutive samples.
         """
         return cls.fit(positions, rate)[0]
 
@@ -117,6 +110,11 @@ class KalmanSettings:
         settings : KalmanSettings
         jumping : ndarray (M,) bool
             The markers left out.
+
+        Raises
+        ------
+        HandcapError
+            Fewer than 30 pairs of consecutive samples.
         """
         pos = np.asarray(positions, dtype=np.float64)
         dt = 1.0 / float(rate)
