@@ -39,6 +39,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=99)
+    parser.add_argument("--video-frames", type=int, default=8, help="frames of the tracked video")
     args = parser.parse_args()
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, str(args.threads))
@@ -82,8 +83,14 @@ def main() -> None:
                             np.array([[0.0, 0.0, 1.0]])).vertices[0]
     camera = cage_rig(12, target=(0.0, 0.0, 1.0), seed=3)[8]
     shot = renderer.render(camera, vertices, skin.grids(vertices, hand.faces), rng)
-    renderer.close()
     image = shot.image
+    # A short video of the same camera: the hand drifting 3 mm a frame (9 cm/s at 30 frames a second).
+    video = []
+    for k in range(args.video_frames):
+        moved = hand.forward(np.zeros(10), np.array([[0.003 * k, 0.3, 0.2]]), hand.hand_pose_from_phi(phi),
+                             np.array([[0.0, 0.0, 1.0]])).vertices[0]
+        video.append(renderer.render(camera, moved, skin.grids(moved, hand.faces), rng).image)
+    renderer.close()
 
     def best(fn):
         fn()
@@ -126,6 +133,7 @@ def main() -> None:
     print(f"whole detector (corners, blocks, reader, vote; {reader_note}): full frame {whole:.3f} s "
           f"({whole / 1.0:.2f} of the 1 s target), hand region {region_whole:.3f} s "
           f"({region_whole / 0.3:.2f} of 0.3 s)")
+    print_video(detector, video, pattern)
 
     maker = SceneMaker(args.seed)
     try:
@@ -223,6 +231,35 @@ def main() -> None:
     own_score = evaluate_detector(page_detector, [own.scene() for _ in range(max(args.scenes // 2, 1))])
     print("handcap's own page, flat, 30 px squares, plain camera: " + own_score.summary()
           + " (target: >= 99.9 % of its tags read)")
+
+
+def print_video(detector, video, pattern) -> None:
+    """Seconds per frame of a video searched whole and tracked (each frame around the previous frame's patches),
+    and whether both name the same corners at the same pixels."""
+    import numpy as np
+
+    from handcap.detect.capture import detect_capture
+
+    class Frames:  # a camera's frames held in memory (detect_capture's FrameSource interface)
+        camera = "cam"
+
+        def frames(self):
+            yield from enumerate(video)
+
+        def count(self):
+            return len(video)
+
+    runs = {}
+    for track in (False, True):
+        start = time.perf_counter()
+        runs[track] = detect_capture(detector, [Frames()], pattern.corner_names(), 30.0, track=track, progress=False)
+        runs[track] = (runs[track], (time.perf_counter() - start) / len(video))
+    (whole, whole_s), (tracked, tracked_s) = runs[False], runs[True]
+    a, b = whole.arrays, tracked.arrays
+    key = lambda d: sorted(zip(d["frame"], d["marker"], np.round(d["xy"], 4).tolist()))  # noqa: E731
+    print(f"video of {len(video)} frames (hand drifting 3 mm a frame): searched whole {whole_s:.3f} s/frame, "
+          f"tracked {tracked_s:.3f} s/frame ({tracked.regions} frames in a region; {whole_s / tracked_s:.1f}x), "
+          f"the same named corners at the same pixels: {key(a) == key(b)} ({len(a['frame'])} vs {len(b['frame'])})")
 
 
 def patch_views(scene, located, match_px: float = 2.0) -> list:

@@ -62,7 +62,8 @@ def test_detections_file_holds_the_contract(frames, weights, tmp_path, capsys):
 
 def test_without_a_template_blocks_only_and_a_warning(frames, weights, tmp_path, capsys):
     out = tmp_path / "det.npz"
-    assert main(["detect", str(frames / "cam_0" / "000000.png"), "--out", str(out), "--no-refine", *weights]) == 0
+    assert main(["detect", str(frames / "cam_0" / "000000.png"), "--out", str(out), "--no-refine", "--whole-frames",
+                 *weights]) == 0
     data = np.load(out)
     assert len(data["marker_names"]) == 0 and len(data["frame"]) == 0
     err = capsys.readouterr().err

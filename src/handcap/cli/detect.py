@@ -8,7 +8,8 @@ from handcap.steps import detect as detect_step
 def _cmd_detect(a):
     return detect_step.detect(a.inputs, a.out, rig=a.rig, pattern=a.pattern, alphabet=a.alphabet, rate=a.rate,
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
-                              refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold)
+                              refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
+                              track=not a.whole_frames)
 
 
 def add_detect(verbs) -> None:
@@ -29,6 +30,10 @@ def add_detect(verbs) -> None:
     p.add_argument("--threshold", type=float, help="least corner probability (default 0.5 from the refiner, 0.3 "
                                                    "from the corner network with --no-refine)")
     p.add_argument("--no-refine", action="store_true", help="keep the corner network's positions (no refiner)")
+    p.add_argument("--whole-frames", action="store_true",
+                   help="search every frame whole (default: a camera's frame is searched around the patches its "
+                        "previous frame showed, and whole every 10th frame or where that search may have missed "
+                        "some)")
     p.add_argument("--corner-weights", help="corner network weights instead of the shipped ones")
     p.add_argument("--refiner-weights", help="corner refiner weights instead of the shipped ones")
     p.add_argument("--reader-weights", help="block reader weights instead of the shipped ones")

@@ -20,6 +20,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from handcap.detect.corners import grey_levels
+
 #: Nearest neighbours a corner pairs with.
 NEIGHBOURS = 12
 #: The fourth corner must lie within this fraction of the shorter side from where the parallelogram puts it.
@@ -142,7 +144,8 @@ def _convex_and_gated(pts: np.ndarray) -> np.ndarray:
     return convex & angles_ok & side_ok & diag_ok
 
 
-def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray,
+                 levels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The quadrilaterals that are white squares between darker ones, with their contrast.
 
     The inside is sampled on a 5 x 5 grid of the quad's central part (in the
@@ -158,6 +161,8 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     image : ndarray (H, W)
     xy : ndarray (K, 2)
     quads : ndarray (Q, 4) int
+    levels : ndarray (3,), optional
+        :func:`~handcap.detect.corners.grey_levels` of the whole frame when ``image`` is a part of it.
 
     Returns
     -------
@@ -169,8 +174,8 @@ def white_blocks(image: np.ndarray, xy: np.ndarray, quads: np.ndarray) -> tuple[
     if len(quads) == 0:
         return quads.reshape(0, 4), np.zeros(0)
     img = np.asarray(image, dtype=np.float32)
-    lo, hi = np.percentile(img[::4, ::4], (5, 95))
-    spread = max(hi - lo, 1.0)
+    lo, _, hi = grey_levels(image) if levels is None else levels
+    spread = max((hi - lo) * (255.0 if np.asarray(image).dtype == np.uint8 else 1.0), 1.0)
     pts = xy[quads].astype(np.float64)
     homs = unit_square_homographies(pts)
     middle, before, after = np.linspace(0.3, 0.7, 5), np.linspace(-0.4, -0.1, 3), np.linspace(1.1, 1.4, 3)

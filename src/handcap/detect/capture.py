@@ -5,6 +5,21 @@ The arrays are the 2D detections File contract (``camera_names``,
 ``rate``) plus one row per read block (``block_text``, ``block_frame``,
 ``block_camera``, ``block_xy``, ``block_score``); ``handcap detect`` writes
 them, ``handcap demo --images`` uses them directly.
+
+Tracking: in a camera's run of frames, a frame is searched only around the
+patches the previous frame found (their box, widened by :data:`MARGIN` of its
+longer side and at least :data:`MARGIN_PX` on every side), with the whole
+frame's grey levels, so what lies well inside the box is found exactly as a
+whole-frame search finds it. The frame is searched whole again when that
+search may have missed something: a block within half the widening of the
+box's edge (the hand may reach beyond it), fewer blocks than
+:data:`KEEP_SHARE` of the previous frame's, or :data:`FULL_EVERY` frames since
+the last whole search (a patch coming into view away from the hand). A
+camera whose region search missed searches whole for the next 2, then 4, ...
+frames before it tries a region again (a hand that moves far between frames,
+as in a take filmed at a few frames a second, costs little). On a 5 MP frame
+of a hand the region costs about a third of the whole frame
+(``benchmarks/detect.py``).
 """
 
 from __future__ import annotations
@@ -14,7 +29,18 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
-from handcap.detect.pipeline import Detector
+from handcap.detect.pipeline import Detector, ImageDetections, region_box
+
+#: A camera's frame is searched whole at least once in this many frames.
+FULL_EVERY = 10
+#: The search region around the previous frame's blocks is widened by this share of its longer side ...
+MARGIN = 0.25
+#: ... and at least by this many pixels, on every side.
+MARGIN_PX = 48
+#: A region search that finds fewer blocks than this share of the previous frame's is redone on the whole frame:
+#: a hand that left the box in one frame while another stayed. Blur and occlusion alone cost a frame up to a
+#: third of its blocks (seen in rendered videos), and those the whole frame would not find either.
+KEEP_SHARE = 0.6
 
 
 @dataclass(frozen=True)
@@ -31,16 +57,106 @@ class CaptureDetections:
         Images with no corner found.
     corrected : int
         Readings the vote over the template changed.
+    regions : int
+        Images searched only around the previous frame's patches (see the module docstring).
     """
 
     arrays: dict
     images: int
     empty: int
     corrected: int
+    regions: int = 0
+
+
+class Tracker:
+    """Where to search one camera's next frame (see the module docstring).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The camera's image height and width, pixels.
+    """
+
+    def __init__(self, shape):
+        self.shape = tuple(shape[:2])
+        self.box = None
+        self.blocks = 0
+        self.since_full = 0
+        self.wait = 0  # whole frames to search before the next region search
+        self.backoff = 1
+
+    def region(self):
+        """The box (x0, y0, x1, y1) to search next, pixels, or None for the whole frame."""
+        if self.box is None or self.wait > 0 or self.since_full + 1 >= FULL_EVERY:
+            return None
+        return self.box
+
+    def missed(self, found: ImageDetections, region) -> bool:
+        """Whether a search of ``region`` may have missed patches the whole frame shows.
+
+        Parameters
+        ----------
+        found : ImageDetections
+            What the search found, whole-frame pixels.
+        region : (x0, y0, x1, y1)
+            The box searched.
+
+        Returns
+        -------
+        bool
+        """
+        if len(found.block_text) < KEEP_SHARE * self.blocks or len(found.block_text) == 0:
+            return True
+        x0, y0, x1, y1 = region_box(region, self.shape)
+        h, w = self.shape
+        pts = found.block_xy.reshape(-1, 2)
+        slack = self._pad(pts) / 2
+        near = np.zeros(len(pts), bool)
+        if x0 > 0:
+            near |= pts[:, 0] < x0 + slack
+        if y0 > 0:
+            near |= pts[:, 1] < y0 + slack
+        if x1 < w:
+            near |= pts[:, 0] > x1 - slack
+        if y1 < h:
+            near |= pts[:, 1] > y1 - slack
+        return bool(near.any())
+
+    def update(self, found: ImageDetections, whole: bool, missed: bool = False) -> None:
+        """Take in a frame's detections.
+
+        Parameters
+        ----------
+        found : ImageDetections
+        whole : bool
+            They come from the whole frame.
+        missed : bool
+            A region search of this frame came first and missed (:meth:`missed`).
+        """
+        self.since_full = 0 if whole else self.since_full + 1
+        if missed:
+            self.backoff = min(2 * self.backoff, FULL_EVERY)
+            self.wait = self.backoff
+        elif not whole:
+            self.backoff = 1
+        elif self.wait > 0:
+            self.wait -= 1
+        self.blocks = len(found.block_text)
+        if self.blocks == 0:
+            self.box = None
+            return
+        pts = found.block_xy.reshape(-1, 2)
+        pad = self._pad(pts)
+        self.box = (*(pts.min(axis=0) - pad), *(pts.max(axis=0) + pad))
+
+    @staticmethod
+    def _pad(pts: np.ndarray) -> float:
+        """The widening of the box around ``pts`` (N, 2), pixels."""
+        return max(MARGIN * float((pts.max(axis=0) - pts.min(axis=0)).max()), MARGIN_PX)
 
 
 def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
-                   progress: bool | None = None) -> CaptureDetections:
+                   progress: bool | None = None, track: bool = True) -> CaptureDetections:
     """Run ``detector`` on every frame of ``sources`` (one per camera, in the rig's order).
 
     Parameters
@@ -55,6 +171,9 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         Frames per second.
     progress : bool, optional
         Progress bar over the images (default: on a terminal).
+    track : bool
+        Search a frame around the previous frame's patches where that is safe (see the module docstring);
+        without, every frame is searched whole.
 
     Returns
     -------
@@ -63,13 +182,22 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     index = {n: k for k, n in enumerate(marker_names)}
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
     blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
-    images = empty = corrected = 0
+    images = empty = corrected = regions = 0
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
         for c, source in enumerate(sources):
+            tracker = None
             for t, image in source.frames():
-                found = detector.image(image)
+                if tracker is None or tracker.shape != image.shape[:2]:
+                    tracker = Tracker(image.shape)
+                region = tracker.region() if track else None
+                found = detector.image(image, region) if region is not None else None
+                missed = found is not None and tracker.missed(found, region)
+                if found is None or missed:
+                    found, region = detector.image(image), None
+                regions += region is not None
+                tracker.update(found, whole=region is None, missed=missed)
                 images += 1
                 empty += len(found.corners) == 0
                 corrected += found.corrected
@@ -98,4 +226,4 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
-    return CaptureDetections(arrays, images, empty, corrected)
+    return CaptureDetections(arrays, images, empty, corrected, regions)

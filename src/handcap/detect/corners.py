@@ -92,12 +92,36 @@ class CornerNet(nn.Module):
         return {"width": self.width, "stem": self.stem_width, "dilations": list(self.dilations)}
 
 
-def normalise(image: np.ndarray) -> np.ndarray:
+def grey_levels(image: np.ndarray) -> np.ndarray:
+    """An image's 5, 50 and 95 % grey levels (of every fourth pixel each way), on the 0..1 scale.
+
+    Every stage scales contrast by these: computed once on a whole frame and passed on, they make a search
+    in a part of the frame (the hand's region) see the grey levels the whole frame gives.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        uint8 (0..255) or float (0..1) grey image.
+
+    Returns
+    -------
+    ndarray (3,) float64
+    """
+    img = np.asarray(image)
+    sample = img[::4, ::4].astype(np.float32)
+    if img.dtype == np.uint8:
+        sample = sample / 255.0
+    return np.percentile(sample, (5, 50, 95))
+
+
+def normalise(image: np.ndarray, levels: np.ndarray | None = None) -> np.ndarray:
     """An 8-bit (or float 0..1) grey image as the network's input: float32, mean and spread of the image fixed.
 
     Parameters
     ----------
     image : ndarray (H, W)
+    levels : ndarray (3,), optional
+        :func:`grey_levels` to scale by (default: the image's own).
 
     Returns
     -------
@@ -108,7 +132,7 @@ def normalise(image: np.ndarray) -> np.ndarray:
     img = np.asarray(image, dtype=np.float32)
     if image.dtype == np.uint8:
         img = img / 255.0
-    lo, mid, hi = np.percentile(img[::4, ::4], (5, 50, 95))
+    lo, mid, hi = grey_levels(image) if levels is None else levels
     return ((img - mid) / max(hi - lo, 8 / 255)).astype(np.float32)
 
 
@@ -219,7 +243,7 @@ def find_corners(heatmap: np.ndarray, offsets: np.ndarray, threshold: float = 0.
 
 
 def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3, tile: int = 512,
-                   halo: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   halo: int | None = None, levels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run the corner network over a whole image, in tiles with a halo, and return its corners.
 
     Parameters
@@ -234,6 +258,8 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     halo : int, optional
         Context kept around each tile and dropped from its output, pixels: more than the network's
         :meth:`~CornerNet.reach` (default: 32, or the reach rounded up to 16 where it is more).
+    levels : ndarray (3,), optional
+        :func:`grey_levels` of the whole frame when ``image`` is a part of it (default: the image's own).
 
     Returns
     -------
@@ -245,7 +271,7 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
         raise HandcapError(f"a grey image of at least 8 x 8 pixels is needed, got shape {image.shape}")
     if halo is None:
         halo = max(32, -(-net.reach() // 16) * 16)
-    img = normalise(image)
+    img = normalise(image, levels)
     h, w = img.shape
     ph, pw = (-h) % 2, (-w) % 2
     img = np.pad(img, ((0, ph), (0, pw)), mode="edge")

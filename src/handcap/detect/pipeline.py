@@ -11,18 +11,56 @@ patches from an unknown sheet).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, check_alphabet
 from handcap.detect.blocks import candidate_quads, white_blocks
-from handcap.detect.corners import CornerNet
+from handcap.detect.corners import CornerNet, grey_levels
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks, tag_probability
 from handcap.detect.refine import CornerRefiner, locate_corners
 from handcap.detect.voting import name_corners, unconfirmed, uncrossed, vote
+
+#: Least side of a region searched, pixels: the corner network's tiles need 8, the refiner's crops 17.
+MIN_REGION = 32
+
+
+def region_box(region, shape) -> tuple[int, int, int, int]:
+    """A search box clipped to the image, its top-left rounded down to even pixels.
+
+    Parameters
+    ----------
+    region : (x0, y0, x1, y1)
+        Pixels; x1 and y1 excluded.
+    shape : (int, int)
+        Image height and width.
+
+    Returns
+    -------
+    (int, int, int, int)
+        The box, at least :data:`MIN_REGION` pixels on each side (or the image's side).
+
+    Raises
+    ------
+    HandcapError
+        A box that is not four finite numbers.
+    """
+    try:
+        box = np.asarray(region, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        box = np.zeros(0)
+    if box.shape != (4,) or not np.isfinite(box).all():
+        raise HandcapError(f"a region is (x0, y0, x1, y1) in pixels, got {region!r}")
+    h, w = shape[:2]
+    x0 = int(np.clip(np.floor(box[0]), 0, max(w - MIN_REGION, 0))) // 2 * 2
+    y0 = int(np.clip(np.floor(box[1]), 0, max(h - MIN_REGION, 0))) // 2 * 2
+    x1 = int(np.clip(np.ceil(box[2]), x0 + MIN_REGION, w))
+    y1 = int(np.clip(np.ceil(box[3]), y0 + MIN_REGION, h))
+    return x0, y0, x1, y1
+
 
 @dataclass(frozen=True)
 class ImageDetections:
@@ -85,19 +123,37 @@ class Detector:
                                f"{pattern.alphabet!r}; leave --alphabet out to use the template's")
         self.threshold = threshold
 
-    def image(self, image: np.ndarray) -> ImageDetections:
-        """Detect the patches of one grey image.
+    def image(self, image: np.ndarray, region=None) -> ImageDetections:
+        """Detect the patches of one grey image, or of a region of it.
 
         Parameters
         ----------
         image : ndarray (H, W) uint8
+        region : (x0, y0, x1, y1), optional
+            Search only this box of the image, pixels (x1, y1 excluded; x0 and y0 are rounded down to
+            even pixels, so the corner network's half-resolution cells are the whole frame's). The grey
+            levels are still the whole frame's, so what is found well inside the box is what the whole
+            frame gives; a corner within a few pixels of the box's edge may be missed.
 
         Returns
         -------
         ImageDetections
+            Positions in the whole image's pixels.
         """
-        xy, cscore = locate_corners(self.corner_net, self.refiner, image, self.threshold)
-        quads, _ = white_blocks(image, xy, candidate_quads(xy, score=cscore))
+        levels = grey_levels(image)
+        origin = np.zeros(2)
+        if region is not None:
+            x0, y0, x1, y1 = region_box(region, image.shape)
+            image, origin = np.ascontiguousarray(image[y0:y1, x0:x1]), np.array([x0, y0], float)
+        found = self._detect(image, levels)
+        if region is None:
+            return found
+        return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin)
+
+    def _detect(self, image: np.ndarray, levels: np.ndarray) -> ImageDetections:
+        """:meth:`image` on an image (or a region of a frame) with the frame's grey levels (3,)."""
+        xy, cscore = locate_corners(self.corner_net, self.refiner, image, self.threshold, levels)
+        quads, _ = white_blocks(image, xy, candidate_quads(xy, score=cscore), levels)
         text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet) if len(quads) \
             else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
         names = np.full(len(xy), None, dtype=object)

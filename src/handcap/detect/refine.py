@@ -33,7 +33,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from handcap.core.errors import HandcapError
-from handcap.detect.corners import MIN_RANGE, THRESHOLD, CornerNet, detect_corners
+from handcap.detect.corners import MIN_RANGE, THRESHOLD, CornerNet, detect_corners, grey_levels
 
 #: Crop half-size: crops are ``2 * RADIUS + 1`` pixels square.
 RADIUS = 8
@@ -152,7 +152,7 @@ def normalise_crops(crops: np.ndarray) -> np.ndarray:
 
 
 def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min_score: float = REFINED_THRESHOLD,
-                   views: int = 8, batch: int = 256) -> tuple[np.ndarray, np.ndarray]:
+                   views: int = 8, batch: int = 256, levels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Refine candidate corners and keep those the refiner believes, one per corner.
 
     Parameters
@@ -170,6 +170,8 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
         fell from 0.180 to 0.153 px with eight (measured while building this).
     batch : int
         Crops per network call.
+    levels : ndarray (3,), optional
+        :func:`~handcap.detect.corners.grey_levels` of the whole frame when ``image`` is a part of it.
 
     Returns
     -------
@@ -185,7 +187,7 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
     if not 1 <= views <= 8:
         raise HandcapError(f"views must be 1 to 8, got {views}")
     centres = np.rint(xy).astype(int)
-    keep = _contrasted(image, centres)
+    keep = _contrasted(image, centres, levels)
     xy, centres = xy[keep], centres[keep]
     if len(xy) == 0:
         return xy, np.zeros(0)
@@ -210,7 +212,7 @@ def refine_corners(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *, min
     return _merge(refined, score)
 
 
-def _contrasted(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
+def _contrasted(image: np.ndarray, centres: np.ndarray, levels: np.ndarray | None = None) -> np.ndarray:
     """Which candidates have around them the contrast a printed corner needs (N,) bool.
 
     The test of the corner network's cells (:data:`~handcap.detect.corners.MIN_RANGE` of the image's 5-95 %
@@ -220,9 +222,8 @@ def _contrasted(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
     candidate within 2 px of a printed corner had at least 0.2.
     """
     img = np.asarray(image)
-    sample = img[::4, ::4].astype(np.float32)
-    lo, hi = np.percentile(sample, (5, 95))
-    spread = max(hi - lo, 8.0 if img.dtype == np.uint8 else 8 / 255)
+    lo, _, hi = grey_levels(img) if levels is None else levels
+    spread = max(hi - lo, 8 / 255) * (255.0 if img.dtype == np.uint8 else 1.0)
     crops = _gather(img, centres)[:, 1:, 1:].astype(np.float32)
     means = crops.reshape(len(crops), 4, 4, 4, 4).mean(axis=(2, 4))
     return means.max(axis=(1, 2)) - means.min(axis=(1, 2)) >= MIN_RANGE * spread
@@ -259,7 +260,7 @@ def _views(net: CornerRefiner, image: np.ndarray, centres: np.ndarray, which: ra
 
 
 def locate_corners(corner_net: CornerNet, refiner: CornerRefiner | None, image: np.ndarray,
-                   threshold: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   threshold: float | None = None, levels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The detector's corners in one image: the corner network's, refined when a refiner is given.
 
     Parameters
@@ -273,6 +274,8 @@ def locate_corners(corner_net: CornerNet, refiner: CornerRefiner | None, image: 
     threshold : float, optional
         Least corner probability (default: :data:`REFINED_THRESHOLD` with a refiner, else
         :data:`~handcap.detect.corners.THRESHOLD`).
+    levels : ndarray (3,), optional
+        :func:`~handcap.detect.corners.grey_levels` of the whole frame when ``image`` is a part of it.
 
     Returns
     -------
@@ -281,9 +284,11 @@ def locate_corners(corner_net: CornerNet, refiner: CornerRefiner | None, image: 
     score : ndarray (K,)
     """
     if refiner is None:
-        return detect_corners(corner_net, image, threshold=THRESHOLD if threshold is None else threshold)
-    xy, _ = detect_corners(corner_net, image, threshold=CANDIDATES)
-    return refine_corners(refiner, image, xy, min_score=REFINED_THRESHOLD if threshold is None else threshold)
+        return detect_corners(corner_net, image, threshold=THRESHOLD if threshold is None else threshold,
+                              levels=levels)
+    xy, _ = detect_corners(corner_net, image, threshold=CANDIDATES, levels=levels)
+    return refine_corners(refiner, image, xy, min_score=REFINED_THRESHOLD if threshold is None else threshold,
+                          levels=levels)
 
 
 def _merge(xy: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

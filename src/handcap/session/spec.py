@@ -51,7 +51,7 @@ from handcap.core.errors import HandcapError
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
-    "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str},
+    "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str, "track": bool},
     "triangulate": {"min_views": int, "threshold_px": float, "units": str},
     "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,
               "max_spline_frames": int},

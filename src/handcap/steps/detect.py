@@ -16,7 +16,7 @@ DEFAULT_RATE = 20.0  # DexterCap's cameras; said in a warning when assumed
 
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
-           threshold: float | None = None, progress: bool | None = None) -> Step:
+           threshold: float | None = None, progress: bool | None = None, track: bool = True) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -42,6 +42,10 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Least corner probability: the refiner's (default 0.5), or the corner network's without it (0.3).
     progress : bool, optional
         Progress bar (default: on a terminal).
+    track : bool
+        Search each camera's frame around the patches its previous frame showed, and the whole frame every
+        10th frame or where that search may have missed some (:mod:`handcap.detect.capture`); without,
+        every frame whole.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -84,7 +88,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     from handcap.detect.capture import detect_capture  # loads torch
 
     marker_names = template.corner_names() if template is not None else []
-    run = detect_capture(detector, sources, marker_names, rate, progress=progress)
+    run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track)
     images, corrected = run.images, run.corrected
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
@@ -94,5 +98,6 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     arrays = {**run.arrays, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
-            f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else ""))
+            f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else "")
+            + (f"; {run.regions} images searched around the previous frame's patches only" if run.regions else ""))
     return Step((line,), tuple(warnings), (str(out),), arrays)

@@ -1,0 +1,121 @@
+"""The detector over a camera's frames: searching around the previous frame's patches finds what a search of
+the whole frame finds, and a hand that jumps away is searched for again on the whole frame."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from handcap import HandcapError
+from handcap.detect.capture import FULL_EVERY, Tracker, detect_capture
+from handcap.detect.pipeline import ImageDetections, region_box
+from handcap.detect.sources import frame_sources
+from handcap.patterns import session_pattern
+
+DEXTERCAP = "0123456789ACEFHPUY"  # the alphabet of the shared rendered scenes (tests/detect/conftest.py)
+#: Where the scene sits in each frame, pixels: a slow drift, then a jump across the frame, then a drift again.
+SHIFTS = [(0, 0), (6, 4), (12, 8), (640, 520), (646, 524)]
+
+
+@pytest.fixture(scope="module")
+def detector():
+    from handcap.detect.networks import load_corner_net, load_reader, load_refiner  # loads torch
+    from handcap.detect.pipeline import Detector
+
+    return Detector(load_corner_net(), load_reader(), session_pattern(("right",), (), alphabet=DEXTERCAP),
+                    refiner=load_refiner())
+
+
+def _film(scene, folder):
+    """The scene's image moved across a larger grey frame, one PNG per entry of SHIFTS."""
+    h, w = scene.image.shape
+    border = np.r_[scene.image[0], scene.image[-1], scene.image[:, 0], scene.image[:, -1]]
+    rng = np.random.default_rng(5)
+    folder.mkdir()
+    for t, (dx, dy) in enumerate(SHIFTS):
+        frame = np.clip(rng.normal(np.median(border), 2.0, (h + 560, w + 680)), 0, 255).astype(np.uint8)
+        frame[dy:dy + h, dx:dx + w] = scene.image
+        cv2.imwrite(str(folder / f"{t:06d}.png"), frame)
+    return folder
+
+
+def test_tracked_frames_find_what_whole_frames_find(scenes, detector, tmp_path):
+    sources = frame_sources([_film(scenes[0], tmp_path / "cam_0")])
+    names = detector.pattern.corner_names()
+    whole = detect_capture(detector, sources, names, 30.0, track=False, progress=False)
+    tracked = detect_capture(detector, sources, names, 30.0, progress=False)
+    # Frames 1 and 2 drift: searched in the region. Frame 3 jumps: the region finds too little and the frame is
+    # searched whole; frame 4 is searched whole too (the tracker waits two frames after a miss).
+    assert whole.regions == 0 and tracked.regions == 2
+    a, b = whole.arrays, tracked.arrays
+    assert np.bincount(a["frame"], minlength=len(SHIFTS)).min() > 40  # named corners in every frame
+    order_a = np.lexsort((a["marker"], a["frame"]))
+    order_b = np.lexsort((b["marker"], b["frame"]))
+    for key in ("frame", "marker"):
+        np.testing.assert_array_equal(a[key][order_a], b[key][order_b])
+    np.testing.assert_allclose(a["xy"][order_a], b["xy"][order_b], atol=1e-4)
+    assert sorted(zip(a["block_frame"], a["block_text"])) == sorted(zip(b["block_frame"], b["block_text"]))
+    # The drift moves the corners by the shift: positions in the whole frame's pixels.
+    first = {m: xy for f, m, xy in zip(b["frame"], b["marker"], b["xy"]) if f == 0}
+    moved = [xy - first[m] for f, m, xy in zip(b["frame"], b["marker"], b["xy"]) if f == 2 and m in first]
+    np.testing.assert_allclose(np.median(moved, axis=0), SHIFTS[2], atol=0.05)
+
+
+def _found(blocks: np.ndarray) -> ImageDetections:
+    """Detections holding only the given blocks' corners (B, 4, 2)."""
+    b = len(blocks)
+    return ImageDetections(blocks.reshape(-1, 2), np.ones(4 * b), np.full(4 * b, None, object),
+                           np.array(["AB"] * b), blocks, np.ones(b), 0)
+
+
+def test_the_tracker_searches_whole_when_the_region_may_miss():
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    hand = np.stack([square + [500 + 20 * k, 400 + 15 * k] for k in range(10)])  # 10 blocks, 190 x 145 px
+    tracker = Tracker((1000, 1200))
+    assert tracker.region() is None  # nothing seen yet: the whole frame
+    tracker.update(_found(hand), whole=True)
+    box = tracker.region()
+    pad = max(0.25 * 190, 48)
+    np.testing.assert_allclose(box, [500 - pad, 400 - pad, 690 + pad, 545 + pad])
+    assert not tracker.missed(_found(hand), box)
+    assert not tracker.missed(_found(hand[:6]), box)
+    assert tracker.missed(_found(hand[:5]), box)  # fewer than 60 % of the previous frame's blocks
+    assert tracker.missed(_found(hand + [30, 0]), box)  # within half the widening of the right edge
+    assert tracker.missed(_found(hand[:0]), box)
+    # At the image's own edge nothing lies beyond: no miss.
+    edge = Tracker((560, 700))
+    edge.update(_found(hand), whole=True)
+    assert not edge.missed(_found(hand + [0, 10]), edge.region())
+    # After a miss the frame is searched whole for 2 frames; a second miss in a row makes it 4.
+    tracker.update(_found(hand), whole=True, missed=True)
+    plan = []
+    for _ in range(3):
+        region = tracker.region()
+        plan.append(region is None)
+        tracker.update(_found(hand), whole=True, missed=region is not None)  # the region search misses again
+    assert plan == [True, True, False] and tracker.wait == 4
+    # Every FULL_EVERY-th frame is searched whole.
+    steady = Tracker((1000, 1200))
+    steady.update(_found(hand), whole=True)
+    whole = []
+    for _ in range(2 * FULL_EVERY):
+        region = steady.region()
+        whole.append(region is None)
+        steady.update(_found(hand), whole=region is None)
+    assert [k for k, w in enumerate(whole) if w] == [FULL_EVERY - 1, 2 * FULL_EVERY - 1]
+
+
+@pytest.mark.parametrize("region, expected", [
+    ((101.7, 51.2, 300.2, 200.9), (100, 50, 301, 201)),  # top-left down to even pixels, bottom-right up
+    ((-50, -20, 90000, 90000), (0, 0, 640, 480)),  # clipped to the image
+    ((630, 470, 640, 480), (608, 448, 640, 480)),  # at least MIN_REGION (32) pixels
+])
+def test_region_box(region, expected):
+    assert region_box(region, (480, 640)) == expected
+
+
+@pytest.mark.parametrize("region", [(0, 0, 10), (0, np.nan, 5, 5), "box"])
+def test_bad_region_is_one_clear_error(region):
+    with pytest.raises(HandcapError, match="a region is"):
+        region_box(region, (480, 640))
