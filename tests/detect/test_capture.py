@@ -3,6 +3,8 @@ the whole frame finds, and a hand that jumps away is searched for again on the w
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -15,7 +17,7 @@ from handcap.patterns import session_pattern
 
 DEXTERCAP = "0123456789ACEFHPUY"  # the alphabet of the shared rendered scenes (tests/detect/conftest.py)
 #: Where the scene sits in each frame, pixels: a slow drift, then a jump across the frame, then a drift again.
-SHIFTS = [(0, 0), (6, 4), (12, 8), (640, 520), (646, 524)]
+SHIFTS = [(0, 0), (6, 4), (12, 8), (18, 12), (640, 520), (646, 524)]
 
 
 @pytest.fixture(scope="module")
@@ -45,8 +47,9 @@ def test_tracked_frames_find_what_whole_frames_find(scenes, detector, tmp_path):
     names = detector.pattern.corner_names()
     whole = detect_capture(detector, sources, names, 30.0, track=False, progress=False)
     tracked = detect_capture(detector, sources, names, 30.0, progress=False)
-    # Frames 1 and 2 drift: searched in the region. Frame 3 jumps: the region finds too little and the frame is
-    # searched whole; frame 4 is searched whole too (the tracker waits two frames after a miss).
+    # Frame 1 is searched whole (no motion seen yet); from frame 0 to 1 the patches moved little, so frames 2
+    # and 3 are searched in the region. Frame 4 jumps: the region finds too little and the frame is searched
+    # whole; frame 5 is searched whole too (the tracker waits two frames after a miss).
     assert whole.regions == 0 and tracked.regions == 2
     a, b = whole.arrays, tracked.arrays
     assert np.bincount(a["frame"], minlength=len(SHIFTS)).min() > 40  # named corners in every frame
@@ -63,10 +66,10 @@ def test_tracked_frames_find_what_whole_frames_find(scenes, detector, tmp_path):
 
 
 def _found(blocks: np.ndarray) -> ImageDetections:
-    """Detections holding only the given blocks' corners (B, 4, 2)."""
+    """Detections holding only the given blocks' corners (B, 4, 2), tagged "A0", "A1", ..."""
     b = len(blocks)
     return ImageDetections(blocks.reshape(-1, 2), np.ones(4 * b), np.full(4 * b, None, object),
-                           np.array(["AB"] * b), blocks, np.ones(b), 0)
+                           np.array([f"A{k}" for k in range(b)]), blocks, np.ones(b), 0)
 
 
 def test_the_tracker_searches_whole_when_the_region_may_miss():
@@ -75,16 +78,22 @@ def test_the_tracker_searches_whole_when_the_region_may_miss():
     tracker = Tracker((1000, 1200))
     assert tracker.region() is None  # nothing seen yet: the whole frame
     tracker.update(_found(hand), whole=True)
+    assert tracker.region() is None  # one frame: no motion seen yet
+    tracker.update(_found(hand + [30, 20]), whole=True)
+    assert tracker.region() is None  # moved 30 px, more than half the widening (24 px)
+    tracker.update(_found(hand + [30, 20]), whole=True)  # still: search the region next
     box = tracker.region()
     pad = max(0.25 * 190, 48)
-    np.testing.assert_allclose(box, [500 - pad, 400 - pad, 690 + pad, 545 + pad])
+    np.testing.assert_allclose(box, [530 - pad, 420 - pad, 720 + pad, 565 + pad])
+    hand = hand + [30, 20]
     assert not tracker.missed(_found(hand), box)
     assert not tracker.missed(_found(hand[:6]), box)
     assert tracker.missed(_found(hand[:5]), box)  # fewer than 60 % of the previous frame's blocks
     assert tracker.missed(_found(hand + [30, 0]), box)  # within half the widening of the right edge
     assert tracker.missed(_found(hand[:0]), box)
     # At the image's own edge nothing lies beyond: no miss.
-    edge = Tracker((560, 700))
+    edge = Tracker((585, 730))
+    edge.update(_found(hand), whole=True)
     edge.update(_found(hand), whole=True)
     assert not edge.missed(_found(hand + [0, 10]), edge.region())
     # After a miss the frame is searched whole for 2 frames; a second miss in a row makes it 4.
@@ -98,12 +107,31 @@ def test_the_tracker_searches_whole_when_the_region_may_miss():
     # Every FULL_EVERY-th frame is searched whole.
     steady = Tracker((1000, 1200))
     steady.update(_found(hand), whole=True)
+    steady.update(_found(hand), whole=True)
     whole = []
     for _ in range(2 * FULL_EVERY):
         region = steady.region()
         whole.append(region is None)
         steady.update(_found(hand), whole=region is None)
     assert [k for k, w in enumerate(whole) if w] == [FULL_EVERY - 1, 2 * FULL_EVERY - 1]
+
+
+def test_the_motion_is_read_from_the_tags_both_frames_show():
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    hand = np.stack([square + [500 + 20 * k, 400 + 15 * k] for k in range(10)])
+    tracker = Tracker((1000, 1200))
+    tracker.update(_found(hand), whole=True)
+    # Half the blocks hidden, the rest moved 5 px and listed in another order: the box's centre moved about
+    # 50 px, the tags both frames read only 5.
+    half = _found(hand[:5] + [5, 0])
+    order = np.array([3, 0, 4, 1, 2])
+    tracker.update(replace(half, block_text=half.block_text[order], block_xy=half.block_xy[order]), whole=True)
+    assert tracker.steady and tracker.region() is not None
+    # No tag in common: the box's centre says how far they moved.
+    tracker.update(replace(half, block_text=np.array(["B0", "B1", "B2", "B3", "B4"])), whole=True)
+    assert tracker.steady
+    tracker.update(replace(_found(hand), block_text=np.array([f"C{k}" for k in range(10)])), whole=True)
+    assert not tracker.steady and tracker.region() is None
 
 
 @pytest.mark.parametrize("region, expected", [

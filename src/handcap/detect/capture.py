@@ -6,7 +6,8 @@ The arrays are the 2D detections File contract (``camera_names``,
 ``block_camera``, ``block_xy``, ``block_score``); ``handcap detect`` writes
 them, ``handcap demo --images`` uses them directly.
 
-Tracking: in a camera's run of frames, a frame is searched only around the
+Tracking: in a camera's run of frames, once the patches have moved less than
+half the widening below between two frames, a frame is searched only around the
 patches the previous frame found (their box, widened by :data:`MARGIN` of its
 longer side and at least :data:`MARGIN_PX` on every side), with the whole
 frame's grey levels, so what lies well inside the box is found exactly as a
@@ -16,8 +17,10 @@ box's edge (the hand may reach beyond it), fewer blocks than
 :data:`KEEP_SHARE` of the previous frame's, or :data:`FULL_EVERY` frames since
 the last whole search (a patch coming into view away from the hand). A
 camera whose region search missed searches whole for the next 2, then 4, ...
-frames before it tries a region again (a hand that moves far between frames,
-as in a take filmed at a few frames a second, costs little). On a 5 MP frame
+frames before it tries a region again. The motion is the median shift of the
+tags both frames read (else of the box's centre), so a take filmed at a few
+frames a second, where the hand moves far between frames, is searched whole
+and pays nothing for tracking. On a 5 MP frame
 of a hand the region costs about a third of the whole frame
 (``benchmarks/detect.py``).
 """
@@ -84,10 +87,12 @@ class Tracker:
         self.since_full = 0
         self.wait = 0  # whole frames to search before the next region search
         self.backoff = 1
+        self.steady = False  # the patches moved less than half the widening since the frame before
+        self.centres = {}  # the last frame's block centres by tag
 
     def region(self):
         """The box (x0, y0, x1, y1) to search next, pixels, or None for the whole frame."""
-        if self.box is None or self.wait > 0 or self.since_full + 1 >= FULL_EVERY:
+        if self.box is None or not self.steady or self.wait > 0 or self.since_full + 1 >= FULL_EVERY:
             return None
         return self.box
 
@@ -143,11 +148,25 @@ class Tracker:
             self.wait -= 1
         self.blocks = len(found.block_text)
         if self.blocks == 0:
-            self.box = None
+            self.box, self.steady, self.centres = None, False, {}
             return
         pts = found.block_xy.reshape(-1, 2)
         pad = self._pad(pts)
-        self.box = (*(pts.min(axis=0) - pad), *(pts.max(axis=0) + pad))
+        box = (*(pts.min(axis=0) - pad), *(pts.max(axis=0) + pad))
+        centres = dict(zip(found.block_text, found.block_xy.mean(axis=1)))
+        shift = self._shift(centres, box)
+        self.steady = shift is not None and float(np.abs(shift).max()) <= pad / 2
+        self.box, self.centres = box, centres
+
+    def _shift(self, centres: dict, box) -> np.ndarray | None:
+        """How far the patches moved since the last frame (2,), pixels: the median over the tags both read, else the
+        shift of the box's centre; None without a last frame."""
+        common = [t for t in centres if t in self.centres]
+        if common:
+            return np.median([centres[t] - self.centres[t] for t in common], axis=0)
+        if self.box is None:
+            return None
+        return (np.add(box[:2], box[2:]) - np.add(self.box[:2], self.box[2:])) / 2
 
     @staticmethod
     def _pad(pts: np.ndarray) -> float:
