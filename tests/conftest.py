@@ -10,6 +10,36 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("HANDCAP_SHARED_DATA") or REPO.parent / "shared" / "data")
 
 
+#: Test modules whose tests share an expensive fixture (seconds to build: a rendered session, a trained model),
+#: by group: with pytest-xdist (``make test``) each group runs on one worker, so its fixtures are built once; the
+#: other tests are shared out one at a time. (pytest-xdist's own ``xdist_group`` marks are ignored under pytest 9.2,
+#: pytest-dev/pytest-xdist#1386.)
+SHARED_FIXTURE_GROUPS = {
+    **dict.fromkeys(("tests/occlusion/test_fill.py", "tests/occlusion/test_filler.py", "tests/occlusion/test_train.py"),
+                    "glove-model"),
+    **dict.fromkeys(("tests/solve/test_motion.py", "tests/solve/test_calibration.py",
+                     "tests/solve/test_positionless.py", "tests/solve/test_lm.py"), "solve-sessions"),
+    **{module: module for module in (
+        "tests/session/test_session.py", "tests/solve/test_relabel.py", "tests/stream/test_stream.py",
+        "tests/labeling/test_adapt.py", "tests/labeling/test_synthetic.py", "tests/labeling/test_fingers.py",
+        "tests/labeling/test_cli_label.py", "tests/multiview/test_calibration.py", "tests/objects/test_cube_label.py")},
+}
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist's ``load`` scheduling, except that each of :data:`SHARED_FIXTURE_GROUPS` is one unit of work."""
+    if config.getvalue("dist") not in ("load", "loadgroup"):
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SharedFixtureGroups(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return SHARED_FIXTURE_GROUPS.get(nodeid.split("::", 1)[0], nodeid)
+
+    return SharedFixtureGroups(config, log)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """The folder of real recordings (``../shared/data``); CI has it beside the checkout.

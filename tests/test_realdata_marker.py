@@ -14,8 +14,9 @@ ONE = "tests/io/test_every_real_file.py::test_the_table_covers_every_file"
 def _pytest(*args, **env):
     environment = {k: v for k, v in os.environ.items() if k != "HANDCAP_REQUIRE_REALDATA"}
     environment.update(env)
-    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *args], cwd=REPO,
-                          env=environment, capture_output=True, text=True, timeout=120)
+    # Without the hypothesis plugin (a second of imports each time; these runs use none of it).
+    command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:hypothesispytest", *args]
+    return subprocess.run(command, cwd=REPO, env=environment, capture_output=True, text=True, timeout=120)
 
 
 def test_tests_that_read_the_shared_data_carry_the_marker():

@@ -13,10 +13,11 @@ from handcap.session.example import new_session
 from handcap.steps import metrics as metrics_step
 
 
+
 @pytest.fixture(scope="module")
 def made(tmp_path_factory, gl_ok):
     folder = tmp_path_factory.mktemp("sess") / "lab"
-    new_session(folder, takes=2, frames=260, image_frames=3, progress=False)
+    new_session(folder, takes=2, frames=260, image_frames=2, progress=False)
     return folder
 
 
