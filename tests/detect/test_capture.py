@@ -89,7 +89,10 @@ def test_the_tracker_searches_whole_when_the_region_may_miss():
     assert not tracker.missed(_found(hand), box)
     assert not tracker.missed(_found(hand[:6]), box)
     assert tracker.missed(_found(hand[:5]), box)  # fewer than 60 % of the previous frame's blocks
-    assert tracker.missed(_found(hand + [30, 0]), box)  # within half the widening of the right edge
+    assert tracker.missed(_found(hand + [30, 0]), box)  # within two squares (20 px) of the right edge
+    assert not tracker.missed(_found(hand + [-20, 0]), box)
+    # A block read now that the last frame did not read, 20 px beyond the last frame's blocks: no sign.
+    assert not tracker.missed(_found(np.concatenate([hand, [square + [510, 560]]])), box)
     assert tracker.missed(_found(hand[:0]), box)
     # At the image's own edge nothing lies beyond: no miss.
     edge = Tracker((585, 730))

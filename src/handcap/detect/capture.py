@@ -12,8 +12,9 @@ patches the previous frame found (their box, widened by :data:`MARGIN` of its
 longer side and at least :data:`MARGIN_PX` on every side), with the whole
 frame's grey levels, so what lies well inside the box is found exactly as a
 whole-frame search finds it. The frame is searched whole again when that
-search may have missed something: a block within half the widening of the
-box's edge (the hand may reach beyond it), fewer blocks than
+search may have missed something: a block within two of its squares (and
+half the widening) of the box's edge (the hand may reach beyond it), fewer
+blocks than
 :data:`KEEP_SHARE` of the previous frame's, or :data:`FULL_EVERY` frames since
 the last whole search (a patch coming into view away from the hand). A
 camera whose region search missed searches whole for the next 2, then 4, ...
@@ -115,7 +116,10 @@ class Tracker:
         x0, y0, x1, y1 = region_box(region, self.shape)
         h, w = self.shape
         pts = found.block_xy.reshape(-1, 2)
-        slack = self._pad(pts) / 2
+        # Within two squares of the edge the hand may go on beyond it (the patch next to the outermost block
+        # found lies outside); a block read now that the last frame did not read, further in, is no sign.
+        sides = np.linalg.norm(np.roll(found.block_xy, -1, axis=1) - found.block_xy, axis=2)
+        slack = min(2 * float(np.median(sides)), self._pad(pts) / 2)
         near = np.zeros(len(pts), bool)
         if x0 > 0:
             near |= pts[:, 0] < x0 + slack
