@@ -28,9 +28,11 @@ JOBS ?= 2
 # workers of two threads each on two cores wait on each other's spinning threads: on the 2-core VM, in the same hour,
 # 604 s (18.6 min of CPU) with the libraries' defaults against 513 s (15.5 min of CPU) with one thread each.
 THREADS ?= $(shell $(PYTHON) -c 'import os; print(max(1, (os.cpu_count() or 1) // $(JOBS)))')
+# PYTHONDONTWRITEBYTECODE unset: the suite starts dozens of Python processes (the workers, command-line runs,
+# process pools, Dask workers), and without cached bytecode each one compiles every module it imports again.
 test: $(STAMP)
-	OMP_NUM_THREADS=$(THREADS) OPENBLAS_NUM_THREADS=$(THREADS) MKL_NUM_THREADS=$(THREADS) \
-		$(BIN)/python -m pytest -q -n $(JOBS)
+	env -u PYTHONDONTWRITEBYTECODE OMP_NUM_THREADS=$(THREADS) OPENBLAS_NUM_THREADS=$(THREADS) \
+		MKL_NUM_THREADS=$(THREADS) $(BIN)/python -m pytest -q -n $(JOBS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks tools
