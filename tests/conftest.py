@@ -26,14 +26,6 @@ SHARED_FIXTURE_GROUPS = {
 }
 
 
-#: Modules with single tests of 10 s or more (``pytest --durations``), run first: a worker that starts one of them
-#: last keeps the run going after the other has finished.
-RUN_FIRST = ("tests/test_demo_images.py", "tests/occlusion/test_generalise.py", "tests/markerless/test_grasp.py",
-             "tests/detect/test_refine.py", "tests/detect/test_scenefile.py", "tests/detect/test_capture.py",
-             "tests/test_imports.py", "tests/multiview/test_reconstruct.py", "tests/labeling/test_defer.py",
-             "tests/test_realdata_marker.py", "tests/hand/test_mano.py", "tests/test_demo.py")
-
-
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """pytest-xdist's ``load`` scheduling, except that each of :data:`SHARED_FIXTURE_GROUPS` is one unit of work."""
@@ -84,9 +76,6 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "shared_data" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.realdata)
-    first = [item for item in items if item.nodeid.split("::", 1)[0] in RUN_FIRST]
-    if first:  # a stable reorder: the same in every pytest-xdist worker
-        items[:] = first + [item for item in items if item.nodeid.split("::", 1)[0] not in RUN_FIRST]
 
 
 _seen_realdata: list = []
