@@ -30,9 +30,10 @@ JOBS ?= 2
 THREADS ?= $(shell $(PYTHON) -c 'import os; print(max(1, (os.cpu_count() or 1) // $(JOBS)))')
 # PYTHONDONTWRITEBYTECODE unset: the suite starts dozens of Python processes (the workers, command-line runs,
 # process pools, Dask workers), and without cached bytecode each one compiles every module it imports again.
+# LP_NUM_THREADS: Mesa's software rasteriser (the renderer's tests) takes the worker's share of the cores too.
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE OMP_NUM_THREADS=$(THREADS) OPENBLAS_NUM_THREADS=$(THREADS) \
-		MKL_NUM_THREADS=$(THREADS) $(BIN)/python -m pytest -q -n $(JOBS)
+		MKL_NUM_THREADS=$(THREADS) LP_NUM_THREADS=$(THREADS) $(BIN)/python -m pytest -q -n $(JOBS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks tools
