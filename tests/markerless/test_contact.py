@@ -23,6 +23,13 @@ def test_object_field_is_the_signed_distance(grasp):
     err = np.abs(field(points[near]) - exact[near])
     assert np.percentile(err, 99) < 0.8e-3 and err.max() < 2e-3  # sampled at 1 mm; off at sharp edges
     assert (np.sign(field(points[np.abs(exact) > 0.001])) == np.sign(exact[np.abs(exact) > 0.001])).mean() > 0.99
+    # with each point's surface sample given (points moved a little, batched), the same distances
+    idx = field.nearest(points)
+    moved = points + rng.normal(0, 1e-7, points.shape)
+    given = field(np.stack([points, moved]), idx)
+    assert given.shape == (2, len(points))
+    np.testing.assert_array_equal(given[0], field(points))
+    assert (given[1] == field(moved)).mean() > 0.99 and np.abs(given[1] - field(moved)).max() < 1e-3
 
 
 def test_refinement_lowers_penetration_and_contact_distance(grasp):

@@ -118,17 +118,28 @@ class ObjectField:
         self.points, self.normals = points, mesh.face_normals[face]
         self.tree = cKDTree(points)
 
-    def __call__(self, points) -> np.ndarray:
-        """Signed distance (N,) of points (N, 3) in the object frame, metres (negative inside)."""
+    def __call__(self, points, nearest=None) -> np.ndarray:
+        """Signed distance (...,) of points (..., 3) in the object frame, metres (negative inside).
+
+        ``nearest`` (N,) gives the index of each point's surface sample (:meth:`nearest`) instead of searching:
+        for points moved too little to change it (the steps of a numerical derivative), broadcast over
+        the leading axes of ``points`` (..., N, 3).
+        """
         points = np.asarray(points, dtype=np.float64)
-        euclid, idx = self.tree.query(points)
-        plane = np.einsum("ij,ij->i", points - self.points[idx], self.normals[idx])
+        idx = self.nearest(points) if nearest is None else nearest
+        away = points - self.points[idx]
+        euclid = np.linalg.norm(away, axis=-1)
+        plane = np.einsum("...j,...j->...", away, self.normals[idx])
         # outside, beyond a convex edge the plane distance falls short: the distance to the sample is the one
         return np.where(plane > 0, euclid, plane)
 
+    def nearest(self, points) -> np.ndarray:
+        """Index (...,) of the surface sample nearest each point (..., 3), object frame."""
+        return self.tree.query(np.asarray(points, dtype=np.float64))[1]
+
 
 def refine_grasp(hand, betas, phi, orient, transl, contact_map: ContactMap, object_pose=None, *,
-                 iterations: int = 30) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 iterations: int = 30, field: ObjectField | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Refine one hand pose against an object's contact map.
 
     Parameters
@@ -144,6 +155,8 @@ def refine_grasp(hand, betas, phi, orient, transl, contact_map: ContactMap, obje
         Object frame to world (default: identity).
     iterations : int
         Most evaluations of the least squares.
+    field : ObjectField, optional
+        The contact map's object field, where the caller has made it (it is slow to make).
 
     Returns
     -------
@@ -151,31 +164,52 @@ def refine_grasp(hand, betas, phi, orient, transl, contact_map: ContactMap, obje
     """
     pose = np.eye(4) if object_pose is None else np.asarray(object_pose, dtype=np.float64)
     obj_world = contact_map.vertices @ pose[:3, :3].T + pose[:3, 3]
-    field = ObjectField(contact_map.vertices, contact_map.faces)
+    field = ObjectField(contact_map.vertices, contact_map.faces) if field is None else field
     start = np.r_[np.asarray(orient, dtype=np.float64), np.asarray(transl, dtype=np.float64), phi]
     touched, free = obj_world[contact_map.contacted], obj_world[~contact_map.contacted]
     # only the uncontacted vertices the hand can reach matter (within 3 cm of its start)
     near_start = cKDTree(hand.forward(betas, start[:3], None, start[3:6], phi=start[6:]).vertices)
     free = free[np.isfinite(near_start.query(free, distance_upper_bound=0.03)[0])]
     world_to_object = np.linalg.inv(pose)
+    scale = np.r_[[STAY_POSE * 0.05] * 3, [STAY_POSE] * 3, [STAY_ANGLE] * 27]
 
-    def vertices(p):
-        return hand.forward(betas, p[:3], None, p[3:6], phi=p[6:]).vertices
+    def vertices(p):  # (..., 33) -> (..., V, 3)
+        return hand.forward(betas, p[..., :3], None, p[..., 3:6], phi=p[..., 6:]).vertices
+
+    def in_object(verts):
+        return verts @ world_to_object[:3, :3].T + world_to_object[:3, 3]
+
+    def pairs(verts):
+        """Each contacted vertex's nearest hand vertex, the hand vertices within the margin of the others, and
+        each hand vertex's nearest sample of the object's surface."""
+        tree = cKDTree(verts)
+        touch = tree.query(touched)[1] if len(touched) else np.zeros(0, int)
+        near, close = tree.query(free, distance_upper_bound=MARGIN) if len(free) else (np.zeros(0), np.zeros(0, int))
+        return touch, np.isfinite(near), np.minimum(close, len(verts) - 1), field.nearest(in_object(verts))
+
+    def terms(verts, p, touch, active, close, surface):
+        """The residuals of hand vertices ``verts`` (..., V, 3) with these nearest pairs, for parameters p (..., 33)."""
+        d_touch = np.linalg.norm(verts[..., touch, :] - touched, axis=-1)
+        repel = np.where(active, MARGIN - np.linalg.norm(verts[..., close, :] - free, axis=-1), 0.0)
+        inside = field(in_object(verts), surface)
+        stay = scale * (p - start)  # the pull to the estimate: 0.05 m of lever per radian of global turn
+        return np.concatenate([ATTRACT * d_touch, REPEL * repel, PENETRATE * np.minimum(inside, 0.0), stay], axis=-1)
 
     def residual(p):
         verts = vertices(p)
-        tree = cKDTree(verts)
-        d_touch = tree.query(touched)[0] if len(touched) else np.zeros(0)
-        near = tree.query(free, distance_upper_bound=MARGIN)[0] if len(free) else np.zeros(0)
-        repel = np.where(np.isfinite(near), MARGIN - near, 0.0)
-        inside = field(verts @ world_to_object[:3, :3].T + world_to_object[:3, 3])
-        # the pull to the estimate: 0.05 m of lever per radian of global turn
-        stay = np.r_[STAY_POSE * 0.05 * (p[:3] - start[:3]), STAY_POSE * (p[3:6] - start[3:6]),
-                     STAY_ANGLE * (p[6:] - start[6:])]
-        return np.r_[ATTRACT * d_touch, REPEL * repel, PENETRATE * np.minimum(inside, 0.0), stay]
+        return terms(verts, p, *pairs(verts))
 
-    fit = least_squares(residual, start, diff_step=1e-5, max_nfev=iterations, x_scale=np.r_[[0.05] * 3, [0.005] * 3,
-                                                                                             [0.05] * 27])
+    def jacobian(p):
+        # Forward differences of all 33 parameters in one batched pass of the hand, each with the nearest
+        # pairs of p (a step this small moves no vertex past another); the pull to the estimate is linear.
+        step = 1e-5 * np.maximum(1.0, np.abs(p))
+        shifted = p + np.diag(step)
+        verts = vertices(np.vstack([p, shifted]))
+        found = terms(verts, np.vstack([p, shifted]), *pairs(verts[0]))
+        return ((found[1:] - found[0]) / step[:, None]).T
+
+    fit = least_squares(residual, start, jac=jacobian, max_nfev=iterations,
+                        x_scale=np.r_[[0.05] * 3, [0.005] * 3, [0.05] * 27])
     return fit.x[6:], fit.x[:3], fit.x[3:6]
 
 

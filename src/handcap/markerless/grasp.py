@@ -328,7 +328,7 @@ def capture_grasp(pixels, camera, vertices, faces, *, object_pose=None, object_p
         field = ObjectField(contact_map.vertices, contact_map.faces)
         _, c0, p0 = _contact_figures(hand, motion, frame, contact_map, field, object_pose)
         phi, orient, transl = refine_grasp(hand, motion.betas, motion.phi[frame], motion.global_orient[frame],
-                                           motion.transl[frame], contact_map, object_pose)
+                                           motion.transl[frame], contact_map, object_pose, field=field)
         refined = _model_poses(hand, motion.betas, orient, transl)
         moved = poses @ (np.linalg.inv(poses[frame]) @ refined)
         with warnings.catch_warnings():
