@@ -48,6 +48,9 @@ ICP_OUTLIER = 3.0
 #: Two ICP starts whose poses differ by more than this (degrees) and whose fits are within
 #: :data:`AMBIGUOUS_COST` of each other mean the cloud does not fix the pose (a symmetric object).
 AMBIGUOUS_DEG, AMBIGUOUS_COST = 10.0, 1.15
+#: Without a start, each of the 24 turns is first fitted with this many of the cloud's points (drawn at random)
+#: and only those whose fit costs at most :data:`ICP_RECHECK` times the best go on to the whole cloud.
+ICP_COARSE, ICP_RECHECK = 500, 3.0
 #: A cloud whose median distance to the fitted mesh is above this (metres) is not the object.
 ICP_WARNING = 0.003
 #: Scales searched for the hand (relative to the size assumed).
@@ -112,28 +115,46 @@ def object_pose_from_points(vertices, faces, points, initial=None, *, seed: int 
             m = np.eye(4)
             m[:3, :3] = turn
             starts.append(shift @ m @ to_centre)  # camera points to the object's frame
-    fits = []
-    for start in starts:
-        matrix = trimesh.registration.icp(points, samples, initial=start, threshold=1e-7, max_iterations=60)[0]
-        d = tree.query(_transform(matrix, points))[0]
-        keep = d <= max(ICP_OUTLIER * np.median(d), 1e-4)
-        matrix = trimesh.registration.icp(points[keep], samples, initial=matrix, threshold=1e-8,
-                                          max_iterations=60)[0]
-        d = tree.query(_transform(matrix, points[keep]))[0]
-        fits.append((float(np.mean(d ** 2)), float(np.median(d)), matrix))
-    fits.sort(key=lambda f: f[0])
+    if len(starts) > 1 and len(points) > 2 * ICP_COARSE:  # coarse to fine: the turns on a few points first
+        few = points[np.random.default_rng(seed).choice(len(points), ICP_COARSE, replace=False)]
+        coarse = sorted((_icp(few, samples, tree, start) for start in starts), key=lambda f: f[0])
+        starts = [f[2] for f in coarse if f[0] <= ICP_RECHECK * coarse[0][0]]
+    fits, turn = [], None
+    for start in starts:  # best coarse fit first; once two poses fit equally well, the rest cannot say more
+        fits = sorted(fits + [_icp(points, samples, tree, start)], key=lambda f: f[0])
+        turn = _ambiguous(fits)
+        if turn is not None:
+            break
     cost, distance, matrix = fits[0]
     found = []
-    for other_cost, _, other in fits[1:]:
-        turn = np.rad2deg(Rotation.from_matrix(other[:3, :3] @ matrix[:3, :3].T).magnitude())
-        if turn > AMBIGUOUS_DEG and other_cost <= AMBIGUOUS_COST * cost:
-            found.append(f"the object's points fit poses {turn:.0f} degrees apart equally well (a symmetric shape, "
-                         f"or too few points): give the object's pose as a start")
-            break
+    if turn is not None:
+        found.append(f"the object's points fit poses {turn:.0f} degrees apart equally well (a symmetric shape, "
+                     f"or too few points): give the object's pose as a start")
     if distance > ICP_WARNING:
         found.append(f"the object's points lie {1000 * distance:.1f} mm from its fitted mesh (median): are they "
                      f"the object's, in metres?")
     return np.linalg.inv(matrix), distance, found
+
+
+def _ambiguous(fits) -> float | None:
+    """The turn (degrees) from the best of ``fits`` (sorted by cost) to another that fits about as well, or None."""
+    cost, _, matrix = fits[0]
+    for other_cost, _, other in fits[1:]:
+        turn = np.rad2deg(Rotation.from_matrix(other[:3, :3] @ matrix[:3, :3].T).magnitude())
+        if turn > AMBIGUOUS_DEG and other_cost <= AMBIGUOUS_COST * cost:
+            return float(turn)
+    return None
+
+
+def _icp(points, samples, tree, start) -> tuple[float, float, np.ndarray]:
+    """ICP of ``points`` onto ``samples`` (with their tree) from ``start``, again without the outliers of the first:
+    the mean squared and the median distance of the points kept, and the matrix (points to samples)."""
+    matrix = trimesh.registration.icp(points, samples, initial=start, threshold=1e-7, max_iterations=60)[0]
+    d = tree.query(_transform(matrix, points))[0]
+    keep = d <= max(ICP_OUTLIER * np.median(d), 1e-4)
+    matrix = trimesh.registration.icp(points[keep], samples, initial=matrix, threshold=1e-8, max_iterations=60)[0]
+    d = tree.query(_transform(matrix, points[keep]))[0]
+    return float(np.mean(d ** 2)), float(np.median(d)), matrix
 
 
 def hand_poses(motion: HandMotion, hand) -> np.ndarray:

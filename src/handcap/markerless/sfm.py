@@ -368,10 +368,17 @@ def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotat
     n_off = 63 if offsets else 0
     n_head = 27 + n_shape + n_off
 
+    models = {}  # the keypoint models of the shapes last seen: most evaluations (a derivative's steps) keep it
+
     def model_points(p):
         b = np.array(betas, dtype=np.float64)
         b[shape_free] = p[27:27 + n_shape]
-        x = KeypointModel(hand, b).positions(np.zeros((1, 3)), np.eye(3)[None], p[None, :27])[0]
+        key = b.tobytes()
+        if key not in models:
+            if len(models) > 2 * n_shape:
+                models.clear()
+            models[key] = KeypointModel(hand, b)
+        x = models[key].positions(np.zeros((1, 3)), np.eye(3)[None], p[None, :27])[0]
         return x + p[27 + n_shape:n_head].reshape(-1, 3) if offsets else x, b
 
     def residual(p):
