@@ -185,7 +185,7 @@ def carry_object(poses, frame: int, object_pose) -> np.ndarray:
     return poses @ hand_from_object
 
 
-def scale_from_contact(hand_vertices, contact_map: ContactMap, object_pose) -> float:
+def scale_from_contact(hand_vertices, contact_map: ContactMap, object_pose, field: ObjectField | None = None) -> float:
     """How much larger the hand must be, scaled about the camera's centre, to touch the contacted object points.
 
     Parameters
@@ -195,6 +195,8 @@ def scale_from_contact(hand_vertices, contact_map: ContactMap, object_pose) -> f
     contact_map : ContactMap
     object_pose : ndarray (4, 4)
         Object to camera.
+    field : ObjectField, optional
+        The contact map's object field, where the caller has made it.
 
     Returns
     -------
@@ -204,7 +206,7 @@ def scale_from_contact(hand_vertices, contact_map: ContactMap, object_pose) -> f
     touched = _transform(object_pose, contact_map.vertices[contact_map.contacted])
     if not len(touched):
         raise HandcapError("the contact map has no contacted vertex: the hand's size cannot be measured from it")
-    field = ObjectField(contact_map.vertices, contact_map.faces)
+    field = ObjectField(contact_map.vertices, contact_map.faces) if field is None else field
     inverse = np.linalg.inv(object_pose)
     hand_vertices = np.asarray(hand_vertices, dtype=np.float64)
 
@@ -328,11 +330,12 @@ def capture_grasp(pixels, camera, vertices, faces, *, object_pose=None, object_p
         raise HandcapError(f"frame {frame}, where the object was measured, has too few keypoints to place the hand")
     used = scale or 1.0
     figures = {"icp_mm": icp}
+    field = None if contact_map is None else ObjectField(contact_map.vertices, contact_map.faces)
     if contact_map is not None and scale is None:
         for _ in range(2):  # the size feeds the solve non-linearly: once more from the first measure
             verts = hand.forward(video.motion.betas, video.motion.global_orient[frame], video.motion.hand_pose[frame],
                                  video.motion.transl[frame]).vertices
-            factor = scale_from_contact(verts, contact_map, object_pose)
+            factor = scale_from_contact(verts, contact_map, object_pose, field)
             if abs(factor - 1.0) < 0.005:
                 break
             used = float(np.clip(used * factor, 0.5, 2.0))
@@ -346,7 +349,6 @@ def capture_grasp(pixels, camera, vertices, faces, *, object_pose=None, object_p
     poses = hand_poses(video.motion, hand)
     motion = video.motion
     if contact_map is not None:
-        field = ObjectField(contact_map.vertices, contact_map.faces)
         _, c0, p0 = _contact_figures(hand, motion, frame, contact_map, field, object_pose)
         phi, orient, transl = refine_grasp(hand, motion.betas, motion.phi[frame], motion.global_orient[frame],
                                            motion.transl[frame], contact_map, object_pose, field=field)
