@@ -119,7 +119,7 @@ def test_a_frame_whose_pose_jumps_is_solved_again_from_its_neighbours(video):
 
 
 def test_learned_offsets_make_eq2_angles_better(video):
-    import handcap.markerless.sfm as sfm
+    import handcap.markerless.jointfit as jointfit
 
     pixels = video.camera.undistort_pixels(video.pixels)
     hand = OpenHand()
@@ -128,7 +128,7 @@ def test_learned_offsets_make_eq2_angles_better(video):
     rot, trans = two.structure.rotation, two.structure.translation
     errors = {}
     for offsets in (False, True):
-        phi, _, structure = sfm.joint_fit(pixels, video.camera.matrix, hand, two.two_stage, fitted_phi, betas, rot,
+        phi, _, structure = jointfit.joint_fit(pixels, video.camera.matrix, hand, two.two_stage, fitted_phi, betas, rot,
                                           trans, offsets=offsets)
         errors[offsets] = np.degrees(np.abs(phi - video.phi)).mean()
     assert errors[True] < errors[False], errors

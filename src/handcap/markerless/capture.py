@@ -22,7 +22,8 @@ from handcap.hand import OpenHand
 from handcap.markerless.fit import fit_keypoints
 from handcap.markerless.joint_model import KeypointModel
 from handcap.markerless.keypoints import KEYPOINT_NAMES, split_hand_name
-from handcap.markerless.sfm import (ROBUST_PX, VideoStructure, continuous_poses, joint_fit, project_points,
+from handcap.markerless.jointfit import joint_fit
+from handcap.markerless.sfm import (ROBUST_PX, VideoStructure, continuous_poses, project_points,
                                    structure_from_motion, template_points)
 from handcap.quality.plausibility import attach, shape_warnings
 

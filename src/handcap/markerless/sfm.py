@@ -9,7 +9,7 @@ moving virtual camera, one pose per frame.
   adjustment of the 21 keypoints ``X`` and the camera poses (scipy's
   ``least_squares`` with the Jacobian's sparsity, a Cauchy loss against wrong
   keypoints), then the hand model fitted to ``X``.
-* **Joint** (the paper's future work, :func:`joint_fit`): eq. 2, the same
+* **Joint** (the paper's future work, :func:`~handcap.markerless.jointfit.joint_fit`): eq. 2, the same
   reprojection error with the keypoints given by the hand model,
   ``X = J(phi, betas) + o``, so pose and shape are the unknowns instead of 63 free
   coordinates; the solver's anatomical priors (joint limits, DIP-PIP coupling) and a shape prior join
@@ -50,22 +50,12 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.hand.anatomy import relaxed_pose
-from handcap.markerless.fit import ROBUST_SCALE as KEYPOINT_ROBUST_SCALE
 from handcap.markerless.joint_model import KeypointModel
 from handcap.markerless.keypoints import PALM
-from handcap.solve.lm import Priors, prior_terms
+from handcap.markerless.numdiff import sparse_differences
 
 #: Cauchy scale of the reprojection residuals, pixels: keypoint detectors are 2-5 px off on a hand 200 px tall.
 ROBUST_PX = 4.0
-#: Weight of the shape prior of eq. 2, pixels per shape unit.
-SHAPE_WEIGHT = 3.0
-#: Prior standard deviation of a keypoint's constant offset from its model joint in eq. 2, metres (where a
-#: detector puts a joint is not its centre of rotation: 2-3 mm on each axis).
-OFFSET_SIGMA = 0.003
-#: Pixels per relative error of the keypoints' palm size against the two-stage structure's (the template's):
-#: with offsets the overall size is no longer held by the first shape value, and the scale of the whole scene
-#: drifted by 5-8 %; quadratic (outside the robust loss), so it holds.
-OFFSET_SIZE_WEIGHT = 1000.0
 #: Least keypoints a frame needs to be placed (PnP and the bundle adjustment).
 MIN_POINTS = 6
 
@@ -176,9 +166,10 @@ def initial_poses(pixels, matrix, points) -> tuple[np.ndarray, np.ndarray]:
     return rot, trans
 
 
-def _palm_size(points):
-    palm = points[PALM]
-    return np.sqrt(((palm - palm.mean(axis=0)) ** 2).sum(axis=1).mean())
+def palm_size(points):
+    """Root mean square distance of the palm's keypoints (..., 21, 3) from their centre: (...,), metres."""
+    palm = points[..., PALM, :]
+    return np.sqrt(((palm - palm.mean(axis=-2, keepdims=True)) ** 2).sum(axis=-1).mean(axis=-1))
 
 
 def structure_from_motion(pixels, matrix, template, *, robust_px: float = ROBUST_PX,
@@ -219,7 +210,7 @@ def structure_from_motion(pixels, matrix, template, *, robust_px: float = ROBUST
     seen = np.isfinite(obs).all(axis=2)  # (F, 21)
     anchor = int(np.argmax(seen.sum(axis=1)))  # the paper anchors one camera: the best seen frame's
     free = np.array([f for f in range(len(frames)) if f != anchor])
-    size0 = _palm_size(template)
+    size0 = palm_size(template)
     t_idx, k_idx = np.nonzero(seen)
 
     def unpack(p):
@@ -246,9 +237,9 @@ def structure_from_motion(pixels, matrix, template, *, robust_px: float = ROBUST
         for c in range(6):
             sparsity[2 * row[has] + a, column_of_frame[t_idx[has]] + c] = 1
     start = np.r_[template.reshape(-1), np.c_[rot0[frames][free], trans0[frames][free]].reshape(-1)]
-    x, rv, tv = unpack(_graduated(residual, start, sparsity, robust_px, max_nfev, 2 * len(t_idx)))
-    k = size0 / _palm_size(x)  # the scale is a gauge of the pixels: set it exactly, outside the robust loss
-    return _structure(pixels, matrix, k * x, frames, rv, k * tv)
+    x, rv, tv = unpack(graduated_fit(residual, start, sparsity, robust_px, max_nfev, 2 * len(t_idx)))
+    k = size0 / palm_size(x)  # the scale is a gauge of the pixels: set it exactly, outside the robust loss
+    return video_structure(pixels, matrix, k * x, frames, rv, k * tv)
 
 
 #: A frame whose pose turns more than this from both its placed neighbours' (degrees) is solved again from
@@ -302,7 +293,7 @@ def continuous_poses(pixels, matrix, structure: VideoStructure, *, jump_deg: flo
                 best, best_err = (fit.x[:3], fit.x[3:]), err
         if best is not None and best_err <= 1.5 * _median_px(matrix, rot[t], trans[t], points[seen], pixels[t, seen]):
             rot[t], trans[t] = best
-    return _structure(pixels, matrix, points, placed, rot[placed], trans[placed])
+    return video_structure(pixels, matrix, points, placed, rot[placed], trans[placed])
 
 
 def _pose_residual(q, matrix, points, pixels):
@@ -314,7 +305,25 @@ def _median_px(matrix, rv, tv, points, pixels) -> float:
     return float(np.median(np.linalg.norm(proj - pixels, axis=1)))
 
 
-def _structure(pixels, matrix, points, frames, rv, tv) -> VideoStructure:
+def video_structure(pixels, matrix, points, frames, rv, tv) -> VideoStructure:
+    """A :class:`VideoStructure` of fitted keypoints and the poses of the frames fitted, with its residuals.
+
+    Parameters
+    ----------
+    pixels : ndarray (T, 21, 2)
+        Undistorted pixels, NaN where not given.
+    matrix : ndarray (3, 3)
+    points : ndarray (21, 3)
+        Keypoints in the hand's frame, metres.
+    frames : ndarray (F,) int
+        The frames fitted.
+    rv, tv : ndarray (F, 3)
+        Their camera-from-hand poses (axis-angle, metres).
+
+    Returns
+    -------
+    VideoStructure
+    """
     n = len(pixels)
     rot, trans = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
     rot[frames], trans[frames] = rv, tv
@@ -323,128 +332,48 @@ def _structure(pixels, matrix, points, frames, rv, tv) -> VideoStructure:
     return VideoStructure(points, rot, trans, residual)
 
 
-def joint_fit(pixels, matrix, hand, structure: VideoStructure, phi, betas, rotation, translation, *,
-              robust_px: float = ROBUST_PX, fit_scale: bool = False, priors: Priors | None = None,
-              max_nfev: int = 40, offsets: bool = True):
-    """Eq. 2: hand pose, shape and camera poses from the reprojection error of the model's keypoints.
-
-    Parameters
-    ----------
-    pixels : ndarray (T, 21, 2)
-        Undistorted pixels, NaN where not given.
-    matrix : ndarray (3, 3)
-    hand : HandModel
-    structure : VideoStructure
-        The two-stage result: which frames are placed, and their start.
-    phi : ndarray (27,)
-        Starting pose, radians.
-    betas : ndarray (10,)
-        Starting shape.
-    rotation, translation : ndarray (T, 3)
-        Starting camera-from-hand poses of the model's frame (NaN for frames not placed).
-    robust_px : float
-    fit_scale : bool
-        Fit the first shape value (overall size) too; off by default, as one camera cannot see it.
-    priors : Priors, optional
-        The anatomical priors of :func:`handcap.solve.lm.prior_terms` (default: the solver's).
-    max_nfev : int
-    offsets : bool
-        Learn each keypoint's constant offset from its model joint (hand frame, a Gaussian prior of
-        :data:`OFFSET_SIGMA`): the hand is still, so the offset is the same in every frame.
-
-    Returns
-    -------
-    phi : ndarray (27,)
-    betas : ndarray (10,)
-    structure : VideoStructure
-        The model's keypoints (plus the learned offsets) and the camera poses.
-    """
-    frames = np.flatnonzero(np.isfinite(rotation).all(axis=1))
-    obs = pixels[frames]
-    seen = np.isfinite(obs).all(axis=2)
-    t_idx, k_idx = np.nonzero(seen)
-    shape_free = np.arange(10) if fit_scale else np.arange(1, 10)
-    n_shape = len(shape_free)
-    n_off = 63 if offsets else 0
-    n_head = 27 + n_shape + n_off
-
-    models = {}  # the keypoint models of the shapes last seen: most evaluations (a derivative's steps) keep it
-
-    def model_points(p):
-        b = np.array(betas, dtype=np.float64)
-        b[shape_free] = p[27:27 + n_shape]
-        key = b.tobytes()
-        if key not in models:
-            if len(models) > 2 * n_shape:
-                models.clear()
-            models[key] = KeypointModel(hand, b)
-        x = models[key].positions(np.zeros((1, 3)), np.eye(3)[None], p[None, :27])[0]
-        return x + p[27 + n_shape:n_head].reshape(-1, 3) if offsets else x, b
-
-    def residual(p):
-        x, b = model_points(p)
-        poses = p[n_head:].reshape(-1, 6)
-        proj = project_points(matrix, poses[:, :3], poses[:, 3:], x)
-        r = (proj - np.nan_to_num(obs))[t_idx, k_idx].reshape(-1)
-        prior = prior_terms(p[None, :27], priors, no_hold)[0][0]
-        if not offsets:
-            return np.r_[r, prior_scale * prior, SHAPE_WEIGHT * b[shape_free]]
-        size = OFFSET_SIZE_WEIGHT * (_palm_size(x) / palm0 - 1.0)
-        return np.r_[r, prior_scale * prior, SHAPE_WEIGHT * b[shape_free],
-                     robust_px / OFFSET_SIGMA * p[27 + n_shape:n_head], size]
-
-    priors = Priors() if priors is None else priors
-    no_hold = np.zeros((1, 27), bool)
-    palm0 = _palm_size(structure.points)
-    # The solver's anatomical priors (limits, DIP-PIP coupling, a weak pull to the relaxed hand), weighed
-    # against the pixels as the two-stage fit weighs them against 3D keypoints that average every frame:
-    # pixels per metre at the two robust scales, times the square root of the frames.
-    prior_scale = robust_px / KEYPOINT_ROBUST_SCALE * np.sqrt(len(frames))
-    n_prior = prior_terms(np.zeros((1, 27)), priors, no_hold)[0].shape[1]
-    n_obs = 2 * len(t_idx)
-    sparsity = lil_matrix((n_obs + n_prior + n_shape + n_off + (1 if offsets else 0), n_head + 6 * len(frames)),
-                          dtype=int)
-    sparsity[:n_obs, :27 + n_shape] = 1
-    row = np.arange(len(t_idx))
-    for a in range(2):
-        for c in range(6):
-            sparsity[2 * row + a, n_head + 6 * t_idx + c] = 1
-        if offsets:
-            for c in range(3):
-                sparsity[2 * row + a, 27 + n_shape + 3 * k_idx + c] = 1
-    sparsity[n_obs:n_obs + n_prior, :27] = 1
-    sparsity[n_obs + n_prior + np.arange(n_shape), 27 + np.arange(n_shape)] = 1
-    sparsity[n_obs + n_prior + n_shape + np.arange(n_off), 27 + n_shape + np.arange(n_off)] = 1
-    if offsets:
-        sparsity[-1, :27 + n_shape] = 1
-        sparsity[-1, 27 + n_shape + 3 * PALM[:, None] + np.arange(3)] = 1
-    start = np.r_[phi, np.asarray(betas)[shape_free], np.zeros(n_off),
-                  np.c_[rotation[frames], translation[frames]].reshape(-1)]
-    p = _graduated(residual, start, sparsity, robust_px, max_nfev, n_obs)
-    x, b = model_points(p)
-    poses = p[n_head:].reshape(-1, 6)
-    return p[:27], b, _structure(pixels, matrix, x, frames, poses[:, :3], poses[:, 3:])
-
-
-def _graduated(residual, start, sparsity, robust_px, max_nfev, n_obs) -> np.ndarray:
+def graduated_fit(residual, start, sparsity, robust_px, max_nfev, n_obs, batched=None) -> np.ndarray:
     """Least squares with a Cauchy loss whose scale falls from the start's typical residual to ``robust_px``.
 
     A robust loss far narrower than the start's errors is flat there (every residual counts as an outlier)
-    and the solver stops where it began; so the scale starts at the median residual and halves down to
+    and the solver stops where it began; so the scale starts at the median residual and falls by thirds to
     ``robust_px``, each stage starting from the last.
+
+    Parameters
+    ----------
+    residual : callable
+        Residuals (m,) of a parameter vector (n,): the ``n_obs`` pixel residuals first, then the priors.
+    start : ndarray (n,)
+    sparsity : scipy sparse (m, n)
+        Where a residual depends on a parameter.
+    robust_px : float
+        The Cauchy scale of the last stage, pixels.
+    max_nfev : int
+        Most residual evaluations of each stage.
+    n_obs : int
+        Pixel residuals, under the robust loss.
+    batched : callable, optional
+        Residuals (B, m) of parameter vectors (B, n): then the Jacobian's forward differences are taken in one
+        call of it (:func:`~handcap.markerless.numdiff.sparse_differences`), else by scipy one group of columns
+        at a time.
+
+    Returns
+    -------
+    ndarray (n,)
     """
     r = np.abs(residual(start)[:n_obs])
     scale = max(float(np.median(r)) if len(r) else robust_px, robust_px)
     p = start
 
-    def robust(q):  # Cauchy on the pixels only (Triggs' square-root form): the priors stay quadratic
-        res = residual(q)
-        pix = res[:n_obs]
-        res[:n_obs] = np.sign(pix) * scale * np.sqrt(np.log1p((pix / scale) ** 2))
+    def cauchy(res):  # Cauchy on the pixels only (Triggs' square-root form): the priors stay quadratic
+        pix = res[..., :n_obs]
+        res[..., :n_obs] = np.sign(pix) * scale * np.sqrt(np.log1p((pix / scale) ** 2))
         return res
 
+    jac = {"jac_sparsity": sparsity} if batched is None else \
+        {"jac": sparse_differences(lambda q: cauchy(batched(q)), sparsity)}
     while True:
-        p = least_squares(robust, p, jac_sparsity=sparsity, x_scale="jac", max_nfev=max_nfev, method="trf").x
+        p = least_squares(lambda q: cauchy(residual(q)), p, x_scale="jac", max_nfev=max_nfev, method="trf", **jac).x
         if scale <= robust_px:
             return p
         scale = max(scale / 3.0, robust_px)
