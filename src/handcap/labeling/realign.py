@@ -100,12 +100,17 @@ def register_to_model(spatial: SpatialModel, local, labels=None, *, weights=None
         else:
             comp = spatial.precision_chol.reshape(-1, 3, 3)
         whiten = comp[pick]  # (N or 1, K, 3, 3)
+        logdet = np.log(np.abs(np.diagonal(comp, axis1=-2, axis2=-1))).sum(axis=-1)[pick]  # (N or 1, K)
         y = local @ rot.T  # (N, 3) turned points
-        d = (y + trans)[:, None] - mu  # (N, K, 3)
-        r = np.matmul(d[:, :, None, :], whiten)[:, :, 0, :]  # whitened residuals W^T d
-        m2 = (r**2).sum(axis=-1)
-        logp = logw + np.log(np.abs(np.diagonal(whiten, axis1=-2, axis2=-1))).sum(axis=-1) \
-            - 1.5 * np.log(2 * np.pi) - 0.5 * m2
+        if labelled:
+            d = (y + trans)[:, None] - mu  # (N, L, 3)
+            r = np.einsum("nkj,nkji->nki", d, whiten)  # whitened residuals W^T d
+        else:  # every point against the same K components: W_k^T (y + t) - W_k^T mu_k as one product
+            w0 = whiten[0]
+            r = ((y + trans) @ w0.transpose(1, 0, 2).reshape(3, -1)).reshape(len(y), -1, 3) \
+                - np.einsum("kj,kji->ki", mu[0], w0)
+        m2 = np.einsum("nki,nki->nk", r, r)
+        logp = logw + logdet - 1.5 * np.log(2 * np.pi) - 0.5 * m2
         top = logp.max(axis=1, keepdims=True)
         p = np.exp(logp - top)
         total = p.sum(axis=1, keepdims=True)
