@@ -13,6 +13,7 @@ the trained one.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from handcap.labeling.frame import HandFrameFinder
 from handcap.labeling.realign import register_to_model
@@ -108,8 +109,11 @@ def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = CANDID
     sides, owner, where = np.concatenate(sides), np.concatenate(owner), np.concatenate(where)
     # For every candidate shape, in how many frames a triangle of that shape (within the tolerance) appears.
     probe = np.linspace(0, len(sides) - 1, min(len(sides), 300)).astype(int)
-    close = (np.abs(sides[probe][:, None] - sides[None]) < tol).all(axis=-1)  # (P, S)
-    frames_with = np.array([len(np.unique(owner[row])) for row in close])
+    near = cKDTree(sides).query_ball_point(sides[probe], r=tol, p=np.inf)  # the shapes within tol, side by side
+    frames_with = np.zeros(len(probe), int)
+    for i, (q, row) in enumerate(zip(probe, near)):
+        row = np.asarray(row, dtype=int)
+        frames_with[i] = len(np.unique(owner[row[(np.abs(sides[row] - sides[q]) < tol).all(axis=1)]]))
     if frames_with.max() < min_share * len(use):
         return []
     out, chosen = [], []
