@@ -195,9 +195,12 @@ def refine_grasp(hand, betas, phi, orient, transl, contact_map: ContactMap, obje
         stay = scale * (p - start)  # the pull to the estimate: 0.05 m of lever per radian of global turn
         return np.concatenate([ATTRACT * d_touch, REPEL * repel, PENETRATE * np.minimum(inside, 0.0), stay], axis=-1)
 
+    last = {}  # the nearest pairs of the parameters last evaluated: the solver asks the Jacobian there next
+
     def residual(p):
         verts = vertices(p)
-        return terms(verts, p, *pairs(verts))
+        last["p"], last["pairs"] = p.copy(), pairs(verts)
+        return terms(verts, p, *last["pairs"])
 
     def jacobian(p):
         # Forward differences of all 33 parameters in one batched pass of the hand, each with the nearest
@@ -205,7 +208,8 @@ def refine_grasp(hand, betas, phi, orient, transl, contact_map: ContactMap, obje
         step = 1e-5 * np.maximum(1.0, np.abs(p))
         shifted = p + np.diag(step)
         verts = vertices(np.vstack([p, shifted]))
-        found = terms(verts, np.vstack([p, shifted]), *pairs(verts[0]))
+        same = "p" in last and np.array_equal(last["p"], p)
+        found = terms(verts, np.vstack([p, shifted]), *(last["pairs"] if same else pairs(verts[0])))
         return ((found[1:] - found[0]) / step[:, None]).T
 
     fit = least_squares(residual, start, jac=jacobian, max_nfev=iterations,
