@@ -10,8 +10,9 @@ import torch
 from handcap import HandcapError
 from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
-from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, crops_at, false_candidates, locate_corners,
-                                   refine_corners, refiner_loss, refiner_samples)
+from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, candidate_negatives, crops_at, false_candidates,
+                                   locate_corners, refine_corners, refiner_loss, refiner_samples)
+from handcap.detect.scenefile import Scene
 from handcap.detect.train import save_net, train_refiner
 
 
@@ -44,6 +45,53 @@ def test_samples_point_at_the_corners_whatever_the_turn(scenes):
     pos = is_corner > 0.5
     assert (np.linalg.norm(offset[pos], axis=1) <= 1.5 + 0.71).all()
     assert (offset[~pos] == 0).all()
+
+
+def _two_corner_scene():
+    """A blank image with two printed corners: a visible one at (20, 20) and a hidden one at (40, 20)."""
+    return Scene(np.zeros((60, 60), np.uint8), np.array([[20.0, 20.0]]), np.array(["a"]), np.zeros((0, 4, 2)),
+                 np.zeros(0, "<U2"), "AB", {"a": np.array([20.0, 20.0]), "b": np.array([40.0, 20.0])})
+
+
+def test_negatives_split_into_false_and_occluders_edges():
+    scene = _two_corner_scene()
+    candidates = np.array([[20.5, 20.0],   # at the visible corner: no negative
+                           [22.5, 20.0],   # 2.5 px from the visible corner: neither (a corner seen from a pixel off)
+                           [41.0, 20.0],   # 1 px from the hidden one: may show at a grazing angle, neither
+                           [42.5, 20.0],   # 2.5 px from the hidden one: an occluder's edge
+                           [40.0, 17.2],   # 2.8 px from it: an occluder's edge
+                           [30.0, 40.0],   # far from both: false
+                           [40.0, 16.5]])  # 3.5 px from the hidden one: false
+    false, occluded = candidate_negatives(candidates, scene)
+    np.testing.assert_array_equal(false, candidates[[5, 6]])
+    np.testing.assert_array_equal(occluded, candidates[[3, 4]])
+    # Without the hidden corners' projections there is no telling an occluder's edge: only the far ones.
+    plain = Scene(scene.image, scene.corners, scene.corner_names, scene.blocks, scene.block_text, "AB")
+    false, occluded = candidate_negatives(candidates, plain)
+    assert len(occluded) == 0
+    np.testing.assert_array_equal(false, candidates[2:])  # all those over 3 px from the visible corner
+
+
+def test_occluders_edges_are_drawn_as_often_as_asked():
+    scene = _two_corner_scene()
+    scene = Scene((np.random.default_rng(0).random((60, 60)) * 255).astype(np.uint8), *list(vars(scene).values())[1:])
+    far, edge = [np.array([[30.0, 40.0]])], [np.array([[42.0, 23.0]])]
+    plain = refiner_samples([scene], 2000, np.random.default_rng(3), far)
+    # With no share asked, the same draws as without them (the shipped weights' commands are unchanged).
+    for a, b in zip(plain, refiner_samples([scene], 2000, np.random.default_rng(3), far, occluded=edge)):
+        np.testing.assert_array_equal(a, b)
+    crops, is_corner, _ = refiner_samples([scene], 2000, np.random.default_rng(3), far, occluded=edge,
+                                          occluded_share=0.5)
+    # Negatives are the 40 % of draws that are no corner; half of them now at the occluder's edge. The crops at
+    # the two points differ, so count them by their distance to a crop at each (the flips and JPEG make copies).
+    negatives = crops[is_corner == 0]
+    assert 0.35 < len(negatives) / 2000 < 0.45
+    at = [crops_at(scene.image, np.array(p, int)).reshape(1, -1) for p in ([[30, 40]], [[42, 23]])]
+    views = [np.stack([v, v[:, ::-1], v[::-1], v[::-1, ::-1]]) for v in (a.reshape(17, 17) for a in at)]
+    views = [np.concatenate([w, w.transpose(0, 2, 1)]).reshape(8, -1) for w in views]
+    flat = negatives.reshape(len(negatives), -1)
+    nearest = np.argmin([np.abs(flat[:, None] - w[None]).mean(axis=2).min(axis=1) for w in views], axis=0)
+    assert 0.4 < nearest.mean() < 0.6, nearest.mean()
 
 
 def test_a_few_training_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):

@@ -50,6 +50,10 @@ BORDER = 2.0
 PRESCREEN = 0.5
 #: Candidates closer than this after refinement are one corner (the better scored is kept), pixels.
 MERGE_PX = 1.0
+#: A candidate farther than this from a hidden corner, and not at a visible one, is an occluder's edge for the
+#: refiner's training (:func:`candidate_negatives`), pixels: the distance past which a named corner is wrong in
+#: :func:`handcap.detect.evaluation.evaluate_detector`.
+OCCLUDED_PX = 2.0
 
 
 class CornerRefiner(nn.Module):
@@ -315,9 +319,9 @@ def _merge(xy: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def false_candidates(corner_net: CornerNet, scene, threshold: float = 0.05, far: float = 3.0) -> np.ndarray:
     """The corner network's candidates in a scene that are no printed corner: (N, 2) pixels.
 
-    A candidate counts as false when it lies over ``far`` pixels from every printed corner, hidden
-    ones included (a corner the truth calls hidden may still show at a grazing angle). The threshold
-    is below the detector's (:data:`CANDIDATES`): more, and harder, negatives.
+    Those over ``far`` pixels from every printed corner, hidden ones included (a corner the truth calls
+    hidden may still show at a grazing angle): the first of :func:`candidate_negatives`. The threshold is
+    below the detector's (:data:`CANDIDATES`): more, and harder, negatives.
 
     Parameters
     ----------
@@ -326,21 +330,55 @@ def false_candidates(corner_net: CornerNet, scene, threshold: float = 0.05, far:
     threshold : float
         Least corner probability of a candidate.
     far : float
-        Least distance from every printed corner, pixels.
+        As :func:`candidate_negatives`.
+    """
+    return candidate_negatives(detect_corners(corner_net, scene.image, threshold=threshold)[0], scene, far)[0]
+
+
+def candidate_negatives(candidates: np.ndarray, scene, far: float = 3.0,
+                        near: float = OCCLUDED_PX) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate corners in a scene that the refiner must turn away, in two kinds.
+
+    * false: over ``far`` pixels from every printed corner, hidden ones included;
+    * occluded: within ``far`` of a printed corner that the truth calls hidden, but over ``near`` from it and
+      over ``far`` from every visible corner. An occluder's edge (a finger, the hand's own outline) crossing
+      a white square's side a few pixels from its hidden corner makes a junction that looks like the corner;
+      a block read through it names a corner two to five pixels from where that corner is.
+
+    A scene without the projections of its hidden corners (``scene.projected``) has no occluded candidates.
+
+    Parameters
+    ----------
+    candidates : ndarray (K, 2)
+        The corner network's candidates, pixels.
+    scene : Scene
+    far : float
+        Least distance of a false candidate from every printed corner, and of an occluded one from every
+        visible corner, pixels.
+    near : float
+        Least distance of an occluded candidate from its hidden corner, pixels.
 
     Returns
     -------
-    ndarray (N, 2)
+    false, occluded : ndarrays (N, 2), (M, 2)
+        Pixels.
     """
-    xy, _ = detect_corners(corner_net, scene.image, threshold=threshold)
+    xy = np.asarray(candidates, dtype=np.float64).reshape(-1, 2)
     printed = np.array(list(scene.projected.values())) if scene.projected else scene.corners
+    none = np.zeros((0, 2))
     if len(xy) == 0 or len(printed) == 0:
-        return xy
-    distance, _ = cKDTree(printed).query(xy)
-    return xy[distance > far]
+        return xy, none
+    distance, nearest = cKDTree(printed).query(xy)
+    if not scene.projected or len(scene.corners) == 0:
+        return xy[distance > far], none
+    seen = set(scene.corner_names)
+    hidden = np.array([name not in seen for name in scene.projected])
+    occluded = hidden[nearest] & (distance > near) & (distance <= far) & (cKDTree(scene.corners).query(xy)[0] > far)
+    return xy[distance > far], xy[occluded]
 
 
-def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5):
+def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5, occluded=None,
+                    occluded_share: float = 0.0):
     """Training crops: true corners seen from a nearby pixel, and candidates that are no corner.
 
     Parameters
@@ -353,6 +391,11 @@ def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5):
         candidates), pixels; a scene without any gets random points instead.
     shift : float
         Largest distance of a positive crop's centre from its corner, pixels.
+    occluded : list of ndarray (M, 2), optional
+        Per scene, candidates at an occluder's edge near a hidden corner (:func:`candidate_negatives`), pixels.
+    occluded_share : float
+        Share of the negatives drawn from ``occluded`` (from any scene that has some): they are rare among
+        the candidates, and the costliest to take for corners.
 
     Returns
     -------
@@ -365,6 +408,7 @@ def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5):
     raw = np.zeros((count, size, size), np.uint8)
     label = np.zeros(count, np.float32)
     offset = np.zeros((count, 2), np.float32)
+    hard = [] if occluded is None or occluded_share <= 0 else [k for k, o in enumerate(occluded) if len(o)]
     for k in range(count):
         pick = int(rng.integers(len(scenes)))
         scene, pool = scenes[pick], negatives[pick]
@@ -373,6 +417,10 @@ def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5):
             r, a = shift * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
             centre = np.rint(corner + r * np.array([np.cos(a), np.sin(a)])).astype(int)
             label[k], offset[k] = 1.0, corner - centre
+        elif hard and rng.random() < occluded_share:
+            pick = hard[int(rng.integers(len(hard)))]
+            scene, pool = scenes[pick], occluded[pick]
+            centre = np.rint(pool[int(rng.integers(len(pool)))]).astype(int)
         elif len(pool):
             centre = np.rint(pool[int(rng.integers(len(pool)))]).astype(int)
         else:  # anywhere; a corner there is a positive

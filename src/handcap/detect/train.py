@@ -29,12 +29,12 @@ from torch.utils.data import DataLoader
 
 from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
-from handcap.detect.corners import CornerNet, corner_loss
+from handcap.detect.corners import CornerNet, corner_loss, detect_corners
 from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
                                        score_corners)
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
 from handcap.detect.reader import GLYPHS, BlockReader, reader_loss
-from handcap.detect.refine import CornerRefiner, false_candidates, refiner_loss, refiner_samples
+from handcap.detect.refine import CornerRefiner, candidate_negatives, refiner_loss, refiner_samples
 from handcap.detect.samples import Batches, corner_batch, crops, non_blocks, reader_samples
 from handcap.detect.scenefile import load_scenes, save_scenes
 from handcap.detect.scenes import PageMaker, SceneMaker
@@ -140,15 +140,16 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
 
 
 def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: int = 256, seed: int = 0,
-                  lr: float = 2e-3, net: CornerRefiner | None = None, progress: bool = False) -> CornerRefiner:
+                  lr: float = 2e-3, net: CornerRefiner | None = None, progress: bool = False,
+                  occluded: float = 0.0) -> CornerRefiner:
     """Train the corner refiner on crops of rendered scenes (deterministic for a seed).
 
     Parameters
     ----------
     scenes : sequence of Scene
     corner_net : CornerNet
-        Its candidates at a low threshold that lie more than 3 pixels from every printed corner are the
-        refiner's negatives (what it must learn to turn away).
+        Its candidates at a low threshold that are no corner (:func:`~handcap.detect.refine.candidate_negatives`)
+        are the refiner's negatives.
     steps, batch, seed : int
     lr : float
         AdamW learning rate, decayed by a cosine to 5 % of it.
@@ -156,15 +157,19 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
         Start from these weights (default: a new network).
     progress : bool
         Print the loss every 100 steps.
+    occluded : float
+        Share of the negatives drawn from candidates at an occluder's edge near a hidden corner (0: no more often).
 
     Returns
     -------
     CornerRefiner
     """
-    negatives = [false_candidates(corner_net, scene) for scene in scenes]
+    negatives, hidden = zip(*[candidate_negatives(detect_corners(corner_net, s.image, threshold=0.05)[0], s)
+                              for s in scenes])
 
     def loss(model, rng):
-        crops, is_corner, offset = refiner_samples(scenes, batch, rng, negatives)
+        crops, is_corner, offset = refiner_samples(scenes, batch, rng, negatives, occluded=hidden,
+                                                   occluded_share=occluded)
         return refiner_loss(model(torch.from_numpy(crops)[:, None]), torch.from_numpy(is_corner),
                             torch.from_numpy(offset))
 
@@ -303,6 +308,8 @@ def main(argv=None) -> int:
                                                       "(the same views, a third smaller in --scenes-file)")
     p.add_argument("--displaced", type=float, default=0.0,
                    help="the reader: share of true blocks shown with one corner moved, as no block (default 0)")
+    p.add_argument("--occluded", type=float, default=0.0, help="the refiner: share of its negatives drawn from "
+                   "candidates at an occluder's edge near a hidden corner (default 0: as often as any other)")
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
@@ -331,7 +338,8 @@ def main(argv=None) -> int:
     if a.what in ("refiner", "all"):
         corner_net = load_corner_net(out / "corners.npz" if (out / "corners.npz").is_file() else None)
         scenes, tests = corner_data if a.what == "all" else _scenes(a)
-        net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, lr=a.lr, net=init, progress=True)
+        net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, lr=a.lr, net=init, progress=True,
+                            occluded=a.occluded)
         score = evaluate_corners(corner_net, tests, refiner=net)
         print(score.summary(), flush=True)
         save_net(net, out / "refiner.npz", {"source": _command(a), "score": score.summary()})
