@@ -69,6 +69,8 @@ detect-weights: $(STAMP)
 	# 4000 for the refiner on the new network's candidates (~7 min).
 	$(BIN)/python -m handcap.detect.train --what corners --scenes 500 --test-scenes 40 --steps 4000 --pages 0.3 \
 		--threads 1 --seed 1 --init src/handcap/detect/weights/corners.npz
+	# The corner network's activation ranges for its 8-bit twin (handcap.detect.int8; 20 scenes, ~1 min).
+	$(BIN)/python tools/corner_ranges.py --scenes 20 --seed 5
 	$(BIN)/python -m handcap.detect.train --what refiner --scenes 500 --test-scenes 40 --steps 4000 --pages 0.3 \
 		--threads 2 --seed 1 --init src/handcap/detect/weights/refiner.npz
 	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 4000 --threads 1 \

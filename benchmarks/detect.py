@@ -5,7 +5,8 @@ camera with the patched hand) on 2 cores, for the whole image (and with the
 corner network run on every tile, as in a frame busy everywhere) and for the
 hand's region only (a box around the corners the previous frame found, as a
 tracker would give), against the issue's targets (<= 1 s, <= 0.3 s) and
-DexterCap's reported 5 s per frame for marker recognition on a GPU machine.
+DexterCap's reported 5 s per frame for marker recognition on a GPU machine. The corner network runs as
+``handcap detect`` runs it, in 8-bit integers (:mod:`handcap.detect.int8`), and in floats beside it.
 Accuracy: the corner figures on held-out rendered scenes (recall and precision
 within 2 px, median and RMS error of the matched corners), from the corner
 network alone and refined by the refiner network, against the issue's
@@ -69,9 +70,14 @@ def main() -> None:
 
     torch.set_num_threads(args.threads)
     net = load_corner_net(args.weights)
+    # What handcap detect runs: the corner network's 8-bit twin where its weights carry activation ranges.
+    fast = load_corner_net(args.weights, int8=True)
+    int8 = fast is not net and type(fast).__name__ == "Int8CornerNet"
     refiner = load_refiner(args.refiner)
     print(f"corner network: {net.flops_per_pixel() / 1000:.1f} kFLOP per pixel, "
-          f"{sum(p.numel() for p in net.parameters())} weights, {args.threads} threads")
+          f"{sum(p.numel() for p in net.parameters())} weights, {args.threads} threads; "
+          + ("run in 8-bit integers as handcap detect runs it (float timed beside it)" if int8 else
+             "no 8-bit twin (no activation ranges in its weights, or no oneDNN engine here): floats"))
 
     # A full 5 MP frame of the patched hand.
     hand = OpenHand("right")
@@ -107,37 +113,43 @@ def main() -> None:
         return min(times)
 
     full = best(lambda: detect_corners(net, image))
+    full8 = best(lambda: detect_corners(fast, image))
     # The network skips tiles without the contrast a printed corner needs; a frame busy everywhere gets none.
     from handcap.detect import corners as corner_module
     skip_range, corner_module.MIN_RANGE = corner_module.MIN_RANGE, -1.0
-    everywhere = best(lambda: detect_corners(net, image))
+    everywhere = best(lambda: detect_corners(fast, image))
     corner_module.MIN_RANGE = skip_range
     try:
         reader = load_reader(args.reader)
         reader_note = "shipped reader" if args.reader is None else args.reader
     except HandcapError:
         reader, reader_note = BlockReader().eval(), "untrained reader (no weights found): timing only"
-    detector = Detector(net, reader, pattern, refiner=refiner)
+    float_detector = Detector(net, reader, pattern, refiner=refiner)
+    whole_float = best(lambda: float_detector.image(image))
+    detector = Detector(fast, reader, pattern, refiner=refiner)
     whole = best(lambda: detector.image(image))
     xy = shot.xy[shot.visible]
     lo = np.maximum(np.floor(xy.min(axis=0) - 40).astype(int) // 2 * 2, 0)
     hi = np.minimum(np.ceil(xy.max(axis=0) + 40).astype(int), image.shape[::-1])
     region = image[lo[1]:hi[1], lo[0]:hi[0]]
-    part = best(lambda: detect_corners(net, region))
-    refined_full = best(lambda: locate_corners(net, refiner, image))
-    refined_part = best(lambda: locate_corners(net, refiner, region))
-    print(f"full frame {image.shape[1]} x {image.shape[0]}: {full:.3f} s (target <= 1 s: {full / 1.0:.2f} of it; "
-          f"DexterCap ~5 s on a GPU machine: {5.0 / full:.1f}x faster)")
+    part = best(lambda: detect_corners(fast, region))
+    refined_full = best(lambda: locate_corners(fast, refiner, image))
+    refined_part = best(lambda: locate_corners(fast, refiner, region))
+    print(f"corner network, full frame {image.shape[1]} x {image.shape[0]}: {full8:.3f} s in 8-bit integers, "
+          f"{full:.3f} s in floats ({full / full8:.2f}x)")
     print(f"corner network on every tile (a frame with contrast everywhere, the worst case): {everywhere:.3f} s "
-          f"({everywhere / full:.1f}x the frame's time with quiet tiles skipped)")
+          f"({everywhere / full8:.1f}x the frame's time with quiet tiles skipped)")
     region_whole = best(lambda: detector.image(region))
+    region_float = best(lambda: float_detector.image(region))
     print(f"hand region {region.shape[1]} x {region.shape[0]} ({region.size / image.size:.0%} of the frame): "
           f"corners {part:.3f} s (target <= 0.3 s: {part / 0.3:.2f} of it)")
     print(f"corners refined (network down to its candidates, then the refiner): full frame {refined_full:.3f} s, "
           f"hand region {refined_part:.3f} s")
     print(f"whole detector (corners, blocks, reader, vote; {reader_note}): full frame {whole:.3f} s "
-          f"({whole / 1.0:.2f} of the 1 s target), hand region {region_whole:.3f} s "
-          f"({region_whole / 0.3:.2f} of 0.3 s)")
+          f"({whole / 1.0:.2f} of the 1 s target; DexterCap ~5 s on a GPU machine: {5.0 / whole:.1f}x faster), "
+          f"hand region {region_whole:.3f} s ({region_whole / 0.3:.2f} of 0.3 s); with the float corner network "
+          f"{whole_float:.3f} s and {region_float:.3f} s ({whole_float / whole:.2f}x, "
+          f"{region_float / region_whole:.2f}x)")
     print_video(detector, video, pattern)
 
     maker = SceneMaker(args.seed)
@@ -146,8 +158,9 @@ def main() -> None:
     finally:
         maker.close()
     print("corner network alone: " + evaluate_corners(net, scenes).summary())
-    score = evaluate_corners(net, scenes, refiner=refiner)
-    print("refined: " + score.summary())
+    print("refined, float corner network: " + evaluate_corners(net, scenes, refiner=refiner).summary())
+    score = evaluate_corners(fast, scenes, refiner=refiner)
+    print(f"refined{', 8-bit corner network' if int8 else ''} (as handcap detect runs): " + score.summary())
     print(f"targets: recall >= 97 % ({100 * score.recall:.1f}), median <= 0.15 px ({score.median_px:.3f}), "
           f"RMS <= 0.3 px ({score.rms_px:.3f})")
     # Where the missed corners are: recall by the shortest side of the squares around each corner in the image
@@ -159,7 +172,7 @@ def main() -> None:
     for scene in scenes:
         every = np.array(list(scene.projected.values()))
         side.append(cKDTree(every).query(scene.corners, 2)[0][:, 1])
-        located = locate_corners(net, refiner, scene.image)[0]
+        located = locate_corners(fast, refiner, scene.image)[0]
         pairs, _ = score_corners(located, scene.corners)
         hit = np.zeros(len(scene.corners), bool)
         hit[pairs[:, 1]] = True
@@ -182,7 +195,7 @@ def main() -> None:
         hands = [maker.scene() for _ in range(args.hand_scenes)]
     finally:
         maker.close()
-    hand_detector = Detector(net, reader, pattern, refiner=refiner)
+    hand_detector = Detector(fast, reader, pattern, refiner=refiner)
     print(f"hand scenes, full-size cameras, {reader_note}: " + evaluate_detector(hand_detector, hands).summary())
     # Where visible tags are lost, stage by stage: their four corners found (2 px), the four made a candidate
     # quad, the quad passed the white-square test, the reader read the tag, the vote kept it with that tag.
@@ -192,7 +205,7 @@ def main() -> None:
 
     funnel, fixed, lost = np.zeros(6, int), 0, 0
     for scene in hands:
-        xy, cscore = locate_corners(net, refiner, scene.image)
+        xy, cscore = locate_corners(fast, refiner, scene.image)
         candidates = candidate_quads(xy, score=cscore)
         quads, _ = white_blocks(scene.image, xy, candidates)
         text, _, turn, bscore = read_blocks(reader, scene.image, xy[quads], pattern.alphabet)
@@ -218,7 +231,7 @@ def main() -> None:
     covered = PageMaker(args.seed + 4, look=PageLook(square_px=(15.0, 40.0), tilt_deg=(0.0, 45.0), occluders=(3, 6)))
     patches = []
     for scene in [covered.scene() for _ in range(args.scenes)]:
-        patches += patch_views(scene, locate_corners(net, refiner, scene.image)[0])
+        patches += patch_views(scene, locate_corners(fast, refiner, scene.image)[0])
     print_hidden("refined recall on photographed sheets under 3-6 occluders, by the patches' share hidden",
                  np.array(patches))
     noto = "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf"
@@ -226,7 +239,7 @@ def main() -> None:
     sheet = PageMaker(args.seed + 2, font=font, look=PageLook(square_px=(20.0, 40.0), tilt_deg=(0.0, 30.0),
                                                               curl=(0.0, 0.5), occluders=(0, 0), glint=0.0))
     pages = [sheet.scene() for _ in range(args.scenes)]
-    page_detector = Detector(net, reader, session_pattern(), refiner=refiner)
+    page_detector = Detector(fast, reader, session_pattern(), refiner=refiner)
     sheet_score = evaluate_detector(page_detector, pages)
     print(f"photographed sheet ({'Noto Sans Mono Bold' if font else 'default font'}, squares 20-40 px, tilt <= 30 "
           f"deg, no occluder): " + sheet_score.summary())

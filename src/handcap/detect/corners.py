@@ -44,11 +44,17 @@ class CornerNet(nn.Module):
         Channels at full resolution.
     dilations : tuple of int
         One 3 x 3 convolution at half resolution per entry, with that dilation.
+
+    Attributes
+    ----------
+    ranges : ndarray (P, 2) or None
+        Its activations' ranges for its 8-bit twin (:mod:`handcap.detect.int8`), saved with the weights.
     """
 
     def __init__(self, width: int = 24, stem: int = 16, dilations=(1, 2, 4)):
         super().__init__()
         self.width, self.stem_width, self.dilations = width, stem, tuple(dilations)
+        self.ranges = None
         self.stem = nn.Conv2d(1, stem, 3, padding=1)
         self.down = nn.Conv2d(stem, width, 3, stride=2, padding=1)
         self.body = nn.ModuleList([nn.Conv2d(width, width, 3, padding=d, dilation=d) for d in self.dilations])

@@ -16,6 +16,7 @@ import torch
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.detect.corners import CornerNet
+from handcap.detect.int8 import int8_corner_net
 from handcap.detect.reader import BlockReader
 from handcap.detect.refine import CornerRefiner
 
@@ -36,6 +37,8 @@ def save_net(net, path, info: dict | None = None) -> None:
     arrays = {f"w.{k}": v.detach().numpy() for k, v in net.state_dict().items()}
     arrays["network"] = np.array(type(net).__name__)
     arrays["config"] = np.array(json.dumps(net.config()))
+    if getattr(net, "ranges", None) is not None:
+        arrays["ranges"] = np.asarray(net.ranges, dtype=np.float64)
     for key, value in (info or {}).items():
         arrays[f"info.{key}"] = np.array(str(value))
     with atomic_output(path) as fh:
@@ -69,11 +72,28 @@ def load_net(path, kind: str):
                 raise HandcapError(f"{path}: holds a {data['network']}, not a {kind}")
             net = NETWORKS[kind](**json.loads(str(data["config"])))
             state = {k[2:]: torch.from_numpy(data[k]) for k in data.files if k.startswith("w.")}
+            if "ranges" in data.files:
+                net.ranges = np.array(data["ranges"], dtype=np.float64)
         net.load_state_dict(state)
     except (KeyError, ValueError, RuntimeError, TypeError, OSError) as err:
         raise HandcapError(f"{path}: not {kind} weights ({err})") from None
     net.eval()
     return net
+
+
+def net_info(path) -> dict:
+    """The strings saved with a network's weights (``info`` of :func:`save_net`): how they were made, their scores.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict
+    """
+    with np.load(path, allow_pickle=False) as data:
+        return {k[5:]: str(data[k]) for k in data.files if k.startswith("info.")}
 
 
 def shipped_notes() -> tuple[str, ...]:
@@ -93,18 +113,22 @@ def shipped_notes() -> tuple[str, ...]:
     return tuple(notes)
 
 
-def load_corner_net(path=None) -> CornerNet:
+def load_corner_net(path=None, *, int8: bool = False):
     """The corner network saved at ``path`` (default: the shipped weights).
 
     Parameters
     ----------
     path : str, Path or None
+    int8 : bool
+        Its 8-bit integer twin, for inference (:func:`handcap.detect.int8.int8_corner_net`), where its
+        weights carry activation ranges (the shipped ones do) and PyTorch can run it; else the network.
 
     Returns
     -------
-    CornerNet
+    CornerNet or Int8CornerNet
     """
-    return load_net(WEIGHTS / "corners.npz" if path is None else path, "CornerNet")
+    net = load_net(WEIGHTS / "corners.npz" if path is None else path, "CornerNet")
+    return int8_corner_net(net) if int8 else net
 
 
 def load_reader(path=None) -> BlockReader:

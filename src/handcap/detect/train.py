@@ -1,17 +1,14 @@
 """Train the detector's networks from rendered images only: ``python -m handcap.detect.train``.
 
-Deterministic for a seed on the CPU (torch's deterministic algorithms, a fixed
-number of threads), so the shipped weights can be remade bit for bit (``make
-detect-weights`` holds the two commands that made them).
+Deterministic for a seed on the CPU (torch's deterministic algorithms, a fixed number of threads), so the
+shipped weights can be remade bit for bit (``make detect-weights`` holds the commands that made them).
 
-Scenes come from :class:`handcap.detect.scenes.SceneMaker` (random poses, cameras,
-sensor scales and looks) and :class:`~handcap.detect.scenes.PageMaker`
-(photographed printed sheets); the corner network learns from 96 x 96 crops of
-them, most of them around a visible corner, with JPEG artefacts on some; the
-refiner from 17 x 17 crops near true corners and at the corner network's false
-candidates; the reader from views of their blocks in several fonts, alphabets and glyph
-layouts, and its confidence gate is set on validation scenes. The test suite
-trains a tiny version for a few steps to show the code runs.
+Scenes come from :class:`handcap.detect.scenes.SceneMaker` (random poses, cameras, sensor scales and looks) and
+:class:`~handcap.detect.scenes.PageMaker` (photographed printed sheets); the corner network learns from 96 x 96
+crops of them, most of them around a visible corner, with JPEG artefacts on some; the refiner from 17 x 17 crops
+near true corners and at the corner network's false candidates; the reader from views of their blocks in several
+fonts, alphabets and glyph layouts, and its confidence gate is set on validation scenes. The test suite trains a
+tiny version for a few steps to show the code runs.
 """
 
 from __future__ import annotations
@@ -119,15 +116,15 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
     device : str
         Where the network trains (``'cpu'``, ``'cuda'``).
     workers : int
-        Processes drawing the crops (:class:`~handcap.detect.samples.Batches`; 0: the training
-        process itself). The crops, and so the weights, depend on the seed and this number.
+        Processes drawing the crops (:class:`~handcap.detect.samples.Batches`; 0: the training process itself).
+        The crops, and so the weights, depend on the seed and this number.
     config : dict, optional
         A new network's :class:`~handcap.detect.corners.CornerNet` arguments (made after the seed is set).
 
     Returns
     -------
     CornerNet
-        On the CPU.
+        On the CPU, with no activation ranges: those of ``net`` held for its old weights (tools/corner_ranges.py).
     """
     draw = _stream(corner_batch, scenes, batch, seed, workers)
 
@@ -135,8 +132,10 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
         images, heat, offset, near = (t.to(device, non_blocking=True) for t in draw(rng))
         return corner_loss(model(images), heat, offset, near)
 
-    return _fit(lambda: net or CornerNet(**(config or {})), loss, scenes, steps=steps, seed=seed, lr=lr,
-                label="corners", progress=progress, device=device)
+    trained = _fit(lambda: net or CornerNet(**(config or {})), loss, scenes, steps=steps, seed=seed, lr=lr,
+                   label="corners", progress=progress, device=device)
+    trained.ranges = None
+    return trained
 
 
 def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: int = 256, seed: int = 0,

@@ -1,0 +1,96 @@
+"""The corner network's 8-bit twin: the same corners as the float network on rendered scenes, ranges saved with the
+weights, and the float network wherever the twin cannot be built."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial import cKDTree
+
+from handcap import HandcapError
+from handcap.detect.corners import CornerNet, detect_corners
+from handcap.detect import int8
+from handcap.detect.int8 import ENGINE, Int8CornerNet, activation_ranges, int8_corner_net
+from handcap.detect.networks import load_corner_net, net_info, save_net
+from handcap.detect.train import train_corners
+
+ROOT = Path(__file__).resolve().parents[2]
+needs_engine = pytest.mark.skipif(ENGINE not in torch.backends.quantized.supported_engines,
+                                  reason=f"this PyTorch has no {ENGINE} quantised engine")
+
+
+@needs_engine
+def test_the_shipped_twin_finds_the_float_networks_corners(scenes):
+    float_net, twin = load_corner_net(), load_corner_net(int8=True)
+    assert isinstance(twin, Int8CornerNet) and twin.reach() == float_net.reach()
+    for scene in scenes:
+        xy, score = detect_corners(float_net, scene.image)
+        xy8, score8 = detect_corners(twin, scene.image)
+        assert abs(len(xy8) - len(xy)) <= 0.03 * len(xy) + 2, (len(xy), len(xy8))
+        gap, at = cKDTree(xy8).query(xy)
+        # The same corners, placed within a few hundredths of a pixel (the corner network's error is ~0.3 px).
+        assert (gap < 0.25).mean() > 0.97 and np.median(gap) < 0.05, np.percentile(gap, [50, 97])
+        close = gap < 0.25
+        change = np.abs(score8[at[close]] - score[close])
+        assert np.median(change) < 0.02 and change.max() < 0.2, np.percentile(change, [50, 100])
+
+
+@needs_engine
+def test_ranges_are_measured_saved_and_loaded(scenes, tmp_path):
+    net = load_corner_net()
+    ranges = activation_ranges(net, [s.image for s in scenes[:2]])
+    assert ranges.shape == (4 + 2 * len(net.body), 2)  # the input, stem, down, each body layer and sum, the head
+    assert (ranges[:, 0] <= 0).all() and (ranges[:, 1] > 0).all()
+    assert (ranges[1:-1, 0] == 0).all()  # after a ReLU (and the sums of two) nothing is negative
+    net.ranges = ranges
+    save_net(net, tmp_path / "c.npz", {"source": "a test"})
+    again = load_corner_net(tmp_path / "c.npz")
+    np.testing.assert_array_equal(again.ranges, ranges)
+    assert net_info(tmp_path / "c.npz") == {"source": "a test"}
+    assert isinstance(load_corner_net(tmp_path / "c.npz", int8=True), Int8CornerNet)
+
+
+def test_without_ranges_or_engine_the_float_network_is_kept(monkeypatch):
+    net = CornerNet()
+    assert net.ranges is None and int8_corner_net(net) is net
+    net.ranges = np.array([[0.0, 1.0]] * 10)
+    monkeypatch.setattr(int8, "ENGINE", "an engine this PyTorch lacks")  # as on an ARM build (qnnpack only)
+    assert int8_corner_net(net) is net
+
+
+@needs_engine
+def test_ranges_of_another_network_are_refused():
+    net = CornerNet(dilations=(1, 2))
+    net.ranges = np.array([[0.0, 1.0]] * 10)  # made for three body layers, not two
+    with pytest.raises(HandcapError, match="activation ranges"):
+        int8_corner_net(net)
+
+
+@needs_engine
+def test_the_ranges_command_keeps_the_weights_and_their_notes(tmp_path):
+    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
+    out = tmp_path / "corners.npz"
+    run = subprocess.run([sys.executable, str(ROOT / "tools" / "corner_ranges.py"), "--scenes", "1", "--out", str(out)],
+                         capture_output=True, text=True, timeout=300)
+    if run.returncode and "OpenGL" in run.stderr:
+        pytest.skip("no headless OpenGL here")
+    assert run.returncode == 0, run.stderr[-2000:]
+    shipped, made = load_corner_net(), load_corner_net(out)
+    for a, b in zip(shipped.state_dict().values(), made.state_dict().values()):
+        assert torch.equal(a, b)
+    assert made.ranges.shape == shipped.ranges.shape
+    info = net_info(out)
+    assert info["source"] == net_info(ROOT / "src/handcap/detect/weights/corners.npz")["source"]
+    assert "1 rendered scenes" in info["int8"]
+
+
+def test_training_drops_the_ranges_of_the_old_weights(scenes):
+    net = load_corner_net()
+    assert net.ranges is not None  # the shipped weights carry them
+    trained = train_corners(scenes[:1], steps=2, batch=4, net=net)
+    assert trained.ranges is None and int8_corner_net(trained) is trained
