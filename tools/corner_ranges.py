@@ -9,8 +9,10 @@ detect-weights`` runs this after training the corner network:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
+from handcap import HandcapError
 from handcap.detect.int8 import activation_ranges
 from handcap.detect.networks import WEIGHTS, load_corner_net, net_info, save_net
 from handcap.detect.train import FONTS, corner_scenes
@@ -24,10 +26,14 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=5)
     p.add_argument("--pages", type=float, default=0.3, help="share of photographed sheets (default %(default)s)")
     a = p.parse_args(argv)
-    net = load_corner_net(a.weights)
-    fonts = [None] + [f for f in FONTS if Path(f).is_file()]
-    scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=fonts)
-    net.ranges = activation_ranges(net, [s.image for s in scenes])
+    try:
+        net = load_corner_net(a.weights)
+        fonts = [None] + [f for f in FONTS if Path(f).is_file()]
+        scenes = corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=fonts)
+        net.ranges = activation_ranges(net, [s.image for s in scenes])
+    except HandcapError as err:
+        print(f"corner_ranges: {err}", file=sys.stderr)
+        return 2
     note = (f"activation ranges from {a.scenes} rendered scenes (seed {a.seed}, pages {a.pages:g}): "
             "tools/corner_ranges.py")
     save_net(net, a.out or a.weights, {**net_info(a.weights), "int8": note})
