@@ -106,10 +106,9 @@ def shipped_notes() -> tuple[str, ...]:
     notes = []
     for name in ("corners.npz", "refiner.npz", "reader.npz"):
         path = WEIGHTS / name
-        if path.is_file():
-            with np.load(path, allow_pickle=False) as data:
-                if "info.score" in data.files:
-                    notes.append(f"{name}: {data['info.score']}")
+        score = net_info(path).get("score") if path.is_file() else None
+        if score is not None:
+            notes.append(f"{name}: {score}")
     return tuple(notes)
 
 
