@@ -5,6 +5,8 @@ command); these tests check the plumbing: cameras, frames, the detections contra
 
 from __future__ import annotations
 
+import struct
+
 import cv2
 import numpy as np
 import pytest
@@ -151,3 +153,27 @@ def test_the_shipped_networks_say_how_good_they_measured(frames, tmp_path, capsy
     assert "short of handcap's targets" in err and "corners.npz: corners: recall" in err
     assert "reader on a font it never saw" in err
     assert any("short of handcap's targets" in w for w in np.load(out)["warnings"])
+
+
+def _with_orientation(jpeg: bytes, orientation: int) -> bytes:
+    """A JPEG file's bytes with an EXIF block that holds only the orientation tag (as a phone writes it)."""
+    tiff = b"MM\x00\x2a" + struct.pack(">IH", 8, 1) + struct.pack(">HHIHH", 0x0112, 3, 1, orientation, 0) + bytes(4)
+    app1 = b"Exif\x00\x00" + tiff
+    return jpeg[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + jpeg[2:]
+
+
+@pytest.mark.parametrize("orientation, turned", [(1, lambda a: a), (3, lambda a: a[::-1, ::-1]),
+                                                 (6, lambda a: np.rot90(a, -1)), (8, lambda a: np.rot90(a, 1))])
+def test_photographs_are_turned_upright_as_their_exif_says(tmp_path, orientation, turned):
+    stored = np.full((40, 100), 30, np.uint8)
+    stored[:10, :20] = 230  # a bright block at the stored image's top left
+    ok, code = cv2.imencode(".jpg", stored, [cv2.IMWRITE_JPEG_QUALITY, 100])
+    path = tmp_path / "photo.jpg"
+    path.write_bytes(_with_orientation(code.tobytes(), orientation))
+    grey, colour = read_image(path), read_image(path, colour=True)
+    expected = turned(stored)
+    assert grey.shape == expected.shape and colour.shape == (*expected.shape, 3)
+    assert np.abs(grey.astype(int) - expected).max() < 12  # JPEG's error only: the block where the viewer shows it
+    # The calibration board's images are read by cv2.imread: the same upright pixels, so the rig and the
+    # detections agree.
+    np.testing.assert_array_equal(grey, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE))

@@ -105,7 +105,10 @@ def read_image(path, colour: bool = False) -> np.ndarray:
     Returns
     -------
     ndarray (H, W) uint8
-        16-bit images are scaled to 8 bits; colour is converted to grey.
+        16-bit images are scaled to 8 bits; colour is converted to grey. The image is turned upright as its
+        EXIF orientation says (phone photographs are stored sideways with such a tag), as image viewers,
+        ``cv2.imread`` (which reads the calibration board's images) and OpenCV's video reader show it: every
+        pixel position handcap reports is in the picture as the user sees it.
 
     Raises
     ------
@@ -116,7 +119,8 @@ def read_image(path, colour: bool = False) -> np.ndarray:
     if not path.is_file():
         raise HandcapError(f"{path}: no such image file")
     data = np.fromfile(path, dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    # Any depth and colour, but not IMREAD_UNCHANGED: that also ignores the EXIF orientation.
+    image = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
     if image is None:
         raise HandcapError(f"{path}: not an image that can be decoded (damaged, truncated or not an image)")
     return _bgr(image) if colour else _grey(image)
