@@ -177,3 +177,19 @@ def test_photographs_are_turned_upright_as_their_exif_says(tmp_path, orientation
     # The calibration board's images are read by cv2.imread: the same upright pixels, so the rig and the
     # detections agree.
     np.testing.assert_array_equal(grey, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE))
+
+
+def test_a_dropped_frame_is_a_stored_warning_and_keeps_the_frame_count(frames, weights, tmp_path, capsys):
+    image = cv2.imread(str(frames / "cam_0" / "000000.png"))
+    for cam, numbers in (("a", (7, 8, 9)), ("b", (7, 9))):  # camera b dropped frame 8 of the rig's counter
+        (tmp_path / cam).mkdir()
+        for k in numbers:
+            cv2.imwrite(str(tmp_path / cam / f"shot_{k}.png"), image)
+    out = tmp_path / "det.npz"
+    assert main(["detect", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out), "--no-refine",
+                 "--whole-frames", *weights]) == 0
+    data = np.load(out)
+    assert int(data["n_frames"]) == 3
+    assert "b: 1 frame(s) missing" in capsys.readouterr().err
+    assert any("b: 1 frame(s) missing" in w for w in data["warnings"])
+    assert set(data["block_frame"][data["block_camera"] == 1].tolist()) <= {0, 2}

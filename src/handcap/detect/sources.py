@@ -1,15 +1,24 @@
 """Where the detector's frames come from: image files, folders of images, videos, one camera each.
 
 Each input path is one camera, named after it: a folder of images (its frames
-in file-name order, e.g. ``images/cam_0/000000.png`` as ``handcap synth
+in file-name order, the numbers in the names compared as numbers, so ``img2``
+comes before ``img10``; e.g. ``images/cam_0/000000.png`` as ``handcap synth
 --images`` writes), a video (its frames in order, read one at a time), or a
 single image (one frame). Frames are grey ``(H, W)`` uint8; colour images
 are converted. A file that cannot be decoded is one clear error naming it.
+
+Frames are matched across cameras by their index. Where every file of the folders is named with a frame
+number and the folders share most of their numbers (one frame counter, as a synchronised rig writes), the
+index is that number less the smallest: a frame a camera dropped is missing from it, and its later frames
+still meet the other cameras' frames of the same instant. Otherwise (cameras numbering their files apart,
+names without numbers) the index is the order in the folder. :func:`frame_notes` says where either may
+pair frames of different instants.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -34,12 +43,16 @@ class FrameSource:
         ``folder``, ``video`` or ``image``.
     files : tuple of Path
         The images of a folder (or the single image).
+    numbers : tuple of int
+        Each file's frame index where the folder's file names give it (see the module docstring); empty
+        where the frames are indexed by their order.
     """
 
     camera: str
     path: Path
     kind: str
     files: tuple = ()
+    numbers: tuple = ()
 
     def frames(self, colour: bool = False):
         """Yield ``(frame_index, image)`` in order; images are grey uint8 ``(H, W)``.
@@ -69,7 +82,7 @@ class FrameSource:
                 raise HandcapError(f"{self.path}: no frame could be read from this video (empty or damaged)")
             return
         for index, file in enumerate(self.files):
-            yield index, read_image(file, colour=colour)
+            yield self.numbers[index] if self.numbers else index, read_image(file, colour=colour)
 
     def fps(self) -> float | None:
         """A video's frame rate as its header says (None for images, or when it does not say)."""
@@ -91,6 +104,11 @@ class FrameSource:
             return max(int(capture.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
         finally:
             capture.release()
+
+
+    def span(self) -> int:
+        """One more than the last frame index (:meth:`count`, unless the files' numbers skip frames)."""
+        return self.numbers[-1] + 1 if self.numbers else self.count()
 
 
 def read_image(path, colour: bool = False) -> np.ndarray:
@@ -175,7 +193,8 @@ def frame_sources(paths) -> list[FrameSource]:
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            files = tuple(sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()))
+            files = tuple(sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
+                                 key=_natural))
             if not files:
                 raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
             sources.append(FrameSource(path.name, path, "folder", files))
@@ -195,4 +214,58 @@ def frame_sources(paths) -> list[FrameSource]:
     if twice:
         raise HandcapError(f"two inputs are both camera {twice[0]!r}; give each camera's images a folder (or video) "
                            "of its own name")
-    return sources
+    return _numbered(sources)
+
+
+def _natural(path: Path) -> tuple:
+    """Sort key of a file: its name's runs of digits compared as numbers (``img2`` before ``img10``)."""
+    parts = re.split(r"(\d+)", path.name)
+    return [int(t) if k % 2 else t for k, t in enumerate(parts)], path.name
+
+
+def _file_numbers(files) -> tuple | None:
+    """The last number in each file's stem, where every file has one and they rise; else None."""
+    found = [re.findall(r"\d+", f.stem) for f in files]
+    if not all(found):
+        return None
+    numbers = tuple(int(n[-1]) for n in found)
+    return numbers if all(a < b for a, b in zip(numbers, numbers[1:])) else None
+
+
+def _numbered(sources: list[FrameSource]) -> list[FrameSource]:
+    """The folders indexed by their files' frame numbers where they share one counter (module docstring)."""
+    numbers = {s.camera: _file_numbers(s.files) for s in sources if s.kind == "folder"}
+    usable = [set(n) for n in numbers.values() if n is not None]
+    if not usable or len(set.intersection(*usable)) < len(set.union(*usable)) / 2:
+        return sources
+    first = min(min(n) for n in usable)
+    return [replace(s, numbers=tuple(k - first for k in numbers[s.camera])) if numbers.get(s.camera) else s
+            for s in sources]
+
+
+def frame_notes(sources) -> list[str]:
+    """Warnings where frames of different instants may be paired across cameras, or frames are missing.
+
+    Parameters
+    ----------
+    sources : sequence of FrameSource
+        From :func:`frame_sources`.
+
+    Returns
+    -------
+    list of str
+        One line per camera whose files' numbers skip frames, and one where cameras indexed by their order
+        hold different numbers of frames.
+    """
+    notes = []
+    for s in sources:
+        gaps = [(a, b) for a, b in zip(s.numbers, s.numbers[1:]) if b > a + 1]
+        if gaps:
+            missing = sum(b - a - 1 for a, b in gaps)
+            notes.append(f"{s.camera}: {missing} frame(s) missing by its files' numbers (first after frame "
+                         f"{gaps[0][0]}); its other frames keep their numbers")
+    ordered = {s.camera: s.count() for s in sources if not s.numbers and s.kind != "image"}
+    if len(ordered) > 1 and len(set(ordered.values())) > 1:
+        notes.append("cameras hold different numbers of frames (" + ", ".join(f"{c}: {n}" for c, n in ordered.items())
+                     + ") and are matched by their order: check that they start together and drop no frame")
+    return notes

@@ -10,7 +10,7 @@ import numpy as np
 
 from handcap.core.camera import Camera
 from handcap.core.errors import HandcapError
-from handcap.detect.sources import frame_sources
+from handcap.detect.sources import frame_notes, frame_sources
 from handcap.hand import hand_model_from_options
 from handcap.io import (check_not_input, read_markers, read_mesh, read_scan_points, write_hand_motion,
                         write_object_motion)
@@ -269,7 +269,7 @@ def keypoints_detect(inputs, out, *, rate: float | None = None, mirrored: bool =
     """
     sources = frame_sources(inputs)
     check_not_input(out, *[f for s in sources for f in (s.files or (s.path,))])
-    warnings = []
+    warnings = frame_notes(sources)
     if rate is None:
         rates = [r for r in (s.fps() for s in sources) if r is not None]
         rate = rates[0] if rates else 30.0

@@ -1,0 +1,67 @@
+"""Frames of a folder: in the order of the numbers in their names, indexed by those numbers where the cameras share
+one frame counter (a dropped frame stays missing), by their order otherwise, and warnings where that may pair
+frames of different instants."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from handcap.detect.sources import frame_notes, frame_sources
+
+
+def _folder(root, camera, names):
+    """A camera folder of tiny images whose grey level is each file's place in ``names`` (10, 20, ...)."""
+    folder = root / camera
+    folder.mkdir()
+    for k, name in enumerate(names):
+        cv2.imwrite(str(folder / name), np.full((4, 5), 10 * (k + 1), np.uint8))
+    return folder
+
+
+def _frames(source):
+    """(index, grey level) of each frame."""
+    return [(t, int(image[0, 0])) for t, image in source.frames()]
+
+
+def test_numbers_in_names_are_compared_as_numbers(tmp_path):
+    names = [f"img{k}.png" for k in range(1, 13)]  # img1 ... img12, written in that order
+    (source,) = frame_sources([_folder(tmp_path, "cam", names)])
+    assert [f.name for f in source.files] == names  # not img1, img10, img11, img12, img2, ...
+    assert _frames(source) == [(k, 10 * (k + 1)) for k in range(12)]
+    assert source.span() == 12 and frame_notes([source]) == []
+
+
+def test_a_dropped_frame_stays_missing_and_is_a_warning(tmp_path):
+    every = [f"frame_{k:04d}.png" for k in range(100, 106)]
+    cam_0 = _folder(tmp_path, "cam_0", every)
+    cam_1 = _folder(tmp_path, "cam_1", every[:3] + every[4:])  # camera 1 dropped frame 103
+    sources = frame_sources([cam_0, cam_1])
+    assert [t for t, _ in _frames(sources[0])] == [0, 1, 2, 3, 4, 5]
+    # Its frame after the drop is still frame 4, the other camera's frame of the same instant.
+    assert _frames(sources[1]) == [(0, 10), (1, 20), (2, 30), (4, 40), (5, 50)]
+    assert [s.span() for s in sources] == [6, 6]
+    (note,) = frame_notes(sources)
+    assert note.startswith("cam_1: 1 frame(s) missing") and "after frame 2" in note
+
+
+def test_cameras_that_number_apart_are_matched_by_order(tmp_path):
+    phone_a = _folder(tmp_path, "phone_a", [f"IMG_{k}.jpg" for k in (4521, 4522, 4523)])
+    phone_b = _folder(tmp_path, "phone_b", [f"IMG_{k:04d}.jpg" for k in (32, 33, 34)])
+    sources = frame_sources([phone_a, phone_b])
+    assert [[t for t, _ in _frames(s)] for s in sources] == [[0, 1, 2], [0, 1, 2]]
+    assert frame_notes(sources) == []
+
+
+def test_cameras_matched_by_order_with_different_counts_are_a_warning(tmp_path):
+    a = _folder(tmp_path, "left", ["a.png", "b.png", "c.png"])
+    b = _folder(tmp_path, "right", ["a.png", "b.png"])
+    sources = frame_sources([a, b])
+    assert [s.numbers for s in sources] == [(), ()] and [s.span() for s in sources] == [3, 2]
+    (note,) = frame_notes(sources)
+    assert "left: 3, right: 2" in note and "matched by their order" in note
+
+
+def test_a_name_without_a_number_orders_the_folder(tmp_path):
+    (source,) = frame_sources([_folder(tmp_path, "cam", ["0003.png", "0007.png", "last.png"])])
+    assert _frames(source) == [(0, 10), (1, 20), (2, 30)] and frame_notes([source]) == []
