@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import tempfile
 import tomllib
 import zipfile
@@ -38,6 +39,22 @@ def existing_file(path) -> Path:
     if not os.access(path, os.R_OK):
         raise HandcapError(f"{path}: not readable (check its permissions)")
     return path
+
+
+def natural_key(path) -> tuple:
+    """Sort key of a file by its name, runs of digits compared as numbers (``img2`` before ``img10``).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    tuple
+        The name's text parts (lower case) and numbers in turn, then the name itself to break ties.
+    """
+    name = Path(path).name
+    return [int(t) if k % 2 else t.lower() for k, t in enumerate(re.split(r"(\d+)", name))], name
 
 
 def _same(a: Path, b: Path) -> bool:

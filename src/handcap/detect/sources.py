@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.core.files import natural_key
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
@@ -194,7 +195,7 @@ def frame_sources(paths) -> list[FrameSource]:
         path = Path(raw)
         if path.is_dir():
             files = tuple(sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
-                                 key=_natural))
+                                 key=natural_key))
             if not files:
                 raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
             sources.append(FrameSource(path.name, path, "folder", files))
@@ -215,12 +216,6 @@ def frame_sources(paths) -> list[FrameSource]:
         raise HandcapError(f"two inputs are both camera {twice[0]!r}; give each camera's images a folder (or video) "
                            "of its own name")
     return _numbered(sources)
-
-
-def _natural(path: Path) -> tuple:
-    """Sort key of a file: its name's runs of digits compared as numbers (``img2`` before ``img10``)."""
-    parts = re.split(r"(\d+)", path.name)
-    return [int(t) if k % 2 else t for k, t in enumerate(parts)], path.name
 
 
 def _file_numbers(files) -> tuple | None:

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.core.files import natural_key
 from handcap.markerless.keypoints import hand_names, split_hand_name
 from handcap.multiview.detections import Detections
 
@@ -153,7 +154,7 @@ def read_openpose_folder(folder, *, rate: float, camera: str | None = None) -> D
     folder = Path(folder)
     if not folder.is_dir():
         raise HandcapError(f"{folder}: OpenPose keypoints are a folder of per-frame JSON files")
-    files = sorted(folder.glob("*.json"))
+    files = sorted(folder.glob("*.json"), key=natural_key)
     if not files:
         raise HandcapError(f"{folder}: no .json files")
     numbers = []

@@ -9,7 +9,6 @@ board was not seen (see :mod:`~handcap.multiview.board_corners`) is all NaN.
 from __future__ import annotations
 
 import os
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +17,7 @@ import cv2
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.core.files import existing_file
+from handcap.core.files import existing_file, natural_key
 from handcap.multiview.board_corners import charuco_detector, find_corners, gray_image
 from handcap.multiview.board_spec import Board, parse_board
 
@@ -85,10 +84,6 @@ class BoardDetections:
                 f"{self.size[0]}x{self.size[1]} px, {self.board.spec})")
 
 
-def _natural_key(path: Path):
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
-
-
 def is_image_file(path) -> bool:
     """Whether ``path`` has an image suffix (the others are read as videos)."""
     return Path(path).suffix.lower() in IMAGE_SUFFIXES
@@ -105,7 +100,7 @@ def image_files(folder) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
         raise HandcapError(f"{folder}: no such folder")
-    files = sorted((p for p in folder.iterdir() if p.is_file() and is_image_file(p)), key=_natural_key)
+    files = sorted((p for p in folder.iterdir() if p.is_file() and is_image_file(p)), key=natural_key)
     if not files:
         raise HandcapError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
     return files
