@@ -193,3 +193,22 @@ def test_a_dropped_frame_is_a_stored_warning_and_keeps_the_frame_count(frames, w
     assert "b: 1 frame(s) missing" in capsys.readouterr().err
     assert any("b: 1 frame(s) missing" in w for w in data["warnings"])
     assert set(data["block_frame"][data["block_camera"] == 1].tolist()) <= {0, 2}
+
+
+@pytest.mark.parametrize("size, match", [("[200, 160]", None), ("[160, 200]", "turned a quarter"),
+                                         ("[400, 320]", "scaled or cropped")])
+def test_images_of_another_size_than_the_rigs_are_refused(frames, weights, tmp_path, capsys, size, match):
+    rig = tmp_path / "rig.toml"
+    rig.write_text("".join(f'[{cam}]\nname = "{cam}"\nsize = {size}\n'
+                           'matrix = [[100, 0, 100], [0, 100, 80], [0, 0, 1]]\n'
+                           f'distortions = [0, 0, 0, 0, 0]\nrotation = [0, 0, 0]\ntranslation = [{k}, 0, 1]\n'
+                           for k, cam in enumerate(("cam_0", "cam_1"))))
+    out = tmp_path / "d.npz"
+    code = main(["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(rig), "--out", str(out),
+                 "--no-refine", "--whole-frames", *weights])
+    err = capsys.readouterr().err
+    if match is None:
+        assert code == 0 and out.is_file()
+    else:
+        assert code == 2 and not out.exists()
+        assert match in err and "cam_0 frame 0: the image is 200x160 px" in err and len(err.strip().splitlines()) == 1

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
+from handcap.core.errors import HandcapError
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
 
 #: A camera's frame is searched whole at least once in this many frames.
@@ -179,7 +180,7 @@ class Tracker:
 
 
 def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
-                   progress: bool | None = None, track: bool = True) -> CaptureDetections:
+                   progress: bool | None = None, track: bool = True, sizes=None) -> CaptureDetections:
     """Run ``detector`` on every frame of ``sources`` (one per camera, in the rig's order).
 
     Parameters
@@ -197,10 +198,18 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     track : bool
         Search a frame around the previous frame's patches where that is safe (see the module docstring);
         without, every frame is searched whole.
+    sizes : sequence of (int, int), optional
+        Image (width, height) of each source's camera in the rig, pixels: a frame of another size is an error
+        (its pixels would not be those the rig was calibrated for), raised at that frame.
 
     Returns
     -------
     CaptureDetections
+
+    Raises
+    ------
+    HandcapError
+        A frame whose size is not its camera's.
     """
     index = {n: k for k, n in enumerate(marker_names)}
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
@@ -212,6 +221,8 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         for c, source in enumerate(sources):
             tracker = None
             for t, image in source.frames():
+                if sizes is not None:
+                    check_size(source, t, image.shape, sizes[c])
                 if tracker is None or tracker.shape != image.shape[:2]:
                     tracker = Tracker(image.shape)
                 region = tracker.region() if track else None
@@ -250,3 +261,33 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
     return CaptureDetections(arrays, images, empty, corrected, regions)
+
+
+def check_size(source, frame: int, shape, size) -> None:
+    """Refuse a frame whose size is not the rig's for its camera.
+
+    Parameters
+    ----------
+    source : FrameSource
+    frame : int
+        The frame's index.
+    shape : tuple of int
+        The frame's array shape, (H, W) or (H, W, 3).
+    size : (int, int)
+        The camera's image (width, height) in the rig, pixels.
+
+    Raises
+    ------
+    HandcapError
+        One line naming the camera, the frame and both sizes, and the likely cause.
+    """
+    w, h = int(shape[1]), int(shape[0])
+    rw, rh = (int(v) for v in size)
+    if (w, h) == (rw, rh):
+        return
+    where = f"{source.camera} frame {frame}: the image is {w}x{h} px but the rig calibrated camera {source.camera} at "
+    if (w, h) == (rh, rw):
+        raise HandcapError(where + f"{rw}x{rh}: turned a quarter (a phone's EXIF orientation, or a rotated "
+                                   "export?); give the images as the camera recorded them for this calibration")
+    raise HandcapError(where + f"{rw}x{rh}: scaled or cropped images would not match the calibration; give the "
+                               "camera's full-size images, or calibrate the rig on images of this size")

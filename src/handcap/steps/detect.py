@@ -89,7 +89,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     from handcap.detect.capture import detect_capture  # loads torch
 
     marker_names = template.corner_names() if template is not None else []
-    run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track)
+    sizes = None if rig is None else [cameras[s.camera].size for s in sources]
+    run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes)
     images, corrected = run.images, run.corrected
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
