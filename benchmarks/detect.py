@@ -249,6 +249,25 @@ def main() -> None:
     own_score = evaluate_detector(page_detector, [own.scene() for _ in range(max(args.scenes // 2, 1))])
     print("handcap's own page, flat, 30 px squares, plain camera: " + own_score.summary()
           + " (target: >= 99.9 % of its tags read)")
+    # A phone close to the patches: squares larger than the networks learned (9-40 px), read at halved levels of
+    # the image (handcap.detect.pipeline), against one search at the image's own size.
+    for side in (60.0, 110.0):
+        width = int(min(4000, 40 * side))
+        close = PageMaker(args.seed + 5, font=font, look=PageLook(square_px=(side, side), tilt_deg=(0.0, 30.0),
+                                                                  curl=(0.0, 0.5), occluders=(0, 0),
+                                                                  size=(width, width * 3 // 4)))
+        photos = [close.scene() for _ in range(max(args.scenes // 7, 1))]
+        timed = {}
+        for pyramid in (True, False):
+            start = time.perf_counter()
+            timed[pyramid] = evaluate_detector(Detector(fast, reader, session_pattern(), refiner=refiner,
+                                                        pyramid=pyramid), photos)
+            timed[pyramid] = (timed[pyramid], (time.perf_counter() - start) / len(photos))
+        (score, seconds), (single, single_s) = timed[True], timed[False]
+        print(f"sheet photographed close ({'Noto Sans Mono Bold' if font else 'default font'}, {side:g} px squares, "
+              f"{photos[0].image.shape[1]} x {photos[0].image.shape[0]} px): halved levels {score.summary()} "
+              f"({seconds:.2f} s/image); one level: tags {100 * single.right / max(single.blocks, 1):.1f} % read "
+              f"right, {single.wrong} wrong ({single_s:.2f} s/image)")
 
 
 def print_video(detector, video, pattern) -> None:
@@ -265,6 +284,9 @@ def print_video(detector, video, pattern) -> None:
             yield from enumerate(video)
 
         def count(self):
+            return len(video)
+
+        def span(self):
             return len(video)
 
     runs = {}
