@@ -212,3 +212,24 @@ def test_images_of_another_size_than_the_rigs_are_refused(frames, weights, tmp_p
     else:
         assert code == 2 and not out.exists()
         assert match in err and "cam_0 frame 0: the image is 200x160 px" in err and len(err.strip().splitlines()) == 1
+
+
+def test_mirrored_photographs_read_nothing_and_say_so(tmp_path, capsys):
+    from handcap.detect.scenes import PageMaker
+    from handcap.synth.pages import PageLook
+
+    maker = PageMaker(5, look=PageLook(square_px=(24.0, 30.0), tilt_deg=(0.0, 15.0), occluders=(0, 0),
+                                       size=(900, 700), glint=0.0))
+    pattern = tmp_path / "pattern.toml"
+    session_pattern().save(pattern)
+    image = maker.scene().image
+    for name, pixels in (("plain", image), ("selfie", image[:, ::-1])):
+        (tmp_path / name).mkdir()
+        cv2.imwrite(str(tmp_path / name / "0.png"), pixels)
+        assert main(["detect", str(tmp_path / name), "--pattern", str(pattern), "--out", str(tmp_path / f"{name}.npz"),
+                     "--rate", "30"]) == 0
+    data = {name: np.load(tmp_path / f"{name}.npz") for name in ("plain", "selfie")}
+    assert len(data["plain"]["block_text"]) > 20 and len(data["selfie"]["block_text"]) == 0  # none read wrong
+    (warning,) = [w for w in data["selfie"]["warnings"] if "no tag was read" in w]
+    assert "look mirrored" in warning and "flip them" in warning
+    assert not any("mirrored" in w for w in data["plain"]["warnings"])

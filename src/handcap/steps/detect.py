@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.pattern import Pattern
@@ -12,6 +14,8 @@ from handcap.io import read_rig
 from handcap.steps.step import Step
 
 DEFAULT_RATE = 20.0  # DexterCap's cameras; said in a warning when assumed
+#: Tags read in a first frame flipped left-right that call the images mirrored when none read as given.
+MIRRORED_TAGS = 3
 
 
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
@@ -95,7 +99,13 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
     if images and not len(run.arrays["block_text"]):
-        warnings.append("no tag was read in any image: wrong --alphabet, patches too small in the images, or not "
+        # A front camera's selfie is mirrored: no tag reads (checked: none read wrong), but flipped back they do.
+        _, first = next(sources[0].frames())
+        flipped = len(detector.image(np.ascontiguousarray(first[:, ::-1])).block_text)
+        warnings.append(f"no tag was read in any image: the images look mirrored ({flipped} tags read in "
+                        f"{sources[0].camera}'s first frame flipped left-right: a front camera's selfie?); flip "
+                        "them before detecting" if flipped >= MIRRORED_TAGS else
+                        "no tag was read in any image: wrong --alphabet, patches too small in the images, or not "
                         "coded patches")
     arrays = {**run.arrays, **warnings_entry(warnings)}
     save_npz(out, arrays)
