@@ -219,7 +219,7 @@ def test_mirrored_photographs_read_nothing_and_say_so(tmp_path, capsys):
     from handcap.synth.pages import PageLook
 
     maker = PageMaker(5, look=PageLook(square_px=(24.0, 30.0), tilt_deg=(0.0, 15.0), occluders=(0, 0),
-                                       size=(900, 700), glint=0.0))
+                                       size=(640, 480), glint=0.0))
     pattern = tmp_path / "pattern.toml"
     session_pattern().save(pattern)
     image = maker.scene().image

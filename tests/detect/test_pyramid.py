@@ -3,6 +3,8 @@ mapped back to the image's pixels; frames with small squares are searched once, 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -63,11 +65,12 @@ def test_frames_with_small_squares_are_searched_once(networks, scenes):
 
 
 def _blocks(side: float, count: int) -> ImageDetections:
+    """``count`` blocks of ``side`` pixels, among 10 corners."""
     square = np.array([[0.0, 0.0], [side, 0.0], [side, side], [0.0, side]])
-    return ImageDetections(np.zeros((0, 2)), np.zeros(0), np.zeros(0, object), np.full(count, "AB"),
+    return ImageDetections(np.zeros((10, 2)), np.zeros(10), np.zeros(10, object), np.full(count, "AB"),
                            np.repeat(square[None], count, axis=0), np.ones(count), 0)
 
 
 def test_a_level_is_too_large_without_blocks_or_with_large_ones():
-    assert _too_large(_blocks(10.0, 0))
+    assert _too_large(_blocks(10.0, 0)) and not _too_large(replace(_blocks(10.0, 0), corners=np.zeros((3, 2))))
     assert _too_large(_blocks(LARGE_SQUARE + 1.0, 3)) and not _too_large(_blocks(LARGE_SQUARE - 1.0, 3))
