@@ -65,3 +65,9 @@ def test_cameras_matched_by_order_with_different_counts_are_a_warning(tmp_path):
 def test_a_name_without_a_number_orders_the_folder(tmp_path):
     (source,) = frame_sources([_folder(tmp_path, "cam", ["0003.png", "0007.png", "last.png"])])
     assert _frames(source) == [(0, 10), (1, 20), (2, 30)] and frame_notes([source]) == []
+
+
+def test_clock_times_in_names_are_no_frame_counter(tmp_path):
+    names = [f"IMG_20261128_1015{k:02d}.jpg" for k in (33, 41, 58)] + ["IMG_20261128_101602.jpg"]
+    (source,) = frame_sources([_folder(tmp_path, "phone", names)])
+    assert source.numbers == () and [t for t, _ in _frames(source)] == [0, 1, 2, 3] and frame_notes([source]) == []

@@ -8,11 +8,12 @@ single image (one frame). Frames are grey ``(H, W)`` uint8; colour images
 are converted. A file that cannot be decoded is one clear error naming it.
 
 Frames are matched across cameras by their index. Where every file of the folders is named with a frame
-number and the folders share most of their numbers (one frame counter, as a synchronised rig writes), the
-index is that number less the smallest: a frame a camera dropped is missing from it, and its later frames
-still meet the other cameras' frames of the same instant. Otherwise (cameras numbering their files apart,
-names without numbers) the index is the order in the folder. :func:`frame_notes` says where either may
-pair frames of different instants.
+number (rising, and skipping no more frames than the folder holds: not a clock time) and the folders share
+most of their numbers (one frame counter, as a synchronised rig writes), the index is that number less the
+smallest: a frame a camera dropped is missing from it, and its later frames still meet the other cameras'
+frames of the same instant. Otherwise (cameras numbering their files apart, names without numbers) the
+index is the order in the folder. :func:`frame_notes` says where either may pair frames of different
+instants.
 """
 
 from __future__ import annotations
@@ -219,12 +220,15 @@ def frame_sources(paths) -> list[FrameSource]:
 
 
 def _file_numbers(files) -> tuple | None:
-    """The last number in each file's stem, where every file has one and they rise; else None."""
+    """The last number in each file's stem, where every file has one and they rise as a frame counter does
+    (skipping no more frames than the files hold: clock times such as ``IMG_20261128_101533`` jump further);
+    else None."""
     found = [re.findall(r"\d+", f.stem) for f in files]
     if not all(found):
         return None
     numbers = tuple(int(n[-1]) for n in found)
-    return numbers if all(a < b for a, b in zip(numbers, numbers[1:])) else None
+    rising = all(a < b for a, b in zip(numbers, numbers[1:]))
+    return numbers if rising and numbers[-1] - numbers[0] + 1 <= 2 * len(numbers) else None
 
 
 def _numbered(sources: list[FrameSource]) -> list[FrameSource]:
