@@ -15,10 +15,10 @@ visible tags were read with 60 px squares, 22 % with 90 px and 6.6 % with 130 px
 block (but four corners or more), or blocks whose sides have a median over :data:`LARGE_SQUARE`, it is
 searched again halved (area averaging), and halved again while that holds and the image keeps
 :data:`COARSEST` pixels; the level that reads the most tags is kept, its positions mapped back to the
-image's pixels. The same photographs then gave
-99.8, 95.5 and 97.9 % (one tag of 487 wrong: read right, one corner of its foreshortened block 2.1 px off),
-corners named within 0.08 px (median) of the truth; frames whose squares are small (the rig's cameras) are
-searched once, as before (the benchmark's hand scenes give the same figures).
+image's pixels. The same photographs then gave 99.8, 95.5 and 97.9 % (one tag of 487 wrong: read right,
+one corner of its foreshortened block 2.1 px off), corners named within 0.08 px (median) of the truth;
+frames whose squares are small (the rig's cameras) are searched once, as before (the benchmark's hand
+scenes give the same figures).
 """
 
 from __future__ import annotations
