@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
+
+from handcap import HandcapError
 
 from handcap.detect.sources import frame_notes, frame_sources
 
@@ -71,3 +74,16 @@ def test_clock_times_in_names_are_no_frame_counter(tmp_path):
     names = [f"IMG_20261128_1015{k:02d}.jpg" for k in (33, 41, 58)] + ["IMG_20261128_101602.jpg"]
     (source,) = frame_sources([_folder(tmp_path, "phone", names)])
     assert source.numbers == () and [t for t, _ in _frames(source)] == [0, 1, 2, 3] and frame_notes([source]) == []
+
+
+@pytest.mark.parametrize("name, match", [("IMG_0001.HEIC", "HEIC/HEIF photograph"), ("shot.dng", "camera raw file"),
+                                         ("notes.txt", "not an image")])
+def test_photographs_opencv_cannot_read_say_what_to_do(tmp_path, name, match):
+    (tmp_path / "cam").mkdir()
+    (tmp_path / "cam" / name).write_bytes(b"\x00" * 64)
+    with pytest.raises(HandcapError, match=match):
+        frame_sources([tmp_path / "cam" / name])
+    with pytest.raises(HandcapError, match="holds no images") as err:
+        frame_sources([tmp_path / "cam"])
+    assert (match in str(err.value)) == (match != "not an image")
+    assert (tmp_path / "cam" / name).read_bytes() == b"\x00" * 64

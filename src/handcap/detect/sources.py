@@ -30,6 +30,13 @@ from handcap.core.files import natural_key
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
+#: Photographs OpenCV cannot decode, and what to do with them.
+UNREADABLE = {**dict.fromkeys((".heic", ".heif"), "a HEIC/HEIF photograph (a phone's default), which OpenCV cannot "
+                                                  "decode: convert it to JPEG or PNG first (heif-convert, or the "
+                                                  "phone's 'Most Compatible' format)"),
+              **dict.fromkeys((".dng", ".cr2", ".cr3", ".nef", ".arw", ".raf", ".orf", ".rw2"),
+                              "a camera raw file, which OpenCV cannot decode: develop it to a 16-bit TIFF or PNG "
+                              "first (dcraw -T, darktable-cli)")}
 
 
 @dataclass(frozen=True)
@@ -198,7 +205,9 @@ def frame_sources(paths) -> list[FrameSource]:
             files = tuple(sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
                                  key=natural_key))
             if not files:
-                raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
+                other = sorted(p.suffix.lower() for p in path.iterdir() if p.suffix.lower() in UNREADABLE)
+                raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})"
+                                   + (f"; it holds {other[0]} files, each {UNREADABLE[other[0]]}" if other else ""))
             sources.append(FrameSource(path.name, path, "folder", files))
         elif path.is_file():
             suffix = path.suffix.lower()
@@ -206,6 +215,8 @@ def frame_sources(paths) -> list[FrameSource]:
                 sources.append(FrameSource(path.stem, path, "video"))
             elif suffix in IMAGE_SUFFIXES:
                 sources.append(FrameSource(path.stem, path, "image", (path,)))
+            elif suffix in UNREADABLE:
+                raise HandcapError(f"{path}: {UNREADABLE[suffix]}")
             else:
                 raise HandcapError(f"{path}: not an image ({', '.join(IMAGE_SUFFIXES)}) or a video "
                                    f"({', '.join(VIDEO_SUFFIXES)})")
