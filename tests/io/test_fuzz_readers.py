@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import re
 import shutil
+import struct
 import tempfile
 import zipfile
 from importlib.resources import files
@@ -27,6 +28,7 @@ from handcap import HandcapError, MarkerSequence
 from handcap.core.cameras import Camera, CameraRig
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
+from handcap.detect.sources import read_image
 from handcap.hand.attachment import MarkerAttachment
 from handcap.occlusion.model import OcclusionModel
 from handcap.io import (
@@ -145,8 +147,22 @@ def _layout() -> bytes:
     return files("handcap.layouts").joinpath("glove-13.toml").read_bytes()
 
 
+def _image(suffix: str) -> bytes:
+    """A small grey photograph (PNG, or JPEG with an EXIF orientation) as the detector's frames are read."""
+    import cv2
+    pixels = np.random.default_rng(0).integers(0, 255, (24, 32), dtype=np.uint8)
+    code = cv2.imencode(suffix, pixels)[1].tobytes()
+    if suffix != ".jpg":
+        return code
+    tiff = b"MM\x00\x2a" + struct.pack(">IH", 8, 1) + struct.pack(">HHIHH", 0x0112, 3, 1, 6, 0) + bytes(4)
+    app1 = b"Exif\x00\x00" + tiff
+    return code[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + code[2:]
+
+
 # name: (seed bytes builder, file name, reader, kind of mutation)
 READERS = {
+    "png-image": (lambda: _image(".png"), "frame.png", read_image, "binary"),
+    "jpeg-image": (lambda: _image(".jpg"), "frame.jpg", read_image, "binary"),
     "c3d": (lambda: _written(lambda p: write_c3d(_markers(), p), ".c3d"), "take.c3d", read_markers, "binary"),
     "trc": (lambda: _written(lambda p: write_trc(_markers(), p), ".trc"), "take.trc", read_markers, "text"),
     "qualisys-tsv": (_tsv, "take.tsv", read_markers, "text"),
