@@ -87,3 +87,39 @@ def test_photographs_opencv_cannot_read_say_what_to_do(tmp_path, name, match):
         frame_sources([tmp_path / "cam"])
     assert (match in str(err.value)) == (match != "not an image")
     assert (tmp_path / "cam" / name).read_bytes() == b"\x00" * 64
+
+
+def _video(path, levels):
+    """A short MJPG video whose frames have the grey levels ``levels``."""
+    out = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (32, 24), isColor=False)
+    for level in levels:
+        out.write(np.full((24, 32), level, np.uint8))
+    out.release()
+
+
+def test_a_take_folder_gives_a_camera_to_each_video_and_each_folder_of_images(tmp_path):
+    take = tmp_path / "take"
+    take.mkdir()
+    _video(take / "cam10.avi", [40, 200])
+    _video(take / "cam2.avi", [90, 90, 160])
+    (take / "notes.txt").write_text("not a camera")
+    sources = frame_sources([take])
+    assert [(s.camera, s.kind) for s in sources] == [("cam2", "video"), ("cam10", "video")]  # natural order
+    assert [[level // 10 for _, level in _frames(s)] for s in sources] == [[9, 9, 16], [4, 20]]  # MJPG: +-a few
+
+    # Pose2Sim's layout: a folder of camera folders, one frame counter; an empty folder beside them is no camera.
+    frames = tmp_path / "intrinsics"
+    frames.mkdir()
+    _folder(frames, "int_cam02_img", [f"cam02_{k:02d}.png" for k in range(1, 7)])
+    _folder(frames, "int_cam01_img", [f"cam01_{k:02d}.png" for k in (1, 2, 3, 5, 6)])  # frame 4 dropped
+    (frames / "empty").mkdir()
+    sources = frame_sources([frames])
+    assert [s.camera for s in sources] == ["int_cam01_img", "int_cam02_img"]
+    assert [[t for t, _ in _frames(s)] for s in sources] == [[0, 1, 2, 4, 5], [0, 1, 2, 3, 4, 5]]
+    assert frame_notes(sources) == ["int_cam01_img: 1 frame(s) missing by its files' numbers (first after frame 2); "
+                                    "its other frames keep their numbers"]
+
+    with pytest.raises(HandcapError, match="no videos and no folders of images"):
+        frame_sources([frames / "empty"])
+    with pytest.raises(HandcapError, match="both camera 'int_cam01_img'"):  # the take and one of its cameras
+        frame_sources([frames, frames / "int_cam01_img"])

@@ -18,9 +18,11 @@ def add_detect(verbs) -> None:
                                      "crops), blocks (white squares between them), their tags "
                                      "(reader network), a vote over the template's patches and the corner ids. "
                                      "Each input is one camera: a folder of images, a video or an image, named "
-                                     "after the camera. Writes the 2D detections file that triangulate reads, "
+                                     "after the camera; a take's folder of videos or of folders of images gives "
+                                     "a camera to each. Writes the 2D detections file that triangulate reads, "
                                      "with one row per read block as well.")
-    p.add_argument("inputs", nargs="+", help="folders of images, videos or image files, one per camera")
+    p.add_argument("inputs", nargs="+", help="folders of images, videos or image files, one per camera (or a folder of "
+                                           "them)")
     p.add_argument("--out", required=True, help="detections file to write (.npz)")
     p.add_argument("--rig", help="cameras file; the inputs must be named after its cameras")
     p.add_argument("--pattern", help="the session's pattern.toml (handcap pattern): without it, blocks only")

@@ -47,8 +47,10 @@ def add_markerless(verbs) -> None:
                                     "'handcap[markerless]' && pip install --no-deps mediapipe==0.10.14), and where it "
                                     "finds no hand, retries: around the hand of the frame before, the image "
                                     "padded, enlarged crops, turned, mirrored. One input per camera: a folder of "
-                                    "images, a video (read frame by frame) or an image, named after the camera.")
-    q.add_argument("inputs", nargs="+", help="folders of images, videos or images, one per camera")
+                                    "images, a video (read frame by frame) or an image, named after the camera; a "
+                                    "take's folder of videos or of folders of images gives a camera to each.")
+    q.add_argument("inputs", nargs="+", help="folders of images, videos or images, one per camera (or a folder "
+                                              "of them)")
     q.add_argument("--out", required=True, help="2D detections file to write (.npz)")
     q.add_argument("--rate", type=float, help="frames per second (default: the video's, else 30)")
     q.add_argument("--mirrored", action="store_true", help="the images are mirrored (a selfie camera): keep "

@@ -4,8 +4,11 @@ Each input path is one camera, named after it: a folder of images (its frames
 in file-name order, the numbers in the names compared as numbers, so ``img2``
 comes before ``img10``; e.g. ``images/cam_0/000000.png`` as ``handcap synth
 --images`` writes), a video (its frames in order, read one at a time), or a
-single image (one frame). Frames are grey ``(H, W)`` uint8; colour images
-are converted. A file that cannot be decoded is one clear error naming it.
+single image (one frame). A take's folder that holds no images itself gives a
+camera to each video and each folder of images in it (anipose's
+``videos/cam1.mp4``, Pose2Sim's ``intrinsics/int_cam01_img/``). Frames are
+grey ``(H, W)`` uint8; colour images are converted. A file that cannot be
+decoded is one clear error naming it.
 
 Frames are matched across cameras by their index. Where every file of the folders is named with a frame
 number (rising, and skipping no more frames than the folder holds: not a clock time) and the folders share
@@ -182,12 +185,15 @@ def _bgr(image: np.ndarray) -> np.ndarray:
 
 
 def frame_sources(paths) -> list[FrameSource]:
-    """One :class:`FrameSource` per input path.
+    """The cameras of the input paths: one per folder of images, video or image file.
+
+    A folder that holds no images but videos or folders of images (a take's folder) gives one camera to
+    each of them, in natural order.
 
     Parameters
     ----------
     paths : sequence of str or Path
-        Folders of images, videos or image files.
+        Folders of images, videos, image files, or folders of videos and folders of images.
 
     Returns
     -------
@@ -196,19 +202,14 @@ def frame_sources(paths) -> list[FrameSource]:
     Raises
     ------
     HandcapError
-        A missing path, a folder without images, a file of another kind, or two inputs with one camera name.
+        A missing path, a folder without images, videos or folders of images, a file of another kind, or two
+        inputs with one camera name.
     """
     sources = []
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            files = tuple(sorted((p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
-                                 key=natural_key))
-            if not files:
-                other = sorted(p.suffix.lower() for p in path.iterdir() if p.suffix.lower() in UNREADABLE)
-                raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)})"
-                                   + (f"; it holds {other[0]} files, each {UNREADABLE[other[0]]}" if other else ""))
-            sources.append(FrameSource(path.name, path, "folder", files))
+            sources += _folder(path)
         elif path.is_file():
             suffix = path.suffix.lower()
             if suffix in VIDEO_SUFFIXES:
@@ -228,6 +229,28 @@ def frame_sources(paths) -> list[FrameSource]:
         raise HandcapError(f"two inputs are both camera {twice[0]!r}; give each camera's images a folder (or video) "
                            "of its own name")
     return _numbered(sources)
+
+
+def _images(folder: Path) -> tuple:
+    """The image files of a folder, in natural order."""
+    return tuple(sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
+                        key=natural_key))
+
+
+def _folder(path: Path) -> list[FrameSource]:
+    """A folder's cameras: itself where it holds images; else each video in it and each folder of images
+    in it (a take's folder, one camera to a video or folder: anipose's and Pose2Sim's layouts)."""
+    files = _images(path)
+    if files:
+        return [FrameSource(path.name, path, "folder", files)]
+    inside = sorted(path.iterdir(), key=natural_key)
+    videos = [FrameSource(p.stem, p, "video") for p in inside if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES]
+    folders = [FrameSource(p.name, p, "folder", _images(p)) for p in inside if p.is_dir() and _images(p)]
+    if videos or folders:
+        return videos + folders
+    other = sorted(p.suffix.lower() for p in inside if p.suffix.lower() in UNREADABLE)
+    raise HandcapError(f"{path}: folder holds no images ({', '.join(IMAGE_SUFFIXES)}), no videos and no folders "
+                       "of images" + (f"; it holds {other[0]} files, each {UNREADABLE[other[0]]}" if other else ""))
 
 
 def _file_numbers(files) -> tuple | None:

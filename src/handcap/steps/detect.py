@@ -26,7 +26,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     Parameters
     ----------
     inputs : sequence of str or Path
-        One per camera: a folder of images, a video or an image file (its name is the camera's).
+        One per camera: a folder of images, a video or an image file (its name is the camera's); a take's
+        folder of videos or of folders of images gives a camera to each.
     out : str or Path
         The detections file (.npz).
     rig : str, Path or None

@@ -254,7 +254,8 @@ def keypoints_detect(inputs, out, *, rate: float | None = None, mirrored: bool =
     Parameters
     ----------
     inputs : sequence of str or Path
-        One per camera: a folder of images, a video or an image (its name is the camera's).
+        One per camera: a folder of images, a video or an image (its name is the camera's); a take's folder
+        of videos or of folders of images gives a camera to each.
     out : str or Path
         Detections .npz to write.
     rate : float or None
