@@ -143,3 +143,27 @@ def test_the_reader_trains_from_its_scenes_file_and_is_scored_afterwards(tmp_pat
         assert np.array_equal(saved["w.turn.weight"], first)
         assert "right" in str(saved["info.score"]) and "; then " in str(saved["info.source"])
         assert "--cut" in str(saved["info.source"])
+
+
+def test_a_scenes_file_splits_into_parts_of_about_equal_size_that_join_into_it(tmp_path, capsys):
+    from handcap.detect.scenefile import main, split_scenes
+    rng = np.random.default_rng(7)
+    train, test = [_scene(rng) for _ in range(9)], [_scene(rng) for _ in range(3)]
+    info = {"scenes": 9, "seed": 1}
+    whole = tmp_path / "all.npz"
+    save_scenes(whole, {"train": train, "test": test}, info)
+    before = whole.read_bytes()
+    parts = split_scenes(whole, 3)
+    assert [p.name for p in parts] == ["all.part1of3.npz", "all.part2of3.npz", "all.part3of3.npz"]
+    sizes = np.array([p.stat().st_size for p in parts])
+    assert sizes.max() < 1.6 * sizes.min()  # twelve random images of 80-180 px a side
+    assert [load_scenes(p)[1]["part"] for p in parts] == [[1, 3], [2, 3], [3, 3]]
+    assert main(["join", str(tmp_path / "joined.npz")] + [str(p) for p in parts]) == 0
+    joined, got = load_scenes(tmp_path / "joined.npz")
+    assert got == info and whole.read_bytes() == before
+    assert all(_same(a, b) for a, b in zip(test + train, joined["test"] + joined["train"]))
+    # Every part holds a scene, however the sizes fall; a part is not split again; too many parts is refused.
+    assert all(sum(map(len, load_scenes(p)[0].values())) >= 1 for p in split_scenes(whole, 12))
+    assert main(["split", str(parts[0]), "2"]) == 2 and "join the parts first" in capsys.readouterr().err
+    with pytest.raises(HandcapError, match="cannot split 12 scenes into 13 parts"):
+        split_scenes(whole, 13)

@@ -5,12 +5,16 @@ Rendering is most of the cost of training the detector's networks on the CPU
 may have no OpenGL at all. ``python -m handcap.detect.train --scenes-file F``
 renders its scenes into ``F`` once and reads them from there afterwards. Images
 are stored as lossless PNG, so a scene read back is the scene rendered, bit for
-bit. This module imports no renderer.
+bit. Where a transfer limits a file's size, ``python -m handcap.detect.scenefile
+split F N`` writes it as N parts and ``... join F PART...`` joins them again.
+This module imports no renderer.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 import zipfile
@@ -217,3 +221,81 @@ def join_scenes(paths, path) -> None:
     arrays["info"], arrays["groups"] = np.array(json.dumps(whole)), np.array(groups)
     with atomic_output(path) as fh:
         np.savez(fh, **arrays)
+
+
+def split_scenes(path, parts: int) -> list[Path]:
+    """Write a scenes file as ``parts`` files of about equal size, for :func:`join_scenes` to join elsewhere.
+
+    Each group's scenes keep their order across the parts; the parts are ``{stem}.part{k}of{n}.npz`` beside
+    ``path`` (each written atomically), and ``path`` itself is left as it is.
+
+    Parameters
+    ----------
+    path : str or Path
+        A whole scenes file (:func:`save_scenes`).
+    parts : int
+        How many parts, 1 or more.
+
+    Returns
+    -------
+    list of Path
+        The parts, in order.
+
+    Raises
+    ------
+    HandcapError
+        Fewer than one part, more parts than scenes, or a file that is itself a part.
+    """
+    path = Path(path)
+    groups, info = load_scenes(path)
+    if "part" in info:
+        raise HandcapError(f"{path}: is part {info['part']} of a scenes file already; join the parts first")
+    order = [(name, k) for name in sorted(groups) for k in range(len(groups[name]))]
+    if not 1 <= parts <= len(order):
+        raise HandcapError(f"{path}: cannot split {len(order)} scenes into {parts} parts")
+    size = np.array([len(cv2.imencode(".png", groups[name][k].image, [cv2.IMWRITE_PNG_COMPRESSION, 9])[1])
+                     for name, k in order], dtype=np.float64)
+    # Cut where the running size passes each k / parts of the whole, every part keeping one scene or more.
+    cuts = [0]
+    for k in range(1, parts):
+        cut = int(np.searchsorted(np.cumsum(size), size.sum() * k / parts)) + 1
+        cuts.append(min(max(cut, cuts[-1] + 1), len(order) - (parts - k)))
+    which = np.searchsorted(cuts, np.arange(len(order)), side="right") - 1
+    out = []
+    for p in range(parts):
+        chosen = {}
+        for (name, k), w in zip(order, which):
+            if w == p:
+                chosen.setdefault(name, []).append(groups[name][k])
+        out.append(path.with_name(f"{path.stem}.part{p + 1}of{parts}.npz"))
+        save_scenes(out[-1], chosen, dict(info, part=[p + 1, parts]))
+    return out
+
+
+def main(argv=None) -> int:
+    """``python -m handcap.detect.scenefile split FILE N`` or ``... join OUT PART...``: move a scenes file
+    to another machine in parts (a transfer's size limit)."""
+    p = argparse.ArgumentParser(prog="python -m handcap.detect.scenefile", description=main.__doc__.split(":")[0])
+    verbs = p.add_subparsers(dest="verb", required=True)
+    s = verbs.add_parser("split", help="write FILE as N parts beside it")
+    s.add_argument("file")
+    s.add_argument("parts", type=int)
+    j = verbs.add_parser("join", help="join the parts, in order, into OUT")
+    j.add_argument("out")
+    j.add_argument("part", nargs="+")
+    a = p.parse_args(argv)
+    try:
+        if a.verb == "split":
+            for part in split_scenes(a.file, a.parts):
+                print(f"wrote {part} ({part.stat().st_size / 1e6:.1f} MB)")
+        else:
+            join_scenes(a.part, a.out)
+            print(f"wrote {a.out}")
+    except HandcapError as err:
+        print(f"python -m handcap.detect.scenefile: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
