@@ -245,7 +245,8 @@ def _folder(path: Path) -> list[FrameSource]:
         return [FrameSource(path.name, path, "folder", files)]
     inside = sorted(path.iterdir(), key=natural_key)
     videos = [FrameSource(p.stem, p, "video") for p in inside if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES]
-    folders = [FrameSource(p.name, p, "folder", _images(p)) for p in inside if p.is_dir() and _images(p)]
+    folders = [FrameSource(p.name, p, "folder", files) for p in inside if p.is_dir() for files in [_images(p)]
+               if files]
     if videos or folders:
         return videos + folders
     other = sorted(p.suffix.lower() for p in inside if p.suffix.lower() in UNREADABLE)
