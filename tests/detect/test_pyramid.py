@@ -1,6 +1,5 @@
 """Large squares (a photograph taken close to the patches) are read at a halved level of the image, their positions
-mapped back to the image's pixels; frames with small squares are searched once, as before. A large photograph
-whose halved level already shows large squares is not searched at its own size."""
+mapped back to the image's pixels; frames with small squares are searched once, as before."""
 
 from __future__ import annotations
 
@@ -9,8 +8,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from handcap.detect import pipeline
-from handcap.detect.corners import grey_levels
 from handcap.detect.evaluation import evaluate_detector
 from handcap.detect.networks import load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import LARGE_SQUARE, Detector, ImageDetections, _too_large
@@ -77,49 +74,3 @@ def _blocks(side: float, count: int) -> ImageDetections:
 def test_a_level_is_too_large_without_blocks_or_with_large_ones():
     assert _too_large(_blocks(10.0, 0)) and not _too_large(replace(_blocks(10.0, 0), corners=np.zeros((3, 2))))
     assert _too_large(_blocks(LARGE_SQUARE + 1.0, 3)) and not _too_large(_blocks(LARGE_SQUARE - 1.0, 3))
-
-
-def _searched(monkeypatch):
-    """The shapes of the image levels a Detector searches, recorded as it goes."""
-    shapes = []
-    search = Detector._detect
-
-    def recorded(self, image, levels):
-        shapes.append(image.shape)
-        return search(self, image, levels)
-
-    monkeypatch.setattr(Detector, "_detect", recorded)
-    return shapes
-
-
-def test_a_large_photo_with_large_squares_skips_its_own_size(networks, close_photos, monkeypatch):
-    # A photo above PEEK_PIXELS is searched halved first. Where its squares are over LARGE_SQUARE there (the
-    # second photo: its own size would show them twice that, where the networks read next to nothing), the
-    # image's own size is not searched; where they are not (the first, more foreshortened), it is, as before.
-    detector = Detector(**networks, pattern=session_pattern())
-    before = [detector.image(scene.image) for scene in close_photos]
-    shapes = _searched(monkeypatch)
-    monkeypatch.setattr(pipeline, "PEEK_PIXELS", 1_000_000)  # the photos are 1-2 MP
-    searched = []
-    for scene, want in zip(close_photos, before):
-        shapes.clear()
-        got = detector.image(scene.image)
-        h, w = scene.image.shape
-        assert shapes[0] == (h // 2, w // 2)
-        searched.append((h, w) in shapes)
-        np.testing.assert_array_equal(got.block_text, want.block_text)  # the same level reads the most tags
-        np.testing.assert_allclose(got.block_xy, want.block_xy)
-    assert searched == [True, False]
-
-
-def test_a_large_frame_with_small_squares_is_searched_at_its_own_size(networks, scenes, monkeypatch):
-    alphabet = "0123456789ACEFHPUY"
-    detector = Detector(**networks, alphabet=alphabet)
-    shapes = _searched(monkeypatch)
-    monkeypatch.setattr(pipeline, "PEEK_PIXELS", 1)
-    for scene in scenes[:2]:
-        got, want = detector.image(scene.image), Detector(**networks, alphabet=alphabet, pyramid=False)._detect(
-            scene.image, grey_levels(scene.image))
-        assert scene.image.shape in shapes and len(got.block_text) > 5
-        np.testing.assert_array_equal(got.corners, want.corners)
-        np.testing.assert_array_equal(got.block_text, want.block_text)

@@ -18,8 +18,7 @@ searched again halved (area averaging), and halved again while that holds and th
 image's pixels. The same photographs then gave 99.8, 95.5 and 97.9 % (one tag of 487 wrong: read right,
 one corner of its foreshortened block 2.1 px off), corners named within 0.08 px (median) of the truth;
 frames whose squares are small (the rig's cameras) are searched once, as before (the benchmark's hand
-scenes give the same figures). An image over :data:`PEEK_PIXELS` (a phone's photograph) is searched halved
-first, and not at its own size where that level's squares are large already.
+scenes give the same figures).
 """
 
 from __future__ import annotations
@@ -45,13 +44,6 @@ MIN_REGION = 32
 LARGE_SQUARE = 28.0
 #: Shorter side of the smallest image level searched, pixels.
 COARSEST = 128
-#: Pixels of an image above which its halved level is searched first: a phone's photograph (12 MP), not a rig's
-#: frame (5 MP) or a 4K video's (8.3-8.8 MP). Where that level's squares are already large (so the image's own
-#: would show them at twice :data:`LARGE_SQUARE` or more, where the networks read next to nothing), the image's
-#: own size is not searched. On rendered 4000 x 3000 sheet photographs (Noto Sans Mono Bold, 2 threads) this
-#: took 1.5-1.9 s an image instead of 2.4-3.0 s with 60-130 px squares, the same tags read, but 3.4 s instead
-#: of 2.3 s with 20 px squares (squares that small fill a phone's frame only from a metre or more away).
-PEEK_PIXELS = 10_000_000
 
 
 def region_box(region, shape) -> tuple[int, int, int, int]:
@@ -175,33 +167,22 @@ class Detector:
         if region is not None:
             x0, y0, x1, y1 = region_box(region, image.shape)
             image, origin = np.ascontiguousarray(image[y0:y1, x0:x1]), np.array([x0, y0], float)
-        half = None
-        if self.pyramid and image.shape[0] * image.shape[1] > PEEK_PIXELS:
-            half = self._detect(_halved(image), levels)
-            if len(half.block_text) and _too_large(half):
-                return self._placed(self._coarser(image, levels, None, half), origin)
         found = self._detect(image, levels)
         if self.pyramid:
-            found = self._coarser(image, levels, found, half)
-        return self._placed(found, origin)
-
-    @staticmethod
-    def _placed(found: ImageDetections, origin: np.ndarray) -> ImageDetections:
-        """Positions in a region moved into the whole image's pixels."""
-        if not origin.any():
+            found = self._coarser(image, levels, found)
+        if region is None:
             return found
         return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin)
 
-    def _coarser(self, image: np.ndarray, levels: np.ndarray, found: ImageDetections | None,
-                 half: ImageDetections | None = None) -> ImageDetections:
+    def _coarser(self, image: np.ndarray, levels: np.ndarray, found: ImageDetections) -> ImageDetections:
         """``found`` in ``image``, or what a halved level of it reads where that holds more tags (module
-        docstring), in ``image``'s pixels. ``half``: the first halved level's detections, made already;
-        ``found`` None: the image's own size was not searched (``half`` is then given)."""
+        docstring), in ``image``'s pixels."""
         best, level, current = found, image, found
-        while (current is None or _too_large(current)) and min(level.shape[:2]) >= 2 * COARSEST:
-            level = _halved(level)
-            current, half = (half if half is not None else self._detect(level, levels)), None
-            if best is None or len(current.block_text) > len(best.block_text):
+        while _too_large(current) and min(level.shape[:2]) >= 2 * COARSEST:
+            h, w = level.shape[:2]
+            level = cv2.resize(level, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+            current = self._detect(level, levels)
+            if len(current.block_text) > len(best.block_text):
                 scale = np.array([image.shape[1] / level.shape[1], image.shape[0] / level.shape[0]])
                 best = replace(current, corners=(current.corners + 0.5) * scale - 0.5,
                                block_xy=(current.block_xy + 0.5) * scale - 0.5)
@@ -263,12 +244,6 @@ class Detector:
         drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
         tags[drop], turns[drop] = "", -1
         return tags, turns, corrected
-
-
-def _halved(image: np.ndarray) -> np.ndarray:
-    """An image at half its size, by area averaging."""
-    h, w = image.shape[:2]
-    return cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
 
 
 def _too_large(found: ImageDetections) -> bool:
