@@ -135,6 +135,8 @@ def test_the_reader_trains_from_its_scenes_file_and_is_scored_afterwards(tmp_pat
     assert np.array_equal(np.load(tmp_path / "w" / "reader.npz")["w.turn.weight"], first)
     with pytest.raises(HandcapError, match="holds scenes made with"):
         train.main([a for a in args if a != "--cut"])
+    with pytest.raises(HandcapError, match="holds scenes made with"):  # varied glyphs are other scenes
+        train.main(args + ["--vary", "0.5"])
     monkeypatch.undo()
     # No steps: the weights are kept, their gate is set on validation scenes, and the chain of commands recorded.
     assert train.main(["--what", "reader", "--steps", "0", "--test-scenes", "1", "--threads", "1",

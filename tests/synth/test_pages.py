@@ -13,7 +13,7 @@ from handcap.patterns import session_pattern
 from handcap.patterns.glyphs import GlyphLayout, load_font, square_ink
 from handcap.synth.images import ImageStyle
 from handcap.synth.pages import PageLook, PagePhotographer
-from handcap.synth.textures import build_atlas
+from handcap.synth.textures import build_atlas, patch_texture
 
 PATTERN = session_pattern(("right",), ())
 FONT = load_font(None, PATTERN.alphabet)
@@ -78,3 +78,44 @@ def test_random_glyph_layouts_stay_inside_their_square():
         assert glyphs.min() > 0.0 and glyphs.max() < 1.0
         assert underline[:, 1].min() > glyphs[:, 1].max() - 0.02  # under the glyphs (descenders aside)
         assert underline[:, 1].max() < 1.0
+
+
+def test_varied_glyphs_stay_inside_their_square():
+    rng = np.random.default_rng(1)
+    for k in range(200):
+        base = GlyphLayout.random(rng) if k % 2 else GlyphLayout()
+        layout = base.varied(rng)
+        paths = square_ink("MW", 0.0, 0.0, 1.0, FONT, layout)
+        glyphs = np.concatenate([p.vertices for p in paths[:2]])
+        assert glyphs.min() > 0.0 and glyphs.max() < 1.0
+
+
+def test_slant_shears_each_glyph_about_its_baseline():
+    plain = square_ink("HI", 0.0, 0.0, 1.0, FONT, GlyphLayout())
+    for slant in (-0.08, 0.12):
+        sheared = square_ink("HI", 0.0, 0.0, 1.0, FONT, GlyphLayout(slant=slant))
+        baseline = GlyphLayout().glyph_top + GlyphLayout().cap_height
+        for a, b in zip(plain[:2], sheared[:2]):
+            shift = b.vertices[:, 0] - a.vertices[:, 0]
+            rise = baseline - a.vertices[:, 1]  # height above the baseline (y down)
+            gain, offset = np.polyfit(rise, shift, 1)
+            assert np.allclose(shift, gain * rise + offset, atol=1e-9)  # a shear, nothing else
+            assert 0.5 < gain / slant <= 1.0 + 1e-9  # the glyph's own slant, times the squeeze of a wide font
+            assert abs(b.vertices[:, 1] - a.vertices[:, 1]).max() < 1e-12
+
+
+def test_wobble_is_one_shape_per_glyph_and_weight_grows_the_strokes():
+    layout = GlyphLayout(wobble=0.03, wobble_seed=5)
+    left, right, _ = square_ink("LL", 0.0, 0.0, 1.0, FONT, layout)
+    plain, _, _ = square_ink("LL", 0.0, 0.0, 1.0, FONT, GlyphLayout())
+    moved = right.vertices - left.vertices
+    assert np.allclose(moved, moved[0], atol=1e-12)  # the same outline, only moved
+    assert abs(left.vertices - plain.vertices - (left.vertices - plain.vertices).mean(0)).max() > 0.002
+    patch = PATTERN.patches[0]
+    ink = {w: patch_texture(patch, FONT, 48, layout=GlyphLayout(weight=w)) for w in (-0.015, 0.0, 0.03)}
+    dark = {w: (255 - im.astype(float)).sum() for w, im in ink.items()}
+    assert dark[-0.015] < dark[0.0] < dark[0.03]
+    bare = patch_texture(patch, FONT, 48, ink=False)
+    for im in ink.values():  # only the glyphs change: the squares' edges and corners stay where they were
+        glyph_free = (bare == 0) | (abs(ink[0.03].astype(int) - bare) == 0)
+        assert np.array_equal(im[glyph_free], bare[glyph_free])

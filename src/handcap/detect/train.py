@@ -102,11 +102,8 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
     Parameters
     ----------
     scenes : sequence of Scene
-    steps : int
-        Optimiser steps.
-    batch : int
-        Crops per step.
-    seed : int
+    steps, batch, seed : int
+        Optimiser steps, crops per step, and the seed.
     lr : float
         AdamW learning rate, decayed by a cosine to 5 % of it.
     net : CornerNet, optional
@@ -184,9 +181,7 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
     Parameters
     ----------
     scenes : sequence of Scene
-    steps : int
-    batch : int
-    seed : int
+    steps, batch, seed : int
     lr : float
         AdamW learning rate, decayed by a cosine to 5 % of it.
     net : BlockReader, optional
@@ -225,30 +220,32 @@ FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
          "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf")
 
 
-def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool = False) -> list:
+def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool = False, vary: float = 0.0) -> list:
     """Scenes for the reader: hand renders and photographed sheets in each font, many alphabets and layouts.
 
     Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
     them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
     photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
-    ``cut`` cuts each scene to its corners (:meth:`Scene.cropped`).
+    ``cut`` cuts each scene to its corners (:meth:`Scene.cropped`). A share ``vary`` of the scenes gets glyphs
+    varied in weight, slant, width and outline (:meth:`GlyphLayout.varied`, from its own random stream).
 
     Parameters
     ----------
-    count : int
-    seed : int
+    count, seed : int
     fonts : sequence of str or None
         Font files (None: the default font).
     pages : float
         Share of photographed sheets among the scenes.
     cut : bool
         Cut each scene to its corners: the same views, a third smaller to keep in a scenes file.
+    vary : float
+        Share of the scenes whose glyphs look like another font's.
 
     Returns
     -------
     list of Scene
     """
-    rng = np.random.default_rng(seed)
+    rng, other = np.random.default_rng(seed), np.random.default_rng((seed, 17))
     n_pages = int(round(pages * count))
     out = []
     for kind, total, per in (("hand", count - n_pages, max(1, (count - n_pages) // (6 * len(fonts)))),
@@ -259,6 +256,7 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool
             alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
             alphabet = alphabets[(k // len(fonts)) % 3]
             layout = GlyphLayout.random(rng) if (k // (3 * len(fonts))) % 2 else None
+            layout = (layout or GlyphLayout()).varied(other) if other.random() < vary else layout
             make = SceneMaker if kind == "hand" else PageMaker
             extra = {"scale": (0.45, 1.0)} if kind == "hand" else {}
             maker = make(seed * 1000 + k + (0 if kind == "hand" else 500), font=font, alphabet=alphabet,
@@ -309,6 +307,8 @@ def main(argv=None) -> int:
                    help="the reader: share of true blocks shown with one corner moved, as no block (default 0)")
     p.add_argument("--occluded", type=float, default=0.0, help="the refiner: share of its negatives drawn from "
                    "candidates at an occluder's edge near a hidden corner (default 0: as often as any other)")
+    p.add_argument("--vary", type=float, default=0.0, help="the reader: share of its training scenes whose glyphs "
+                   "are varied in weight, slant, width and outline, to read fonts it never saw")
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
@@ -384,8 +384,9 @@ def _plan(train, scenes, a, init, **settings) -> int:
 def _reader_scenes(a, fonts) -> list:
     """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file``."""
     made = {"what": "reader", "scenes": a.scenes, "seed": a.seed, "cut": a.cut}
+    made |= {"vary": a.vary} if a.vary else {}  # files made before --vary stay readable
     return _kept(a.scenes_file, made, ("train",),
-                 lambda: {"train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut)})["train"]
+                 lambda: {"train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut, vary=a.vary)})["train"]
 
 
 def _kept(path, made: dict, names, render) -> dict:
@@ -409,7 +410,7 @@ def _command(a) -> str:
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
                             ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False),
-                            ("cut", False), ("displaced", 0.0)):
+                            ("cut", False), ("displaced", 0.0), ("vary", 0.0)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.init:

@@ -13,7 +13,7 @@ margin reaches half a square beyond the grid on every side.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -56,6 +56,18 @@ class GlyphLayout:
     underline_top, underline_thickness : float
     gap : float
         Space between the two glyphs.
+    weight : float
+        Ink grown (or, below 0, thinned) on every side of the glyphs' strokes, fractions of the glyph
+        height. Raster textures only (:func:`handcap.synth.textures.patch_texture`): the vector drawing
+        keeps the font's own strokes.
+    slant : float
+        Shear of the glyphs: shift to the right per unit of height above the baseline.
+    stretch : float
+        Glyph width, a fraction of the font's.
+    wobble : float
+        Amplitude of a smooth random displacement of the glyphs' outlines, glyph heights (0: none); one
+        displacement per glyph and ``wobble_seed``, so a glyph looks the same in every square, as in a font.
+    wobble_seed : int
     """
 
     cap_height: float = CAP_HEIGHT
@@ -63,6 +75,11 @@ class GlyphLayout:
     underline_top: float = UNDERLINE_TOP
     underline_thickness: float = UNDERLINE_THICKNESS
     gap: float = 0.06
+    weight: float = 0.0
+    slant: float = 0.0
+    stretch: float = 1.0
+    wobble: float = 0.0
+    wobble_seed: int = 0
 
     @classmethod
     def random(cls, rng) -> "GlyphLayout":
@@ -81,6 +98,24 @@ class GlyphLayout:
         below = rng.uniform(0.03, 0.1)  # from the glyphs' foot to the underline
         top = rng.uniform(0.08, max(0.09, 0.95 - cap - below - thick))
         return cls(cap, top, top + cap + below, thick, rng.uniform(0.02, 0.1))
+
+    def varied(self, rng) -> "GlyphLayout":
+        """This layout with glyphs that look like another font's: stroke weight, slant, width and outline.
+
+        The reader is trained on a few fonts and must read fonts it never saw (another generator's
+        patches); these variations cover the ways bold monospace fonts differ from each other.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        GlyphLayout
+        """
+        return replace(self, weight=rng.uniform(-0.015, 0.035), slant=rng.uniform(-0.08, 0.12),
+                       stretch=rng.uniform(0.8, 1.0), wobble=rng.uniform(0.0, 0.03),
+                       wobble_seed=int(rng.integers(1 << 30)))
 
 
 @dataclass(frozen=True)
@@ -195,15 +230,28 @@ def square_ink(text: str, x0: float, y0: float, side: float, font: Font,
     baseline = y0 + (layout.glyph_top + layout.cap_height) * side
     out = []
     for k, ch in enumerate(text):
-        outline = font.outline(ch)
+        outline = _varied(font.outline(ch), ch, layout)
         xs = outline.vertices[:, 0]
-        squeeze = min(1.0, width / (font.advance * height))
+        squeeze = layout.stretch * min(1.0, width / (font.advance * height))
         shift = left + k * (width + gap) + (width - squeeze * height * (xs.max() + xs.min())) / 2
         out.append(outline.transformed(Affine2D().scale(squeeze * height, -height).translate(shift, baseline)))
     u0 = y0 + layout.underline_top * side
     u1 = u0 + layout.underline_thickness * side
     out.append(MplPath([(left, u0), (left + width, u0), (left + width, u1), (left, u1), (left, u0)], closed=True))
     return out
+
+
+def _varied(outline: MplPath, ch: str, layout: GlyphLayout) -> MplPath:
+    """A glyph's outline (``H`` 1 high, y up) slanted and wobbled as ``layout`` says."""
+    if layout.slant == 0 and layout.wobble == 0:
+        return outline
+    v = outline.vertices @ np.array([[1.0, 0.0], [layout.slant, 1.0]])
+    if layout.wobble:
+        rng = np.random.default_rng((layout.wobble_seed, ord(ch)))
+        freq = rng.uniform(0.6, 1.6, (2, 2)) * rng.choice((-1, 1), (2, 2))
+        phase = rng.uniform(0, 2 * np.pi, 2)
+        v = v + layout.wobble * np.sin(2 * np.pi * v @ freq.T + phase)
+    return MplPath(v, outline.codes)
 
 
 def patch_drawing(patch: Patch, pitch_mm: float, font: Font,

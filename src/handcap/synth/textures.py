@@ -98,6 +98,10 @@ def patch_texture(patch: Patch, font: Font, square: int = 48, *, ink: bool = Tru
         polys = [np.round(((p + offset) * scale - 0.5) * (1 << _SHIFT)).astype(np.int32)
                  for path in glyphs for p in path.to_polygons(closed_only=True)]
         cv2.fillPoly(mask, polys, 255, lineType=cv2.LINE_8, shift=_SHIFT)
+        grow = int(round((layout.weight * layout.cap_height * scale) if layout else 0))
+        if grow:
+            disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * abs(grow) + 1,) * 2)
+            mask = (cv2.dilate if grow > 0 else cv2.erode)(mask, disc)
         covered = cv2.resize(mask, (w, h), interpolation=cv2.INTER_AREA) / 255.0
         paper *= 1.0 - covered
     return np.round(np.clip(paper, 0, 1) * 255).astype(np.uint8)
