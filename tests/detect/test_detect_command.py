@@ -71,6 +71,13 @@ def test_without_a_template_blocks_only_and_a_warning(frames, weights, tmp_path,
     err = capsys.readouterr().err
     assert "no template" in err and "20 Hz assumed" in err
     assert any("no template" in w for w in data["warnings"])
+    assert "draw alike" not in err  # handcap's alphabet holds no lookalikes
+    alike = tmp_path / "alike.npz"
+    assert main(["detect", str(frames / "cam_0" / "000000.png"), "--out", str(alike), "--no-refine", "--whole-frames",
+                 "--alphabet", "0123456789OIZ", *weights]) == 0
+    said = [w for w in np.load(alike)["warnings"] if "draw alike" in w]
+    assert len(said) == 1 and "0 and O, 1 and I, 2 and Z, 7 and Z" in said[0]
+    assert "draw alike" in capsys.readouterr().err
 
 
 def test_videos_are_read_frame_by_frame(tmp_path):

@@ -17,6 +17,7 @@ from handcap import HandcapError
 from handcap.cli import main
 from handcap.patterns import (ALPHABET, DEXTERCAP_ALPHABET, HAND_PATCHES, Patch, Pattern, check_alphabet,
                             session_pattern, tag, tag_count, tag_index)
+from handcap.patterns.alphabet import lookalike_warning, lookalikes
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.pattern import checker_tags
 from handcap.patterns.sheet import write_sheets
@@ -210,6 +211,19 @@ def test_the_pattern_command(tmp_path, capsys):
     assert (again / "pattern.pdf").exists() and not (again / "pattern.toml").exists()
     err = capsys.readouterr().err
     assert "Traceback" not in err
+
+
+def test_alphabets_with_glyphs_fonts_draw_alike_are_warned_of(tmp_path, capsys):
+    assert lookalikes(ALPHABET) == [] and lookalikes(DEXTERCAP_ALPHABET) == []
+    assert lookalikes("Q0OD") == ["0O", "0D", "0Q", "OD", "OQ", "DQ"] and lookalike_warning("AB") == []
+    assert "and 1 more" in lookalike_warning("0OQD@")[0]
+    wide = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+    assert main(["pattern", "--out", str(tmp_path / "p"), "--hands", "left", "--objects", "none", "--no-svg",
+                 "--alphabet", wide]) == 0
+    err = capsys.readouterr().err
+    assert "draw alike (0 and O, 0 and D, 0 and Q, O and D, O and Q, D and Q and 8 more)" in err
+    assert main(["pattern", "--out", str(tmp_path / "q"), "--hands", "left", "--objects", "none", "--no-svg"]) == 0
+    assert "draw alike" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("args, match", [

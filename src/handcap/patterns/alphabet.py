@@ -27,6 +27,49 @@ DEXTERCAP_ALPHABET = "0123456789ACEFHPUY"
 _RESERVED = set("*-\"'\\ \t\n")
 
 
+#: Pairs of glyphs that bold monospace fonts draw alike, so that a reader trained on some fonts mistakes one for the
+#: other in a font it never saw (the reader's trusted misreadings on 200 rendered scenes in Noto Sans Mono Bold were
+#: mostly these; handcap's and DexterCap's alphabets hold none of them).
+LOOKALIKES = ("0O", "0D", "0Q", "0@", "OD", "OQ", "DQ", "1I", "2Z", "7Z", "5S", "6G", "8B", "UV", "VY", "+=", "A&")
+
+
+def lookalikes(alphabet: str) -> list[str]:
+    """The pairs of :data:`LOOKALIKES` that ``alphabet`` holds both glyphs of.
+
+    Parameters
+    ----------
+    alphabet : str
+
+    Returns
+    -------
+    list of str
+        Two-glyph strings, in the order of :data:`LOOKALIKES`.
+    """
+    return [pair for pair in LOOKALIKES if pair[0] in alphabet and pair[1] in alphabet]
+
+
+def lookalike_warning(alphabet: str) -> list[str]:
+    """A warning for an alphabet that holds glyphs fonts draw alike (none for one that does not).
+
+    Parameters
+    ----------
+    alphabet : str
+
+    Returns
+    -------
+    list of str
+        No line, or one.
+    """
+    pairs = lookalikes(alphabet)
+    if not pairs:
+        return []
+    said = ", ".join(f"{p[0]} and {p[1]}" for p in pairs[:6])
+    said += f" and {len(pairs) - 6} more" if len(pairs) > 6 else ""
+    return [f"alphabet {alphabet}: holds glyphs that fonts draw alike ({said}); printed in a font the reader never "
+            "saw, their tags are misread more often (with the vote over a template most are corrected); handcap's "
+            f"alphabet {ALPHABET} leaves them out"]
+
+
 def check_alphabet(alphabet: str) -> str:
     """``alphabet`` if it can make tags: 2 or more distinct printable glyphs, none reserved.
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
+from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.sources import frame_notes, frame_sources
 from handcap.io import read_rig
@@ -76,7 +77,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     # The corner network's 8-bit twin where its weights carry activation ranges: the same corners, faster.
     detector = Detector(load_corner_net(corner_weights, int8=True), load_reader(reader_weights), template, alphabet,
                         threshold, load_refiner(refiner_weights) if refine else None)
-    warnings = frame_notes(sources)
+    warnings = frame_notes(sources) + lookalike_warning(detector.alphabet)
     if corner_weights is None or reader_weights is None or (refine and refiner_weights is None):
         # Issue 16: the shipped networks are short of the targets; say how good they measured, every time.
         warnings.append("the shipped detector networks are short of handcap's targets (corner recall >= 97 %, "

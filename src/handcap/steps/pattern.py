@@ -6,7 +6,7 @@ from pathlib import Path
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output_folder
-from handcap.patterns.alphabet import ALPHABET
+from handcap.patterns.alphabet import ALPHABET, lookalike_warning
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.pattern import Pattern
 from handcap.patterns.session import HANDS, session_pattern
@@ -63,4 +63,4 @@ def pattern(out, *, hands=HANDS, objects=DEFAULT_OBJECTS, alphabet: str = ALPHAB
     lines = (chosen.summary(),
              f"wrote {', '.join(Path(p).name for p in outputs)} in {folder}{count}",
              "print the PDF at 100 % (actual size) and check its 50 mm scale bar with a ruler")
-    return Step(lines, (), tuple(outputs), chosen)
+    return Step(lines, tuple(lookalike_warning(chosen.alphabet)), tuple(outputs), chosen)
