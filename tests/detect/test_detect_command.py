@@ -6,13 +6,14 @@ command); these tests check the plumbing: cameras, frames, the detections contra
 from __future__ import annotations
 
 import struct
+from dataclasses import replace
 
 import cv2
 import numpy as np
 import pytest
 
 from handcap.cli import main
-from handcap.patterns import session_pattern
+from handcap.patterns import Pattern, session_pattern
 from handcap.detect.corners import CornerNet
 from handcap.detect.reader import BlockReader
 from handcap.detect.refine import CornerRefiner
@@ -239,4 +240,16 @@ def test_mirrored_photographs_read_nothing_and_say_so(tmp_path, capsys):
     assert len(data["plain"]["block_text"]) > 20 and len(data["selfie"]["block_text"]) == 0  # none read wrong
     (warning,) = [w for w in data["selfie"]["warnings"] if "no tag was read" in w]
     assert "look mirrored" in warning and "flip them" in warning
-    assert not any("mirrored" in w for w in data["plain"]["warnings"])
+    assert not any("mirrored" in w or "do not fit" in w for w in data["plain"]["warnings"])
+    # Another template over the same patches (the same tags, shuffled among the squares): said, not silent.
+    whole = session_pattern()
+    tags = [t for p in whole.patches for row in p.tags for t in row if t]
+    swap = dict(zip(tags, np.random.default_rng(0).permutation(tags)))
+    other = Pattern(tuple(replace(p, tags=tuple(tuple(swap.get(t, t) for t in row) for row in p.tags))
+                          for p in whole.patches), whole.alphabet, whole.pitch)
+    other.save(tmp_path / "other.toml")
+    assert main(["detect", str(tmp_path / "plain"), "--pattern", str(tmp_path / "other.toml"), "--rate", "30",
+                 "--out", str(tmp_path / "other.npz")]) == 0
+    (warning,) = [w for w in np.load(tmp_path / "other.npz")["warnings"] if "do not fit" in w]
+    assert "other.toml the pattern.toml these patches were printed from" in warning
+    assert "do not fit" in capsys.readouterr().err

@@ -64,6 +64,9 @@ class CaptureDetections:
         Readings the vote over the template changed.
     regions : int
         Images searched only around the previous frame's patches (see the module docstring).
+    sure, disowned : int
+        Readings the reader trusted alone, and those of them the vote over the template dropped or changed
+        (:class:`~handcap.detect.pipeline.ImageDetections`).
     """
 
     arrays: dict
@@ -71,6 +74,8 @@ class CaptureDetections:
     empty: int
     corrected: int
     regions: int = 0
+    sure: int = 0
+    disowned: int = 0
 
 
 class Tracker:
@@ -214,7 +219,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     index = {n: k for k, n in enumerate(marker_names)}
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
     blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
-    images = empty = corrected = regions = 0
+    images = empty = corrected = regions = sure = disowned = 0
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
@@ -234,7 +239,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                 tracker.update(found, whole=region is None, missed=missed)
                 images += 1
                 empty += len(found.corners) == 0
-                corrected += found.corrected
+                corrected, sure, disowned = corrected + found.corrected, sure + found.sure, disowned + found.disowned
                 named = [k for k, n in enumerate(found.names) if n is not None and n in index]
                 rows["frame"] += [t] * len(named)
                 rows["camera"] += [c] * len(named)
@@ -260,7 +265,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
-    return CaptureDetections(arrays, images, empty, corrected, regions)
+    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned)
 
 
 def check_size(source, frame: int, shape, size) -> None:

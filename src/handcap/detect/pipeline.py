@@ -98,6 +98,9 @@ class ImageDetections:
     block_score : ndarray (B,)
     corrected : int
         Readings the vote changed.
+    sure, disowned : int
+        Readings the reader trusts alone (their confidence at its gate), and those of them the vote over the
+        template dropped or changed: nearly all of them where the template is not the printed patches'.
     """
 
     corners: np.ndarray
@@ -107,6 +110,8 @@ class ImageDetections:
     block_xy: np.ndarray
     block_score: np.ndarray
     corrected: int
+    sure: int = 0
+    disowned: int = 0
 
 
 class Detector:
@@ -195,17 +200,20 @@ class Detector:
         text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet) if len(quads) \
             else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
         names = np.full(len(xy), None, dtype=object)
-        corrected = 0
+        corrected = disowned = 0
+        sure = (text != "") & (bscore >= self.reader.min_score)
         if self.pattern is not None and len(quads):
             tags, turns, corrected = self.vote(image, xy, cscore, quads, text, rotation, bscore)
+            disowned = int((sure & ((tags != text) | (turns != rotation))).sum())
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
             order = (np.arange(4)[None] + np.maximum(turns, 0)[:, None]) % 4
             reading = np.take_along_axis(xy[quads], order[..., None], axis=1)
             text = tags
         else:
-            keep = (text != "") & (bscore >= self.reader.min_score)
-        return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected)
+            keep = sure
+        return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected, int(sure.sum()),
+                               disowned)
 
     def vote(self, image: np.ndarray, xy: np.ndarray, corner_score: np.ndarray, quads: np.ndarray, text, rotation,
              score) -> tuple[np.ndarray, np.ndarray, int]:

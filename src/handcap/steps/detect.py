@@ -17,6 +17,11 @@ from handcap.steps.step import Step
 DEFAULT_RATE = 20.0  # DexterCap's cameras; said in a warning when assumed
 #: Tags read in a first frame flipped left-right that call the images mirrored when none read as given.
 MIRRORED_TAGS = 3
+#: Share of the readings the reader trusts alone that the vote may drop or change before the template is said not to
+#: fit the patches, and the least such readings to judge by. Measured (2026-11-28): 4-6 % on rendered hands and 2 %
+#: on photographed sheets with their own template; 98 % with the tags shuffled over the same patches, 72 % with a
+#: template of one hand of a sheet that holds the whole session.
+DISOWNED_SHARE, MIN_SURE = 0.5, 10
 
 
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
@@ -100,7 +105,11 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     images, corrected = run.images, run.corrected
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
-    if images and not len(run.arrays["block_text"]):
+    if template is not None and run.sure >= MIN_SURE and run.disowned > DISOWNED_SHARE * run.sure:
+        warnings.append(f"{run.disowned} of the {run.sure} tags the reader was sure of do not fit the template's "
+                        f"patches where they were read: is {pattern} the pattern.toml these patches were printed "
+                        "from? (tags of patches it lacks are dropped too)")
+    elif images and not len(run.arrays["block_text"]):
         # A front camera's selfie is mirrored: no tag reads (checked: none read wrong), but flipped back they do.
         _, first = next(sources[0].frames())
         flipped = len(detector.image(np.ascontiguousarray(first[:, ::-1])).block_text)
