@@ -56,6 +56,7 @@ def test_detections_file_holds_the_contract(frames, weights, tmp_path, capsys):
                  "--out", str(out), *weights]) == 0
     data = np.load(out)
     assert list(data["camera_names"]) == ["cam_0", "cam_1"] and float(data["rate"]) == 30.0
+    assert float(data["pitch"]) == session_pattern(("right",), ()).pitch == 0.005  # triangulate's ruler
     assert len(data["marker_names"]) == len(session_pattern(("right",), ()).corner_names())
     n, b = len(data["frame"]), len(data["block_text"])
     assert data["xy"].shape == (n, 2) and data["camera"].shape == data["marker"].shape == data["score"].shape == (n,)

@@ -1,6 +1,7 @@
 """From 2D detections to 3D markers on a synthetic dense-patches capture with known truth."""
 
 import hashlib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -118,6 +119,11 @@ def test_detections_file_round_trip_and_checks(detections, tmp_path):
                              ({"rate": np.array(0.0)}, "rate must be a positive")]:
         with pytest.raises(HandcapError, match=message):
             read_detections(broken(**changes))
+    for pitch in (np.array(-0.005), np.array(np.nan), np.array(2.0), np.array("5 mm"), np.zeros(3)):
+        with pytest.raises(HandcapError, match="pitch must be"):
+            read_detections(broken(pitch=pitch))
+    write_detections(replace(detections, pitch=0.005), tmp_path / "p.npz")  # the printed squares' side, metres
+    assert read_detections(tmp_path / "p.npz").pitch == 0.005 and back.pitch is None
     del arrays["xy"]
     np.savez(tmp_path / "noxy.npz", **arrays)
     with pytest.raises(HandcapError, match="missing xy"):
@@ -144,6 +150,9 @@ def test_per_camera_files_merge_into_the_whole(detections):
         merge_detections([parts[0], short])
     with pytest.raises(HandcapError, match="also appears"):
         merge_detections([parts[0], parts[0]])
+    assert merge_detections([replace(parts[0], pitch=0.005), parts[1]]).pitch == 0.005
+    with pytest.raises(HandcapError, match="different pitches of the printed squares: 4 mm, 5 mm"):
+        merge_detections([replace(parts[0], pitch=0.005), replace(parts[1], pitch=0.004)])
 
 
 @pytest.fixture(scope="module")
@@ -177,6 +186,27 @@ def test_cli_writes_markers_and_their_quality(capture, capture_folder, result, t
         assert np.array_equal(quality["error_px"], result.error_px, equal_nan=True)
         assert np.array_equal(quality["used"], result.used)
     assert hashlib.sha256((capture_folder / "detections.npz").read_bytes()).digest() == before
+
+
+def test_the_printed_pitch_is_a_ruler_for_the_rigs_scale(capture, detections, tmp_path, capsys):
+    # Independent of the check: the median distance of adjacent patch corners in the truth.
+    names = list(detections.marker_names)
+    pairs = [(i, names.index(f"{n[:n.rindex('_r')]}_r{r}c{c + 1}")) for i, n in enumerate(names)
+             for r, c in [map(int, n[n.rindex("_r") + 2:].split("c"))] if f"{n[:n.rindex('_r')]}_r{r}c{c + 1}" in names]
+    truth = capture.truth["positions"]
+    side = np.nanmedian(np.linalg.norm(truth[:, [i for i, _ in pairs]] - truth[:, [j for _, j in pairs]], axis=-1))
+    assert 0.004 < side < 0.007
+    rig_file = tmp_path / "cameras.toml"
+    capture.rig.save(rig_file)
+    for pitch, said in ((side, False), (0.8 * side, True)):
+        write_detections(replace(detections, pitch=pitch), tmp_path / "d.npz")
+        assert main(["triangulate", str(tmp_path / "d.npz"), "--cameras", str(rig_file), "--workers", "1",
+                     "--out", str(tmp_path / f"m{said}.npz")]) == 0
+        out, err = capsys.readouterr()
+        shown = float(out.split("of the printed pitch (%)")[1].split()[0])
+        assert abs(shown - 100 * side / pitch) < 2.0  # rows along the patch too, and triangulation noise
+        assert ("the coded patches' squares measure" in err) == said
+    assert "squares measure 5." in err or "squares measure 4." in err or "squares measure 6." in err
 
 
 def test_cli_bad_input_exits_2_with_one_line(capture, capture_folder, detections, tmp_path, capsys):

@@ -300,3 +300,22 @@ def test_the_real_glove_recording_is_plausible_and_not_in_millimetres(shared_dat
     wrong = MarkerSequence(markers.positions * 1000, markers.names, markers.rate)
     (line,) = p.marker_warnings(wrong)
     assert "millimetres read as metres" in line
+
+
+def test_the_patches_square_side_against_their_printed_pitch():
+    rng = np.random.default_rng(0)
+    r, c = np.meshgrid(np.arange(4), np.arange(5), indexing="ij")
+    grid = np.stack([c.ravel(), r.ravel(), np.zeros(r.size)], axis=1) * 0.005  # one flat patch, 5 mm squares
+    names = tuple(f"right:palm_r{i}c{j}" for i, j in zip(r.ravel(), c.ravel())) + ("wrist",)
+    positions = np.concatenate([grid[None] + rng.normal(0, 0.0002, (30, len(grid), 3)), np.zeros((30, 1, 3))], axis=1)
+    markers = MarkerSequence(positions, names, 100.0)
+    figures, warned = p.pitch_check(markers, 0.005)
+    assert abs(figures["patch square (mm)"] - 5.0) < 0.05 and figures["of the printed pitch (%)"] == pytest.approx(
+        100, abs=1) and warned == []
+    figures, warned = p.pitch_check(markers, 0.006)  # a board's square size given 20 % too large
+    assert figures["of the printed pitch (%)"] == pytest.approx(83.3, abs=1) and len(warned) == 1
+    assert "83." in warned[0] and "scale" in warned[0]
+    assert p.pitch_check(markers, None) == ({}, [])
+    plain = MarkerSequence(positions, tuple(f"m{k}" for k in range(len(names))), 100.0)  # no patch corners
+    assert p.pitch_check(plain, 0.005) == ({}, [])
+    assert p.pitch_check(MarkerSequence(positions[:1, :3], names[:3], 100.0), 0.005) == ({}, [])  # 2 distances

@@ -11,6 +11,8 @@ One row per observation (see DESIGN.md, File contracts)::
     score (N,)          detector confidence, 0..1 (1 when the detector has none)
     rate ()             frames per second
     n_frames ()         optional: frames in the take (default: last frame + 1)
+    pitch ()            optional: side of the printed squares of coded patches, metres (``handcap detect``
+                        with a template: adjacent corners ``NAME_r{r}c{c}`` lie this far apart on the patch)
 
 ``handcap synth`` writes exactly this (plus a ``wrong_id`` column with the
 truth about its injected outliers, which the loader ignores). Several files,
@@ -49,6 +51,9 @@ class Detections:
         Frames in the take; every ``frame`` is below it.
     source : str
         Where the rows came from (a file name), for messages.
+    pitch : float or None
+        Side of the printed squares of the coded patches the markers are corners of, metres (None: not
+        coded-patch corners, or not known).
     """
 
     camera_names: tuple
@@ -61,6 +66,7 @@ class Detections:
     rate: float
     n_frames: int
     source: str = "detections"
+    pitch: float | None = None
 
     def __post_init__(self):
         where = self.source
@@ -117,6 +123,16 @@ class Detections:
             raise HandcapError(f"{where}: mismatched frame counts: n_frames is {int(n_frames)} but a detection "
                                f"is in frame {last - 1}")
         object.__setattr__(self, "n_frames", int(n_frames))
+        if self.pitch is not None:
+            try:
+                pitch = float(self.pitch)
+            except (TypeError, ValueError):
+                raise HandcapError(f"{where}: pitch must be the side of a printed square in metres, got "
+                                   f"{self.pitch!r}") from None
+            if not (np.isfinite(pitch) and 0 < pitch < 1):
+                raise HandcapError(f"{where}: pitch must be the side of a printed square in metres (0 to 1), got "
+                                   f"{pitch}")
+            object.__setattr__(self, "pitch", pitch)
         for key in ("frame", "camera", "marker", "xy", "score"):
             getattr(self, key).setflags(write=False)
 
@@ -145,7 +161,7 @@ class Detections:
         keep = (self.frame >= start) & (self.frame < stop)
         return Detections(self.camera_names, self.marker_names, self.frame[keep] - start, self.camera[keep],
                           self.marker[keep], self.xy[keep], self.score[keep], self.rate,
-                          max(0, min(stop, self.n_frames) - start), self.source)
+                          max(0, min(stop, self.n_frames) - start), self.source, self.pitch)
 
     def camera_order(self, rig: CameraRig) -> np.ndarray:
         """Index into ``rig`` of each of ``camera_names``.
@@ -175,11 +191,12 @@ def read_detections(path) -> Detections:
         message names the file.
     """
     arrays = load_npz(path, REQUIRED, what="detections file")
-    n_frames = arrays.get("n_frames")
+    n_frames, pitch = arrays.get("n_frames"), arrays.get("pitch")
     try:
         return Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
                           arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"],
-                          None if n_frames is None else int(n_frames), source=str(path))
+                          None if n_frames is None else int(n_frames), source=str(path),
+                          pitch=None if pitch is None else pitch.item() if pitch.size == 1 else pitch)
     except (TypeError, ValueError, OverflowError, HandcapError) as err:
         # One line, whatever the entry held (a message may quote an array).
         reason = " ".join(str(err).split())[:160]
@@ -193,14 +210,15 @@ def write_detections(detections: Detections, path) -> None:
     ----------
     detections : Detections
         Written with the keys of the File contract: ``xy`` (N, 2) distorted pixels, ``rate`` frames
-        per second, ``n_frames``; ``source`` is not stored.
+        per second, ``n_frames``, ``pitch`` where known; ``source`` is not stored.
     path : str or Path
     """
+    pitch = {} if detections.pitch is None else {"pitch": np.array(detections.pitch)}
     save_npz(path, {"camera_names": np.array(detections.camera_names),
                     "marker_names": np.array(detections.marker_names), "frame": detections.frame,
                     "camera": detections.camera, "marker": detections.marker, "xy": detections.xy,
                     "score": detections.score, "rate": np.array(detections.rate),
-                    "n_frames": np.array(detections.n_frames)})
+                    "n_frames": np.array(detections.n_frames), **pitch})
 
 
 def merge_detections(parts) -> Detections:
@@ -232,6 +250,11 @@ def merge_detections(parts) -> Detections:
         if part.n_frames != first.n_frames:
             raise HandcapError(f"mismatched frame counts: {part.source} has {part.n_frames} frames, "
                                f"{first.source} has {first.n_frames}")
+    pitches = {p.pitch for p in parts if p.pitch is not None}
+    if len(pitches) > 1:
+        raise HandcapError(f"the detections files give different pitches of the printed squares: "
+                           f"{', '.join(f'{1000 * p:g} mm' for p in sorted(pitches))}; detect each with its own "
+                           "session's template")
     camera_index = {name: i for i, name in enumerate(cameras)}
     marker_index = {name: i for i, name in enumerate(markers)}
     columns = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
@@ -245,7 +268,8 @@ def merge_detections(parts) -> Detections:
     order = np.lexsort((joined["marker"], joined["camera"], joined["frame"]))
     return Detections(tuple(cameras), tuple(markers), *(joined[k][order] for k in ("frame", "camera", "marker", "xy",
                                                                                   "score")),
-                      first.rate, first.n_frames, source=" + ".join(p.source for p in parts))
+                      first.rate, first.n_frames, source=" + ".join(p.source for p in parts),
+                      pitch=next(iter(pitches), None))
 
 
 __all__ = ["Detections", "merge_detections", "read_detections", "write_detections"]

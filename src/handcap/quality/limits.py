@@ -17,6 +17,11 @@ Every limit is a module constant with the reason for its value; none is fitted t
 ``BONE_RATIO``      1.5: a bone longer or shorter than its anthropometric proportion by more than this
                     factor; OpenHand's shape space with every value at +-3 SD reaches 1.50.
 ``REPROJECTION_PX`` camera calibration RMS above 1 px (a well-detected board gives 0.1-0.5 px).
+``PITCH_TOLERANCE`` 15 %: the coded patches' measured square side (median) against their printed pitch. Skin
+                    and tape bend and stretch (synth's patches on its hands of every size and pose: 108.7 % on
+                    a grasp take; a 5 mm square round a finger 8 mm in radius: 98.4 %); past 15 % the rig's
+                    scale is off (a calibration board's square size given wrong, the units of its
+                    translations). A page printed "to fit" (94-97 %) shows only in the printed figure.
 ==================  =====================================================================================
 """
 
@@ -50,6 +55,8 @@ HAND_LENGTH_RANGE = (0.1825 * (1 - 5 * 0.052), 0.1825 * (1 + 5 * 0.052))
 BONE_RATIO = 1.5
 #: Largest plausible reprojection RMS of a camera calibration, pixels.
 REPROJECTION_PX = 1.0
+#: Largest plausible departure of the coded patches' measured square side from their printed pitch (a share).
+PITCH_TOLERANCE = 0.15
 
 MM = 1000.0  # millimetres per metre, for messages
 

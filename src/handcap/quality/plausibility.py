@@ -17,16 +17,17 @@ value; none is fitted to one file (the table of them is there).
 
 from handcap.quality.fit_checks import (labeling_warnings, limit_warnings, residual_warnings, shape_warnings)
 from handcap.quality.limits import (BONE_RATIO, CAPTURE_SPREAD, HAND_LENGTH_RANGE, HAND_SPREAD, MAX_SPEED, MIN_LABELED,
-                                    MRE_LIMIT, REPROJECTION_PX, SHAPE_BOUND, SPIKE_JUMP, SPIKE_Z)
+                                    MRE_LIMIT, PITCH_TOLERANCE, REPROJECTION_PX, SHAPE_BOUND, SPIKE_JUMP, SPIKE_Z)
 from handcap.quality.motion_checks import (BONE_NAMES, anthropometric_bone_lengths, bone_lengths, bone_warnings,
                                            jerk_spikes, jerk_warnings, size_warnings, speed_warnings, speeds, spread)
 from handcap.quality.stage_checks import (attach, camera_warnings, clean_warnings, marker_figures, marker_warnings,
-                                          motion_figures, motion_warnings, object_warnings, summary,
-                                          triangulation_warnings)
+                                          motion_figures, motion_warnings, object_warnings, pitch_check,
+                                          summary, triangulation_warnings)
 
 __all__ = ["anthropometric_bone_lengths", "attach", "bone_lengths", "BONE_NAMES", "BONE_RATIO", "bone_warnings",
            "camera_warnings", "CAPTURE_SPREAD", "clean_warnings", "HAND_LENGTH_RANGE", "HAND_SPREAD", "jerk_spikes",
            "jerk_warnings", "labeling_warnings", "limit_warnings", "marker_figures", "marker_warnings", "MAX_SPEED",
-           "MIN_LABELED", "motion_figures", "motion_warnings", "MRE_LIMIT", "object_warnings", "REPROJECTION_PX",
+           "MIN_LABELED", "motion_figures", "motion_warnings", "MRE_LIMIT", "object_warnings", "PITCH_TOLERANCE",
+           "pitch_check", "REPROJECTION_PX",
            "residual_warnings", "SHAPE_BOUND", "shape_warnings", "size_warnings", "speed_warnings", "speeds",
            "SPIKE_JUMP", "SPIKE_Z", "spread", "summary", "triangulation_warnings"]

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -10,7 +11,7 @@ import numpy as np
 from handcap.core.errors import merge_warnings, warn
 from handcap.hand.anthropometry import HAND_LENGTH as AVERAGE_HAND_LENGTH
 from handcap.quality.fit_checks import residual_warnings, shape_warnings
-from handcap.quality.limits import CAPTURE_SPREAD, MM, REPROJECTION_PX, default_names, listed
+from handcap.quality.limits import CAPTURE_SPREAD, MM, PITCH_TOLERANCE, REPROJECTION_PX, default_names, listed
 from handcap.quality.motion_checks import (anthropometric_bone_lengths, bone_lengths, bone_warnings, jerk_spikes,
                                            jerk_warnings, size_warnings, speed_warnings, speeds, spread)
 
@@ -191,6 +192,61 @@ def camera_warnings(rms, *, names=None, limit: float = REPROJECTION_PX) -> list[
     return [f"reprojection RMS above {limit:g} px (plausible: <= {limit:g} px) for "
             f"{listed([labels[i] for i in bad], np.nan_to_num(rms[bad], nan=np.inf), 'px', 1.0)}; "
             f"check the board's size and the detections"]
+
+
+#: Least adjacent-corner distances (pairs times frames) to judge the pitch by.
+MIN_PITCH_SAMPLES = 20
+_GRID = re.compile(r"^(.*)_r(\d+)c(\d+)$")
+
+
+def pitch_check(markers, pitch: float | None) -> tuple[dict, list[str]]:
+    """The square side of the coded patches measured in 3D, against the pitch they were printed at.
+
+    Every pair of adjacent corners of a patch (markers ``NAME_r{r}c{c}`` and ``NAME_r{r}c{c+1}`` or
+    ``NAME_r{r+1}c{c}``) lies one printed square apart: a ruler in every frame. The median side is a
+    figure of every summary; off the pitch by more than :data:`PITCH_TOLERANCE` (skin and tape bend and
+    stretch less) it is a warning: a rig whose scale is off (its translations' units, or a calibration
+    board whose square size was given wrong) or patches printed at another scale, which the other
+    checks see only when the scale is off many times over.
+
+    Parameters
+    ----------
+    markers : MarkerSequence
+    pitch : float or None
+        Side of the printed squares, metres (None: nothing to check).
+
+    Returns
+    -------
+    figures : dict
+        ``patch square (mm)`` and ``of the printed pitch (%)``; empty when fewer than
+        :data:`MIN_PITCH_SAMPLES` distances were measured.
+    warnings : list of str
+    """
+    if pitch is None:
+        return {}, []
+    index = {}
+    for i, name in enumerate(markers.names):
+        match = _GRID.match(str(name))
+        if match:
+            index[(match[1], int(match[2]), int(match[3]))] = i
+    pairs = [(i, index[(p, r + dr, c + dc)]) for (p, r, c), i in index.items() for dr, dc in ((0, 1), (1, 0))
+             if (p, r + dr, c + dc) in index]
+    if not pairs:
+        return {}, []
+    a, b = np.array(pairs).T
+    sides = np.linalg.norm(markers.positions[:, a] - markers.positions[:, b], axis=-1)
+    sides = sides[np.isfinite(sides)]
+    if len(sides) < MIN_PITCH_SAMPLES:
+        return {}, []
+    side = float(np.median(sides))
+    ratio = side / pitch
+    figures = {"patch square (mm)": round(1000 * side, 3), "of the printed pitch (%)": round(100 * ratio, 1)}
+    if abs(ratio - 1) <= PITCH_TOLERANCE:
+        return figures, []
+    return figures, [f"the coded patches' squares measure {1000 * side:.2f} mm (median of {len(sides)} distances "
+                     f"between adjacent corners), {100 * ratio:.1f} % of the {1000 * pitch:g} mm they were printed "
+                     "at: patches printed at another scale (print at 100 % and check the 50 mm bar), or a rig "
+                     "whose scale is off (the units of its translations, or the calibration board's square size)"]
 
 
 # -- the figures the checks look at, for summaries ------------------------------------------------------

@@ -118,7 +118,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         "them before detecting" if flipped >= MIRRORED_TAGS else
                         "no tag was read in any image: wrong --alphabet, patches too small in the images, or not "
                         "coded patches")
-    arrays = {**run.arrays, **warnings_entry(warnings)}
+    pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
+    arrays = {**run.arrays, **pitch, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else "")

@@ -65,14 +65,16 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
                                     chunk_frames=chunk_frames, scheduler=scheduler, workers=workers)
     seconds = time.perf_counter() - start
     markers = result.to_markers()
+    pitch_figures, pitch_warnings = q.pitch_check(markers, merged.pitch)
     markers = q.attach(markers, [*rig.warnings, *q.triangulation_warnings(
-        result.error_px, result.views, threshold_px=threshold_px, used=result.used), *q.marker_warnings(markers)])
+        result.error_px, result.views, threshold_px=threshold_px, used=result.used), *q.marker_warnings(markers),
+        *pitch_warnings])
     write_markers(markers, out)
     quality = write_quality(result, out)
     s = result.counts()
     line = q.summary(f"{out}: {result.summary()}, {s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} "
                      f"marker-frames/s; per-marker errors and view counts in {quality}",
-                     q.marker_figures(markers), markers.warnings)
+                     q.marker_figures(markers) | pitch_figures, markers.warnings)
     return Step((*lines, line), markers.warnings, (str(out), str(quality)), result)
 
 
