@@ -89,7 +89,7 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         start = time.perf_counter()
         run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=progress)
         seconds = time.perf_counter() - start
-        save_npz(folder / "detections.npz", run.arrays)
+        save_npz(folder / "detections.npz", run.arrays | {"pitch": np.array(pattern.pitch)})
         summary.update(_detection_figures(key, run, folder / "image_truth.npz", seconds))
         triangulated = triangulate_detections(read_detections(folder / "detections.npz"), capture.rig,
                                               min_views=config.min_views, progress=progress)
@@ -98,6 +98,10 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         # The template names its corners OWNER:PATCH_rRcC; the layout names them PATCH_rRcC.
         markers = triangulated.to_markers()
         markers = markers.renamed([n.split(":", 1)[-1] for n in markers.names])
+        # The printed squares as a ruler (as triangulate says it): synth's patches stretch with its hands.
+        ruler, stretched = q.pitch_check(markers, pattern.pitch)
+        summary[f"{key}_patch_square_mm"] = ruler.get("patch square (mm)")
+        found += stretched
         write_markers(q.attach(markers, found), folder / "triangulated.c3d")
         layout = load_layout(config.layout)
         # Four frames a second: a finger moves too far between frames to interpolate over a gap, so only the
