@@ -234,7 +234,10 @@ def pitch_check(markers, pitch: float | None) -> tuple[dict, list[str]]:
     if not pairs:
         return {}, []
     a, b = np.array(pairs).T
-    sides = np.linalg.norm(markers.positions[:, a] - markers.positions[:, b], axis=-1)
+    # At most 1,000 frames, evenly spread: the median needs no more, and a long take's pairs would not fit memory.
+    frames = np.unique(np.linspace(0, len(markers.positions) - 1, min(len(markers.positions), 1000)).astype(int))
+    positions = markers.positions[frames]
+    sides = np.linalg.norm(positions[:, a] - positions[:, b], axis=-1)
     sides = sides[np.isfinite(sides)]
     if len(sides) < MIN_PITCH_SAMPLES:
         return {}, []
