@@ -27,16 +27,19 @@ BOX_SLACK = 1e-5
 
 class _Surface:
     """The occluding triangles of T frames, shared by every camera: vertices (T, V, 3), the corners of each
-    face as three index columns (F,) and the face normals (T, F, 3) with their offsets ``n . a`` (T, F),
-    metres."""
+    face as three index columns (F,) and the face normals as three component arrays (T, F) with their offsets
+    ``n . a`` (T, F), metres."""
 
     def __init__(self, vertices, faces):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces).reshape(-1, 3)
         self.corner = tuple(np.ascontiguousarray(self.faces[:, k]) for k in range(3))
-        a, b, c = (self.vertices[:, i] for i in self.corner)
-        self.normal = np.cross(b - a, c - a)
-        self.offset = np.einsum("tfi,tfi->tf", self.normal, a)
+        # Components as separate (T, F) arrays: NumPy is slow on products over axes of length 3.
+        axes = [np.ascontiguousarray(self.vertices[..., d]) for d in range(3)]
+        a, b, c = ([np.take(x, i, axis=1) for x in axes] for i in self.corner)
+        u, v = [q - p for p, q in zip(a, b)], [q - p for p, q in zip(a, c)]
+        self.normal = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+        self.offset = self.normal[0] * a[0] + self.normal[1] * a[1] + self.normal[2] * a[2]
 
 
 def occluded(camera, points, vertices, faces, *, end_gap: float = 1e-4) -> np.ndarray:
@@ -77,23 +80,30 @@ def _boxes(surface: _Surface, camera, cam: np.ndarray) -> tuple:
     ahead = depth > 1e-6
     i, j, k = surface.corner
     # In front of the camera, and facing it: the normal points against the line of sight (n . (a - centre) < 0).
-    facing = ahead[:, i] & ahead[:, j] & ahead[:, k] & (surface.offset < surface.normal @ camera.center)
+    n, (x, y, z) = surface.normal, camera.center
+    facing = ahead[:, i] & ahead[:, j] & ahead[:, k] & (surface.offset < n[0] * x + n[1] * y + n[2] * z)
     # Normalised image coordinates in single precision, and the boxes from them, widened by far more than its
     # rounding (rounding keeps the order, so a box's corners are its true corners rounded): the box test only
     # picks the triangles the exact test (double precision) tries, and half the bytes make it faster.
-    px = (cam[..., :2] / np.where(ahead, depth, 1.0)[..., None]).astype(np.float32)
-    boxes = []
-    for axis in (0, 1):
-        c = np.ascontiguousarray(px[..., axis])
-        corners = c[:, i], c[:, j], c[:, k]
-        boxes.append([np.minimum(np.minimum(*corners[:2]), corners[2]),
-                      np.maximum(np.maximum(*corners[:2]), corners[2])])
-    largest = np.where(facing, np.maximum(np.maximum(np.abs(boxes[0][0]), np.abs(boxes[0][1])),
-                                          np.maximum(np.abs(boxes[1][0]), np.abs(boxes[1][1]))), 0.0)
-    widen = (BOX_SLACK * (1.0 + largest.max(axis=1, keepdims=True))).astype(np.float32)
-    out = (np.float32(np.inf), np.float32(-np.inf))
-    return tuple(np.where(facing, value + sign * widen, out[sign > 0])
-                 for low, high in boxes for value, sign in ((low, -1.0), (high, 1.0)))
+    inverse = 1.0 / np.where(ahead, depth, 1.0)
+    # Widened by 1e-5 of the largest coordinate of a vertex in front (at least that of any facing triangle's).
+    coords = [(cam[..., axis] * inverse).astype(np.float32) for axis in (0, 1)]
+    largest = np.maximum(*(np.abs(np.where(ahead, c, np.float32(0.0))).max(axis=1) for c in coords))
+    widen = (BOX_SLACK * (1.0 + largest[:, None])).astype(np.float32)
+    # The triangles not facing get empty boxes: +inf added to their low ends and taken from their high ends.
+    shut = np.where(facing, np.float32(0.0), np.float32(np.inf))
+    out = []
+    for c in coords:
+        # np.take keeps the (T, F) arrays C-ordered (c[:, i] would not), as the pair test wants them.
+        corners = np.take(c, i, axis=1), np.take(c, j, axis=1), np.take(c, k, axis=1)
+        low = np.minimum(np.minimum(corners[0], corners[1]), corners[2])
+        high = np.maximum(np.maximum(corners[0], corners[1]), corners[2])
+        low -= widen
+        low += shut
+        high += widen
+        high -= shut
+        out += [low, high]
+    return tuple(out)
 
 
 def _hidden(surface: _Surface, camera, points: np.ndarray, end_gap: float = 1e-4) -> np.ndarray:
