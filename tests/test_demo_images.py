@@ -19,18 +19,18 @@ def test_demo_from_images_runs_every_stage_and_scores_it(gl_ok, tmp_path, monkey
     from handcap.multiview import read_detections
 
     small = {"calibration": SynthConfig(layout="dense-patches", motion="calibration", frames=3, rate=4.0, seed=8,
-                                        subject_seed=21, cameras=6, min_views=2),
+                                        subject_seed=21, cameras=4, min_views=2),
              "take": SynthConfig(layout="dense-patches", motion="calibration", frames=2, rate=4.0, seed=9,
-                                 subject_seed=21, cameras=6, min_views=2)}
+                                 subject_seed=21, cameras=4, min_views=2)}
     monkeypatch.setattr(demo_images, "IMAGE_DEMO_CONFIGS", small)
     out = tmp_path / "demo"
     assert main(["demo", "--images", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
     for key in ("calibration", "take"):
-        assert len(list((out / key / "images").rglob("*.png"))) == 6 * small[key].frames
+        assert len(list((out / key / "images").rglob("*.png"))) == 4 * small[key].frames
         detections = read_detections(out / key / "detections.npz")  # the 2D detections File contract
-        assert detections.camera_names == tuple(f"cam_{k}" for k in range(6))
+        assert detections.camera_names == tuple(f"cam_{k}" for k in range(4))
         # The named corners: most of those named lie at their true pixels, and they triangulate near the truth.
         assert summary[f"{key}_named_corners"] > 100
         assert summary[f"{key}_misnamed_fraction"] < 0.02
