@@ -30,10 +30,13 @@ JOBS ?= 2
 THREADS ?= $(shell $(PYTHON) -c 'import os; print(max(1, (os.cpu_count() or 1) // $(JOBS)))')
 # PYTHONDONTWRITEBYTECODE unset: the suite starts dozens of Python processes (the workers, command-line runs,
 # process pools, Dask workers), and without cached bytecode each one compiles every module it imports again.
-# LP_NUM_THREADS: Mesa's software rasteriser (the renderer's tests) takes the worker's share of the cores too.
+# LP_NUM_THREADS: Mesa's software rasteriser (the renderer's tests) takes the worker's share of the cores too; a share
+# of one core is 0, which rasterises in the calling thread: the small images demo test alone took 29.7 s so, 33.2 s
+# with one rasteriser thread (and 27.0 s with two, which the other worker needs).
+LP_THREADS = $(shell $(PYTHON) -c 'print(0 if $(THREADS) <= 1 else $(THREADS))')
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE OMP_NUM_THREADS=$(THREADS) OPENBLAS_NUM_THREADS=$(THREADS) \
-		MKL_NUM_THREADS=$(THREADS) LP_NUM_THREADS=$(THREADS) $(BIN)/python -m pytest -q -n $(JOBS)
+		MKL_NUM_THREADS=$(THREADS) LP_NUM_THREADS=$(LP_THREADS) $(BIN)/python -m pytest -q -n $(JOBS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks tools
