@@ -203,13 +203,17 @@ def main() -> None:
     from handcap.detect.blocks import candidate_quads, white_blocks
     from handcap.detect.reader import read_blocks
 
-    funnel, fixed, lost = np.zeros(6, int), 0, 0
+    from handcap.detect.voting import vote as template_vote
+
+    funnel, fixed, lost, by_vote = np.zeros(6, int), 0, 0, 0
     for scene in hands:
         xy, cscore = locate_corners(fast, refiner, scene.image)
         candidates = candidate_quads(xy, score=cscore)
         quads, _ = white_blocks(scene.image, xy, candidates)
         text, _, turn, bscore = read_blocks(reader, scene.image, xy[quads], pattern.alphabet)
         tags, _, _ = hand_detector.vote(scene.image, xy, cscore, quads, text, turn, bscore)
+        # The template's vote alone (before the checks of the blocks it keeps), to tell where a reading is lost.
+        voted_only = template_vote(pattern, quads, text, turn, bscore, reader.min_score, xy)[0]
         at = {frozenset(q): k for k, q in enumerate(quads.tolist())}
         made = {frozenset(q) for q in candidates.tolist()}
         tree = _Tree(xy) if len(xy) else None
@@ -223,10 +227,13 @@ def main() -> None:
             funnel[5] += voted and steps[1]
             fixed += voted and steps[3] and not steps[4]
             lost += steps[4] and not voted
+            by_vote += steps[4] and not voted and voted_only[k] != tag
     print("visible tags of the hand scenes, kept stage by stage: " + ", ".join(
         f"{name} {100 * n / max(funnel[0], 1):.1f} %" for name, n in zip(
             ("four corners found", "a candidate quad", "a white square", "read right", "after the vote"),
-            funnel[1:])) + f" (the vote fixed {fixed} misreadings and dropped {lost} right readings)")
+            funnel[1:])) + f" (the vote fixed {fixed} misreadings and dropped {lost} right readings: {by_vote} in the "
+          f"vote itself (a lone reading below the reader's gate, or outvoted), {lost - by_vote} by the checks of "
+          "the blocks it kept, their shape and the occluders' edges)")
     # The occluder line: sheets photographed with 3-6 fingers or pens over them (truth: each corner under one or not).
     covered = PageMaker(args.seed + 4, look=PageLook(square_px=(15.0, 40.0), tilt_deg=(0.0, 45.0), occluders=(3, 6)))
     patches = []
