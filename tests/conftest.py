@@ -22,7 +22,11 @@ SHARED_FIXTURE_GROUPS = {
     **{module: module for module in (
         "tests/session/test_session.py", "tests/solve/test_relabel.py", "tests/stream/test_stream.py",
         "tests/labeling/test_adapt.py", "tests/labeling/test_synthetic.py", "tests/labeling/test_fingers.py",
-        "tests/labeling/test_cli_label.py", "tests/multiview/test_calibration.py", "tests/objects/test_cube_label.py")},
+        "tests/labeling/test_cli_label.py", "tests/multiview/test_calibration.py", "tests/objects/test_cube_label.py",
+        # module fixtures of 1-4 s that were built on both workers when the module's tests were shared out
+        "tests/report/test_html.py", "tests/synth/test_scene.py", "tests/multiview/test_reconstruct.py",
+        "tests/detect/test_pyramid.py", "tests/solve/test_cli_solve.py", "tests/multiview/test_clean.py",
+        "tests/markerless/test_grasp.py", "tests/markerless/test_contact.py", "tests/test_cli_bad_input.py")},
 }
 
 
