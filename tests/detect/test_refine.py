@@ -11,7 +11,8 @@ from handcap import HandcapError
 from handcap.detect.evaluation import score_corners
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_refiner
 from handcap.detect.refine import (RADIUS, CornerRefiner, _merge, candidate_negatives, crops_at, false_candidates,
-                                   locate_corners, refine_corners, refiner_loss, refiner_samples)
+                                   locate_corners, refine_corners, refiner_loss)
+from handcap.detect.samples import phone_look, refiner_samples
 from handcap.detect.scenefile import Scene
 from handcap.detect.train import save_net, train_refiner
 
@@ -45,6 +46,31 @@ def test_samples_point_at_the_corners_whatever_the_turn(scenes):
     pos = is_corner > 0.5
     assert (np.linalg.norm(offset[pos], axis=1) <= 1.5 + 0.71).all()
     assert (offset[~pos] == 0).all()
+
+
+def test_a_phones_sharpening_rings_beside_an_edge_and_leaves_it_in_place(scenes):
+    # A blurred vertical step, dark to light at x = 20.5: processed, it is steeper, overshoots on both sides
+    # (where the mask is wide or strong enough), still crosses mid-grey between the same two pixels, and the
+    # same seed gives the same image.
+    x = np.arange(41)
+    row = 40 + 160 / (1 + np.exp(-(x - 20.5) / 0.5))
+    step = np.rint(np.tile(row, (31, 1))).astype(np.uint8)
+    rings = 0
+    for seed in range(8):
+        out = phone_look(step, np.random.default_rng(seed)).astype(float)
+        np.testing.assert_array_equal(out, phone_look(step, np.random.default_rng(seed)))
+        middle = out[15]
+        assert np.diff(middle).max() > np.diff(row).max() + 5, (seed, middle[18:24])
+        assert middle[20] < 120 < middle[21], (seed, middle[18:24])
+        rings += middle.max() > 205 and middle.min() < 35
+    assert rings >= 3, rings
+    # A share of the refiner's crops so processed: 0 draws exactly the crops drawn before the option existed.
+    negatives = [np.zeros((0, 2)) for _ in scenes]
+    plain = refiner_samples(scenes, 50, np.random.default_rng(4), negatives)
+    for a, b in zip(plain, refiner_samples(scenes, 50, np.random.default_rng(4), negatives, phone=0.0)):
+        np.testing.assert_array_equal(a, b)
+    sharpened = refiner_samples(scenes, 50, np.random.default_rng(4), negatives, phone=1.0)
+    assert not np.array_equal(plain[0], sharpened[0])
 
 
 def _two_corner_scene():

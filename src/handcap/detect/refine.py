@@ -24,7 +24,6 @@ Coordinates: pixel ``(x, y)`` at column x, row y, centres at integers (as in
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -114,11 +113,23 @@ def crops_at(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
     ndarray (N, 17, 17) float32
         See :func:`normalise_crops`.
     """
-    return normalise_crops(_gather(np.asarray(image), centres))
+    return normalise_crops(raw_crops(np.asarray(image), centres))
 
 
-def _gather(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    """The raw (N, 17, 17) pixels around each centre (x, y), the image mirrored beyond its border."""
+def raw_crops(image: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """The raw pixels around each centre, the image mirrored beyond its border (:func:`crops_at` unnormalised).
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+    centres : ndarray (N, 2) int
+        Pixel (x, y) of each crop's centre.
+
+    Returns
+    -------
+    ndarray (N, 17, 17)
+        Of the image's dtype.
+    """
     span = np.arange(-RADIUS, RADIUS + 1)
     c = np.asarray(centres, dtype=int).reshape(-1, 2)
     rows = _mirror(c[:, 1, None] + span[None], image.shape[0])
@@ -228,7 +239,7 @@ def _contrasted(image: np.ndarray, centres: np.ndarray, levels: np.ndarray | Non
     img = np.asarray(image)
     lo, _, hi = grey_levels(img) if levels is None else levels
     spread = max(hi - lo, 8 / 255) * (255.0 if img.dtype == np.uint8 else 1.0)
-    crops = _gather(img, centres)[:, 1:, 1:].astype(np.float32)
+    crops = raw_crops(img, centres)[:, 1:, 1:].astype(np.float32)
     means = crops.reshape(len(crops), 4, 4, 4, 4).mean(axis=(2, 4))
     return means.max(axis=(1, 2)) - means.min(axis=(1, 2)) >= MIN_RANGE * spread
 
@@ -375,75 +386,6 @@ def candidate_negatives(candidates: np.ndarray, scene, far: float = 3.0,
     hidden = np.array([name not in seen for name in scene.projected])
     occluded = hidden[nearest] & (distance > near) & (distance <= far) & (cKDTree(scene.corners).query(xy)[0] > far)
     return xy[distance > far], xy[occluded]
-
-
-def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5, occluded=None,
-                    occluded_share: float = 0.0):
-    """Training crops: true corners seen from a nearby pixel, and candidates that are no corner.
-
-    Parameters
-    ----------
-    scenes : sequence of Scene
-    count : int
-    rng : numpy.random.Generator
-    negatives : list of ndarray (N, 2)
-        Per scene, points more than 3 pixels from any printed corner (the corner network's false
-        candidates), pixels; a scene without any gets random points instead.
-    shift : float
-        Largest distance of a positive crop's centre from its corner, pixels.
-    occluded : list of ndarray (M, 2), optional
-        Per scene, candidates at an occluder's edge near a hidden corner (:func:`candidate_negatives`), pixels.
-    occluded_share : float
-        Share of the negatives drawn from ``occluded`` (from any scene that has some): they are rare among
-        the candidates, and the costliest to take for corners.
-
-    Returns
-    -------
-    crops : ndarray (count, 17, 17) float32
-    is_corner : ndarray (count,) float32
-    offset : ndarray (count, 2) float32
-        Corner minus crop centre, pixels (zero for negatives).
-    """
-    size = 2 * RADIUS + 1
-    raw = np.zeros((count, size, size), np.uint8)
-    label = np.zeros(count, np.float32)
-    offset = np.zeros((count, 2), np.float32)
-    hard = [] if occluded is None or occluded_share <= 0 else [k for k, o in enumerate(occluded) if len(o)]
-    for k in range(count):
-        pick = int(rng.integers(len(scenes)))
-        scene, pool = scenes[pick], negatives[pick]
-        if len(scene.corners) and rng.random() < 0.6:
-            corner = scene.corners[int(rng.integers(len(scene.corners)))]
-            r, a = shift * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
-            centre = np.rint(corner + r * np.array([np.cos(a), np.sin(a)])).astype(int)
-            label[k], offset[k] = 1.0, corner - centre
-        elif hard and rng.random() < occluded_share:
-            pick = hard[int(rng.integers(len(hard)))]
-            scene, pool = scenes[pick], occluded[pick]
-            centre = np.rint(pool[int(rng.integers(len(pool)))]).astype(int)
-        elif len(pool):
-            centre = np.rint(pool[int(rng.integers(len(pool)))]).astype(int)
-        else:  # anywhere; a corner there is a positive
-            centre = np.rint(rng.uniform([0, 0], scene.image.shape[::-1])).astype(int)
-            if len(scene.corners):
-                gap = np.linalg.norm(scene.corners - centre, axis=1)
-                j = int(np.argmin(gap))
-                if gap[j] <= shift:
-                    label[k], offset[k] = 1.0, scene.corners[j] - centre
-        raw[k] = _gather(scene.image, centre)[0]
-        if rng.random() < 0.3:  # a phone photo's JPEG artefacts
-            ok, code = cv2.imencode(".jpg", raw[k], [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(40, 95))])
-            raw[k] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
-    crops = normalise_crops(raw)
-    # The eight turns and mirrors of the square, with the offsets turned alike.
-    flip_x, flip_y, swap = rng.random((3, count)) < 0.5
-    crops[flip_x] = crops[flip_x, :, ::-1]
-    offset[flip_x, 0] *= -1
-    crops[flip_y] = crops[flip_y, ::-1, :]
-    offset[flip_y, 1] *= -1
-    crops[swap] = crops[swap].transpose(0, 2, 1)
-    offset[swap] = offset[swap][:, ::-1]
-    return np.ascontiguousarray(crops), label, offset
 
 
 def refiner_loss(output: torch.Tensor, is_corner: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:

@@ -1,4 +1,4 @@
-"""Training samples drawn from rendered scenes: crops for the corner network, block views for the reader.
+"""Training samples drawn from rendered scenes: crops for the corner network and refiner, views for the reader.
 
 Each function draws from a numpy random generator only, so a stream of batches is
 fixed by its seed. :class:`Batches` runs :func:`corner_batch` or
@@ -17,6 +17,7 @@ from torch.utils.data import IterableDataset
 from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import normalise, targets
 from handcap.detect.reader import GLYPHS, NONE, block_views
+from handcap.detect.refine import RADIUS, normalise_crops, raw_crops
 
 #: Side of the corner network's training crops, pixels.
 CROP = 96
@@ -184,6 +185,104 @@ def non_blocks(scene) -> np.ndarray:
     truth = {frozenset(map(tuple, np.round(b, 4))) for b in scene.blocks}
     pts = scene.corners[quads] if len(quads) else np.zeros((0, 4, 2))
     return np.array([q for q in pts if frozenset(map(tuple, np.round(q, 4))) not in truth]).reshape(-1, 4, 2)
+
+
+def phone_look(image: np.ndarray, rng) -> np.ndarray:
+    """A phone camera's processing of a grey image: half the time its noise reduction, then its sharpening.
+
+    The noise reduction is an edge-keeping bilateral filter; the sharpening an unsharp mask (sigma 0.6-2 px,
+    amount 0.3-2), which rings beside every edge: printed squares photographed so keep their corners where
+    they were, but the overshoot brightens the paper and darkens the ink along each edge.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) uint8
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+    """
+    out = image
+    if rng.random() < 0.5:
+        out = cv2.bilateralFilter(out, 5, float(rng.uniform(10, 40)), float(rng.uniform(1, 3)))
+    level = out.astype(np.float32)
+    blurred = cv2.GaussianBlur(level, (0, 0), float(rng.uniform(0.6, 2.0)), borderType=cv2.BORDER_REFLECT)
+    return np.clip(np.rint(level + rng.uniform(0.3, 2.0) * (level - blurred)), 0, 255).astype(np.uint8)
+
+
+def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5, occluded=None,
+                    occluded_share: float = 0.0, phone: float = 0.0):
+    """Training crops: true corners seen from a nearby pixel, and candidates that are no corner.
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+    count : int
+    rng : numpy.random.Generator
+    negatives : list of ndarray (N, 2)
+        Per scene, points more than 3 pixels from any printed corner (the corner network's false
+        candidates), pixels; a scene without any gets random points instead.
+    shift : float
+        Largest distance of a positive crop's centre from its corner, pixels.
+    occluded : list of ndarray (M, 2), optional
+        Per scene, candidates at an occluder's edge near a hidden corner (:func:`candidate_negatives`), pixels.
+    occluded_share : float
+        Share of the negatives drawn from ``occluded`` (from any scene that has some): they are rare among
+        the candidates, and the costliest to take for corners.
+    phone : float
+        Share of the crops processed as a phone's camera does (:func:`phone_look`), before the JPEG artefacts
+        some get (drawn from ``rng`` only where above 0, so a stream without it is as before).
+
+    Returns
+    -------
+    crops : ndarray (count, 17, 17) float32
+    is_corner : ndarray (count,) float32
+    offset : ndarray (count, 2) float32
+        Corner minus crop centre, pixels (zero for negatives).
+    """
+    size = 2 * RADIUS + 1
+    raw = np.zeros((count, size, size), np.uint8)
+    label = np.zeros(count, np.float32)
+    offset = np.zeros((count, 2), np.float32)
+    hard = [] if occluded is None or occluded_share <= 0 else [k for k, o in enumerate(occluded) if len(o)]
+    for k in range(count):
+        pick = int(rng.integers(len(scenes)))
+        scene, pool = scenes[pick], negatives[pick]
+        if len(scene.corners) and rng.random() < 0.6:
+            corner = scene.corners[int(rng.integers(len(scene.corners)))]
+            r, a = shift * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+            centre = np.rint(corner + r * np.array([np.cos(a), np.sin(a)])).astype(int)
+            label[k], offset[k] = 1.0, corner - centre
+        elif hard and rng.random() < occluded_share:
+            pick = hard[int(rng.integers(len(hard)))]
+            scene, pool = scenes[pick], occluded[pick]
+            centre = np.rint(pool[int(rng.integers(len(pool)))]).astype(int)
+        elif len(pool):
+            centre = np.rint(pool[int(rng.integers(len(pool)))]).astype(int)
+        else:  # anywhere; a corner there is a positive
+            centre = np.rint(rng.uniform([0, 0], scene.image.shape[::-1])).astype(int)
+            if len(scene.corners):
+                gap = np.linalg.norm(scene.corners - centre, axis=1)
+                j = int(np.argmin(gap))
+                if gap[j] <= shift:
+                    label[k], offset[k] = 1.0, scene.corners[j] - centre
+        raw[k] = raw_crops(scene.image, centre)[0]
+        if phone > 0 and rng.random() < phone:
+            raw[k] = phone_look(raw[k], rng)
+        if rng.random() < 0.3:  # a phone photo's JPEG artefacts
+            ok, code = cv2.imencode(".jpg", raw[k], [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(40, 95))])
+            raw[k] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+    crops = normalise_crops(raw)
+    # The eight turns and mirrors of the square, with the offsets turned alike.
+    flip_x, flip_y, swap = rng.random((3, count)) < 0.5
+    crops[flip_x] = crops[flip_x, :, ::-1]
+    offset[flip_x, 0] *= -1
+    crops[flip_y] = crops[flip_y, ::-1, :]
+    offset[flip_y, 1] *= -1
+    crops[swap] = crops[swap].transpose(0, 2, 1)
+    offset[swap] = offset[swap][:, ::-1]
+    return np.ascontiguousarray(crops), label, offset
 
 
 def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:

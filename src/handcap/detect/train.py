@@ -31,8 +31,8 @@ from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_r
                                        score_corners)
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
 from handcap.detect.reader import GLYPHS, BlockReader, reader_loss
-from handcap.detect.refine import CornerRefiner, candidate_negatives, refiner_loss, refiner_samples
-from handcap.detect.samples import Batches, corner_batch, crops, non_blocks, reader_samples
+from handcap.detect.refine import CornerRefiner, candidate_negatives, refiner_loss
+from handcap.detect.samples import Batches, corner_batch, crops, non_blocks, reader_samples, refiner_samples
 from handcap.detect.scenefile import load_scenes, save_scenes
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
@@ -44,10 +44,8 @@ __all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "eval
 
 @contextlib.contextmanager
 def _deterministic(device: str = "cpu"):
-    """torch's deterministic algorithms while training, the caller's setting restored afterwards.
-
-    On a GPU an operation without a deterministic kernel warns instead of failing.
-    """
+    """torch's deterministic algorithms while training (on a GPU, a warning where an operation has no
+    deterministic kernel), the caller's setting restored afterwards."""
     before = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(True, warn_only=device != "cpu")
     try:
@@ -137,7 +135,7 @@ def train_corners(scenes, *, steps: int = 2000, batch: int = 32, seed: int = 0, 
 
 def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: int = 256, seed: int = 0,
                   lr: float = 2e-3, net: CornerRefiner | None = None, progress: bool = False,
-                  occluded: float = 0.0) -> CornerRefiner:
+                  occluded: float = 0.0, phone: float = 0.0) -> CornerRefiner:
     """Train the corner refiner on crops of rendered scenes (deterministic for a seed).
 
     Parameters
@@ -155,6 +153,8 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
         Print the loss every 100 steps.
     occluded : float
         Share of the negatives drawn from candidates at an occluder's edge near a hidden corner (0: no more often).
+    phone : float
+        Share of the crops processed as a phone camera does (:func:`~handcap.detect.samples.phone_look`).
 
     Returns
     -------
@@ -165,7 +165,7 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
 
     def loss(model, rng):
         crops, is_corner, offset = refiner_samples(scenes, batch, rng, negatives, occluded=hidden,
-                                                   occluded_share=occluded)
+                                                   occluded_share=occluded, phone=phone)
         return refiner_loss(model(torch.from_numpy(crops)[:, None]), torch.from_numpy(is_corner),
                             torch.from_numpy(offset))
 
@@ -307,6 +307,7 @@ def main(argv=None) -> int:
                    help="the reader: share of true blocks shown with one corner moved, as no block (default 0)")
     p.add_argument("--occluded", type=float, default=0.0, help="the refiner: share of its negatives drawn from "
                    "candidates at an occluder's edge near a hidden corner (default 0: as often as any other)")
+    p.add_argument("--phone", type=float, default=0.0, help="the refiner: share of crops a phone sharpens")
     p.add_argument("--vary", type=float, default=0.0, help="the reader: share of its training scenes whose glyphs "
                    "are varied in weight, slant, width and outline, to read fonts it never saw")
     p.add_argument("--seconds", type=float,
@@ -314,8 +315,7 @@ def main(argv=None) -> int:
                         "this long")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
+    (out := Path(a.out)).mkdir(parents=True, exist_ok=True)
     started = time.time()
     if a.init and a.what == "all":
         raise HandcapError("--init starts one network: name it with --what")
@@ -338,7 +338,7 @@ def main(argv=None) -> int:
         corner_net = load_corner_net(out / "corners.npz" if (out / "corners.npz").is_file() else None)
         scenes, tests = corner_data if a.what == "all" else _scenes(a)
         net = train_refiner(scenes, corner_net, steps=a.steps, seed=a.seed, lr=a.lr, net=init, progress=True,
-                            occluded=a.occluded)
+                            occluded=a.occluded, phone=a.phone)
         score = evaluate_corners(corner_net, tests, refiner=net)
         print(score.summary(), flush=True)
         save_net(net, out / "refiner.npz", {"source": _command(a), "score": score.summary()})
@@ -410,7 +410,7 @@ def _command(a) -> str:
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
                             ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False),
-                            ("cut", False), ("displaced", 0.0), ("vary", 0.0)):
+                            ("cut", False), ("displaced", 0.0), ("vary", 0.0), ("phone", 0.0)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.init:
