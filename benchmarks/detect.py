@@ -13,7 +13,8 @@ network alone and refined by the refiner network, against the issue's
 targets (recall >= 97 %, median <= 0.15 px, RMS <= 0.3 px); the whole
 detector's tags and corner names on held-out hand scenes (full-size cameras)
 and on photographs of a printed sheet in a font the reader never saw (Noto Sans
-Mono Bold), and on handcap's own page printed flat and photographed square-on,
+Mono Bold; and the same sheets as a phone processes them: noise reduction, sharpening, JPEG), and on
+handcap's own page printed flat and photographed square-on,
 against the targets (tags read right >= 99.5 %, corners with a wrong id <= 0.1 %,
 a page's tags read >= 99.9 %). The occluder line (recall >= 90 % with 30 % of a patch
 behind occluders): the refined recall of each patch's visible corners, binned by the share of its

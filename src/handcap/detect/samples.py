@@ -226,7 +226,8 @@ def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5, o
     shift : float
         Largest distance of a positive crop's centre from its corner, pixels.
     occluded : list of ndarray (M, 2), optional
-        Per scene, candidates at an occluder's edge near a hidden corner (:func:`candidate_negatives`), pixels.
+        Per scene, candidates at an occluder's edge near a hidden corner
+        (:func:`~handcap.detect.refine.candidate_negatives`), pixels.
     occluded_share : float
         Share of the negatives drawn from ``occluded`` (from any scene that has some): they are rare among
         the candidates, and the costliest to take for corners.
