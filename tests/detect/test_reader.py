@@ -98,6 +98,18 @@ def test_blocks_with_a_corner_moved_are_shown_as_no_block(scenes):
     assert not np.allclose(views, same[0])  # the moved corners change what the reader sees
 
 
+def test_views_processed_as_a_phone_does(scenes):
+    # phone=0 draws exactly the default views; phone=1 processes every view's surroundings (its labels still
+    # drawn as before for the first view, whose draws come first).
+    plain = reader_samples(scenes, 32, np.random.default_rng(1))
+    for a, b in zip(plain, reader_samples(scenes, 32, np.random.default_rng(1), phone=0.0)):
+        np.testing.assert_array_equal(a, b)
+    views, first, second, turn = reader_samples(scenes, 32, np.random.default_rng(1), phone=1.0)
+    assert (first[0], second[0], turn[0]) == (plain[1][0], plain[2][0], plain[3][0])
+    assert not np.allclose(views[0], plain[0][0])
+    assert np.isfinite(views).all() and (turn[turn < 4] >= 0).all()
+
+
 def test_a_few_reader_steps_lower_the_loss_and_repeat_exactly(scenes, tmp_path):
     from handcap.detect.reader import reader_loss
     views, *labels = reader_samples(scenes, 48, np.random.default_rng(5))

@@ -119,7 +119,8 @@ class Batches(IterableDataset):
             yield self.draw(self.scenes, self.count, rng, **self.options)
 
 
-def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None, displaced: float = 0.0):
+def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=None, displaced: float = 0.0,
+                   phone: float = 0.0):
     """Training views for the block reader: true blocks turned at random, and quads that are not blocks.
 
     With ``displaced`` > 0, that share of the true blocks drawn has one corner moved by 18-50 % of the
@@ -137,6 +138,8 @@ def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=N
         Per scene, quads that are not blocks (default: made here, which is slow in a loop).
     displaced : float
         Share of the true blocks drawn that get one corner moved and count as no block.
+    phone : float
+        Share of the views processed around their block as a phone's camera does (:func:`phone_look`).
 
     Returns
     -------
@@ -175,7 +178,7 @@ def reader_samples(scenes, count: int, rng, *, jitter: float = 0.04, negatives=N
             labels[:, k] = (NONE, NONE, 4)
         side = np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).mean()
         noisy = quad + rng.normal(0, jitter * side, quad.shape)
-        views[k] = block_views(_photometric(scene.image, noisy, rng), noisy[None])[0]
+        views[k] = block_views(_photometric(scene.image, noisy, rng, phone), noisy[None])[0]
     return views, labels[0], labels[1], labels[2]
 
 
@@ -286,9 +289,12 @@ def refiner_samples(scenes, count: int, rng, negatives, *, shift: float = 1.5, o
     return np.ascontiguousarray(crops), label, offset
 
 
-def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:
-    """Sometimes JPEG artefacts around the quad (a phone photo), else the image as it is."""
-    if rng.random() >= 0.3:
+def _photometric(image: np.ndarray, quad: np.ndarray, rng, phone: float = 0.0) -> np.ndarray:
+    """Around the quad, sometimes a phone's processing (a share ``phone``, :func:`phone_look`) and sometimes JPEG
+    artefacts, else the image as it is (``phone`` 0 draws nothing for it)."""
+    sharpened = phone > 0 and rng.random() < phone
+    jpeg = rng.random() < 0.3
+    if not (sharpened or jpeg):
         return image
     lo = np.clip(np.floor(quad.min(axis=0)).astype(int) - 24, 0, None) // 8 * 8
     hi = np.clip(np.ceil(quad.max(axis=0)).astype(int) + 24, 0, image.shape[::-1])
@@ -296,8 +302,10 @@ def _photometric(image: np.ndarray, quad: np.ndarray, rng) -> np.ndarray:
     part = np.ascontiguousarray(image[lo[1]:hi[1], lo[0]:hi[0]])
     if part.size == 0:
         return image
-    ok, code = cv2.imencode(".jpg", part, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 95))])
-    out[lo[1]:hi[1], lo[0]:hi[0]] = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+    if sharpened:
+        part = phone_look(part, rng)
+    if jpeg:
+        ok, code = cv2.imencode(".jpg", part, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 95))])
+        part = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
+    out[lo[1]:hi[1], lo[0]:hi[0]] = part
     return out
-
-

@@ -175,7 +175,7 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
 
 def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, lr: float = 2e-3,
                  net: BlockReader | None = None, progress: bool = False, device: str = "cpu",
-                 workers: int = 0, negatives=None, displaced: float = 0.0) -> BlockReader:
+                 workers: int = 0, negatives=None, displaced: float = 0.0, phone: float = 0.0) -> BlockReader:
     """Train the block reader on views of rendered scenes (deterministic for a seed).
 
     Parameters
@@ -190,12 +190,12 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
     device : str
         Where the network trains (``'cpu'``, ``'cuda'``).
     workers : int
-        Processes drawing the views (0: the training process). The views, and so the weights,
-        depend on the seed and this number.
+        Processes drawing the views (0: the training process); the views depend on the seed and this number.
     negatives : list of ndarray (N, 4, 2), optional
         Per scene, quads of its corners that are not blocks (default: :func:`non_blocks`, made here).
-    displaced : float
-        Share of the true blocks shown with one corner moved, as no block (:func:`reader_samples`).
+    displaced, phone : float
+        Shares of the true blocks shown with one corner moved, as no block, and of the views processed as a
+        phone does (:func:`reader_samples`).
 
     Returns
     -------
@@ -203,7 +203,7 @@ def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, 
         On the CPU.
     """
     negatives = [non_blocks(s) for s in scenes] if negatives is None else negatives
-    draw = _stream(reader_samples, scenes, batch, seed, workers, negatives=negatives, displaced=displaced)
+    draw = _stream(reader_samples, scenes, batch, seed, workers, negatives=negatives, displaced=displaced, phone=phone)
 
     def loss(model, rng):
         views, first, second, turn = (t.to(device, non_blocking=True) for t in draw(rng))
@@ -307,7 +307,7 @@ def main(argv=None) -> int:
                    help="the reader: share of true blocks shown with one corner moved, as no block (default 0)")
     p.add_argument("--occluded", type=float, default=0.0, help="the refiner: share of its negatives drawn from "
                    "candidates at an occluder's edge near a hidden corner (default 0: as often as any other)")
-    p.add_argument("--phone", type=float, default=0.0, help="the refiner: share of crops a phone sharpens")
+    p.add_argument("--phone", type=float, default=0.0, help="the refiner or reader: share of views a phone sharpens")
     p.add_argument("--vary", type=float, default=0.0, help="the reader: share of its training scenes whose glyphs "
                    "are varied in weight, slant, width and outline, to read fonts it never saw")
     p.add_argument("--seconds", type=float,
@@ -348,7 +348,7 @@ def main(argv=None) -> int:
         scenes = _reader_scenes(a, trained) if a.steps > 0 else []
         print(f"reader: {len(scenes)} scenes in {len(trained)} font(s), held-out font {held_out[0]}", flush=True)
         settings = {"seed": a.seed, "lr": a.lr, "batch": a.batch or 128, "device": a.device, "workers": a.workers,
-                    "negatives": [non_blocks(s) for s in scenes], "displaced": a.displaced}
+                    "negatives": [non_blocks(s) for s in scenes], "displaced": a.displaced, "phone": a.phone}
         if a.seconds:
             a.steps = _plan(train_reader, scenes, a, init, **settings)
         net = train_reader(scenes, steps=a.steps, net=init, progress=True, **settings)
