@@ -109,3 +109,29 @@ def test_report_in_headless_chromium(session, tmp_path):
     red = (np.abs(shot - np.array([214, 39, 40]) / 255).max(axis=-1) < 0.12).sum()  # the skeleton's colour
     assert red > 150 and (np.abs(empty - np.array([214, 39, 40]) / 255).max(axis=-1) < 0.12).sum() == 0
     assert shot.std() > 5 * max(empty.std(), 1e-3)
+
+
+def test_the_3d_views_frames_hold_the_solved_skeleton_and_markers(session):
+    """The view's frames are written as plain dicts, unchecked by plotly: plotly must still accept the figure, and
+    each frame must show that frame's joints and markers (mm, to 0.01)."""
+    import plotly.graph_objects as go
+
+    from handcap.hand.anatomy import PARENTS
+    from handcap.report.html import VIEW_FRAMES, view_figure
+    from handcap.report.take import read_take
+
+    take = read_take(session / "take1")
+    view = view_figure(take)
+    go.Figure(view)  # raises on anything plotly does not know
+    n = take.motion.n_frames
+    step = -(-n // VIEW_FRAMES)
+    assert [f["name"] for f in view["frames"]] == [str(t) for t in range(0, n, step)]
+    for frame in view["frames"][::7]:
+        t = int(frame["name"])
+        skeleton, markers = frame["data"]
+        joints = take.motion.joints[t] * 1000
+        child = next(j for j, p in enumerate(PARENTS) if p >= 0)  # the first bone: parent, child, break
+        assert np.allclose([skeleton[a][:2] for a in "xyz"], joints[[PARENTS[child], child]].T, atol=0.006)
+        assert np.isnan(skeleton["x"][2])
+        assert np.allclose(np.stack([markers[a] for a in "xyz"], axis=1), take.markers.positions[t] * 1000,
+                           atol=0.006, equal_nan=True)

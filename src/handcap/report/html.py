@@ -30,11 +30,13 @@ _STYLE = ("body{font-family:system-ui,sans-serif;margin:24px;max-width:1200px;co
 
 
 def _plotly():
+    """plotly's graph objects and its io module."""
     try:
         import plotly.graph_objects as go  # noqa: PLC0415 (optional extra 'report', loaded only when used)
+        import plotly.io as pio  # noqa: PLC0415
     except ImportError:
         raise HandcapError("handcap report needs plotly: pip install 'handcap[report]'") from None
-    return go
+    return go, pio
 
 
 def _bones(joints) -> np.ndarray:
@@ -45,7 +47,23 @@ def _bones(joints) -> np.ndarray:
     return out
 
 
-def _view(go, take: TakeFiles):
+def view_figure(take: TakeFiles) -> dict:
+    """The take's 3D view: the skeleton, markers and objects over time, with a slider and a play button.
+
+    The layout and the first frame are built (and checked) by plotly; the animation's frames are plain dicts,
+    since checking :data:`VIEW_FRAMES` frames of traces took ten times as long as everything else on the page.
+
+    Parameters
+    ----------
+    take : TakeFiles
+        From :func:`handcap.report.take.read_take`; its hand motion needs joints.
+
+    Returns
+    -------
+    dict
+        A plotly figure (``data``, ``layout``, ``frames``); positions in millimetres, rounded to 0.01.
+    """
+    go, _ = _plotly()
     motion = take.motion
     joints = motion.joints
     step = max(1, math.ceil(motion.n_frames / VIEW_FRAMES))
@@ -58,13 +76,13 @@ def _view(go, take: TakeFiles):
             clouds.append((name, om.transform_points(om.canonical), "#2ca02c"))
 
     def traces(t):
-        bones = _bones(joints[t]) * 1000
-        out = [go.Scatter3d(x=bones[:, 0], y=bones[:, 1], z=bones[:, 2], mode="lines+markers", name="skeleton",
-                            line={"color": "#d62728", "width": 5}, marker={"size": 2})]
+        bones = np.round(_bones(joints[t]) * 1000, 2)
+        out = [{"type": "scatter3d", "x": bones[:, 0], "y": bones[:, 1], "z": bones[:, 2], "mode": "lines+markers",
+                "name": "skeleton", "line": {"color": "#d62728", "width": 5}, "marker": {"size": 2}}]
         for name, points, colour in clouds:
-            p = points[t] * 1000
-            out.append(go.Scatter3d(x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", name=name,
-                                    marker={"size": 3, "color": colour}))
+            p = np.round(points[t] * 1000, 2)
+            out.append({"type": "scatter3d", "x": p[:, 0], "y": p[:, 1], "z": p[:, 2], "mode": "markers", "name": name,
+                        "marker": {"size": 3, "color": colour}})
         return out
 
     every = np.concatenate([joints.reshape(-1, 3)] + [c[1].reshape(-1, 3) for c in clouds]) * 1000
@@ -72,7 +90,7 @@ def _view(go, take: TakeFiles):
     lo, hi = every.min(axis=0), every.max(axis=0)
     axes = {a: {"range": [float(lo[i]) - 10, float(hi[i]) + 10], "title": f"{a} (mm)"} for i, a in
             enumerate("xyz")}
-    fig = go.Figure(data=traces(frames[0]), frames=[go.Frame(data=traces(t), name=str(t)) for t in frames])
+    fig = go.Figure(data=traces(frames[0]))
     fig.update_layout(
         title="3D view (millimetres)", height=650,
         scene={"xaxis": axes["x"], "yaxis": axes["y"], "zaxis": axes["z"], "aspectmode": "data"},
@@ -82,7 +100,7 @@ def _view(go, take: TakeFiles):
             {"label": "pause", "method": "animate", "args": [[None], {"mode": "immediate"}]}]}],
         sliders=[{"currentvalue": {"prefix": "frame "}, "steps": [
             {"label": str(t), "method": "animate", "args": [[str(t)], {"mode": "immediate"}]} for t in frames]}])
-    return fig
+    return {**fig.to_dict(), "frames": [{"data": traces(t), "name": str(t)} for t in frames]}
 
 
 def _time_plots(go, take: TakeFiles) -> list:
@@ -146,7 +164,7 @@ def take_page(take: TakeFiles, title: str | None = None, figures: dict | None = 
     -------
     str
     """
-    go = _plotly()
+    go, pio = _plotly()
     motion = take.motion
     if motion.joints is None:
         raise HandcapError(f"{take.folder / take.paths['hand motion']}: has no joints; solve it with handcap solve")
@@ -160,9 +178,9 @@ def take_page(take: TakeFiles, title: str | None = None, figures: dict | None = 
              _table([("frames", motion.n_frames), ("rate (Hz)", f"{motion.rate:g}"), ("side", motion.side),
                      ("hand model", motion.model), ("joints", ", ".join(JOINT_NAMES + TIP_NAMES))]
                     + [(k, v) for k, v in take.paths.items()])]
-    plots = [_view(go, take), *_time_plots(go, take)]
-    for k, fig in enumerate(plots):
-        parts.append(fig.to_html(full_html=False, include_plotlyjs=(k == 0), auto_play=False))
+    plots = [view_figure(take), *_time_plots(go, take)]
+    for k, fig in enumerate(plots):  # the view's frames are unchecked dicts (view_figure)
+        parts.append(pio.to_html(fig, full_html=False, include_plotlyjs=(k == 0), auto_play=False, validate=False))
     table = metrics_table(figures) if any(k in figures for k in ("msnr_db", "mre_mm")) else ""
     parts.append("<h2>Quality</h2>" + (f"<pre>{html.escape(table)}</pre>" if table else
                                         _table((k, v) for k, v in figures.items() if k != "warnings")))
