@@ -263,6 +263,23 @@ def main() -> None:
     print(f"the same sheets sharpened as a phone does (unsharp mask sigma 0.6-2 px, amount 0.3-2; JPEG 70-95): "
           f"{phone_score.summary()} ({phone_score.right / max(sheet_score.right, 1):.3f} of the tags read right "
           "without)")
+    # Another generator's sheet, read without a template: one checkerboard over the page, plain rows and columns,
+    # the underline where DexterCap's generator draws it (lower, from 0.1 of the square to its middle).
+    from handcap.detect.scenes import SheetMaker
+    from handcap.patterns.alphabet import DEXTERCAP_ALPHABET
+    from handcap.patterns.glyphs import GlyphLayout
+
+    theirs = GlyphLayout(cap_height=0.43, glyph_top=0.27, underline_top=0.8, underline_thickness=0.083, gap=0.067,
+                         underline_span=(0.1, 0.5))
+    for name, alphabet in (("DexterCap's 22", "0123456789ACEHNPRSTVXZ"), ("DexterCap's 18", DEXTERCAP_ALPHABET)):
+        for where, layout in (("their", theirs), ("handcap's", None)):
+            sheet = SheetMaker(args.seed + 7, alphabet, font=font, layout=layout,
+                               look=PageLook(square_px=(12.0, 30.0), occluders=(0, 2)))
+            score = evaluate_detector(Detector(fast, reader, alphabet=alphabet, refiner=refiner),
+                                      [sheet.scene() for _ in range(args.scenes)])
+            print(f"another generator's sheet, no template, {name} glyphs, {where} glyph layout: tags "
+                  f"{100 * score.right / max(score.blocks, 1):.1f} % of {score.blocks} visible read right, "
+                  f"{score.wrong} of {score.read} read wrong")
     # The pattern line: handcap's own page (its font and layout) printed flat and photographed square-on.
     own = PageMaker(args.seed + 3, look=PageLook(square_px=(30.0, 30.0), tilt_deg=(0.0, 5.0), curl=(0.0, 0.0),
                                                  occluders=(0, 0), glint=0.0), style=ImageStyle.clean())

@@ -44,3 +44,38 @@ def test_the_truth_scores_perfectly_and_a_moved_corner_is_wrong(scenes):
     assert spoilt.read == perfect.blocks + 1 and spoilt.wrong == 1 and spoilt.right == perfect.blocks - 1
     assert spoilt.misnamed == 1 and spoilt.named_right == len(scene.corners) - 1
     assert "read right" in spoilt.summary()
+
+
+class _Reader:
+    """A detector without a template: reports a scene's visible tags at their corners, one of them turned a
+    quarter (its corners out of reading order), and one tag the sheet does not hold."""
+
+    pattern = None
+
+    def __init__(self, scene):
+        self.scene = scene
+
+    def image(self, image):
+        s = self.scene
+        text, xy = list(s.block_text), np.array(s.blocks, float)
+        xy[1] = np.roll(xy[1], 1, axis=0)
+        text.append("QQ")
+        xy = np.concatenate([xy, xy[:1] + 40.0])
+        return ImageDetections(np.zeros((0, 2)), np.zeros(0), np.zeros(0, object), np.array(text), xy,
+                               np.ones(len(text)), 0)
+
+
+def test_another_generators_sheet_read_without_a_template_is_scored_by_position():
+    from handcap.detect.scenes import SheetMaker
+    from handcap.synth.pages import PageLook
+
+    maker = SheetMaker(3, "0123456789ACEHNPRSTVXZ", rows=8, cols=10,
+                       look=PageLook(square_px=(12.0, 14.0), tilt_deg=(0.0, 20.0), occluders=(0, 0)))
+    plain = {(r, c) for r in range(8) for c in range(10) if (r + c) % 2 and (r % 4 == 0 or c in (0, 4, 8))}
+    assert maker.plain == plain and len(maker.block_text) == 40 - len(plain) == len(set(maker.block_text))
+    scene = maker.scene()
+    assert len(scene.blocks) > 10
+    score = evaluate_detector(_Reader(scene), [scene])
+    assert (score.blocks, score.read, score.right, score.wrong) == (len(scene.blocks), len(scene.blocks) + 1,
+                                                                    len(scene.blocks) - 1, 2)
+    assert score.named == 0

@@ -135,8 +135,9 @@ def test_the_reader_trains_from_its_scenes_file_and_is_scored_afterwards(tmp_pat
     assert np.array_equal(np.load(tmp_path / "w" / "reader.npz")["w.turn.weight"], first)
     with pytest.raises(HandcapError, match="holds scenes made with"):
         train.main([a for a in args if a != "--cut"])
-    with pytest.raises(HandcapError, match="holds scenes made with"):  # varied glyphs are other scenes
-        train.main(args + ["--vary", "0.5"])
+    for other in (["--vary", "0.5"], ["--wide", "0.5"]):  # varied glyphs or wider layouts are other scenes
+        with pytest.raises(HandcapError, match="holds scenes made with"):
+            train.main(args + other)
     monkeypatch.undo()
     # No steps: the weights are kept, their gate is set on validation scenes, and the chain of commands recorded.
     assert train.main(["--what", "reader", "--steps", "0", "--test-scenes", "1", "--threads", "1",
@@ -169,3 +170,35 @@ def test_a_scenes_file_splits_into_parts_of_about_equal_size_that_join_into_it(t
     assert main(["split", str(parts[0]), "2"]) == 2 and "join the parts first" in capsys.readouterr().err
     with pytest.raises(HandcapError, match="cannot split 12 scenes into 13 parts"):
         split_scenes(whole, 13)
+
+
+def test_wider_layouts_change_only_the_random_layouts_drawn(monkeypatch):
+    """``reader_scenes(..., wide=S)`` swaps a share S of the random glyph layouts for wide ones, drawn from their own
+    stream: the scenes with handcap's layout, and every other draw, stay as they were."""
+    from handcap.detect import samples
+
+    made = []
+
+    class Maker:
+        def __init__(self, seed, *, font=None, alphabet=None, layout=None, **kw):
+            made.append((seed, font, alphabet, layout))
+
+        def scene(self):
+            return object()
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(samples, "SceneMaker", Maker)
+    monkeypatch.setattr(samples, "PageMaker", Maker)
+    runs = {}
+    for wide in (0.0, 0.6):
+        made.clear()
+        assert len(samples.reader_scenes(96, 4, [None, "f"], wide=wide)) == 96
+        runs[wide] = list(made)
+    plain, wide = runs[0.0], runs[0.6]
+    assert [m[:3] for m in plain] == [m[:3] for m in wide] and len(plain) > 12
+    changed = [b for a, b in zip(plain, wide) if a[3] != b[3]]
+    assert all(a[3] is None for a, b in zip(plain, wide) if b[3] is None)  # handcap's layout kept
+    assert 0.3 < len(changed) / sum(m[3] is not None for m in plain) < 0.9
+    assert any(b[3].underline_span is not None for b in changed)

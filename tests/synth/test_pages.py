@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from handcap.patterns import session_pattern
 from handcap.patterns.glyphs import GlyphLayout, load_font, square_ink
@@ -69,15 +70,32 @@ def test_the_same_seed_gives_the_same_photograph():
     assert np.array_equal(a.image, b.image) and np.array_equal(a.xy, b.xy)
 
 
-def test_random_glyph_layouts_stay_inside_their_square():
+@pytest.mark.parametrize("wide", [False, True])
+def test_random_glyph_layouts_stay_inside_their_square(wide):
     rng = np.random.default_rng(0)
+    gaps, spans = [], []
     for _ in range(200):
-        layout = GlyphLayout.random(rng)
+        layout = GlyphLayout.random(rng, wide=wide)
         paths = square_ink("MW", 0.0, 0.0, 1.0, FONT, layout)
         glyphs, underline = np.concatenate([p.vertices for p in paths[:2]]), paths[2].vertices
         assert glyphs.min() > 0.0 and glyphs.max() < 1.0
         assert underline[:, 1].min() > glyphs[:, 1].max() - 0.02  # under the glyphs (descenders aside)
-        assert underline[:, 1].max() < 1.0
+        assert underline.min() > 0.0 and underline.max() < 1.0
+        assert underline[:, 0].min() < paths[0].vertices[:, 0].max()  # under the first glyph
+        assert underline[:, 0].max() < paths[1].vertices[:, 0].min() + 0.02  # not under the second
+        gaps.append(layout.underline_top - layout.glyph_top - layout.cap_height)
+        spans.append(layout.underline_span is not None)
+    # the wide draws reach DexterCap's underline (about 0.11 of the side below the glyphs, from 0.1 to the middle)
+    assert (max(gaps) > 0.15 and 0.3 < np.mean(spans) < 0.7) if wide else (max(gaps) <= 0.1 and not any(spans))
+
+
+def test_an_underline_span_places_the_underline():
+    layout = GlyphLayout(underline_span=(0.1, 0.5))
+    underline = square_ink("HI", 2.0, 3.0, 2.0, FONT, layout)[2].vertices
+    assert np.allclose([underline[:, 0].min(), underline[:, 0].max()], [2.2, 3.0])
+    assert np.allclose(underline[:, 1].min(), 3.0 + 2.0 * layout.underline_top)
+    default = square_ink("HI", 2.0, 3.0, 2.0, FONT, GlyphLayout())
+    assert np.allclose(default[2].vertices[:, 1], underline[:, 1])  # only its length changes
 
 
 def test_varied_glyphs_stay_inside_their_square():

@@ -18,6 +18,9 @@ from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import normalise, targets
 from handcap.detect.reader import GLYPHS, NONE, block_views
 from handcap.detect.refine import RADIUS, normalise_crops, raw_crops
+from handcap.detect.scenes import PageMaker, SceneMaker
+from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
+from handcap.patterns.glyphs import GlyphLayout
 
 #: Side of the corner network's training crops, pixels.
 CROP = 96
@@ -308,4 +311,62 @@ def _photometric(image: np.ndarray, quad: np.ndarray, rng, phone: float = 0.0) -
         ok, code = cv2.imencode(".jpg", part, [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 95))])
         part = cv2.imdecode(code, cv2.IMREAD_GRAYSCALE)
     out[lo[1]:hi[1], lo[0]:hi[0]] = part
+    return out
+
+
+def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool = False, vary: float = 0.0,
+                  wide: float = 0.0) -> list:
+    """Scenes for the reader: hand renders and photographed sheets in each font, many alphabets and layouts.
+
+    Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
+    them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
+    photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
+    ``cut`` cuts each scene to its corners (:meth:`Scene.cropped`). A share ``vary`` of the scenes gets glyphs
+    varied in weight, slant, width and outline (:meth:`GlyphLayout.varied`, from its own random stream); a share
+    ``wide`` of the random layouts is drawn from wider ranges instead (``GlyphLayout.random(..., wide=True)``:
+    underlines further below the glyphs or reaching to the square's middle, as other generators print them).
+
+    Parameters
+    ----------
+    count, seed : int
+    fonts : sequence of str or None
+        Font files (None: the default font).
+    pages : float
+        Share of photographed sheets among the scenes.
+    cut : bool
+        Cut each scene to its corners: the same views, a third smaller to keep in a scenes file.
+    vary : float
+        Share of the scenes whose glyphs look like another font's.
+    wide : float
+        Share of the random layouts drawn from the wider ranges.
+
+    Returns
+    -------
+    list of Scene
+    """
+    rng, other, wider = (np.random.default_rng(s) for s in (seed, (seed, 17), (seed, 19)))
+    n_pages = int(round(pages * count))
+    out = []
+    for kind, total, per in (("hand", count - n_pages, max(1, (count - n_pages) // (6 * len(fonts)))),
+                             ("page", n_pages, 10)):
+        made, k = 0, 0
+        while made < total:
+            font = fonts[k % len(fonts)]
+            alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
+            alphabet = alphabets[(k // len(fonts)) % 3]
+            layout = GlyphLayout.random(rng) if (k // (3 * len(fonts))) % 2 else None
+            layout = GlyphLayout.random(wider, wide=True) if layout and wider.random() < wide else layout
+            layout = (layout or GlyphLayout()).varied(other) if other.random() < vary else layout
+            make = SceneMaker if kind == "hand" else PageMaker
+            extra = {"scale": (0.45, 1.0)} if kind == "hand" else {}
+            maker = make(seed * 1000 + k + (0 if kind == "hand" else 500), font=font, alphabet=alphabet,
+                         layout=layout, **extra)
+            try:
+                batch = [maker.scene() for _ in range(min(per, total - made))]
+                batch = [b.cropped() for b in batch] if cut else batch
+            finally:
+                maker.close()
+            out += batch
+            made += len(batch)
+            k += 1
     return out

@@ -27,7 +27,8 @@ from handcap.synth.decals import patch_skin
 from handcap.synth.filming import scaled_camera
 from handcap.synth.images import ImageStyle, PatchRenderer
 from handcap.synth.pages import PageLook, PagePhotographer
-from handcap.synth.textures import build_atlas
+from handcap.synth.textures import PatchAtlas, build_atlas
+from handcap.patterns.pattern import Patch
 
 
 class SceneMaker:
@@ -137,6 +138,59 @@ class PageMaker:
 
     def scene(self) -> Scene:
         """Draw one photograph.
+
+        Returns
+        -------
+        Scene
+        """
+        shot = self.photographer.photograph(self.rng)
+        seen = shot.visible
+        blocks = seen[self.blocks_index].all(axis=1)
+        return Scene(shot.image, shot.xy[seen], self.names[seen], shot.xy[self.blocks_index[blocks]],
+                     self.block_text[blocks], self.alphabet, dict(zip(self.names, shot.xy)))
+
+
+class SheetMaker:
+    """Photographs of a sheet as another generator prints it (DexterCap's does so): one checkerboard over the
+    page, the tags counted along its rows, every fourth row of squares and a few columns plain (white squares
+    with no glyphs, where the sheet is cut into strips), to be read without a template.
+
+    Parameters
+    ----------
+    seed : int
+    alphabet : str
+        The tags are ``alphabet[n % L] + alphabet[n // L % L]`` for the n-th tagged square.
+    font : str or Path, optional
+    layout : GlyphLayout, optional
+        Where the generator puts the glyphs and the underline (default: handcap's).
+    look : PageLook, optional
+    rows, cols : int
+        Squares of the sheet.
+    """
+
+    def __init__(self, seed: int, alphabet: str, *, font=None, layout: GlyphLayout | None = None,
+                 look: PageLook | None = None, rows: int = 16, cols: int = 20):
+        self.rng, self.alphabet = np.random.default_rng(seed), alphabet
+        n = len(alphabet)
+        white = [(r, c) for r in range(rows) for c in range(cols) if (r + c) % 2]
+        text = {rc: alphabet[k % n] + alphabet[k // n % n] for k, rc in enumerate(white)}
+        patch = Patch("sheet", "sheet", "object:sheet",
+                      tuple(tuple(text.get((r, c), "") for c in range(cols)) for r in range(rows)))
+        atlas = build_atlas([patch], load_font(font, alphabet), square=48, layout=layout)
+        image, (x0, y0), side = atlas.image.copy(), np.round(atlas.origins[0]).astype(int), atlas.square
+        self.plain = {(r, c) for r, c in white if r % 4 == 0 or c in (0, cols // 2 - 1, cols - 2)}
+        for r, c in self.plain:  # paper where the glyphs were
+            image[y0 + r * side + 1:y0 + (r + 1) * side - 1, x0 + c * side + 1:x0 + (c + 1) * side - 1] = 255
+        self.names, blocks, texts = _block_truth([patch])
+        tagged = np.array([(r, c) not in self.plain for _, r, c in patch.blocks()])
+        self.blocks_index, self.block_text = blocks[tagged], texts[tagged]
+        self.photographer = PagePhotographer(PatchAtlas(image, atlas.patches, atlas.origins, side), look)
+
+    def close(self) -> None:
+        """Nothing to free (the same interface as :class:`SceneMaker`)."""
+
+    def scene(self) -> Scene:
+        """Draw one photograph; its blocks are the tagged squares only.
 
         Returns
         -------

@@ -30,9 +30,10 @@ from handcap.detect.corners import CornerNet, corner_loss, detect_corners
 from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
                                        score_corners)
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
-from handcap.detect.reader import GLYPHS, BlockReader, reader_loss
+from handcap.detect.reader import BlockReader, reader_loss
 from handcap.detect.refine import CornerRefiner, candidate_negatives, refiner_loss
-from handcap.detect.samples import Batches, corner_batch, crops, non_blocks, reader_samples, refiner_samples
+from handcap.detect.samples import (Batches, corner_batch, crops, non_blocks, reader_samples, reader_scenes,
+                                    refiner_samples)
 from handcap.detect.scenefile import load_scenes, save_scenes
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
@@ -220,58 +221,6 @@ FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
          "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf")
 
 
-def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool = False, vary: float = 0.0) -> list:
-    """Scenes for the reader: hand renders and photographed sheets in each font, many alphabets and layouts.
-
-    Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
-    them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
-    photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
-    ``cut`` cuts each scene to its corners (:meth:`Scene.cropped`). A share ``vary`` of the scenes gets glyphs
-    varied in weight, slant, width and outline (:meth:`GlyphLayout.varied`, from its own random stream).
-
-    Parameters
-    ----------
-    count, seed : int
-    fonts : sequence of str or None
-        Font files (None: the default font).
-    pages : float
-        Share of photographed sheets among the scenes.
-    cut : bool
-        Cut each scene to its corners: the same views, a third smaller to keep in a scenes file.
-    vary : float
-        Share of the scenes whose glyphs look like another font's.
-
-    Returns
-    -------
-    list of Scene
-    """
-    rng, other = np.random.default_rng(seed), np.random.default_rng((seed, 17))
-    n_pages = int(round(pages * count))
-    out = []
-    for kind, total, per in (("hand", count - n_pages, max(1, (count - n_pages) // (6 * len(fonts)))),
-                             ("page", n_pages, 10)):
-        made, k = 0, 0
-        while made < total:
-            font = fonts[k % len(fonts)]
-            alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
-            alphabet = alphabets[(k // len(fonts)) % 3]
-            layout = GlyphLayout.random(rng) if (k // (3 * len(fonts))) % 2 else None
-            layout = (layout or GlyphLayout()).varied(other) if other.random() < vary else layout
-            make = SceneMaker if kind == "hand" else PageMaker
-            extra = {"scale": (0.45, 1.0)} if kind == "hand" else {}
-            maker = make(seed * 1000 + k + (0 if kind == "hand" else 500), font=font, alphabet=alphabet,
-                         layout=layout, **extra)
-            try:
-                batch = [maker.scene() for _ in range(min(per, total - made))]
-                batch = [b.cropped() for b in batch] if cut else batch
-            finally:
-                maker.close()
-            out += batch
-            made += len(batch)
-            k += 1
-    return out
-
-
 def main(argv=None) -> int:
     """Render scenes, train the networks, score them on held-out scenes, write the weights."""
     p = argparse.ArgumentParser(prog="python -m handcap.detect.train", description=__doc__.split("\n\n")[0])
@@ -310,6 +259,8 @@ def main(argv=None) -> int:
     p.add_argument("--phone", type=float, default=0.0, help="the refiner or reader: share of views a phone sharpens")
     p.add_argument("--vary", type=float, default=0.0, help="the reader: share of its training scenes whose glyphs "
                    "are varied in weight, slant, width and outline, to read fonts it never saw")
+    p.add_argument("--wide", type=float, default=0.0, help="the reader: share of its random glyph layouts drawn "
+                   "from wider ranges (underlines further down, or to the square's middle)")
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
@@ -384,9 +335,9 @@ def _plan(train, scenes, a, init, **settings) -> int:
 def _reader_scenes(a, fonts) -> list:
     """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file``."""
     made = {"what": "reader", "scenes": a.scenes, "seed": a.seed, "cut": a.cut}
-    made |= {"vary": a.vary} if a.vary else {}  # files made before --vary stay readable
-    return _kept(a.scenes_file, made, ("train",),
-                 lambda: {"train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut, vary=a.vary)})["train"]
+    made |= {k: getattr(a, k) for k in ("vary", "wide") if getattr(a, k)}  # files made before them stay readable
+    return _kept(a.scenes_file, made, ("train",), lambda: {
+        "train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut, vary=a.vary, wide=a.wide)})["train"]
 
 
 def _kept(path, made: dict, names, render) -> dict:
@@ -410,7 +361,7 @@ def _command(a) -> str:
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
                             ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False),
-                            ("cut", False), ("displaced", 0.0), ("vary", 0.0), ("phone", 0.0)):
+                            ("cut", False), ("displaced", 0.0), ("vary", 0.0), ("phone", 0.0), ("wide", 0.0)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.init:

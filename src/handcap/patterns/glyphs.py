@@ -68,6 +68,9 @@ class GlyphLayout:
         Amplitude of a smooth random displacement of the glyphs' outlines, glyph heights (0: none); one
         displacement per glyph and ``wobble_seed``, so a glyph looks the same in every square, as in a font.
     wobble_seed : int
+    underline_span : (float, float) or None
+        Left and right ends of the underline, fractions of the side from the square's left edge (DexterCap's
+        generator draws it from 0.1 to the middle); None: under the first glyph, as wide as it.
     """
 
     cap_height: float = CAP_HEIGHT
@@ -80,14 +83,20 @@ class GlyphLayout:
     stretch: float = 1.0
     wobble: float = 0.0
     wobble_seed: int = 0
+    underline_span: tuple | None = None
 
     @classmethod
-    def random(cls, rng) -> "GlyphLayout":
+    def random(cls, rng, *, wide: bool = False) -> "GlyphLayout":
         """A random layout that fits the square (glyphs 0.36-0.58 high, the underline below them).
 
         Parameters
         ----------
         rng : numpy.random.Generator
+        wide : bool
+            Draw from wider ranges: the underline 0.03-0.2 of the side below the glyphs (0.03-0.1 otherwise)
+            and, half the time, reaching from 0.03-0.12 of the side to 0.4-0.5 (the left half of the square)
+            instead of spanning the first glyph. Other generators place it so: DexterCap's draws it about
+            0.11 below the glyphs' foot, from 0.1 to the middle.
 
         Returns
         -------
@@ -95,9 +104,10 @@ class GlyphLayout:
         """
         cap = rng.uniform(0.36, 0.58)
         thick = rng.uniform(0.04, 0.1)
-        below = rng.uniform(0.03, 0.1)  # from the glyphs' foot to the underline
+        below = rng.uniform(0.03, min(0.2, 0.96 - 0.08 - cap - thick) if wide else 0.1)  # glyphs' foot to underline
         top = rng.uniform(0.08, max(0.09, 0.95 - cap - below - thick))
-        return cls(cap, top, top + cap + below, thick, rng.uniform(0.02, 0.1))
+        span = (rng.uniform(0.03, 0.12), rng.uniform(0.4, 0.5)) if wide and rng.random() < 0.5 else None
+        return cls(cap, top, top + cap + below, thick, rng.uniform(0.02, 0.1), underline_span=span)
 
     def varied(self, rng) -> "GlyphLayout":
         """This layout with glyphs that look like another font's: stroke weight, slant, width and outline.
@@ -220,7 +230,8 @@ def square_ink(text: str, x0: float, y0: float, side: float, font: Font,
     Returns
     -------
     list of matplotlib.path.Path
-        One outline per glyph, then the underline (a rectangle under the first glyph).
+        One outline per glyph, then the underline (a rectangle under the first glyph, or where the layout's
+        ``underline_span`` puts it).
     """
     layout = layout or GlyphLayout()
     height = layout.cap_height * side
@@ -237,7 +248,9 @@ def square_ink(text: str, x0: float, y0: float, side: float, font: Font,
         out.append(outline.transformed(Affine2D().scale(squeeze * height, -height).translate(shift, baseline)))
     u0 = y0 + layout.underline_top * side
     u1 = u0 + layout.underline_thickness * side
-    out.append(MplPath([(left, u0), (left + width, u0), (left + width, u1), (left, u1), (left, u0)], closed=True))
+    a, b = (left, left + width) if layout.underline_span is None else (x0 + layout.underline_span[0] * side,
+                                                                        x0 + layout.underline_span[1] * side)
+    out.append(MplPath([(a, u0), (b, u0), (b, u1), (a, u1), (a, u0)], closed=True))
     return out
 
 
