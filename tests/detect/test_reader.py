@@ -160,3 +160,20 @@ def test_the_gate_keeps_at_most_the_allowed_share_of_wrong_readings():
     lower = (score >= np.max(score[score < gate])) & (outcome != 0)  # one reading more: too many wrong
     assert (outcome[lower] == -1).mean() > 0.01 or lower.sum() == kept.sum() + 1
     assert gate_for(np.array([-1, -1]), np.array([0.9, 0.8]), 0.001) == 1.0
+
+
+def test_a_reading_with_a_glyph_whose_look_alike_is_printed_needs_a_surer_reader():
+    """DexterCap's 22-glyph alphabet prints S and 5, Z and 2 and 7: a tag with one of them is trusted alone only at
+    LOOKALIKE_GATE; its other tags, and every tag of an alphabet without look-alikes, at the reader's own gate."""
+    from handcap.detect.pipeline import LOOKALIKE_GATE, Detector
+    from handcap.patterns.alphabet import DEXTERCAP_ALPHABET
+
+    reader = BlockReader()
+    reader.min_score = 0.9
+    theirs = Detector(CornerNet(), reader, alphabet="0123456789ACEHNPRSTVXZ")
+    text = np.array(["S4", "40", "7A", "AC", "02", "", "Z9"])
+    assert np.array_equal(theirs.gates(text), [LOOKALIKE_GATE, 0.9, LOOKALIKE_GATE, 0.9, LOOKALIKE_GATE, 0.9,
+                                               LOOKALIKE_GATE])
+    assert (Detector(CornerNet(), reader, alphabet=DEXTERCAP_ALPHABET).gates(np.array(["57", "2A"])) == 0.9).all()
+    reader.min_score = 0.9995  # a reader surer than the look-alike gate keeps its own
+    assert (theirs.gates(np.array(["S4", "40"])) == 0.9995).all()

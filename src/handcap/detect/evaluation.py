@@ -270,12 +270,13 @@ class DetectorScore:
                 f"named, {100 * self.misnamed / max(self.named, 1):.2f} % of {self.named} named wrong")
 
 
-def evaluate_detector(detector, scenes, match_px: float = 2.0) -> DetectorScore:
+def evaluate_detector(detector, scenes, match_px: float = 2.0, pattern=None) -> DetectorScore:
     """Run a :class:`~handcap.detect.pipeline.Detector` and score its tags and corner names against the truth.
 
     With a template, a tag is right where the template's corners of it lie within ``match_px`` of the truth;
     without one (tags and their corners only), where a visible tag of that text has its corners, in reading
-    order, within ``match_px`` (a tag that is not visible whole counts wrong); no corner is named then.
+    order, within ``match_px`` (a tag that is not visible whole counts wrong), or, given ``pattern``, as with a
+    template; no corner is named then.
 
     Parameters
     ----------
@@ -284,18 +285,21 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0) -> DetectorScore:
     scenes : sequence of Scene
     match_px : float
         Largest distance of a right tag's corners, or a right name's corner, from the truth, pixels.
+    pattern : Pattern, optional
+        The printed patches, to score the tags of a detector without a template (default: the detector's).
 
     Returns
     -------
     DetectorScore
     """
+    pattern = detector.pattern if pattern is None else pattern
     counts = np.zeros(8, int)
     for scene in scenes:
         found = detector.image(scene.image)
         truth = scene.projected if scene.projected is not None else dict(zip(scene.corner_names, scene.corners))
         visible = set(scene.block_text)
         wrong = right = 0
-        if detector.pattern is None:  # tags and their corners only: each must be a visible tag's, in reading order
+        if pattern is None:  # tags and their corners only: each must be a visible tag's, in reading order
             at = dict(zip(scene.block_text, scene.blocks))
             for tag, xy in zip(found.block_text, found.block_xy):
                 ok = str(tag) in at and np.linalg.norm(at[str(tag)] - xy, axis=1).max() <= match_px
@@ -303,7 +307,7 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0) -> DetectorScore:
             counts += (len(scene.blocks), len(found.block_text), wrong, right, 0, 0, 0, len(scene.corners))
             continue
         for tag, xy in zip(found.block_text, found.block_xy):
-            place = detector.pattern.locate(str(tag))
+            place = pattern.locate(str(tag))
             names = [place[0].corner_name(*v) for v in place[0].block_vertices(*place[1:])] if place else []
             bad = not names or any(n not in truth or np.linalg.norm(truth[n] - p) > match_px for n, p in zip(names, xy))
             wrong += bad

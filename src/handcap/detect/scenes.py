@@ -28,7 +28,7 @@ from handcap.synth.filming import scaled_camera
 from handcap.synth.images import ImageStyle, PatchRenderer
 from handcap.synth.pages import PageLook, PagePhotographer
 from handcap.synth.textures import PatchAtlas, build_atlas
-from handcap.patterns.pattern import Patch
+from handcap.patterns.pattern import Patch, Pattern
 
 
 class SceneMaker:
@@ -185,6 +185,7 @@ class SheetMaker:
         tagged = np.array([(r, c) not in self.plain for _, r, c in patch.blocks()])
         self.blocks_index, self.block_text = blocks[tagged], texts[tagged]
         self.photographer = PagePhotographer(PatchAtlas(image, atlas.patches, atlas.origins, side), look)
+        self.pattern = Pattern((patch,), alphabet)  # to score tags read without a template
 
     def close(self) -> None:
         """Nothing to free (the same interface as :class:`SceneMaker`)."""
