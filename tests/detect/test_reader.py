@@ -177,3 +177,19 @@ def test_a_reading_with_a_glyph_whose_look_alike_is_printed_needs_a_surer_reader
     assert (Detector(CornerNet(), reader, alphabet=DEXTERCAP_ALPHABET).gates(np.array(["57", "2A"])) == 0.9).all()
     reader.min_score = 0.9995  # a reader surer than the look-alike gate keeps its own
     assert (theirs.gates(np.array(["S4", "40"])) == 0.9995).all()
+
+
+def test_without_a_template_only_readings_sure_in_an_unseen_font_are_reported(scenes):
+    """No vote can correct a reading made without a template: those reported score UNSEEN_FONT_GATE or more, and
+    they are the readings the reader's own gate keeps less those below it."""
+    from handcap.detect.networks import load_corner_net, load_refiner
+    from handcap.detect.pipeline import UNSEEN_FONT_GATE, Detector
+    from handcap.detect.train import load_reader as shipped_reader
+
+    reader = shipped_reader()
+    alone = Detector(load_corner_net(), reader, alphabet=scenes[0].alphabet, refiner=load_refiner())
+    found = [alone.image(s.image) for s in scenes]
+    scores = np.concatenate([f.block_score for f in found])
+    assert len(scores) >= 5 and (scores >= UNSEEN_FONT_GATE).all()
+    reader.min_score = 0.0  # every reading trusted by the reader: the detector still holds back the unsure ones
+    assert [len(f.block_text) for f in found] == [len(alone.image(s.image).block_text) for s in scenes]
