@@ -276,7 +276,7 @@ def main() -> None:
             sheet = SheetMaker(args.seed + 7, alphabet, font=font, layout=layout,
                                look=PageLook(square_px=(12.0, 30.0), occluders=(0, 2)))
             score = evaluate_detector(Detector(fast, reader, alphabet=alphabet, refiner=refiner),
-                                      [sheet.scene() for _ in range(args.scenes)])
+                                      [sheet.scene() for _ in range(args.scenes)], pattern=sheet.pattern)
             print(f"another generator's sheet, no template, {name} glyphs, {where} glyph layout: tags "
                   f"{100 * score.right / max(score.blocks, 1):.1f} % of {score.blocks} visible read right, "
                   f"{score.wrong} of {score.read} read wrong")
