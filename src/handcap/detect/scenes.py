@@ -150,10 +150,11 @@ class PageMaker:
                      self.block_text[blocks], self.alphabet, dict(zip(self.names, shot.xy)))
 
 
-class SheetMaker:
+class SheetMaker(PageMaker):
     """Photographs of a sheet as another generator prints it (DexterCap's does so): one checkerboard over the
     page, the tags counted along its rows, every fourth row of squares and a few columns plain (white squares
-    with no glyphs, where the sheet is cut into strips), to be read without a template.
+    with no glyphs, where the sheet is cut into strips), to be read without a template. Its scenes' blocks are the
+    tagged squares only.
 
     Parameters
     ----------
@@ -186,22 +187,7 @@ class SheetMaker:
         self.blocks_index, self.block_text = blocks[tagged], texts[tagged]
         self.photographer = PagePhotographer(PatchAtlas(image, atlas.patches, atlas.origins, side), look)
         self.pattern = Pattern((patch,), alphabet)  # to score tags read without a template
-
-    def close(self) -> None:
-        """Nothing to free (the same interface as :class:`SceneMaker`)."""
-
-    def scene(self) -> Scene:
-        """Draw one photograph; its blocks are the tagged squares only.
-
-        Returns
-        -------
-        Scene
-        """
-        shot = self.photographer.photograph(self.rng)
-        seen = shot.visible
-        blocks = seen[self.blocks_index].all(axis=1)
-        return Scene(shot.image, shot.xy[seen], self.names[seen], shot.xy[self.blocks_index[blocks]],
-                     self.block_text[blocks], self.alphabet, dict(zip(self.names, shot.xy)))
+        # PageMaker.scene and close work on these attributes; its own __init__ would build a session's sheet.
 
 
 def _block_truth(patches):
