@@ -187,6 +187,18 @@ def test_core_io_and_solve_load_no_torch():
     assert done.stdout.split() == ["[]", "True"]
 
 
+def test_triangulation_workers_and_gap_filling_load_no_simulator():
+    # Every process a triangulation or cleaning pool starts imports handcap.multiview, which fills gaps with
+    # handcap.occlusion; the simulator (handcap.synth, trimesh, scipy.signal) cost each of them about a second.
+    # Training the occlusion networks on synthetic hands does load it (the check can fail).
+    heavy = "[m for m in ('handcap.synth', 'trimesh', 'scipy.signal') if m in sys.modules]"
+    code = (f"import sys, handcap.multiview, handcap.occlusion; print({heavy}); "
+            f"import handcap.occlusion.data; print({heavy})")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == ["[]", "['handcap.synth', 'trimesh', 'scipy.signal']"]
+
+
 def _inner_handcap_imports(name: str, path: Path) -> list:
     """``path:line`` of every handcap import inside a function of the module, but those marked as loading torch."""
     lines = path.read_text().splitlines()

@@ -6,7 +6,8 @@ from scipy.spatial.transform import Rotation
 
 from handcap import HandcapError
 from handcap.occlusion import OcclusionModel
-from handcap.occlusion.data import PosedTake, simulate_take
+from handcap.occlusion.data import simulate_take
+from handcap.occlusion.takes import PosedTake
 from handcap.occlusion.evaluate import marker_error_table, occlusion_windows
 from handcap.occlusion.regressor import matrix_from_6d, outputs_to_world, targets_in_frame
 from handcap.occlusion.train import registration_weights, train_occlusion_model

@@ -18,7 +18,8 @@ Modules: :mod:`~handcap.occlusion.baselines` (LK, MA, AC),
 network's error before a gap, learned and carried into it), :mod:`~handcap.occlusion.regressor`
 (joint angles), :mod:`~handcap.occlusion.filler` (streaming, discontinuities, mirroring),
 :mod:`~handcap.occlusion.fill` (batch), :mod:`~handcap.occlusion.evaluate` (Tables 3 and 4),
-:mod:`~handcap.occlusion.train`, :mod:`~handcap.occlusion.shipped` (the shipped weights).
+:mod:`~handcap.occlusion.takes` (a take with its poses), :mod:`~handcap.occlusion.train`,
+:mod:`~handcap.occlusion.shipped` (the shipped weights).
 """
 
 from handcap.occlusion.evaluate import joint_error_table, marker_error_table

@@ -40,7 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from handcap.core.errors import HandcapError
-from handcap.occlusion.data import PosedTake
+from handcap.occlusion.takes import PosedTake
 
 
 #: Standard deviation of each finger's turn (degrees). Chosen on the real glove (every frame of 0.5 s gaps,

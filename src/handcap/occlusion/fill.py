@@ -35,7 +35,7 @@ from handcap.core.errors import HandcapError, warn
 from handcap.core.checks import check_positive
 from handcap.core.markers import MarkerSequence, runs
 from handcap.occlusion.baselines import MA_WINDOW_S, ac_apply, ac_weights, ma_velocity
-from handcap.occlusion.data import marker_columns
+from handcap.occlusion.takes import marker_columns
 from handcap.occlusion.filler import OcclusionFiller
 from handcap.occlusion.history import HISTORY_S, check_history
 from handcap.occlusion.model import OcclusionModel

@@ -19,7 +19,7 @@ from handcap.core.files import load_npz
 from handcap.io import read_markers
 from handcap.layouts import MarkerLayout, load_layout
 from handcap.occlusion.augment import Augmentation, NO_AUGMENTATION, finger_groups, warped_copies
-from handcap.occlusion.data import PosedTake, marker_columns
+from handcap.occlusion.takes import PosedTake, marker_columns
 from handcap.occlusion.model import OcclusionModel
 from handcap.occlusion.predictor import train_marker_predictor
 from handcap.occlusion.regressor import train_joint_regressor
