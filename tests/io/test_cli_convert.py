@@ -46,6 +46,18 @@ def test_c3d_to_trc_to_npz(shared_data, tmp_path):
                                atol=1e-9)
 
 
+def test_the_output_as_out_like_the_other_verbs_and_given_once(shared_data, tmp_path, capsys):
+    source = shared_data / "markers/ezc3d/Vicon.c3d"
+    assert main(["convert", str(source), "--out", str(tmp_path / "v.npz")]) == 0
+    np.testing.assert_allclose(read_markers(tmp_path / "v.npz").positions, read_markers(source).positions,
+                               atol=1e-9)
+    capsys.readouterr()
+    for twice in ([str(tmp_path / "a.npz"), "--out", str(tmp_path / "b.npz")], []):
+        assert main(["convert", str(source), *twice]) == 2
+        assert "give the output file once" in _one_error_line(capsys)
+    assert not (tmp_path / "a.npz").exists() and not (tmp_path / "b.npz").exists()
+
+
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
     assert main(["convert", str(tmp_path / "absent.c3d"), str(tmp_path / "out.npz")]) == 2
     assert "no such file" in _one_error_line(capsys)
