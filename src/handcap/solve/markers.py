@@ -346,10 +346,10 @@ class MarkerModel:
         # Pairs of entries on one marker (e <= f) and the Hessian cells (d_e, d_f), (d_f, d_e) they add to.
         order = np.argsort(self._entry_marker, kind="stable")
         starts = np.searchsorted(self._entry_marker[order], np.arange(self.n_markers + 1))
-        pe, pf = [], []
+        pe, pf, upper = [], [], {}  # upper: the triangle's indices by size (markers share a few sizes)
         for a, b in zip(starts[:-1], starts[1:]):
             ids = order[a:b]
-            i, j = np.triu_indices(len(ids))
+            i, j = upper[b - a] if b - a in upper else upper.setdefault(b - a, np.triu_indices(b - a))
             pe.append(ids[i])
             pf.append(ids[j])
         self._pair_e, self._pair_f = np.concatenate(pe), np.concatenate(pf)
