@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import lsq_linear
 
 from handcap.core.errors import HandcapError
 from handcap.core.geometry import closest_points_on_mesh
@@ -421,13 +421,22 @@ def _reattach(model, hand, attachment, goal, radius, estimate_offset) -> MarkerA
 SHAPE_PRIOR = 0.0005
 
 
-def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
+def _fit_shape(hand, attachment, poses: Poses, target, observed, steps: int = 4) -> np.ndarray:
     """Shape values that bring the posed markers closest to the observed ones (poses fixed).
 
     A Gaussian prior on the shape values (zero mean, unit deviation) keeps the
     hand average where the markers say little: moving a value by one unit must
     lower the mean square marker error by ``SHAPE_PRIOR**2``. Values stay
     within ``SHAPE_BOUND`` deviations.
+
+    With the poses fixed, a marker moves almost linearly with the shape values (the rest vertices and joints are
+    linear in them; only a marker's height along its triangle's normal is not). So one Jacobian, by forward
+    differences at the start, serves every step: each step is the bounded linear least-squares problem of that
+    Jacobian (``scipy.optimize.lsq_linear`` on its 10 x 10 triangular factor), kept while it lowers the cost, up
+    to ``steps`` of them. On the demo's calibration take (395 markers, 100 frames, 30 rounds) the calibration
+    took 58 s with least_squares making its Jacobian anew at each of its iterations (the shape fit half of
+    it), 44 s with least_squares on this one Jacobian (its SVD of the whole Jacobian at each iteration then
+    took a quarter), and 31-35 s with this, to the same error (0.26 mm) and shape values within 0.003.
     """
     rows = observed
     weight = SHAPE_PRIOR * np.sqrt(observed.sum())
@@ -437,5 +446,18 @@ def _fit_shape(hand, attachment, poses: Poses, target, observed) -> np.ndarray:
         fit = model.positions(poses.transl, poses.rot, poses.phi)
         return np.concatenate([(fit - np.nan_to_num(target))[rows].ravel(), weight * betas])
 
-    result = least_squares(residual, attachment.betas, bounds=(-SHAPE_BOUND, SHAPE_BOUND), diff_step=1e-3, max_nfev=40)
-    return result.x
+    betas = np.clip(np.asarray(attachment.betas, dtype=np.float64), -SHAPE_BOUND, SHAPE_BOUND)
+    now = residual(betas)
+    away = np.where(betas + 1e-3 > SHAPE_BOUND, -1e-3, 1e-3)  # each difference away from the nearer bound
+    jacobian = np.stack([(residual(betas + h * e) - now) / h for h, e in zip(away, np.eye(len(betas)))], axis=1)
+    basis, factor = np.linalg.qr(jacobian)
+    for _ in range(steps):
+        move = lsq_linear(factor, -(basis.T @ now), bounds=(-SHAPE_BOUND - betas, SHAPE_BOUND - betas)).x
+        trial = np.clip(betas + move, -SHAPE_BOUND, SHAPE_BOUND)
+        after = residual(trial)
+        if after @ after >= now @ now:
+            break
+        betas, now = trial, after
+        if np.abs(move).max() < 1e-4:
+            break
+    return betas
