@@ -1,13 +1,19 @@
 """Attachment calibration recovers misplaced markers; bad inputs are refused."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
 
 from handcap import HandcapError
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
 from handcap.layouts import LayoutMarker, MarkerLayout, load_layout
+from handcap.quality.plausibility import SHAPE_BOUND
 from handcap.solve import calibrate_attachment, solve_hand
+from handcap.solve.calibration import SHAPE_PRIOR, _calibration_frames, _fit_shape
+from handcap.solve.markers import MarkerModel
 
 
 def attachment_error(att, truth, hand):
@@ -71,3 +77,25 @@ def test_bad_inputs(glove_session):
         calibrate_attachment(MarkerSequence(positions, cal.markers.names, cal.markers.rate), layout)
     with pytest.raises(HandcapError, match="calibration frames show 3 or more"):
         calibrate_attachment(cal.markers, layout, frames=slice(0, 2))
+
+
+def test_the_shape_fit_reaches_the_optimum_of_scipys_least_squares(glove_session):
+    # The shape fit keeps one Jacobian and takes linear steps (the markers move almost linearly with the shape);
+    # scipy's least_squares, making its own Jacobian at each iteration, is the independent solver it must match.
+    cal, _ = glove_session
+    layout, hand = load_layout("glove-13"), OpenHand("right")
+    result = calibrate_attachment(cal.markers, layout, fit_shape=True, rounds=2)
+    target, observed, _ = _calibration_frames(cal.markers, layout, result.frames, 200)
+    average = replace(result.attachment, betas=np.zeros(10))  # the fitted spots and poses, the average shape
+
+    def cost(betas):
+        fit = MarkerModel(hand, replace(average, betas=betas)).positions(result.poses.transl, result.poses.rot,
+                                                                       result.poses.phi)
+        return np.r_[(fit - np.nan_to_num(target))[observed].ravel(), SHAPE_PRIOR * np.sqrt(observed.sum()) * betas]
+
+    ours = _fit_shape(hand, average, result.poses, target, observed)
+    theirs = least_squares(cost, np.zeros(10), bounds=(-SHAPE_BOUND, SHAPE_BOUND), diff_step=1e-3).x
+    start, reached, best = (float(np.sum(cost(b) ** 2)) for b in (np.zeros(10), ours, theirs))
+    assert reached < 0.9 * start  # the shape mattered
+    assert reached <= best * (1 + 1e-4)
+    np.testing.assert_allclose(ours, theirs, atol=0.02)
