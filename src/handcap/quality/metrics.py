@@ -142,14 +142,24 @@ def penetration(hand_vertices, object_vertices, object_faces) -> Stat:
     hand_vertices : ndarray (T, V, 3)
         Metres.
     object_vertices : ndarray (T, W, 3) or (W, 3)
-        The object's mesh in every frame (or a fixed one).
+        The object's mesh in every frame, or a fixed one. A rigid object is best given fixed, in its own
+        frame, with the hand's vertices moved into that frame: its box then bounds it tightly (only the
+        vertices inside the box are measured), and its mesh and spatial index are made once for all frames
+        (on the demo's take, 120 frames, 3.6 s instead of 12.7 s in the world frame).
     object_faces : ndarray (F, 3)
     """
     import trimesh
     hand_vertices = np.asarray(hand_vertices, dtype=np.float64)
     object_vertices = np.asarray(object_vertices, dtype=np.float64)
     if object_vertices.ndim == 2:
-        object_vertices = np.broadcast_to(object_vertices, (len(hand_vertices),) + object_vertices.shape)
+        mesh = trimesh.Trimesh(object_vertices, object_faces, process=False)
+        flat = hand_vertices.reshape(-1, 3)
+        near = np.flatnonzero(((flat >= object_vertices.min(axis=0)) & (flat <= object_vertices.max(axis=0)))
+                              .all(axis=1))
+        depth = np.zeros(len(hand_vertices))
+        if len(near):  # positive inside (trimesh)
+            np.maximum.at(depth, near // hand_vertices.shape[1], trimesh.proximity.signed_distance(mesh, flat[near]))
+        return Stat.of(depth[depth > 0])
     depths = []
     for verts, obj in zip(hand_vertices, object_vertices):
         lo, hi = obj.min(axis=0), obj.max(axis=0)

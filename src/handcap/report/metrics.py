@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import existing_file, load_npz
+from handcap.core.rotations import matrix_from_axis_angle
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
 from handcap.io import read_hand_motion, read_markers, read_mesh, read_object_motion
@@ -92,8 +93,11 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
             raise HandcapError(f"{object_mesh}: holds no mesh faces; give the object's surface mesh")
         hand = _hand_for(motion, hand)
         verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
-        world = object_motion.transform_points(np.asarray(mesh.vertices))
-        s = q.penetration(verts, world, np.asarray(mesh.faces))
+        # The hand in the object's frame, so the object's mesh is one for all frames (see q.penetration);
+        # NaN in the frames where the object was lost, which are then left out as before.
+        turn = matrix_from_axis_angle(object_motion.rotation)
+        local = np.einsum("tji,tvj->tvi", turn, verts - object_motion.translation[:, None])
+        s = q.penetration(local, np.asarray(mesh.vertices), np.asarray(mesh.faces))
         out["penetration_mm"] = [1000 * s.mean, 1000 * s.std, s.count]
     if leave_one_out:
         if attachment is None or markers is None:
