@@ -1,10 +1,12 @@
 """The constant-acceleration Kalman filters (handcap.labeling.kalman) against the textbook equations."""
 
-
 import numpy as np
+import pytest
 from scipy.stats import multivariate_normal
 
 from handcap.labeling import KalmanBatch, KalmanSettings
+from handcap.labeling.innovations import COMPILED, innovation_log_likelihoods, likelihoods_numpy
+from handcap.labeling.kalman import JERKS, SIGMAS_MM
 
 
 def test_kalman_likelihood_is_the_gaussian_density():
@@ -67,7 +69,6 @@ def test_successors_equal_copy_step_and_restart():
 
 def test_noise_tuning_scores_every_setting_like_the_filters_do():
     # The vectorised grid search must give each setting the likelihood a KalmanBatch run gives it.
-    from handcap.labeling.kalman import _innovation_log_likelihoods
     rng = np.random.default_rng(0)
     pos = np.cumsum(np.cumsum(rng.normal(0, 1e-6, (400, 3, 3)), axis=0), axis=0) + rng.normal(0, 3e-4, (400, 3, 3))
     pos[rng.uniform(size=(400, 3)) < 0.05] = np.nan
@@ -87,9 +88,29 @@ def test_noise_tuning_scores_every_setting_like_the_filters_do():
 
     jerk, measurement = np.array([10.0, 1e4, 1e6]), np.array([1e-8, 1e-7, 4e-8])
     expected = [by_filters(KalmanSettings(0.01, j, m)) for j, m in zip(jerk, measurement)]
-    np.testing.assert_allclose(_innovation_log_likelihoods(0.01, jerk, measurement, pos), expected, rtol=1e-10)
+    unit = KalmanSettings(0.01, 1.0, 1.0)
+    for score in (innovation_log_likelihoods, likelihoods_numpy):  # compiled (with numba), and numpy
+        np.testing.assert_allclose(score(unit, jerk, measurement, pos), expected, rtol=1e-10)
     tuned = KalmanSettings.from_training(pos, 100.0)
     assert np.isclose(np.sqrt(tuned.measurement), 3e-4, rtol=0.5)  # the noise put in
+
+
+def test_noise_tuning_compiled_and_in_numpy_agree():
+    # Gaps, restarts after long gaps, a marker never seen, markers seen once: each (setting, marker) the same.
+    if not COMPILED:
+        pytest.skip("numba is not installed (extra 'stream'): the noise tuning runs in numpy only")
+    rng = np.random.default_rng(3)
+    pos = np.cumsum(np.cumsum(rng.normal(0, 2e-6, (500, 6, 3)), axis=0), axis=0) + rng.normal(0, 2e-4, (500, 6, 3))
+    pos[rng.uniform(size=(500, 6)) < 0.1] = np.nan
+    pos[200:240, 2] = np.nan
+    pos[:, 4] = np.nan
+    pos[:-1, 5] = np.nan
+    sigmas, jerks = np.asarray(SIGMAS_MM) * 1e-3, np.asarray(JERKS)
+    measurement, jerk = np.repeat(sigmas**2, len(jerks)), np.tile(jerks, len(sigmas))
+    numpy_ll = likelihoods_numpy(KalmanSettings(0.01, 1.0, 1.0), jerk, measurement, pos, 10, per_marker=True)
+    compiled = innovation_log_likelihoods(KalmanSettings(0.01, 1.0, 1.0), jerk, measurement, pos, per_marker=True)
+    assert compiled.shape == (len(jerk), 6) and (compiled[:, 4:] == 0).all() and (compiled[:, 0] != 0).all()
+    np.testing.assert_allclose(compiled, numpy_ll, rtol=1e-12, atol=1e-9)
 
 
 def _smooth_tracks(seed=0, frames=600, markers=4, noise=3e-4, jerk=30.0):

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.labeling.innovations import innovation_log_likelihoods
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,8 @@ class KalmanSettings:
             raise HandcapError("too few pairs of consecutive samples in the training take to tune the Kalman filters")
         sigmas, jerks = np.asarray(SIGMAS_MM) * 1e-3, np.asarray(JERKS)
         measurement, jerk = np.repeat(sigmas**2, len(jerks)), np.tile(jerks, len(sigmas))
-        each = _innovation_log_likelihoods(dt, jerk, measurement, pos, per_marker=True)  # (C, M)
+        base = cls(dt, 1.0, 1.0)  # unit jerk and noise: the process noise of each setting is its jerk times this
+        each = innovation_log_likelihoods(base, jerk, measurement, pos, per_marker=True)  # (C, M)
         counted = (seen[1:] & seen[:-1]).sum(axis=0) >= 30
         own = np.sqrt(measurement[np.argmax(each, axis=0)])  # each marker's own best noise, metres
         typical = np.median(own[counted]) if counted.any() else np.median(own)
@@ -136,7 +138,7 @@ class KalmanSettings:
             if wider:
                 sigmas, jerks = np.asarray(WIDER_SIGMAS_MM) * 1e-3, np.asarray(WIDER_JERKS)
                 measurement, jerk = np.repeat(sigmas**2, len(jerks)), np.tile(jerks, len(sigmas))
-                ll = _innovation_log_likelihoods(dt, jerk, measurement, pos[:, kept])
+                ll = innovation_log_likelihoods(base, jerk, measurement, pos[:, kept])
             best = int(np.argmax(ll))
             row, column = divmod(best, len(jerks))
             if 0 < row < len(sigmas) - 1 and 0 < column < len(jerks) - 1:
@@ -171,65 +173,6 @@ JUMPING_FACTOR = 5.0
 #: The grid searched when the best pair lies on the first grid's edge.
 WIDER_SIGMAS_MM = (0.01, 0.02, *SIGMAS_MM, 10.0, 20.0, 50.0)
 WIDER_JERKS = tuple(10.0 ** np.arange(-1.0, 10.25, 0.5))
-
-
-def _innovation_log_likelihoods(dt, jerk, measurement, positions, max_coast: int = 10,
-                                per_marker: bool = False) -> np.ndarray:
-    """Log-likelihood (C,) of the one-step innovations of trajectories (T, M, 3) under C noise settings
-    ((C, M), each marker's own, with ``per_marker``).
-
-    All settings run at once: filters (C, M) restarted after gaps longer than
-    ``max_coast`` frames, innovations counted once a filter has had 2 updates.
-    The filter is written out by components (arrays (C, M) for each entry of
-    the symmetric covariance, (C, M, 3) for the state), not as 3 x 3 products:
-    about 30 times faster on a take of 22 markers.
-    """
-    base = KalmanSettings(dt, 1.0, 1.0)
-    q = jerk[:, None, None, None] * base.process  # (C, 1, 3, 3)
-    q00, q01, q02, q11, q12, q22 = (q[..., i, j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
-    r = measurement[:, None]  # (C, 1)
-    n_settings, n_markers = len(jerk), positions.shape[1]
-    shape = (n_settings, n_markers)
-    pos, vel, acc = (np.zeros(shape + (3,)) for _ in range(3))
-    p00, p01, p02, p11, p12, p22 = (np.zeros(shape) for _ in range(6))
-    age = np.zeros(n_markers, dtype=np.int64)
-    missed = np.full(n_markers, 1 << 30)
-    total = np.zeros(shape)
-    half = 0.5 * dt * dt
-    for z in positions:
-        has = ~np.isnan(z[:, 0])
-        # predict: x <- F x, P <- F P F' + Q, F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]
-        pos = pos + dt * vel + half * acc
-        vel = vel + dt * acc
-        a00, a01, a02 = p00 + dt * p01 + half * p02, p01 + dt * p11 + half * p12, p02 + dt * p12 + half * p22
-        a11, a12 = p11 + dt * p12, p12 + dt * p22
-        p00, p01, p02 = a00 + dt * a01 + half * a02 + q00, a01 + dt * a02 + q01, a02 + q02
-        p11, p12, p22 = a11 + dt * a12 + q11, a12 + q12, p22 + q22
-        use = has & (age >= 2) & (missed <= max_coast)
-        s = p00 + r  # (C, M)
-        update = has & (missed <= max_coast)
-        innovation = np.where(update[:, None], np.where(has[:, None], z, 0.0) - pos, 0.0)  # (C, M, 3)
-        if use.any():
-            ll = -1.5 * np.log(2 * np.pi * s) - 0.5 * (innovation**2).sum(-1) / s
-            total += np.where(use, ll, 0.0)
-        if update.any():
-            g0, g1, g2 = (np.where(update, p / s, 0.0) for p in (p00, p01, p02))
-            pos = pos + g0[..., None] * innovation
-            vel = vel + g1[..., None] * innovation
-            acc = acc + g2[..., None] * innovation
-            p00, p01, p02, p11, p12, p22 = (p00 - g0 * p00, p01 - g0 * p01, p02 - g0 * p02, p11 - g1 * p01,
-                                            p12 - g1 * p02, p22 - g2 * p02)
-        fresh = has & (missed > max_coast)
-        if fresh.any():
-            pos = np.where(fresh[:, None], z, pos)
-            vel, acc = (np.where(fresh[:, None], 0.0, v) for v in (vel, acc))
-            p00 = np.where(fresh, r, p00)
-            p01, p02, p12 = (np.where(fresh, 0.0, p) for p in (p01, p02, p12))
-            p11, p22 = np.where(fresh, base.initial_velocity, p11), np.where(fresh, base.initial_acceleration, p22)
-        age = np.where(has, age + 1, age)
-        age[fresh] = 1
-        missed = np.where(has, 0, missed + 1)
-    return total if per_marker else total.sum(axis=1)
 
 
 class KalmanBatch:
