@@ -273,8 +273,9 @@ def calibrate_attachment(markers: MarkerSequence, layout, hand=None, *, betas=No
         if moved < tolerance:
             break
     if fit_shape:
-        # The trust-region solver stays strictly inside its bounds: a value that ended within 0.02 of one is on it
-        # (and is reported so). Only at the end: snapping between rounds would change the rounds' path.
+        # The shape fit's steps (lsq_linear's trust region) end just inside a bound: a value that ended within 0.02
+        # of one is on it (and is reported so). Only at the end: snapping between rounds would change the rounds'
+        # path.
         stuck = np.abs(attachment.betas) > SHAPE_BOUND - 0.02
         attachment = replace(attachment, betas=np.where(stuck, np.sign(attachment.betas) * SHAPE_BOUND,
                                                         attachment.betas))
@@ -440,11 +441,12 @@ def _fit_shape(hand, attachment, poses: Poses, target, observed, steps: int = 4)
     """
     rows = observed
     weight = SHAPE_PRIOR * np.sqrt(observed.sum())
+    aim = target[rows]
 
     def residual(betas):
         model = MarkerModel(hand, replace(attachment, betas=betas))
         fit = model.positions(poses.transl, poses.rot, poses.phi)
-        return np.concatenate([(fit - np.nan_to_num(target))[rows].ravel(), weight * betas])
+        return np.concatenate([(fit[rows] - aim).ravel(), weight * betas])
 
     betas = np.clip(np.asarray(attachment.betas, dtype=np.float64), -SHAPE_BOUND, SHAPE_BOUND)
     now = residual(betas)
