@@ -7,14 +7,20 @@ line between the camera centre and the marker: no triangle of the hand (its
 own skin included) or of the object. The ray test is exact (Moller-Trumbore,
 in camera coordinates); the triangles tried for each marker are found in the
 image first: those facing the camera whose bounding box holds its projection.
-Frames are tested together (arrays over frames, markers and triangles), one
-camera at a time.
+Where numba is installed the test runs compiled (:func:`hidden_compiled`, one
+loop over each frame's triangles, the markers sorted in the image), else in
+numpy (arrays over frames, markers and triangles); both give the same answers
+(tested). One camera at a time.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
+from handcap.core.compiled import AVAILABLE as COMPILED
+from handcap.core.compiled import njit as _njit
 from handcap.core.geometry import segments_cross_triangles
 
 
@@ -26,20 +32,34 @@ BOX_SLACK = 1e-5
 
 
 class _Surface:
-    """The occluding triangles of T frames, shared by every camera: vertices (T, V, 3), the corners of each
-    face as three index columns (F,) and the face normals as three component arrays (T, F) with their offsets
-    ``n . a`` (T, F), metres."""
+    """The occluding triangles of T frames, shared by every camera: vertices (T, V, 3) and faces (F, 3), metres.
+    The numpy test also takes the corners of each face as three index columns (F,) and the face normals as three
+    component arrays (T, F) with their offsets ``n . a`` (T, F), made when it first asks for them."""
 
     def __init__(self, vertices, faces):
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.faces = np.asarray(faces).reshape(-1, 3)
-        self.corner = tuple(np.ascontiguousarray(self.faces[:, k]) for k in range(3))
+
+    @functools.cached_property
+    def corner(self) -> tuple:
+        return tuple(np.ascontiguousarray(self.faces[:, k]) for k in range(3))
+
+    @functools.cached_property
+    def normal(self) -> tuple:
         # Components as separate (T, F) arrays: NumPy is slow on products over axes of length 3.
-        axes = [np.ascontiguousarray(self.vertices[..., d]) for d in range(3)]
-        a, b, c = ([np.take(x, i, axis=1) for x in axes] for i in self.corner)
+        a, b, c = self._corners
         u, v = [q - p for p, q in zip(a, b)], [q - p for p, q in zip(a, c)]
-        self.normal = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-        self.offset = self.normal[0] * a[0] + self.normal[1] * a[1] + self.normal[2] * a[2]
+        return u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]
+
+    @functools.cached_property
+    def offset(self) -> np.ndarray:
+        a, n = self._corners[0], self.normal
+        return n[0] * a[0] + n[1] * a[1] + n[2] * a[2]
+
+    @functools.cached_property
+    def _corners(self) -> tuple:
+        axes = [np.ascontiguousarray(self.vertices[..., d]) for d in range(3)]
+        return tuple([np.take(x, i, axis=1) for x in axes] for i in self.corner)
 
 
 def occluded(camera, points, vertices, faces, *, end_gap: float = 1e-4) -> np.ndarray:
@@ -117,6 +137,13 @@ def _hidden(surface: _Surface, camera, points: np.ndarray, end_gap: float = 1e-4
         return hidden
     rot, trans = camera.rotation_matrix, camera.translation
     cam = surface.vertices @ rot.T + trans  # (T, V, 3) camera coordinates
+    if COMPILED:
+        pt_cam = np.where(tested[..., None], points, np.nan) @ rot.T + trans
+        ends = pt_cam * (1.0 - end_gap / np.linalg.norm(pt_cam, axis=-1, keepdims=True))
+        # Writable, C-ordered arrays of these types: one compiled signature for every caller.
+        arrays = [np.require(a, dtype, ("C", "W")) for a, dtype in
+                  ((cam, np.float64), (surface.faces, np.int64), (ends, np.float64))]
+        return hidden_compiled(*arrays)
     x_low, x_high, y_low, y_high = _boxes(surface, camera, cam)
     pt_cam = np.where(tested[..., None], points, 0.0) @ rot.T + trans
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -145,6 +172,114 @@ def _hidden(surface: _Surface, camera, points: np.ndarray, end_gap: float = 1e-4
     ends = seg * (1.0 - end_gap / np.linalg.norm(seg, axis=1, keepdims=True))
     hit = segments_cross_triangles(np.zeros_like(ends), ends, cam[frames[:, None], surface.faces[cand]])
     hidden[frames[hit], which[hit]] = True
+    return hidden
+
+
+@_njit
+def _bucket(x, start, scale, buckets):
+    """The bucket (0 .. buckets - 1) of a coordinate ``x``: monotonic in ``x``, clamped as a float first (so an
+    x far out cannot overflow the integer)."""
+    return int(min(buckets - 1.0, max(0.0, (x - start) * scale)))
+
+
+@_njit
+def hidden_compiled(cam, faces, ends):
+    """The test of :func:`_hidden`, compiled: whether each line from the camera to ``ends`` crosses a triangle
+    in front of the camera and facing it (the same Moller-Trumbore arithmetic as
+    :func:`segments_cross_triangles`, so the same answers).
+
+    Parameters
+    ----------
+    cam : ndarray (T, V, 3)
+        The surfaces' vertices in camera coordinates, metres.
+    faces : ndarray (F, 3)
+    ends : ndarray (T, M, 3)
+        The lines' far ends in camera coordinates (shortened by the end gap), metres; NaN: not tested.
+
+    Returns
+    -------
+    hidden : ndarray (T, M) bool
+
+    Notes
+    -----
+    Each frame's points are sorted by their image x; each triangle's box in the image (widened by far more
+    than double precision's rounding) then finds the points within its x range by bisection, and tries those
+    within its y range too. A triangle faces the camera when its normal points against the line of sight,
+    ``n . a < 0`` in camera coordinates (the numpy test asks the same in world coordinates): the two can
+    differ only for a triangle seen exactly edge on, which no line of sight crosses.
+    """
+    n_frames, n_points, n_vertices = ends.shape[0], ends.shape[1], cam.shape[1]
+    hidden = np.zeros((n_frames, n_points), np.bool_)
+    image_x, image_y, ahead = np.empty(n_vertices), np.empty(n_vertices), np.empty(n_vertices, np.bool_)
+    point_x, point_y, which = np.empty(n_points), np.empty(n_points), np.empty(n_points, np.int64)
+    first = np.empty(2 * n_points, np.int64)
+    for t in range(n_frames):
+        count, largest = 0, 0.0
+        for m in range(n_points):
+            d0, d1, d2 = ends[t, m, 0], ends[t, m, 1], ends[t, m, 2]
+            if np.isnan(d0) or np.isnan(d1) or np.isnan(d2) or d2 == 0.0:  # (in the camera's plane: no image)
+                continue
+            point_x[count], point_y[count], which[count] = d0 / d2, d1 / d2, m
+            largest = max(largest, abs(point_x[count]), abs(point_y[count]))
+            count += 1
+        if count == 0:
+            continue
+        order = np.argsort(point_x[:count])
+        sorted_x, sorted_y, sorted_m = point_x[:count][order], point_y[:count][order], which[:count][order]
+        bottom, top = sorted_y.min(), sorted_y.max()
+        # Buckets of equal width over the points' x range, each with its first point: a box's first point then
+        # lies at or after its low end's bucket's first (the bucket of a point is monotonic in its x).
+        buckets = 2 * count
+        spread = sorted_x[count - 1] - sorted_x[0]
+        scale = buckets / spread if spread > 0.0 else 0.0
+        r = 0
+        for b in range(buckets):
+            while r < count and _bucket(sorted_x[r], sorted_x[0], scale, buckets) < b:
+                r += 1
+            first[b] = r
+        for v in range(n_vertices):
+            ahead[v] = cam[t, v, 2] > 1e-6
+            image_x[v] = cam[t, v, 0] / cam[t, v, 2] if ahead[v] else 0.0
+            image_y[v] = cam[t, v, 1] / cam[t, v, 2] if ahead[v] else 0.0
+            if ahead[v]:
+                largest = max(largest, abs(image_x[v]), abs(image_y[v]))
+        slack = 1e-9 * (1.0 + largest)
+        for f in range(faces.shape[0]):
+            i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
+            if not (ahead[i] and ahead[j] and ahead[k]):
+                continue
+            a0, a1, a2 = cam[t, i, 0], cam[t, i, 1], cam[t, i, 2]
+            e10, e11, e12 = cam[t, j, 0] - a0, cam[t, j, 1] - a1, cam[t, j, 2] - a2
+            e20, e21, e22 = cam[t, k, 0] - a0, cam[t, k, 1] - a1, cam[t, k, 2] - a2
+            if not (e11 * e22 - e12 * e21) * a0 + (e12 * e20 - e10 * e22) * a1 + (e10 * e21 - e11 * e20) * a2 < 0.0:
+                continue  # facing away
+            x_low = min(image_x[i], image_x[j], image_x[k]) - slack
+            x_high = max(image_x[i], image_x[j], image_x[k]) + slack
+            y_low = min(image_y[i], image_y[j], image_y[k]) - slack
+            y_high = max(image_y[i], image_y[j], image_y[k]) + slack
+            if x_high < sorted_x[0] or x_low > sorted_x[count - 1] or y_high < bottom or y_low > top:
+                continue
+            low = first[_bucket(x_low, sorted_x[0], scale, buckets)]
+            while low < count and sorted_x[low] < x_low:
+                low += 1
+            t0, t1, t2 = 0.0 - a0, 0.0 - a1, 0.0 - a2
+            q0, q1, q2 = t1 * e12 - t2 * e11, t2 * e10 - t0 * e12, t0 * e11 - t1 * e10
+            for r in range(low, count):
+                if sorted_x[r] > x_high:
+                    break
+                m = sorted_m[r]
+                if hidden[t, m] or sorted_y[r] < y_low or sorted_y[r] > y_high:
+                    continue
+                d0, d1, d2 = ends[t, m, 0], ends[t, m, 1], ends[t, m, 2]
+                p0, p1, p2 = d1 * e22 - d2 * e21, d2 * e20 - d0 * e22, d0 * e21 - d1 * e20
+                det = e10 * p0 + e11 * p1 + e12 * p2
+                if not abs(det) > 1e-12:
+                    continue
+                inv = 1.0 / det
+                u = (t0 * p0 + t1 * p1 + t2 * p2) * inv
+                v = (d0 * q0 + d1 * q1 + d2 * q2) * inv
+                s = (e20 * q0 + e21 * q1 + e22 * q2) * inv
+                hidden[t, m] = u >= 0 and v >= 0 and u + v <= 1 and s > 0 and s < 1
     return hidden
 
 
