@@ -186,12 +186,15 @@ class PatchRenderer:
         self.ctx = _context()
         self.program = self.ctx.program(vertex_shader=(_SHADERS / "patch.vert").read_text(),
                                         fragment_shader=(_SHADERS / "patch.frag").read_text())
+        self.depth_program = self.ctx.program(vertex_shader=(_SHADERS / "patch.vert").read_text(),
+                                              fragment_shader="#version 330\nvoid main() {}\n")
         flipped = np.ascontiguousarray(atlas.image)
         self.texture = self.ctx.texture(flipped.shape[::-1], 1, flipped.tobytes())
         self.texture.build_mipmaps()
         self.texture.anisotropy = 16.0
         self.texture.repeat_x = self.texture.repeat_y = False
         self._maps = {}
+        self._buffers = {}
         # One patch mesh layout per patch: its grid faces and texture coordinates (fixed).
         self._patch_faces, self._patch_uv, self._corner_nodes = [], [], []
         for k, patch in enumerate(atlas.patches):
@@ -211,7 +214,25 @@ class PatchRenderer:
 
     def close(self) -> None:
         """Free the OpenGL context."""
+        for buffers in self._buffers.values():
+            for obj in buffers:
+                for att in obj.color_attachments + ((obj.depth_attachment,) if obj.depth_attachment else ()):
+                    att.release()
+                obj.release()
+        self._buffers.clear()
         self.ctx.release()
+
+    def _framebuffers(self, size) -> tuple:
+        """The render's framebuffers for an image size, made once and kept (each render clears them): the
+        multisampled render, its depth, and the resolved render. Made afresh for every image, their memory
+        was most of a 5 MP render's time (the software rasteriser touches every new page)."""
+        if size not in self._buffers:
+            self._buffers[size] = (
+                self.ctx.framebuffer(self.ctx.renderbuffer(size, components=1, samples=4, dtype="f4"),
+                                     self.ctx.depth_renderbuffer(size, samples=4)),
+                self.ctx.framebuffer(depth_attachment=self.ctx.depth_texture(size)),
+                self.ctx.framebuffer(self.ctx.renderbuffer(size, components=1, dtype="f4")))
+        return self._buffers[size]
 
     # -- geometry of the undistorted render -------------------------------------------------------------------
     def _render_camera(self, camera):
@@ -305,10 +326,7 @@ class PatchRenderer:
         near = max(0.01, 0.5 * depths.min())
         far = 2.0 * depths.max() + 1.0
         mvp = self._mvp(camera, matrix, size, near, far)
-        fbo = self.ctx.framebuffer(self.ctx.renderbuffer(size, components=1, samples=4, dtype="f4"),
-                                   self.ctx.depth_renderbuffer(size, samples=4))
-        depth_fbo = self.ctx.framebuffer(depth_attachment=self.ctx.depth_texture(size))
-        resolved = self.ctx.framebuffer(self.ctx.renderbuffer(size, components=1, dtype="f4"))
+        fbo, depth_fbo, resolved = self._framebuffers(size)
         prog = self.program
         prog["mvp"].write(mvp.T.astype("f4").tobytes())
         prog["eye"].value = tuple(eye)
@@ -321,7 +339,7 @@ class PatchRenderer:
         prog["specular"].value = float(rng.uniform(*style.specular))
         self.texture.use(0)
         prog["atlas"].value = 0
-        arrays = []
+        arrays, depth_arrays = [], []
         for verts, faces, uv, albedo in meshes:
             normals = _vertex_normals(verts, faces)
             uv = np.zeros((len(verts), 2)) if uv is None else uv
@@ -330,16 +348,23 @@ class PatchRenderer:
             ibo = self.ctx.buffer(np.asarray(faces, "i4").tobytes())
             vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 2f", "in_pos", "in_normal", "in_uv")], ibo)
             arrays.append((vao, vbo, ibo, uv is not None and albedo is None, albedo))
-        for target in (fbo, depth_fbo):
-            target.use()
-            target.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
-            self.ctx.enable(self.ctx.DEPTH_TEST)
-            for vao, _, _, textured, albedo in arrays:
-                prog["textured"].value = int(textured)
-                prog["albedo"].value = 0.0 if albedo is None else albedo
-                prog["grain"].value = 0.15 if textured else 0.3
-                prog["grain_scale"].value = 0.0015 if textured else 0.004
-                vao.render()
+            depth_arrays.append(self.ctx.vertex_array(self.depth_program, [(vbo, "3f 20x", "in_pos")], ibo))
+        self.ctx.enable(self.ctx.DEPTH_TEST)
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+        for vao, _, _, textured, albedo in arrays:
+            prog["textured"].value = int(textured)
+            prog["albedo"].value = 0.0 if albedo is None else albedo
+            prog["grain"].value = 0.15 if textured else 0.3
+            prog["grain_scale"].value = 0.0015 if textured else 0.004
+            vao.render()
+        # The depth of the truth's visibility test: the same vertex shader, so the same depths, but a fragment
+        # shader that shades nothing.
+        self.depth_program["mvp"].write(mvp.T.astype("f4").tobytes())
+        depth_fbo.use()
+        depth_fbo.clear(depth=1.0)
+        for vao in depth_arrays:
+            vao.render()
         self.ctx.copy_framebuffer(resolved, fbo)
         w, h = size
         render = np.frombuffer(resolved.read(components=1, dtype="f4"), "f4").reshape(h, w)[::-1].copy()
@@ -348,10 +373,8 @@ class PatchRenderer:
             vao.release()
             vbo.release()
             ibo.release()
-        for obj in (fbo, depth_fbo, resolved):
-            for att in obj.color_attachments + ((obj.depth_attachment,) if obj.depth_attachment else ()):
-                att.release()
-            obj.release()
+        for vao in depth_arrays:
+            vao.release()
 
         # Background where nothing was drawn: a smooth random field.
         empty = depth >= 1.0
