@@ -224,8 +224,7 @@ class PatchRenderer:
 
     def _framebuffers(self, size) -> tuple:
         """The render's framebuffers for an image size, made once and kept (each render clears them): the
-        multisampled render, its depth, and the resolved render. Made afresh for every image, their memory
-        was most of a 5 MP render's time (the software rasteriser touches every new page)."""
+        multisampled render, its depth, and the resolved render."""
         if size not in self._buffers:
             self._buffers[size] = (
                 self.ctx.framebuffer(self.ctx.renderbuffer(size, components=1, samples=4, dtype="f4"),
