@@ -202,9 +202,10 @@ def hidden_compiled(cam, faces, ends):
 
     Notes
     -----
-    Each frame's points are sorted by their image x; each triangle's box in the image (widened by far more
-    than double precision's rounding) then finds the points within its x range by bisection, and tries those
-    within its y range too. A triangle faces the camera when its normal points against the line of sight,
+    Each frame's points are sorted by their image x and put in buckets of equal width along it; each
+    triangle's box in the image (widened by far more than double precision's rounding) starts at the first
+    point of its low end's bucket, walks to the points within its x range, and tries those within its y
+    range too. A triangle faces the camera when its normal points against the line of sight,
     ``n . a < 0`` in camera coordinates (the numpy test asks the same in world coordinates): the two can
     differ only for a triangle seen exactly edge on, which no line of sight crosses.
     """
