@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.patterns import session_pattern
-from handcap.detect.voting import name_corners, unconfirmed, vote
+from handcap.detect.checks import unconfirmed
+from handcap.detect.voting import name_corners, vote
 
 PATTERN = session_pattern(("right",), ("cube2x2",))
 
@@ -217,7 +218,7 @@ def test_a_block_read_as_another_tag_needs_some_probability_of_its_voted_one():
 
 
 def test_a_lone_corner_must_show_the_white_square_across_it():
-    from handcap.detect.voting import uncrossed
+    from handcap.detect.checks import uncrossed
     from handcap.patterns.pattern import Pattern, Patch
 
     # One patch of 2 x 2 squares: white "AC" at (0, 0) and "EF" at (1, 1) meet at vertex (1, 1).
