@@ -81,6 +81,9 @@ detect-weights: $(STAMP)
 	# ... then 2000 more steps for the reader on 600 new scenes (seed 1), from the weights just made (~15 min).
 	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 2000 --threads 2 \
 		--seed 1 --init src/handcap/detect/weights/reader.npz
+	# The block checker on the blocks the vote places in 1,200 new scenes (800 to fit, 400 to set its gate), as
+	# the weights just made read them (~30 min on 2 cores, most of it rendering and detecting).
+	$(BIN)/python -m handcap.detect.train --what checker --scenes 1200 --pages 0.2 --hidden 8 --threads 1
 
 clean-venv:
 	rm -rf $(VENV)

@@ -15,6 +15,7 @@ import torch
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
+from handcap.detect.checker import BlockChecker
 from handcap.detect.corners import CornerNet
 from handcap.detect.int8 import int8_corner_net
 from handcap.detect.reader import BlockReader
@@ -23,13 +24,14 @@ from handcap.detect.refine import CornerRefiner
 #: Folder of the shipped weights.
 WEIGHTS = Path(__file__).resolve().parent / "weights"
 #: The networks that can be saved and loaded, by class name.
-NETWORKS = {"CornerNet": CornerNet, "CornerRefiner": CornerRefiner, "BlockReader": BlockReader}
+NETWORKS = {"CornerNet": CornerNet, "CornerRefiner": CornerRefiner, "BlockReader": BlockReader,
+            "BlockChecker": BlockChecker}
 def save_net(net, path, info: dict | None = None) -> None:
     """Write a network's weights, class and configuration to an ``.npz`` (atomically).
 
     Parameters
     ----------
-    net : CornerNet, CornerRefiner or BlockReader
+    net : CornerNet, CornerRefiner, BlockReader or BlockChecker
     path : str or Path
     info : dict, optional
         Strings recorded with the weights (how they were made, their scores).
@@ -51,11 +53,11 @@ def load_net(path, kind: str):
     Parameters
     ----------
     path : str or Path
-    kind : {'CornerNet', 'CornerRefiner', 'BlockReader'}
+    kind : {'CornerNet', 'CornerRefiner', 'BlockReader', 'BlockChecker'}
 
     Returns
     -------
-    CornerNet, CornerRefiner or BlockReader
+    CornerNet, CornerRefiner, BlockReader or BlockChecker
         In evaluation mode.
 
     Raises
@@ -104,7 +106,7 @@ def shipped_notes() -> tuple[str, ...]:
     tuple of str
     """
     notes = []
-    for name in ("corners.npz", "refiner.npz", "reader.npz"):
+    for name in ("corners.npz", "refiner.npz", "reader.npz", "checker.npz"):
         path = WEIGHTS / name
         score = net_info(path).get("score") if path.is_file() else None
         if score is not None:
@@ -156,3 +158,21 @@ def load_refiner(path=None) -> CornerRefiner:
     CornerRefiner
     """
     return load_net(WEIGHTS / "refiner.npz" if path is None else path, "CornerRefiner")
+
+
+def load_checker(path=None) -> BlockChecker | None:
+    """The block checker saved at ``path`` (default: the shipped one, or None where none ships).
+
+    Parameters
+    ----------
+    path : str, Path or None
+
+    Returns
+    -------
+    BlockChecker or None
+        None only for the default path when no checker ships there (the detector then uses the hand-set
+        rules of :mod:`handcap.detect.checks`).
+    """
+    if path is None and not (WEIGHTS / "checker.npz").is_file():
+        return None
+    return load_net(WEIGHTS / "checker.npz" if path is None else path, "BlockChecker")

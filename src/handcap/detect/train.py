@@ -27,9 +27,11 @@ from torch.utils.data import DataLoader
 from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET, DEXTERCAP_ALPHABET
 from handcap.detect.corners import CornerNet, corner_loss, detect_corners
+from handcap.detect.checker import checker_samples, train_checker
 from handcap.detect.evaluation import (CornerScore, evaluate_corners, evaluate_reader, reader_gate, reader_line,
                                        score_corners)
-from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, save_net
+from handcap.detect.pipeline import Detector
+from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, load_refiner, save_net
 from handcap.detect.reader import BlockReader, reader_loss
 from handcap.detect.refine import CornerRefiner, candidate_negatives, refiner_loss
 from handcap.detect.samples import (Batches, corner_batch, crops, non_blocks, reader_samples, reader_scenes,
@@ -37,6 +39,7 @@ from handcap.detect.samples import (Batches, corner_batch, crops, non_blocks, re
 from handcap.detect.scenefile import load_scenes, save_scenes
 from handcap.detect.scenes import PageMaker, SceneMaker
 from handcap.patterns.glyphs import GlyphLayout
+from handcap.patterns.session import session_pattern
 
 __all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "evaluate_reader", "load_corner_net",
            "load_net", "load_reader", "main", "reader_samples", "reader_scenes", "save_net",
@@ -224,7 +227,7 @@ FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
 def main(argv=None) -> int:
     """Render scenes, train the networks, score them on held-out scenes, write the weights."""
     p = argparse.ArgumentParser(prog="python -m handcap.detect.train", description=__doc__.split("\n\n")[0])
-    p.add_argument("--what", choices=("corners", "refiner", "reader", "all"), default="all")
+    p.add_argument("--what", choices=("corners", "refiner", "reader", "checker", "all"), default="all")
     p.add_argument("--scenes", type=int, default=600, help="rendered training scenes (default %(default)s)")
     p.add_argument("--test-scenes", type=int, default=40, help="held-out scenes to score on (default %(default)s)")
     p.add_argument("--steps", type=int, default=4000, help="optimiser steps (default %(default)s)")
@@ -264,6 +267,11 @@ def main(argv=None) -> int:
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
+    p.add_argument("--hidden", type=int, default=0, help="the checker: hidden units (default 0: logistic regression)")
+    p.add_argument("--floor", action="store_true",
+                   help="the checker: fit and keep only blocks the vote's own rules keep")
+    p.add_argument("--max-wrong", type=float, help="the checker: share of wrong blocks its gate keeps (default: "
+                   "as many as the hand-set checks keep of the same blocks)")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
     (out := Path(a.out)).mkdir(parents=True, exist_ok=True)
@@ -272,6 +280,8 @@ def main(argv=None) -> int:
         raise HandcapError("--init starts one network: name it with --what")
     if a.seconds and a.what not in ("corners", "reader"):
         raise HandcapError("--seconds plans one network's steps: give it with --what corners or --what reader")
+    if a.init and a.what == "checker":
+        raise HandcapError("--init: the checker is fitted anew each time")
     init = load_net(a.init, {"corners": "CornerNet", "refiner": "CornerRefiner", "reader": "BlockReader"}[a.what]) \
         if a.init else None
     if a.what in ("corners", "all"):
@@ -315,8 +325,35 @@ def main(argv=None) -> int:
             line = reader_line(score, held_out[0])
         print(line, flush=True)
         save_net(net, out / "reader.npz", {"source": _command(a), "score": line})
+    if a.what in ("checker", "all"):
+        _train_checker(a, out)
     print(f"wrote {out} ({time.time() - started:.0f} s in all)")
     return 0
+
+
+def _train_checker(a, out: Path) -> None:
+    """Fit the block checker on the vote's blocks in new scenes, as the networks in ``out`` (else the shipped
+    ones) read them, in three folds of the scenes (:func:`~handcap.detect.checker.train_checker`)."""
+    corner_net, refiner, reader = (load(out / name if (out / name).is_file() else None) for load, name in (
+        (lambda path: load_corner_net(path, int8=True), "corners.npz"), (load_refiner, "refiner.npz"),
+        (load_reader, "reader.npz")))  # as handcap detect runs them
+    if a.scenes < 3:
+        raise HandcapError(f"--scenes {a.scenes}: the checker needs 3 scenes or more (three folds)")
+    fonts = [None] + [f for f in FONTS if Path(f).is_file()][:-1]  # the reader's training fonts
+    made = {"what": "checker", "scenes": a.scenes, "seed": a.seed, "pages": a.pages}
+    scenes = _kept(a.scenes_file, made, ("train",), lambda: {
+        "train": corner_scenes(a.scenes, a.seed + 3_000_003, pages=a.pages, fonts=fonts)})["train"]
+    ruled = {name: Detector(corner_net, reader, pattern, refiner=refiner)  # the hand-set checks
+             for name, pattern in (("hand", session_pattern(("right",), ())), ("session", session_pattern()))}
+    detectors = [ruled["hand" if all(str(n).startswith("right:") for n in s.corner_names) else "session"]
+                 for s in scenes]
+    folds = [checker_samples(detectors[k::3], scenes[k::3]) for k in range(3)]  # hands and sheets in each
+    print(f"checker: {sum(len(f[0]) for f in folds)} blocks ({sum(int((~f[1]).sum()) for f in folds)} wrong) in "
+          f"{len(scenes)} scenes, three folds", flush=True)
+    checker, line = train_checker(folds, min_support=reader.min_score, hidden=a.hidden, floor=a.floor,
+                                  max_wrong=a.max_wrong, seed=a.seed)
+    print(line, flush=True)
+    save_net(checker, out / "checker.npz", {"source": _command(a), "score": line})
 
 
 def _plan(train, scenes, a, init, **settings) -> int:
@@ -364,6 +401,9 @@ def _command(a) -> str:
                             ("cut", False), ("displaced", 0.0), ("vary", 0.0), ("phone", 0.0), ("wide", 0.0)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
+    if a.what == "checker":
+        words += f" --hidden {a.hidden}" + (" --floor" if a.floor else "") + (
+            f" --max-wrong {a.max_wrong}" if a.max_wrong is not None else "")
     if a.init:
         with np.load(a.init, allow_pickle=False) as data:
             if "info.source" in data.files:
