@@ -16,13 +16,15 @@ and on photographs of a printed sheet in a font the reader never saw (Noto Sans
 Mono Bold; and the same sheets as a phone processes them: noise reduction, sharpening, JPEG), and on
 handcap's own page printed flat and photographed square-on,
 against the targets (tags read right >= 99.5 %, corners with a wrong id <= 0.1 %,
-a page's tags read >= 99.9 %). The occluder line (recall >= 90 % with 30 % of a patch
-behind occluders): the refined recall of each patch's visible corners, binned by the share of its
-corners in the image that the truth calls hidden, on the hand scenes (hidden by the hand itself,
-its fingers or the skin turning away) and on sheets photographed under 3-6 fingers or pens.
+a page's tags read >= 99.9 %). The detector checks the blocks the vote keeps with the shipped block
+checker (:mod:`handcap.detect.checker`); the hand scenes are scored with the hand-set checks too.
+The occluder line (recall >= 90 % with 30 % of a patch behind occluders): the refined recall of each
+patch's visible corners, binned by the share of its corners in the image that the truth calls hidden,
+on the hand scenes (hidden by the hand itself, its fingers or the skin turning away) and on sheets
+photographed under 3-6 fingers or pens.
 
-    .venv/bin/python benchmarks/detect.py [--weights FILE] [--refiner FILE] [--reader FILE] [--scenes 20]
-        [--hand-scenes 100] [--repeats 3] [--threads 2]
+    .venv/bin/python benchmarks/detect.py [--weights FILE] [--refiner FILE] [--reader FILE] [--checker FILE]
+        [--scenes 20] [--hand-scenes 100] [--repeats 3] [--threads 2]
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ def main() -> None:
     parser.add_argument("--weights", help="corner network weights (default: the shipped ones)")
     parser.add_argument("--refiner", help="corner refiner weights (default: the shipped ones)")
     parser.add_argument("--reader", help="block reader weights (default: the shipped ones)")
+    parser.add_argument("--checker", help="block checker weights (default: the shipped ones)")
     parser.add_argument("--scenes", type=int, default=20, help="held-out rendered scenes to score")
     parser.add_argument("--hand-scenes", type=int, default=100,
                         help="held-out hand scenes for the whole detector's tags and names (wrong tags are rare: "
@@ -55,7 +58,7 @@ def main() -> None:
     from handcap.detect.corners import detect_corners
     from handcap.detect.scenes import SceneMaker
     from handcap import HandcapError
-    from handcap.detect.networks import load_corner_net, load_reader, load_refiner
+    from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
     from handcap.detect.refine import locate_corners
     from handcap.detect.pipeline import Detector
     from handcap.detect.reader import BlockReader
@@ -75,6 +78,7 @@ def main() -> None:
     fast = load_corner_net(args.weights, int8=True)
     int8 = fast is not net and type(fast).__name__ == "Int8CornerNet"
     refiner = load_refiner(args.refiner)
+    checker = load_checker(args.checker)
     print(f"corner network: {net.flops_per_pixel() / 1000:.1f} kFLOP per pixel, "
           f"{sum(p.numel() for p in net.parameters())} weights, {args.threads} threads; "
           + ("run in 8-bit integers as handcap detect runs it (float timed beside it)" if int8 else
@@ -125,9 +129,9 @@ def main() -> None:
         reader_note = "shipped reader" if args.reader is None else args.reader
     except HandcapError:
         reader, reader_note = BlockReader().eval(), "untrained reader (no weights found): timing only"
-    float_detector = Detector(net, reader, pattern, refiner=refiner)
+    float_detector = Detector(net, reader, pattern, refiner=refiner, checker=checker)
     whole_float = best(lambda: float_detector.image(image))
-    detector = Detector(fast, reader, pattern, refiner=refiner)
+    detector = Detector(fast, reader, pattern, refiner=refiner, checker=checker)
     whole = best(lambda: detector.image(image))
     xy = shot.xy[shot.visible]
     lo = np.maximum(np.floor(xy.min(axis=0) - 40).astype(int) // 2 * 2, 0)
@@ -196,8 +200,13 @@ def main() -> None:
         hands = [maker.scene() for _ in range(args.hand_scenes)]
     finally:
         maker.close()
-    hand_detector = Detector(fast, reader, pattern, refiner=refiner)
-    print(f"hand scenes, full-size cameras, {reader_note}: " + evaluate_detector(hand_detector, hands).summary())
+    hand_detector = Detector(fast, reader, pattern, refiner=refiner, checker=checker)
+    checked = "the block checker" if checker is not None else "the hand-set checks (no checker)"
+    print(f"hand scenes, full-size cameras, {reader_note}, {checked}: "
+          + evaluate_detector(hand_detector, hands).summary())
+    if checker is not None:
+        ruled = evaluate_detector(Detector(fast, reader, pattern, refiner=refiner), hands)
+        print("the same hand scenes with the hand-set checks instead of the block checker: " + ruled.summary())
     # Where visible tags are lost, stage by stage: their four corners found (2 px), the four made a candidate
     # quad, the quad passed the white-square test, the reader read the tag, the vote kept it with that tag.
     from scipy.spatial import cKDTree as _Tree
@@ -247,7 +256,7 @@ def main() -> None:
     sheet = PageMaker(args.seed + 2, font=font, look=PageLook(square_px=(20.0, 40.0), tilt_deg=(0.0, 30.0),
                                                               curl=(0.0, 0.5), occluders=(0, 0), glint=0.0))
     pages = [sheet.scene() for _ in range(args.scenes)]
-    page_detector = Detector(fast, reader, session_pattern(), refiner=refiner)
+    page_detector = Detector(fast, reader, session_pattern(), refiner=refiner, checker=checker)
     sheet_score = evaluate_detector(page_detector, pages)
     print(f"photographed sheet ({'Noto Sans Mono Bold' if font else 'default font'}, squares 20-40 px, tilt <= 30 "
           f"deg, no occluder): " + sheet_score.summary())
@@ -298,7 +307,7 @@ def main() -> None:
         for pyramid in (True, False):
             start = time.perf_counter()
             timed[pyramid] = evaluate_detector(Detector(fast, reader, session_pattern(), refiner=refiner,
-                                                        pyramid=pyramid), photos)
+                                                        pyramid=pyramid, checker=checker), photos)
             timed[pyramid] = (timed[pyramid], (time.perf_counter() - start) / len(photos))
         (score, seconds), (single, single_s) = timed[True], timed[False]
         print(f"sheet photographed close ({'Noto Sans Mono Bold' if font else 'default font'}, {side:g} px squares, "

@@ -31,7 +31,7 @@ import numpy as np
 
 from handcap.core.files import atomic_output, file_stamps, save_npz, written_since
 from handcap.detect.capture import detect_capture
-from handcap.detect.networks import load_corner_net, load_reader, load_refiner
+from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
 from handcap.io import write_hand_motion, write_markers
@@ -83,7 +83,8 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         summary[f"{key}_render_seconds"] = round(time.perf_counter() - start, 1)
         pattern = Pattern.load(folder / "pattern.toml")
         if detector is None:
-            detector = Detector(load_corner_net(int8=True), load_reader(), pattern, refiner=load_refiner())
+            detector = Detector(load_corner_net(int8=True), load_reader(), pattern, refiner=load_refiner(),
+                                checker=load_checker())
         detector.pattern = pattern
         sources = frame_sources([folder / "images" / c.name for c in capture.rig])
         start = time.perf_counter()

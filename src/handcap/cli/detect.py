@@ -9,7 +9,8 @@ def _cmd_detect(a):
     return detect_step.detect(a.inputs, a.out, rig=a.rig, pattern=a.pattern, alphabet=a.alphabet, rate=a.rate,
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
-                              track=not a.whole_frames)
+                              track=not a.whole_frames, checker_weights=a.checker_weights,
+                              checker=not a.no_checker)
 
 
 def add_detect(verbs) -> None:
@@ -39,4 +40,7 @@ def add_detect(verbs) -> None:
     p.add_argument("--corner-weights", help="corner network weights instead of the shipped ones")
     p.add_argument("--refiner-weights", help="corner refiner weights instead of the shipped ones")
     p.add_argument("--reader-weights", help="block reader weights instead of the shipped ones")
+    p.add_argument("--checker-weights", help="block checker weights instead of the shipped ones")
+    p.add_argument("--no-checker", action="store_true",
+                   help="check the voted blocks with the hand-set rules instead of the learned checker")
     p.set_defaults(run=_cmd_detect)

@@ -36,7 +36,9 @@ from handcap.detect.corners import CornerNet, grey_levels
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks, tag_probability
 from handcap.detect.refine import CornerRefiner, locate_corners
-from handcap.detect.voting import name_corners, unconfirmed, uncrossed, vote
+from handcap.detect.checker import BlockChecker, block_features
+from handcap.detect.checks import unconfirmed, uncrossed
+from handcap.detect.voting import name_corners, vote
 
 #: Least side of a region searched, pixels: the corner network's tiles need 8, the refiner's crops 17.
 MIN_REGION = 32
@@ -147,12 +149,16 @@ class Detector:
     pyramid : bool
         Search again at halved levels where the squares are large or no block is read (module docstring);
         False searches each image at its own size only.
+    checker : BlockChecker, optional
+        The learned check of the voted blocks (:mod:`~handcap.detect.checker`); without it, the hand-set
+        rules of :mod:`~handcap.detect.checks`.
     """
 
     def __init__(self, corner_net: CornerNet, reader: BlockReader, pattern: Pattern | None = None,
                  alphabet: str | None = None, threshold: float | None = None, refiner: CornerRefiner | None = None,
-                 pyramid: bool = True):
+                 pyramid: bool = True, checker: BlockChecker | None = None):
         self.corner_net, self.reader, self.pattern, self.refiner = corner_net, reader, pattern, refiner
+        self.checker = checker
         if alphabet is None:
             alphabet = pattern.alphabet if pattern is not None else ALPHABET
         self.alphabet = check_alphabet(alphabet)
@@ -270,6 +276,8 @@ class Detector:
         corrected : int
             Readings the vote changed.
         """
+        if self.checker is not None:
+            return self._checked(image, xy, corner_score, quads, text, rotation, score)
         tags, turns, corrected = vote(self.pattern, quads, text, rotation, score, self.reader.min_score, xy)
         agreed = (text == tags) & (rotation == turns)
         other = np.flatnonzero((tags != "") & ~agreed)
@@ -283,6 +291,15 @@ class Detector:
         drop = uncrossed(self.pattern, image, quads, tags, turns, xy)
         tags[drop], turns[drop] = "", -1
         return tags, turns, corrected
+
+    def _checked(self, image, xy, corner_score, quads, text, rotation, score) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`vote` with the learned checker: each block the vote gives a tag is kept where the checker's
+        probability of it reaches the checker's gate."""
+        tags, turns, features = block_features(self.pattern, self.reader, self.alphabet, image, xy, corner_score,
+                                               quads, text, rotation, score)
+        drop = (tags != "") & ~self.checker.keeps(features, self.reader.min_score)
+        tags[drop], turns[drop] = "", -1
+        return tags, turns, int(((tags != "") & (text != "") & (tags != text)).sum())
 
 
 def _too_large(found: ImageDetections) -> bool:

@@ -26,7 +26,8 @@ DISOWNED_SHARE, MIN_SURE = 0.5, 10
 
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
-           threshold: float | None = None, progress: bool | None = None, track: bool = True) -> Step:
+           threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
+           checker: bool = True) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -45,8 +46,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Glyphs of the printed tags (default: the template's, else handcap's).
     rate : float, optional
         Frames per second (default: a video's own, else 20 with a warning).
-    corner_weights, reader_weights, refiner_weights : str, Path or None
-        Networks to use instead of the shipped ones.
+    corner_weights, reader_weights, refiner_weights, checker_weights : str, Path or None
+        Networks (and the block checker) to use instead of the shipped ones.
     refine : bool
         Refine the corners to a fraction of a pixel (and turn away false ones) with the refiner network.
     threshold : float, optional
@@ -57,6 +58,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Search each camera's frame around the patches its previous frame showed, and the whole frame every
         10th frame or where that search may have missed some (:mod:`handcap.detect.capture`); without,
         every frame whole.
+    checker : bool
+        Check the blocks the template's vote keeps with the learned checker (:mod:`handcap.detect.checker`);
+        False, or no checker shipped, uses the hand-set checks (:mod:`handcap.detect.checks`).
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -74,14 +78,16 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         names = [n for n in cameras.names if n in names]
         sources = sorted(sources, key=lambda s: names.index(s.camera))
     # The networks load torch (a second and a half): only when detecting, not with the command line.
-    from handcap.detect.networks import load_corner_net, load_reader, load_refiner, shipped_notes  # loads torch
+    from handcap.detect.networks import (load_checker, load_corner_net, load_reader, load_refiner,
+                                         shipped_notes)  # loads torch
     from handcap.detect.pipeline import Detector  # loads torch
 
     if threshold is not None and not 0.0 < threshold < 1.0:
         raise HandcapError(f"--threshold {threshold}: give a probability between 0 and 1")
     # The corner network's 8-bit twin where its weights carry activation ranges: the same corners, faster.
     detector = Detector(load_corner_net(corner_weights, int8=True), load_reader(reader_weights), template, alphabet,
-                        threshold, load_refiner(refiner_weights) if refine else None)
+                        threshold, load_refiner(refiner_weights) if refine else None,
+                        checker=load_checker(checker_weights) if checker else None)
     warnings = frame_notes(sources) + lookalike_warning(detector.alphabet)
     if corner_weights is None or reader_weights is None or (refine and refiner_weights is None):
         # Issue 16: the shipped networks are short of the targets; say how good they measured, every time.
