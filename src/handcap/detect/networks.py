@@ -1,6 +1,7 @@
 """Saved detector networks: write and read their weights (``.npz``: arrays, class, configuration, provenance).
 
-The shipped weights live in ``handcap/detect/weights/`` (``corners.npz``, ``refiner.npz``, ``reader.npz``), made by
+The shipped weights live in ``handcap/detect/weights/`` (``corners.npz``, ``refiner.npz``, ``reader.npz`` and the
+block checker's ``checker.npz``), made by
 ``python -m handcap.detect.train``; ``info.source`` in each file is the command that made it and
 ``info.score`` what it measured on held-out rendered scenes.
 """

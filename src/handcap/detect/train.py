@@ -7,8 +7,9 @@ Scenes come from :class:`handcap.detect.scenes.SceneMaker` (random poses, camera
 :class:`~handcap.detect.scenes.PageMaker` (photographed printed sheets); the corner network learns from 96 x 96
 crops of them, most of them around a visible corner, with JPEG artefacts on some; the refiner from 17 x 17 crops
 near true corners and at the corner network's false candidates; the reader from views of their blocks in several
-fonts, alphabets and glyph layouts, and its confidence gate is set on validation scenes. The test suite trains a
-tiny version for a few steps to show the code runs.
+fonts, alphabets and glyph layouts, and its confidence gate is set on validation scenes; the block checker
+(:mod:`handcap.detect.checker`) from the blocks the vote names in new scenes, as the networks read them. The test
+suite trains a tiny version for a few steps to show the code runs.
 """
 
 from __future__ import annotations
