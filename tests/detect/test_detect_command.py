@@ -160,8 +160,21 @@ def test_the_shipped_networks_say_how_good_they_measured(frames, tmp_path, capsy
     assert main(["detect", str(frames / "cam_0"), "--rate", "20", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert "short of handcap's targets" in err and "corners.npz: corners: recall" in err
-    assert "reader on a font it never saw" in err
+    assert "reader on a font it never saw" in err and "checker.npz: checker: gate" in err
     assert any("short of handcap's targets" in w for w in np.load(out)["warnings"])
+
+
+def test_the_block_checker_can_be_turned_off_or_replaced(frames, weights, tmp_path, capsys):
+    pattern = tmp_path / "pattern.toml"
+    session_pattern(("right",), ()).save(pattern)
+    common = [str(frames / "cam_0"), "--pattern", str(pattern), "--rate", "30", "--whole-frames", *weights]
+    assert main(["detect", *common, "--no-checker", "--out", str(tmp_path / "ruled.npz")]) == 0
+    # Weights that are not a checker's, or none where they are said to be: one clear line, exit 2, no file.
+    for bad, match in ((weights[1], "holds a CornerNet, not a BlockChecker"), (str(tmp_path / "none.npz"),
+                                                                              "no BlockChecker weights there")):
+        capsys.readouterr()
+        assert main(["detect", *common, "--checker-weights", bad, "--out", str(tmp_path / "bad.npz")]) == 2
+        assert match in capsys.readouterr().err and not (tmp_path / "bad.npz").exists()
 
 
 def _with_orientation(jpeg: bytes, orientation: int) -> bytes:
