@@ -23,7 +23,7 @@ from torch.nn import functional as F
 from handcap.core.errors import HandcapError
 from handcap.detect.blocks import candidate_quads, white_blocks
 from handcap.detect.checks import corner_uses, cross_margin
-from handcap.detect.evaluation import gate_for
+from handcap.detect.evaluation import gate_for, tag_is_right
 from handcap.detect.reader import BlockReader, read_blocks, tag_probability
 from handcap.detect.refine import locate_corners
 from handcap.detect.voting import MAJORITY, tally, unique_tags
@@ -276,7 +276,7 @@ def checker_samples(detectors, scenes, match_px: float = 2.0):
     whether the hand-set checks keep it.
 
     A block is right where its tag's template corners all lie within ``match_px`` of where the scene's truth
-    projects them (as :func:`handcap.detect.evaluation.evaluate_detector` scores a tag).
+    projects them (:func:`handcap.detect.evaluation.tag_is_right`, as the detector's scores count a tag).
 
     Parameters
     ----------
@@ -308,11 +308,8 @@ def checker_samples(detectors, scenes, match_px: float = 2.0):
         kept, _, _ = detector.vote(scene.image, xy, corner_score, quads, text, rotation, score)
         truth = scene.projected if scene.projected is not None else dict(zip(scene.corner_names, scene.corners))
         for b in np.flatnonzero(tags != ""):
-            patch, row, col = pattern.locate(str(tags[b]))
             corners = xy[quads[b][(np.arange(4) + turns[b]) % 4]]
-            names = [patch.corner_name(*v) for v in patch.block_vertices(row, col)]
-            right.append(np.array([all(n in truth and np.linalg.norm(truth[n] - p) <= match_px
-                                       for n, p in zip(names, corners))]))
+            right.append(np.array([tag_is_right(pattern, str(tags[b]), corners, truth, match_px)]))
             ruled.append(np.array([kept[b] == tags[b]]))
             features.append(found[b][None])
     return np.concatenate(features), np.concatenate(right), np.concatenate(ruled)

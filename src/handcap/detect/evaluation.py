@@ -307,9 +307,7 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0, pattern=None) -> 
             counts += (len(scene.blocks), len(found.block_text), wrong, right, 0, 0, 0, len(scene.corners))
             continue
         for tag, xy in zip(found.block_text, found.block_xy):
-            place = pattern.locate(str(tag))
-            names = [place[0].corner_name(*v) for v in place[0].block_vertices(*place[1:])] if place else []
-            bad = not names or any(n not in truth or np.linalg.norm(truth[n] - p) > match_px for n, p in zip(names, xy))
+            bad = not tag_is_right(pattern, str(tag), xy, truth, match_px)
             wrong += bad
             right += not bad and str(tag) in visible
         named = [(n, xy) for n, xy in zip(found.names, found.corners) if n is not None]
@@ -319,3 +317,30 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0, pattern=None) -> 
         counts += (len(scene.blocks), len(found.block_text), wrong, right, len(named), sum(bad), named_right,
                    len(scene.corners))
     return DetectorScore(*map(int, counts))
+
+
+def tag_is_right(pattern, tag: str, corners: np.ndarray, truth: dict, match_px: float = 2.0) -> bool:
+    """Whether a tag read at these corners is right: the template's corners of that tag lie within ``match_px``
+    of where the truth puts them.
+
+    Parameters
+    ----------
+    pattern : Pattern
+    tag : str
+    corners : ndarray (4, 2)
+        The block's corners in reading order, pixels.
+    truth : dict
+        Corner name -> its true pixel (hidden corners too, where the scene projects them).
+    match_px : float
+
+    Returns
+    -------
+    bool
+        False too for a tag the template lacks, or a corner the truth does not know.
+    """
+    place = pattern.locate(tag)
+    if place is None:
+        return False
+    patch, row, col = place
+    return all(name in truth and np.linalg.norm(truth[name] - p) <= match_px
+               for name, p in zip((patch.corner_name(*v) for v in patch.block_vertices(row, col)), corners))
