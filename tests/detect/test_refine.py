@@ -168,7 +168,10 @@ def test_no_corner_where_an_edge_meets_the_image_border():
 def test_training_command_writes_weights_and_starts_from_others(scenes, tmp_path, capsys):
     from handcap.detect.train import main
     out = tmp_path / "w"
-    assert main(["--what", "refiner", "--scenes", "3", "--test-scenes", "1", "--steps", "2", "--out", str(out)]) == 0
+    threads = torch.get_num_threads()
+    assert main(["--what", "refiner", "--scenes", "3", "--test-scenes", "1", "--steps", "2", "--out", str(out),
+                 "--threads", str(threads + 1)]) == 0
+    assert torch.get_num_threads() == threads  # --threads ends with the command (else a test run oversubscribes)
     first = load_refiner(out / "refiner.npz")
     assert main(["--what", "refiner", "--scenes", "3", "--test-scenes", "1", "--steps", "2", "--seed", "1",
                  "--init", str(out / "refiner.npz"), "--out", str(tmp_path / "again")]) == 0

@@ -227,6 +227,14 @@ FONTS = ("/usr/share/fonts/truetype/liberation/LiberationMono-Bold.ttf",
 
 def main(argv=None) -> int:
     """Render scenes, train the networks, score them on held-out scenes, write the weights."""
+    threads = torch.get_num_threads()
+    try:
+        return _main(argv)
+    finally:  # run in a process that goes on (a test, a notebook), --threads must not outlive the command
+        torch.set_num_threads(threads)
+
+
+def _main(argv) -> int:
     p = argparse.ArgumentParser(prog="python -m handcap.detect.train", description=__doc__.split("\n\n")[0])
     p.add_argument("--what", choices=("corners", "refiner", "reader", "checker", "all"), default="all")
     p.add_argument("--scenes", type=int, default=600, help="rendered training scenes (default %(default)s)")
