@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch.utils.data import IterableDataset
 
+from handcap.core.errors import HandcapError
 from handcap.detect.blocks import candidate_quads
 from handcap.detect.corners import normalise, targets
 from handcap.detect.reader import GLYPHS, NONE, block_views
@@ -315,12 +316,12 @@ def _photometric(image: np.ndarray, quad: np.ndarray, rng, phone: float = 0.0) -
 
 
 def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool = False, vary: float = 0.0,
-                  wide: float = 0.0) -> list:
+                  wide: float = 0.0, layouts: float = 0.5) -> list:
     """Scenes for the reader: hand renders and photographed sheets in each font, many alphabets and layouts.
 
     Hand renders cycle through the fonts and handcap's, DexterCap's and random alphabets, half of
-    them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`);
-    photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
+    them with handcap's glyph layout and half with a random one (:meth:`GlyphLayout.random`; ``layouts`` sets that
+    share); photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet) do the same.
     ``cut`` cuts each scene to its corners (:meth:`Scene.cropped`). A share ``vary`` of the scenes gets glyphs
     varied in weight, slant, width and outline (:meth:`GlyphLayout.varied`, from its own random stream); a share
     ``wide`` of the random layouts is drawn from wider ranges instead (``GlyphLayout.random(..., wide=True)``:
@@ -339,12 +340,18 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool
         Share of the scenes whose glyphs look like another font's.
     wide : float
         Share of the random layouts drawn from the wider ranges.
+    layouts : float
+        Share of the scenes with a random glyph layout (0.5: every other group of scenes, as before this option;
+        other shares move groups to or from handcap's layout at random, from a stream of their own).
 
     Returns
     -------
     list of Scene
     """
-    rng, other, wider = (np.random.default_rng(s) for s in (seed, (seed, 17), (seed, 19)))
+    if not 0.0 <= layouts <= 1.0:
+        raise HandcapError(f"the share of random glyph layouts must be 0 to 1, got {layouts}")
+    rng, other, wider, mixed = (np.random.default_rng(s) for s in (seed, (seed, 17), (seed, 19), (seed, 23)))
+    flip = abs(layouts - 0.5) / 0.5  # chance that a group takes the other kind of layout than the alternation's
     n_pages = int(round(pages * count))
     out = []
     for kind, total, per in (("hand", count - n_pages, max(1, (count - n_pages) // (6 * len(fonts)))),
@@ -354,7 +361,10 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool
             font = fonts[k % len(fonts)]
             alphabets = (ALPHABET, DEXTERCAP_ALPHABET, "".join(rng.permutation(list(GLYPHS))[:27]))
             alphabet = alphabets[(k // len(fonts)) % 3]
-            layout = GlyphLayout.random(rng) if (k // (3 * len(fonts))) % 2 else None
+            random_layout = bool((k // (3 * len(fonts))) % 2)
+            if flip and random_layout == (layouts < 0.5) and mixed.random() < flip:
+                random_layout = not random_layout
+            layout = GlyphLayout.random(rng) if random_layout else None
             layout = GlyphLayout.random(wider, wide=True) if layout and wider.random() < wide else layout
             layout = (layout or GlyphLayout()).varied(other) if other.random() < vary else layout
             make = SceneMaker if kind == "hand" else PageMaker
@@ -369,4 +379,36 @@ def reader_scenes(count: int, seed: int, fonts, *, pages: float = 0.5, cut: bool
             out += batch
             made += len(batch)
             k += 1
+    return out
+
+
+def corner_scenes(count: int, seed: int, *, pages: float = 0.0, fonts=(None,)) -> list:
+    """Scenes for the corner network: hand renders, and a share of photographed sheets.
+
+    Parameters
+    ----------
+    count : int
+    seed : int
+    pages : float
+        Share of photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet, each
+        in one of ``fonts`` with a random glyph layout).
+    fonts : sequence of str or None
+        Fonts of the sheets.
+
+    Returns
+    -------
+    list of Scene
+    """
+    n_pages = int(round(pages * count))
+    maker = SceneMaker(seed)
+    try:
+        out = [maker.scene() for _ in range(count - n_pages)]
+    finally:
+        maker.close()
+    rng = np.random.default_rng(seed + 7)
+    k = 0
+    while len(out) < count:
+        sheet = PageMaker(seed * 1000 + 500 + k, font=fonts[k % len(fonts)], layout=GlyphLayout.random(rng))
+        out += [sheet.scene() for _ in range(min(10, count - len(out)))]
+        k += 1
     return out

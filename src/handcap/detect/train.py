@@ -35,11 +35,9 @@ from handcap.detect.pipeline import Detector
 from handcap.detect.networks import WEIGHTS, load_corner_net, load_net, load_reader, load_refiner, save_net
 from handcap.detect.reader import BlockReader, reader_loss
 from handcap.detect.refine import CornerRefiner, candidate_negatives, refiner_loss
-from handcap.detect.samples import (Batches, corner_batch, crops, non_blocks, reader_samples, reader_scenes,
-                                    refiner_samples)
+from handcap.detect.samples import (Batches, corner_batch, corner_scenes, crops, non_blocks, reader_samples,
+                                    reader_scenes, refiner_samples)
 from handcap.detect.scenefile import load_scenes, save_scenes
-from handcap.detect.scenes import PageMaker, SceneMaker
-from handcap.patterns.glyphs import GlyphLayout
 from handcap.patterns.session import session_pattern
 
 __all__ = ["CornerScore", "FONTS", "WEIGHTS", "crops", "evaluate_corners", "evaluate_reader", "load_corner_net",
@@ -247,10 +245,9 @@ def _main(argv) -> int:
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default %(default)s)")
     p.add_argument("--out", default=str(WEIGHTS), help="folder for corners.npz, refiner.npz and reader.npz "
                                                        "(default: the shipped weights)")
-    p.add_argument("--scenes-file", help="the corner network's and refiner's scenes: read from this .npz when it "
-                                         "exists, rendered and written there when not (train where nothing renders)")
-    p.add_argument("--device", default="cpu", help="where the corner network or the reader trains: cpu or cuda "
-                                                   "(default cpu)")
+    p.add_argument("--scenes-file", help="the networks' scenes: read from this .npz when it exists, rendered and "
+                   "written there when not (train where nothing renders)")
+    p.add_argument("--device", default="cpu", help="where the corner network or the reader trains: cpu or cuda")
     p.add_argument("--workers", type=int, default=0, help="processes drawing the corner network's crops or the "
                                                           "reader's views (default 0: the training process)")
     p.add_argument("--batch", type=int, help="samples per step (default 32 crops for the corner network, 128 "
@@ -273,6 +270,8 @@ def _main(argv) -> int:
                    "are varied in weight, slant, width and outline, to read fonts it never saw")
     p.add_argument("--wide", type=float, default=0.0, help="the reader: share of its random glyph layouts drawn "
                    "from wider ranges (underlines further down, or to the square's middle)")
+    p.add_argument("--layouts", type=float, default=0.5, help="the reader: share of its scenes with a random glyph "
+                   "layout, the rest in handcap's (default %(default)s)")
     p.add_argument("--seconds", type=float,
                    help="the corner network or the reader: time a few steps first and train only as many as fit "
                         "this long")
@@ -381,9 +380,10 @@ def _plan(train, scenes, a, init, **settings) -> int:
 def _reader_scenes(a, fonts) -> list:
     """The reader's training scenes: rendered in ``fonts``, or read from ``--scenes-file``."""
     made = {"what": "reader", "scenes": a.scenes, "seed": a.seed, "cut": a.cut}
-    made |= {k: getattr(a, k) for k in ("vary", "wide") if getattr(a, k)}  # files made before them stay readable
-    return _kept(a.scenes_file, made, ("train",), lambda: {
-        "train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut, vary=a.vary, wide=a.wide)})["train"]
+    made |= {k: getattr(a, k) for k, v in (("vary", 0), ("wide", 0), ("layouts", 0.5)) if getattr(a, k) != v}
+    return _kept(a.scenes_file, made, ("train",), lambda: {  # (files made before those options stay readable)
+        "train": reader_scenes(a.scenes, a.seed, fonts, cut=a.cut, vary=a.vary, wide=a.wide,
+                               layouts=a.layouts)})["train"]
 
 
 def _kept(path, made: dict, names, render) -> dict:
@@ -407,7 +407,8 @@ def _command(a) -> str:
              f"--steps {a.steps} --pages {a.pages} --seed {a.seed}" + (f" --init {a.init}" if a.init else ""))
     for option, default in (("device", "cpu"), ("workers", 0), ("batch", None), ("lr", 2e-3), ("width", 24),
                             ("stem", 16), ("dilations", "1,2,4"), ("scenes_file", None), ("no_score", False),
-                            ("cut", False), ("displaced", 0.0), ("vary", 0.0), ("phone", 0.0), ("wide", 0.0)):
+                            ("cut", False), ("displaced", 0.0), ("vary", 0.0), ("phone", 0.0), ("wide", 0.0),
+                            ("layouts", 0.5)):
         if getattr(a, option) != default:
             words += f" --{option.replace('_', '-')}" + ("" if getattr(a, option) is True else f" {getattr(a, option)}")
     if a.what == "checker":
@@ -428,38 +429,6 @@ def _scenes(a) -> tuple[list, list]:
                    lambda: {"train": corner_scenes(a.scenes, a.seed, pages=a.pages, fonts=fonts),
                             "test": corner_scenes(a.test_scenes, a.seed + 1_000_003)})
     return groups["train"], groups["test"]
-
-
-def corner_scenes(count: int, seed: int, *, pages: float = 0.0, fonts=(None,)) -> list:
-    """Scenes for the corner network: hand renders, and a share of photographed sheets.
-
-    Parameters
-    ----------
-    count : int
-    seed : int
-    pages : float
-        Share of photographed sheets (:class:`handcap.detect.scenes.PageMaker`, ten per sheet, each
-        in one of ``fonts`` with a random glyph layout).
-    fonts : sequence of str or None
-        Fonts of the sheets.
-
-    Returns
-    -------
-    list of Scene
-    """
-    n_pages = int(round(pages * count))
-    maker = SceneMaker(seed)
-    try:
-        out = [maker.scene() for _ in range(count - n_pages)]
-    finally:
-        maker.close()
-    rng = np.random.default_rng(seed + 7)
-    k = 0
-    while len(out) < count:
-        sheet = PageMaker(seed * 1000 + 500 + k, font=fonts[k % len(fonts)], layout=GlyphLayout.random(rng))
-        out += [sheet.scene() for _ in range(min(10, count - len(out)))]
-        k += 1
-    return out
 
 
 if __name__ == "__main__":
