@@ -5,8 +5,10 @@ command); these tests check the plumbing: cameras, frames, the detections contra
 
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -267,3 +269,34 @@ def test_mirrored_photographs_read_nothing_and_say_so(tmp_path, capsys):
     (warning,) = [w for w in np.load(tmp_path / "other.npz")["warnings"] if "do not fit" in w]
     assert "other.toml the pattern.toml these patches were printed from" in warning
     assert "do not fit" in capsys.readouterr().err
+
+
+def test_a_sheet_read_unsurely_without_a_template_says_so(tmp_path, capsys):
+    """Another generator's sheet (DexterCap's glyphs and layout, a font the reader never saw), read without a
+    template: the reader sees tags in most squares but reports few, and the warning says so with its counts;
+    handcap's own page reads surely and gets no such warning."""
+    from handcap.detect.scenes import PageMaker, SheetMaker
+    from handcap.patterns.alphabet import DEXTERCAP_ALPHABET
+    from handcap.patterns.glyphs import GlyphLayout
+    from handcap.synth.pages import PageLook
+
+    look = PageLook(square_px=(16.0, 22.0), tilt_deg=(0.0, 15.0), occluders=(0, 0), size=(640, 480), glint=0.0)
+    theirs = GlyphLayout(cap_height=0.43, glyph_top=0.27, underline_top=0.8, underline_thickness=0.083, gap=0.067,
+                         underline_span=(0.1, 0.5))
+    noto = "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf"
+    sheets = {"theirs": SheetMaker(3, DEXTERCAP_ALPHABET, font=noto if Path(noto).is_file() else None,
+                                   layout=theirs, look=look), "own": PageMaker(3, look=look)}
+    found = {}
+    for name, maker in sheets.items():
+        (tmp_path / name).mkdir()
+        cv2.imwrite(str(tmp_path / name / "0.png"), maker.scene().image)
+        alphabet = ["--alphabet", DEXTERCAP_ALPHABET] if name == "theirs" else []
+        assert main(["detect", str(tmp_path / name), "--out", str(tmp_path / f"{name}.npz"), "--rate", "30",
+                     *alphabet]) == 0
+        data = np.load(tmp_path / f"{name}.npz")
+        found[name] = len(data["block_text"]), [w for w in data["warnings"] if "white squares" in w]
+    kept, (warning,) = found["theirs"]
+    seen = int(re.search(r"saw tags in (\d+) white squares and reports (\d+) ", warning).group(1))
+    assert f"reports {kept} (" in warning and seen >= 20 and kept < 0.5 * seen and "--pattern" in warning
+    assert "white squares" in capsys.readouterr().err
+    assert found["own"][0] > 30 and found["own"][1] == []

@@ -67,6 +67,8 @@ class CaptureDetections:
     sure, disowned : int
         Readings the reader trusted alone, and those of them the vote over the template dropped or changed
         (:class:`~handcap.detect.pipeline.ImageDetections`).
+    read : int
+        White squares in which the reader saw a tag, at any confidence.
     """
 
     arrays: dict
@@ -76,6 +78,7 @@ class CaptureDetections:
     regions: int = 0
     sure: int = 0
     disowned: int = 0
+    read: int = 0
 
 
 class Tracker:
@@ -219,7 +222,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     index = {n: k for k, n in enumerate(marker_names)}
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
     blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
-    images = empty = corrected = regions = sure = disowned = 0
+    images = empty = corrected = regions = sure = disowned = read = 0
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
@@ -240,6 +243,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                 images += 1
                 empty += len(found.corners) == 0
                 corrected, sure, disowned = corrected + found.corrected, sure + found.sure, disowned + found.disowned
+                read += found.read
                 named = [k for k, n in enumerate(found.names) if n is not None and n in index]
                 rows["frame"] += [t] * len(named)
                 rows["camera"] += [c] * len(named)
@@ -265,7 +269,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
-    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned)
+    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read)
 
 
 def check_size(source, frame: int, shape, size) -> None:

@@ -116,6 +116,8 @@ class ImageDetections:
     sure, disowned : int
         Readings the reader trusts alone (their confidence at its gate), and those of them the vote over the
         template dropped or changed: nearly all of them where the template is not the printed patches'.
+    read : int
+        White squares in which the reader saw a tag, at any confidence.
     """
 
     corners: np.ndarray
@@ -127,6 +129,7 @@ class ImageDetections:
     corrected: int
     sure: int = 0
     disowned: int = 0
+    read: int = 0
 
 
 class Detector:
@@ -222,7 +225,7 @@ class Detector:
             else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
         names = np.full(len(xy), None, dtype=object)
         corrected = disowned = 0
-        sure = (text != "") & (bscore >= self.gates(text))
+        sure, read = (text != "") & (bscore >= self.gates(text)), int((text != "").sum())
         if self.pattern is not None and len(quads):
             tags, turns, corrected = self.vote(image, xy, cscore, quads, text, rotation, bscore)
             disowned = int((sure & ((tags != text) | (turns != rotation))).sum())
@@ -234,7 +237,7 @@ class Detector:
         else:  # nothing to vote with: a reading stands alone, in a font the reader may never have seen
             keep = sure & (bscore >= UNSEEN_FONT_GATE)
         return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected, int(sure.sum()),
-                               disowned)
+                               disowned, read)
 
     def gates(self, text) -> np.ndarray:
         """The confidence at which each reading is trusted alone: the reader's gate, or :data:`LOOKALIKE_GATE` for a
