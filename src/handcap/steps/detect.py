@@ -126,10 +126,10 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         warnings.append(f"no tag was read in any image: the images look mirrored ({flipped} tags read in "
                         f"{sources[0].camera}'s first frame flipped left-right: a front camera's selfie?); flip "
                         "them before detecting" if flipped >= MIRRORED_TAGS else
-                        "no tag was read in any image: wrong --alphabet, patches too small in the images, or not "
-                        "coded patches")
+                        "no tag was read in any image: wrong --alphabet, patches too small in the images or printed "
+                        "in a font or glyph layout unlike handcap's, or not coded patches")
     kept = len(run.arrays["block_text"])
-    if template is None and run.read >= MIN_SURE and kept < REPORTED_SHARE * run.read:
+    if template is None and run.read >= MIN_SURE and 0 < kept < REPORTED_SHARE * run.read:  # none read: said above
         warnings.append(f"the reader saw tags in {run.read} white squares and reports {kept} "
                         f"({100 * kept / run.read:.0f} %), those it is sure of without a template: patches in a font "
                         "or glyph layout unlike handcap's, small or blurred squares, or a wrong --alphabet; with the "
