@@ -34,9 +34,10 @@ THREADS ?= $(shell $(PYTHON) -c 'import os; print(max(1, (os.cpu_count() or 1) /
 # of one core is 0, which rasterises in the calling thread: the small images demo test alone took 29.7 s so, 33.2 s
 # with one rasteriser thread (and 27.0 s with two, which the other worker needs).
 LP_THREADS = $(shell $(PYTHON) -c 'print(0 if $(THREADS) <= 1 else $(THREADS))')
+# --durations: the slowest steps of every run are in CI's log, to see where the suite's 10 minutes go.
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE OMP_NUM_THREADS=$(THREADS) OPENBLAS_NUM_THREADS=$(THREADS) \
-		MKL_NUM_THREADS=$(THREADS) LP_NUM_THREADS=$(LP_THREADS) $(BIN)/python -m pytest -q -n $(JOBS)
+		MKL_NUM_THREADS=$(THREADS) LP_NUM_THREADS=$(LP_THREADS) $(BIN)/python -m pytest -q -n $(JOBS) --durations=30
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks tools
