@@ -172,9 +172,9 @@ def test_a_scenes_file_splits_into_parts_of_about_equal_size_that_join_into_it(t
         split_scenes(whole, 13)
 
 
-def test_wider_layouts_change_only_the_random_layouts_drawn(monkeypatch):
-    """``reader_scenes(..., wide=S)`` swaps a share S of the random glyph layouts for wide ones, drawn from their own
-    stream: the scenes with handcap's layout, and every other draw, stay as they were."""
+@pytest.fixture()
+def made(monkeypatch):
+    """The scene makers ``reader_scenes`` builds, as (seed, font, alphabet, layout), without rendering a scene."""
     from handcap.detect import samples
 
     made = []
@@ -191,6 +191,14 @@ def test_wider_layouts_change_only_the_random_layouts_drawn(monkeypatch):
 
     monkeypatch.setattr(samples, "SceneMaker", Maker)
     monkeypatch.setattr(samples, "PageMaker", Maker)
+    return made
+
+
+def test_wider_layouts_change_only_the_random_layouts_drawn(made):
+    """``reader_scenes(..., wide=S)`` swaps a share S of the random glyph layouts for wide ones, drawn from their own
+    stream: the scenes with handcap's layout, and every other draw, stay as they were."""
+    from handcap.detect import samples
+
     runs = {}
     for wide in (0.0, 0.6):
         made.clear()
@@ -204,32 +212,19 @@ def test_wider_layouts_change_only_the_random_layouts_drawn(monkeypatch):
     assert any(b[3].underline_span is not None for b in changed)
 
 
-def test_the_share_of_random_layouts_is_the_one_asked_for(monkeypatch):
+def test_the_share_of_random_layouts_is_the_one_asked_for(made):
     """``reader_scenes(..., layouts=S)``: a share S of the groups of scenes gets a random glyph layout. The default
     (0.5) alternates the groups, as before the option; 0 and 1 give handcap's layout only or random ones only."""
     from handcap.detect import samples
 
-    made = []
-
-    class Maker:
-        def __init__(self, seed, *, font=None, alphabet=None, layout=None, **kw):
-            made.append(layout)
-
-        def scene(self):
-            return object()
-
-        def close(self):
-            pass
-
-    monkeypatch.setattr(samples, "SceneMaker", Maker)
-    monkeypatch.setattr(samples, "PageMaker", Maker)
     share = {}
     for layouts in (0.0, 0.5, 0.85, 1.0):
         made.clear()
         assert len(samples.reader_scenes(600, 4, [None, "f"], layouts=layouts)) == 600
-        share[layouts] = np.mean([m is not None for m in made])
+        random = [m[3] is not None for m in made]
+        share[layouts] = np.mean(random)
         if layouts == 0.5:  # groups of 3 alphabets x 2 fonts, every other one random
-            assert [m is not None for m in made[:18]] == [False] * 6 + [True] * 6 + [False] * 6
+            assert random[:18] == [False] * 6 + [True] * 6 + [False] * 6
     assert share[0.0] == 0.0 and share[1.0] == 1.0 and 0.4 < share[0.5] < 0.6 and 0.75 < share[0.85] < 0.95
     with pytest.raises(HandcapError, match="must be 0 to 1"):
         samples.reader_scenes(10, 4, [None], layouts=1.5)
