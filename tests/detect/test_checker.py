@@ -98,8 +98,9 @@ def _read(scene):
     return reader, xy, score, quads, text, rotation, bscore
 
 
-def test_block_features_of_a_rendered_scene_agree_with_the_vote_and_the_truth(scenes):
-    scene = scenes[0]
+def _features_and_rightness(scene):
+    """Checks one scene's block features against independent computations; returns whether each voted block is
+    right against the truth (all four corners within 2 px of their names)."""
     reader, xy, score, quads, text, rotation, bscore = _read(scene)
     tags, turns, x = block_features(PATTERN, reader, PATTERN.alphabet, scene.image, xy, score, quads, text, rotation,
                                     bscore)
@@ -130,7 +131,14 @@ def test_block_features_of_a_rendered_scene_agree_with_the_vote_and_the_truth(sc
         corners = xy[quads[b][(np.arange(4) + turns[b]) % 4]]
         right.append(all(np.linalg.norm(truth[patch.corner_name(*v)] - p) <= 2.0
                          for v, p in zip(patch.block_vertices(row, col), corners)))
-    assert np.mean(right) > 0.8
+    return right
+
+
+def test_block_features_of_rendered_scenes_agree_with_the_vote_and_the_truth(scenes):
+    # Pooled over the three scenes: one scene holds 40-100 voted blocks, and its share right moves by a few points
+    # with the CPU's rasteriser and kernels (0.79 on an AMD EPYC for the first scene, 0.95 and 0.96 for the others).
+    right = np.concatenate([_features_and_rightness(scene) for scene in scenes])
+    assert len(right) > 100 and right.mean() > 0.85
 
 
 def test_the_detector_with_the_shipped_checker_reads_no_wrong_tag(scenes):
