@@ -35,6 +35,7 @@ from handcap.detect.blocks import candidate_quads, white_blocks
 from handcap.detect.corners import CornerNet, grey_levels
 from handcap.patterns.pattern import Pattern
 from handcap.detect.reader import GLYPHS, BlockReader, read_blocks, tag_probability
+from handcap.detect.adapt import GATE as ADAPTED_GATE
 from handcap.detect.refine import CornerRefiner, locate_corners
 from handcap.detect.checker import BlockChecker, block_features
 from handcap.detect.checks import unconfirmed, uncrossed
@@ -155,6 +156,15 @@ class Detector:
     checker : BlockChecker, optional
         The learned check of the voted blocks (:mod:`~handcap.detect.checker`); without it, the hand-set
         rules of :mod:`~handcap.detect.checks`.
+
+    Attributes
+    ----------
+    adapted : BlockReader or None
+        Without a template: a copy of the reader fine-tuned on the take (:mod:`~handcap.detect.adapt`), which
+        vouches for readings the reader alone is not sure enough of; None (the default) reads with the reader only.
+    confused : str
+        Glyphs the reader confuses with another printed one in the take (:func:`~handcap.detect.adapt.
+        confused_glyphs`): the adapted reader vouches for no reading with one of them.
     """
 
     def __init__(self, corner_net: CornerNet, reader: BlockReader, pattern: Pattern | None = None,
@@ -173,6 +183,8 @@ class Detector:
                                f"{pattern.alphabet!r}; leave --alphabet out to use the template's")
         self.threshold, self.pyramid = threshold, pyramid
         self.risky = "".join(sorted(set("".join(lookalikes(self.alphabet)))))  # glyphs with a look-alike printed
+        self.adapted: BlockReader | None = None
+        self.confused = ""
 
     def image(self, image: np.ndarray, region=None) -> ImageDetections:
         """Detect the patches of one grey image, or of a region of it.
@@ -236,8 +248,20 @@ class Detector:
             text = tags
         else:  # nothing to vote with: a reading stands alone, in a font the reader may never have seen
             keep = sure & (bscore >= UNSEEN_FONT_GATE)
+            if self.adapted is not None and len(quads):
+                keep |= self._vouched(image, xy[quads], text, rotation, bscore)
         return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected, int(sure.sum()),
                                disowned, read)
+
+    def _vouched(self, image: np.ndarray, quads: np.ndarray, text, rotation, score) -> np.ndarray:
+        """The readings (B,) the reader adapted to the take vouches for: it reads the same tag and turn at
+        :data:`~handcap.detect.adapt.GATE` or more, the reader gave that reading its own gate or more, and no glyph
+        of it has a look-alike in the alphabet or is one the reader confuses in this take."""
+        again, _, turn, sure = read_blocks(self.adapted, image, quads, self.alphabet)
+        doubtful = set(self.risky + self.confused)
+        plain = np.array([not doubtful.intersection(str(t)) for t in text], dtype=bool)
+        return ((text != "") & (again == text) & (turn == rotation) & plain & (score >= self.reader.min_score)
+                & (sure >= ADAPTED_GATE))
 
     def gates(self, text) -> np.ndarray:
         """The confidence at which each reading is trusted alone: the reader's gate, or :data:`LOOKALIKE_GATE` for a

@@ -215,6 +215,37 @@ def tag_probability(net: BlockReader, image: np.ndarray, quads: np.ndarray, alph
     return out
 
 
+def glyph_probabilities(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet: str, *,
+                        batch: int = 512) -> tuple[np.ndarray, np.ndarray]:
+    """The two glyph heads' probabilities over the printed alphabet (one view, as :func:`read_blocks` reads).
+
+    Parameters
+    ----------
+    net : BlockReader
+    image : ndarray (H, W)
+    quads : ndarray (B, 4, 2)
+        Corners in image order, pixels.
+    alphabet : str
+        Glyphs that may be read.
+
+    Returns
+    -------
+    (ndarray (B, L), ndarray (B, L))
+        The first and the second glyph's probabilities over the L glyphs of ``alphabet``, each head's over the
+        alphabet and "no tag" (so a row sums to 1 less its "no tag").
+    """
+    allowed = _allowed(alphabet)
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    first, second = np.zeros((len(quads), len(alphabet))), np.zeros((len(quads), len(alphabet)))
+    net.eval().to(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        for start in range(0, len(quads), batch):
+            f, s, _ = _averaged(net, image, quads[start:start + batch], 1)
+            first[start:start + batch] = _renormalised(f, allowed)[:, allowed]
+            second[start:start + batch] = _renormalised(s, allowed)[:, allowed]
+    return first, second
+
+
 def _allowed(alphabet: str) -> np.ndarray:
     """Indices in :data:`GLYPHS` of the glyphs of ``alphabet``; a glyph the reader does not know is an error."""
     unknown = [ch for ch in alphabet if ch not in GLYPHS]

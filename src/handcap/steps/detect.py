@@ -31,7 +31,7 @@ REPORTED_SHARE = 0.5
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
-           checker: bool = True) -> Step:
+           checker: bool = True, adapt_steps: int = 0) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -65,6 +65,10 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     checker : bool
         Check the blocks the template's vote keeps with the learned checker (:mod:`handcap.detect.checker`);
         False, or no checker shipped, uses the hand-set checks (:mod:`handcap.detect.checks`).
+    adapt_steps : int
+        Without a template: steps of fine-tuning a copy of the reader on the take's sure readings, which then
+        vouches for more readings (:mod:`handcap.detect.adapt`; :data:`handcap.detect.adapt.STEPS` is a good
+        number); 0 (the default) reads with the shipped reader only.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -86,6 +90,11 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                          shipped_notes)  # loads torch
     from handcap.detect.pipeline import Detector  # loads torch
 
+    if adapt_steps < 0:
+        raise HandcapError(f"--adapt-steps {adapt_steps}: give 0 (the shipped reader only) or more steps")
+    if adapt_steps and template is not None:
+        raise HandcapError("--adapt-steps adapts the reader to a take read without --pattern; with the template the "
+                           "vote over its patches corrects the readings")
     if threshold is not None and not 0.0 < threshold < 1.0:
         raise HandcapError(f"--threshold {threshold}: give a probability between 0 and 1")
     # The corner network's 8-bit twin where its weights carry activation ranges: the same corners, faster.
@@ -129,15 +138,50 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         "no tag was read in any image: wrong --alphabet, patches too small in the images or printed "
                         "in a font or glyph layout unlike handcap's, or not coded patches")
     kept = len(run.arrays["block_text"])
+    adapted = ""
+    if adapt_steps and images and kept:
+        from handcap.detect.adapt import MIN_READINGS, adapt_reader, take_views  # loads torch
+
+        views = take_views(detector, _spread(sources), progress=progress)
+        if len(views.blocks) < MIN_READINGS:
+            warnings.append(f"the reader was not adapted to this take: {len(views.blocks)} sure readings in "
+                            f"{len(views.images)} images, and it needs {MIN_READINGS}")
+        else:
+            detector.adapted = adapt_reader(detector.reader, views, steps=adapt_steps, progress=progress)
+            detector.confused = views.confused
+            run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes)
+            adapted = (f"; the reader adapted to this take ({len(views.blocks)} sure readings in {len(views.images)} "
+                       f"images, {adapt_steps} steps) vouched for {len(run.arrays['block_text']) - kept} more"
+                       + (f" (none with {views.confused}, glyphs it confuses here)" if views.confused else ""))
+            warnings.append("tags vouched for by a reader adapted to this take (--adapt-steps) are a little more "
+                            "often wrong than those the shipped reader reports alone (README: another generator's "
+                            "sheets): check them")
+            kept = len(run.arrays["block_text"])
     if template is None and run.read >= MIN_SURE and 0 < kept < REPORTED_SHARE * run.read:  # none read: said above
         warnings.append(f"the reader saw tags in {run.read} white squares and reports {kept} "
                         f"({100 * kept / run.read:.0f} %), those it is sure of without a template: patches in a font "
                         "or glyph layout unlike handcap's, small or blurred squares, or a wrong --alphabet; with the "
-                        "patches' template (--pattern) the vote over them reads more")
+                        "patches' template (--pattern) the vote over them reads more"
+                        + ("" if adapt_steps else "; so may a reader adapted to this take (--adapt-steps 200)"))
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     arrays = {**run.arrays, **pitch, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else "")
-            + (f"; {run.regions} images searched around the previous frame's patches only" if run.regions else ""))
+            + (f"; {run.regions} images searched around the previous frame's patches only" if run.regions else "")
+            + adapted)
     return Step((line,), tuple(warnings), (str(out),), arrays)
+
+
+def _spread(sources) -> list:
+    """At most :data:`handcap.detect.adapt.MAX_IMAGES` of the sources' frames, evenly spread over them."""
+    from handcap.detect.adapt import MAX_IMAGES  # loads torch
+
+    every = max(1, -(-sum(s.count() for s in sources) // MAX_IMAGES))
+    images, k = [], 0
+    for source in sources:
+        for _, image in source.frames():
+            if k % every == 0 and len(images) < MAX_IMAGES:
+                images.append(image)
+            k += 1
+    return images
