@@ -16,6 +16,7 @@ from handcap.detect.adapt import MIN_READINGS, TakeViews, adapt_reader, confused
 from handcap.detect.evaluation import evaluate_detector, tag_is_right
 from handcap.detect.networks import load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector
+from handcap.detect.reader import GLYPHS
 from handcap.patterns import session_pattern
 from handcap.patterns.alphabet import DEXTERCAP_ALPHABET
 
@@ -71,9 +72,8 @@ def test_confused_glyphs_are_the_pairs_the_reader_splits_its_belief_between():
 def test_the_take_teaches_its_sure_readings_and_quads_that_are_no_tag(take, views):
     maker, scenes = take
     assert len(views.blocks) >= MIN_READINGS and len(views.others) > 100
-    wrong = sum(not tag_is_right(maker.pattern, "".join(np.array(list("0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ#%&+=@"))[
-        [a, b]]), xy, scenes[k].projected, 2.0) for a, b, xy, k in zip(views.first, views.second, views.blocks,
-                                                                         views.block_image))
+    wrong = sum(not tag_is_right(maker.pattern, GLYPHS[a] + GLYPHS[b], xy, scenes[k].projected, 2.0)
+                for a, b, xy, k in zip(views.first, views.second, views.blocks, views.block_image))
     assert wrong <= 1  # the unseen-font gate: at most about one in a thousand wrong
     # No quad taught as "no tag" is a tagged square (in any turn), against the truth's corners.
     tagged = np.concatenate([scene.blocks for scene in scenes])
