@@ -64,7 +64,8 @@ class TakeViews:
         Quads of detected corners that are not white squares (black squares, odd shapes), pixels.
     other_image : ndarray (K,) int
     confused : str
-        Printed glyphs the shipped reader confuses with another in these images (:func:`confused_glyphs`).
+        Printed glyphs the shipped reader confuses with another in these images: :func:`confused_glyphs` over both
+        glyph heads of every white square found, read or not.
     """
 
     images: list
