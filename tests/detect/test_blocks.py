@@ -116,3 +116,37 @@ def test_unit_square_homographies_match_opencv():
         np.testing.assert_allclose(hom, ref / ref[2, 2], rtol=1e-4, atol=1e-6)
         mapped = np.c_[square, np.ones(4)] @ hom.T
         np.testing.assert_allclose(mapped[:, :2] / mapped[:, 2:], quad, atol=1e-9)
+
+
+def test_candidates_are_the_gated_quads_with_no_strong_corner_inside_found_by_brute_force():
+    # A jittered checkerboard with scattered corners, some weak (a glyph's), some strong (a stray crossing): the
+    # candidates are exactly the gated quads (all of them where no corner counts as strong) that hold no other
+    # strong corner in their outline shrunk by SHRINK, tested here corner by corner with OpenCV.
+    from handcap.detect.blocks import INSIDE_SCORE, SHRINK
+
+    rng = np.random.default_rng(3)
+    _, corners = _checkerboard(rows=5, cols=6, side=14)
+    xy = np.vstack([corners + rng.normal(0, 0.6, corners.shape), rng.uniform(20, 110, (40, 2))])
+    score = np.r_[np.full(len(corners), 0.99), rng.uniform(0.3, 1.0, 40)]
+    gated = candidate_quads(xy, score=np.zeros(len(xy)))
+    strong = np.flatnonzero(score >= INSIDE_SCORE)
+    expected = []
+    for quad in gated:
+        pts = xy[quad]
+        poly = (pts.mean(axis=0) + SHRINK * (pts - pts.mean(axis=0))).astype(np.float32)
+        if all(cv2.pointPolygonTest(poly, (float(xy[p, 0]), float(xy[p, 1])), False) < 0
+               for p in strong if p not in quad):
+            expected.append(quad)
+    found = candidate_quads(xy, score=score)
+    assert 20 < len(found) < len(gated)
+    assert np.array_equal(found, np.array(expected))
+    assert np.array_equal(found, np.unique(found, axis=0))  # distinct, sorted as np.unique sorts rows
+
+
+def test_distinct_rows_match_numpys():
+    from handcap.detect.blocks import _unique_rows
+
+    rng = np.random.default_rng(0)
+    quads = rng.integers(0, 9, (500, 4))
+    assert np.array_equal(_unique_rows(quads, 9), np.unique(quads, axis=0))
+    assert _unique_rows(quads[:0], 9).shape == (0, 4)

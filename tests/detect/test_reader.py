@@ -193,3 +193,21 @@ def test_without_a_template_only_readings_sure_in_an_unseen_font_are_reported(sc
     assert len(scores) >= 5 and (scores >= UNSEEN_FONT_GATE).all()
     reader.min_score = 0.0  # every reading trusted by the reader: the detector still holds back the unsure ones
     assert [len(f.block_text) for f in found] == [len(alone.image(s.image).block_text) for s in scenes]
+
+
+def test_each_view_is_normalised_by_its_own_levels():
+    # Every view: zero median and unit 5-95 % spread, computed here from the warped view of each block alone.
+    import cv2
+
+    image, quad = _image()
+    quads = np.stack([quad, quad + 7.3, np.roll(quad, 1, axis=0) - 4.1])
+    views = block_views(image, quads)
+    square = np.array([[4, 4], [28, 4], [28, 28], [4, 28]], np.float32) - 0.5
+    for view, q in zip(views, quads):
+        raw = cv2.warpPerspective(image.astype(np.float32), cv2.getPerspectiveTransform(q.astype(np.float32), square),
+                                  (32, 32), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        lo, mid, hi = np.percentile(raw, (5, 50, 95))
+        np.testing.assert_allclose(view, (raw - mid) / (hi - lo), rtol=1e-6, atol=1e-6)
+    flat = block_views(np.full((60, 60), 90, np.uint8), quads[:1] - 30)
+    assert np.isfinite(flat).all()
+    assert block_views(image, quads[:0]).shape == (0, 32, 32)

@@ -90,25 +90,45 @@ def candidate_quads(xy: np.ndarray, min_side: float = 3.0, score: np.ndarray | N
     quads = np.stack([a, b, c, d], axis=1)[ok]
     if len(quads) == 0:
         return np.zeros((0, 4), int)
+    # Each quad is proposed from several of its corners: one of each set of four, then their order and gates.
+    quads = _unique_rows(np.sort(quads, axis=1), len(xy))
     quads = _ordered(xy, quads)
-    quads = np.unique(quads[_convex_and_gated(xy[quads])], axis=0)
+    quads = _unique_rows(quads[_convex_and_gated(xy[quads])], len(xy))
     strong = np.ones(len(xy), bool) if score is None else np.asarray(score) >= INSIDE_SCORE
-    return quads[_empty(xy, quads, tree, strong)]
+    return quads[_empty(xy, quads, strong)]
 
 
-def _empty(xy: np.ndarray, quads: np.ndarray, tree, strong: np.ndarray) -> np.ndarray:
+def _unique_rows(quads: np.ndarray, n: int) -> np.ndarray:
+    """The distinct rows of ``quads`` (Q, 4) of indices below ``n``, sorted as ``np.unique(quads, axis=0)`` sorts
+    them (one integer key per row: several times faster)."""
+    if n ** 4 >= 2 ** 63:
+        return np.unique(quads, axis=0)
+    key = ((quads[:, 0] * n + quads[:, 1]) * n + quads[:, 2]) * n + quads[:, 3]
+    return quads[np.unique(key, return_index=True)[1]]
+
+
+#: Corners inside a quad shrunk by this share towards its centre refuse it (:func:`_empty`).
+SHRINK = 0.85
+
+
+def _empty(xy: np.ndarray, quads: np.ndarray, strong: np.ndarray) -> np.ndarray:
     """Quads with no other ``strong`` corner inside them (one square, not two or four): (Q,) bool."""
     pts = xy[quads]
     centre = pts.mean(axis=1)
     reach = np.linalg.norm(pts - centre[:, None], axis=2).max(axis=1)
-    near = tree.query_ball_point(centre, reach * 1.05)
+    # Only strong corners can refuse a quad, and only within the shrunk quad's reach of its centre.
+    index = np.flatnonzero(strong)
+    if len(index) == 0:
+        return np.ones(len(quads), bool)
+    near = cKDTree(xy[index]).query_ball_point(centre, reach * (SHRINK * (1 + 1e-9)),
+                                                  return_sorted=False)
     counts = np.fromiter(map(len, near), int, len(quads))
     q = np.repeat(np.arange(len(quads)), counts)
-    p = np.fromiter((k for ks in near for k in ks), int, counts.sum())
-    other = (quads[q] != p[:, None]).all(axis=1) & strong[p]
+    p = index[np.concatenate(near).astype(int)] if counts.sum() else np.zeros(0, int)
+    other = (quads[q] != p[:, None]).all(axis=1)
     q, p = q[other], p[other]
     # Shrink each quad by 15 % towards its centre: a point inside that is a corner of a larger shape.
-    poly = centre[q, None] + 0.85 * (pts[q] - centre[q, None])
+    poly = centre[q, None] + SHRINK * (pts[q] - centre[q, None])
     edges = np.roll(poly, -1, axis=1) - poly
     rel = xy[p, None] - poly
     cross = edges[..., 0] * rel[..., 1] - edges[..., 1] * rel[..., 0]

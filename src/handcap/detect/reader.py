@@ -106,10 +106,12 @@ def block_views(image: np.ndarray, quads: np.ndarray) -> np.ndarray:
     views = np.zeros((len(quads), VIEW, VIEW), np.float32)
     for k, quad in enumerate(np.asarray(quads, dtype=np.float32)):
         h = cv2.getPerspectiveTransform(quad, square)
-        view = cv2.warpPerspective(img, h, (VIEW, VIEW), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        lo, mid, hi = np.percentile(view, (5, 50, 95))
-        views[k] = (view - mid) / max(hi - lo, 1e-3 * max(abs(hi), 1.0))
-    return views
+        views[k] = cv2.warpPerspective(img, h, (VIEW, VIEW), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    if len(views) == 0:
+        return views
+    lo, mid, hi = np.percentile(views.reshape(len(views), -1), (5, 50, 95), axis=1)
+    spread = np.maximum(hi - lo, 1e-3 * np.maximum(np.abs(hi), 1.0))
+    return ((views - mid[:, None, None]) / spread[:, None, None]).astype(np.float32)
 
 
 def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet: str, *, batch: int = 512,
