@@ -80,8 +80,10 @@ def test_the_tracker_searches_whole_when_the_region_may_miss():
     tracker.update(_found(hand), whole=True)
     assert tracker.region() is None  # one frame: no motion seen yet
     tracker.update(_found(hand + [30, 20]), whole=True)
-    assert tracker.region() is None  # moved 30 px, more than half the widening (24 px)
-    tracker.update(_found(hand + [30, 20]), whole=True)  # still: search the region next
+    assert tracker.region() is None  # moved 30 px where no motion was predicted: more than half the widening (24 px)
+    tracker.update(_found(hand + [30, 20]), whole=True)
+    assert tracker.region() is None  # stopped: the motion changed by 30 px again
+    tracker.update(_found(hand + [30, 20]), whole=True)  # still again: search the region next
     box = tracker.region()
     pad = max(0.25 * 190, 48)
     np.testing.assert_allclose(box, [530 - pad, 420 - pad, 720 + pad, 565 + pad])
@@ -117,6 +119,31 @@ def test_the_tracker_searches_whole_when_the_region_may_miss():
         whole.append(region is None)
         steady.update(_found(hand), whole=region is None)
     assert [k for k, w in enumerate(whole) if w] == [FULL_EVERY - 1, 2 * FULL_EVERY - 1]
+
+
+def test_the_box_moves_on_with_a_steady_hand():
+    # A hand moving 40 px a frame (more than half the widening, 24 px) at a steady pace: from the third frame
+    # the box is searched, moved on by 40 px, and the blocks lie as far inside it as a still hand's do.
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    hand = np.stack([square + [500 + 20 * k, 400 + 15 * k] for k in range(10)])
+    tracker = Tracker((1000, 1400))
+    pad = max(0.25 * 190, 48)
+    plan = []
+    for k in range(5):
+        region = tracker.region()
+        moved = hand + [40 * k, 0]
+        plan.append(region is not None)
+        if region is not None:
+            np.testing.assert_allclose(region, [500 + 40 * k - pad, 400 - pad, 690 + 40 * k + pad, 545 + pad])
+            assert not tracker.missed(_found(moved), region)
+        tracker.update(_found(moved), whole=region is None)
+    assert plan == [False, False, False, True, True]
+    np.testing.assert_allclose(tracker.motion, [40, 0])
+    # The hand stops: the box searched next was moved on, and the hand sits at its edge, so that search missed.
+    region = tracker.region()
+    assert tracker.missed(_found(hand + [160, 0]), region)
+    tracker.update(_found(hand + [160, 0]), whole=False, missed=True)
+    assert tracker.region() is None and not tracker.steady
 
 
 def test_the_motion_is_read_from_the_tags_both_frames_show():

@@ -6,12 +6,13 @@ The arrays are the 2D detections File contract (``camera_names``,
 ``block_camera``, ``block_xy``, ``block_score``); ``handcap detect`` writes
 them, ``handcap demo --images`` uses them directly.
 
-Tracking: in a camera's run of frames, once the patches have moved less than
-half the widening below between two frames, a frame is searched only around the
-patches the previous frame found (their box, widened by :data:`MARGIN` of its
-longer side and at least :data:`MARGIN_PX` on every side), with the whole
-frame's grey levels, so what lies well inside the box is found exactly as a
-whole-frame search finds it. The frame is searched whole again when that
+Tracking: in a camera's run of frames, a frame is searched only around where
+the patches the previous frame found are expected (their box, widened by
+:data:`MARGIN` of its longer side and at least :data:`MARGIN_PX` on every side,
+and moved on as far as they moved between the two frames before: a hand
+moving steadily stays inside it), once that prediction held to half the
+widening for the last frame, with the whole frame's grey levels, so what lies
+well inside the box is found exactly as a whole-frame search finds it. The frame is searched whole again when that
 search may have missed something: a block within two of its squares (and
 half the widening) of the box's edge (the hand may reach beyond it), fewer
 blocks than
@@ -20,8 +21,11 @@ the last whole search (a patch coming into view away from the hand). A
 camera whose region search missed searches whole for the next 2, then 4, ...
 frames before it tries a region again. The motion is the median shift of the
 tags both frames read (else of the box's centre), so a take filmed at a few
-frames a second, where the hand moves far between frames, is searched whole
-and pays nothing for tracking. On a 5 MP frame
+frames a second, where the hand's motion changes much between frames, is
+searched whole and pays nothing for tracking. (The box first followed the
+patches without moving on: on a rendered grasp take of 20 frames a second,
+the hand moved more than half the widening between frames in a quarter of
+them, but its motion changed that much in 2 %.) On a 5 MP frame
 of a hand the region costs about a third of the whole frame
 (``benchmarks/detect.py``).
 """
@@ -97,14 +101,17 @@ class Tracker:
         self.since_full = 0
         self.wait = 0  # whole frames to search before the next region search
         self.backoff = 1
-        self.steady = False  # the patches moved less than half the widening since the frame before
+        self.steady = False  # the last motion was within half the widening of the one before (its prediction)
         self.centres = {}  # the last frame's block centres by tag
+        self.motion = np.zeros(2)  # how far the patches moved between the last two frames, pixels
 
     def region(self):
         """The box (x0, y0, x1, y1) to search next, pixels, or None for the whole frame."""
         if self.box is None or not self.steady or self.wait > 0 or self.since_full + 1 >= FULL_EVERY:
             return None
-        return self.box
+        x0, y0, x1, y1 = self.box
+        dx, dy = self.motion
+        return x0 + dx, y0 + dy, x1 + dx, y1 + dy
 
     def missed(self, found: ImageDetections, region) -> bool:
         """Whether a search of ``region`` may have missed patches the whole frame shows.
@@ -161,15 +168,18 @@ class Tracker:
             self.wait -= 1
         self.blocks = len(found.block_text)
         if self.blocks == 0:
-            self.box, self.steady, self.centres = None, False, {}
+            self.box, self.steady, self.centres, self.motion = None, False, {}, np.zeros(2)
             return
         pts = found.block_xy.reshape(-1, 2)
         pad = self._pad(pts)
         box = (*(pts.min(axis=0) - pad), *(pts.max(axis=0) + pad))
         centres = dict(zip(found.block_text, found.block_xy.mean(axis=1)))
         shift = self._shift(centres, box)
-        self.steady = shift is not None and float(np.abs(shift).max()) <= pad / 2
+        # Steady: this frame's motion was what the last one predicted, to half the widening (a first motion is
+        # predicted as none).
+        self.steady = shift is not None and float(np.abs(shift - self.motion).max()) <= pad / 2
         self.box, self.centres = box, centres
+        self.motion = np.zeros(2) if shift is None else np.asarray(shift, dtype=np.float64)
 
     def _shift(self, centres: dict, box) -> np.ndarray | None:
         """How far the patches moved since the last frame (2,), pixels: the median over the tags both read, else the
