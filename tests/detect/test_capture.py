@@ -177,3 +177,51 @@ def test_region_box(region, expected):
 def test_bad_region_is_one_clear_error(region):
     with pytest.raises(HandcapError, match="a region is"):
         region_box(region, (480, 640))
+
+
+class _Listed:
+    """A stand-in for the detector: frame t (its first pixel's grey) shows the blocks ``shown(t)`` (B, 4, 2), tagged
+    by their place in the list; a search of a region finds those wholly inside it."""
+
+    def __init__(self, shown):
+        self.shown, self.searches = shown, []
+
+    def image(self, image, region=None):
+        t = int(image[0, 0])
+        blocks = self.shown(t)
+        keep = ~np.isnan(blocks).any(axis=(1, 2))
+        if region is not None:
+            x0, y0, x1, y1 = region_box(region, image.shape)
+            with np.errstate(invalid="ignore"):
+                keep &= (blocks >= (x0, y0)).all(axis=(1, 2)) & (blocks < (x1, y1)).all(axis=(1, 2))
+        self.searches.append((t, region is not None))
+        return replace(_found(blocks[keep]), block_text=np.array([f"A{k}" for k in np.flatnonzero(keep)]))
+
+
+def test_a_miss_the_whole_frame_does_not_confirm_makes_no_wait(tmp_path):
+    # Frame 4 is blurred: half the blocks read, in the region and in the whole frame alike. That region search
+    # "missed" (under 60 % of the last frame's blocks), but the whole frame read no more: frame 5 tries a region
+    # again. In frame 9 the hand jumps away: the whole frame confirms that miss, so frames 10 and 11 are searched
+    # whole before a region again.
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    hand = np.stack([square + [300 + 20 * k, 200 + 15 * k] for k in range(10)])
+    folder = tmp_path / "cam_0"
+    folder.mkdir()
+    for t in range(13):
+        cv2.imwrite(str(folder / f"{t:06d}.png"), np.full((500, 700), t, np.uint8))
+
+    def shown(t):
+        if t == 4:
+            return np.where(np.isin(np.arange(10), [0, 2, 4, 6, 9])[:, None, None], hand, np.nan)
+        return hand + [-250, 150] if t >= 9 else hand
+
+    fake = _Listed(shown)
+    run = detect_capture(fake, frame_sources([folder]), [], 20.0, progress=False)
+    searched = {}
+    for t, in_region in fake.searches:
+        searched.setdefault(t, []).append("region" if in_region else "whole")
+    assert searched[4] == ["region", "whole"] and searched[5] == ["region"]
+    assert searched[9] == ["region", "whole"] and searched[10] == ["whole"] and searched[11] == ["whole"]
+    assert searched[12] == ["region"]
+    assert run.regions == sum(v == ["region"] for v in searched.values())
+    assert len(run.arrays["block_text"]) == 12 * 10 + 5
