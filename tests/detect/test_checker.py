@@ -152,6 +152,33 @@ def test_the_detector_with_the_shipped_checker_reads_no_wrong_tag(scenes):
     assert checked.right >= 0.9 * ruled.right > 0
 
 
+def test_the_detector_looks_at_each_white_square_once(scenes):
+    # The vote's probability of a tag the reader did not read comes from the heads it read the square with: the
+    # reader network runs once per image, and the tags are those of a second look at the squares.
+    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner())
+    for checker in (load_checker(), None):
+        detector = Detector(**networks, pattern=PATTERN, checker=checker, pyramid=False)
+        once, calls = _counted(detector, scenes)
+        assert calls == len(scenes)
+        vote = detector.vote
+        detector.vote = lambda *args, vote=vote: vote(*args[:7])  # the heads withheld: the reader looks again
+        twice, calls = _counted(detector, scenes)
+        assert calls > len(scenes)  # some voted tags were not the reader's own
+        for one, two in zip(once, twice):
+            np.testing.assert_array_equal(one.block_text, two.block_text)
+            np.testing.assert_allclose(one.block_xy, two.block_xy)
+
+
+def _counted(detector, scenes):
+    """The detector's findings in the scenes and how many times its reader network ran."""
+    calls = []
+    hook = detector.reader.register_forward_hook(lambda module, args, out: calls.append(len(args[0])))
+    try:
+        return [detector.image(scene.image) for scene in scenes], len(calls)
+    finally:
+        hook.remove()
+
+
 def test_the_training_command_fits_a_checker_from_new_scenes(tmp_path, monkeypatch):
     pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
     from handcap.detect import train

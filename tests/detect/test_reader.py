@@ -8,7 +8,7 @@ import torch
 
 from handcap import HandcapError
 from handcap.detect.corners import CornerNet
-from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks, tag_probability
+from handcap.detect.reader import GLYPHS, NONE, BlockReader, block_views, read_blocks, reader_heads, tag_probability
 from handcap.detect.train import load_reader, reader_samples, save_net, train_reader
 
 
@@ -80,6 +80,27 @@ def test_the_probability_of_a_given_tag_is_the_readers_score_of_its_own_reading(
         tag_probability(reader, scene.image, quads[:1], scene.alphabet, ["A"], [0])
     with pytest.raises(HandcapError, match="one tag and one rotation"):
         tag_probability(reader, scene.image, quads[:2], scene.alphabet, [text[read[0]]] * 2, [0, 4])
+
+
+def test_heads_read_once_give_what_the_network_gives_again(scenes):
+    reader = load_reader()  # the shipped weights
+    scene = max(scenes, key=lambda s: len(s.blocks))
+    quads = np.asarray(scene.blocks[:12], dtype=np.float64)
+    heads = reader_heads(reader, scene.image, quads, scene.alphabet)
+    for got, want in zip(read_blocks(reader, scene.image, quads, scene.alphabet, heads=heads),
+                         read_blocks(reader, scene.image, quads, scene.alphabet)):
+        np.testing.assert_array_equal(got, want)
+    # A part of the blocks, with their part of the heads: the probability of other tags and turns than those read
+    # is what the network gives when it looks at that part alone.
+    part = np.arange(1, len(quads), 2)
+    tags = [scene.alphabet[k % len(scene.alphabet)] * 2 for k in range(len(part))]
+    turns = np.arange(len(part)) % 4
+    np.testing.assert_allclose(
+        tag_probability(reader, scene.image, quads[part], scene.alphabet, tags, turns,
+                        heads=tuple(h[part] for h in heads)),
+        tag_probability(reader, scene.image, quads[part], scene.alphabet, tags, turns), rtol=1e-4, atol=1e-9)
+    with pytest.raises(HandcapError, match="1, 2 or 4 turns"):
+        reader_heads(reader, scene.image, quads, scene.alphabet, turns=3)
 
 
 def test_samples_label_the_turn_and_the_glyphs(scenes):

@@ -56,7 +56,7 @@ def _nines(p) -> np.ndarray:
 
 
 def block_features(pattern: Pattern, reader: BlockReader, alphabet: str, image: np.ndarray, xy: np.ndarray,
-                   corner_score: np.ndarray, quads: np.ndarray, text, rotation, score):
+                   corner_score: np.ndarray, quads: np.ndarray, text, rotation, score, heads=None):
     """The vote's tag of every block (no check yet: the winner of its votes, a tag two blocks hold dropped)
     and the checker's :data:`FEATURES` of each.
 
@@ -77,6 +77,9 @@ def block_features(pattern: Pattern, reader: BlockReader, alphabet: str, image: 
         The white squares' corner indices in image order.
     text, rotation, score : ndarrays (B,)
         :func:`~handcap.detect.reader.read_blocks`'s readings of them.
+    heads : tuple of ndarrays, optional
+        :func:`~handcap.detect.reader.reader_heads` of the blocks in one turn, as they were read; without them the
+        reader looks again at the blocks whose voted tag it did not read.
 
     Returns
     -------
@@ -112,7 +115,8 @@ def block_features(pattern: Pattern, reader: BlockReader, alphabet: str, image: 
     probability = np.where(agreed, score, 1.0)
     other = np.flatnonzero(voted & ~agreed)
     if len(other):
-        probability[other] = tag_probability(reader, image, xy[quads[other]], alphabet, tags[other], turns[other])
+        probability[other] = tag_probability(reader, image, xy[quads[other]], alphabet, tags[other], turns[other],
+                                             heads=None if heads is None else tuple(h[other] for h in heads))
     _, _, uses = corner_uses(quads, tags, len(xy))
     pts = xy[quads]
     sides = np.linalg.norm(np.roll(pts, -1, axis=1) - pts, axis=2)

@@ -34,7 +34,7 @@ from handcap.patterns.alphabet import ALPHABET, check_alphabet, lookalikes
 from handcap.detect.blocks import candidate_quads, white_blocks
 from handcap.detect.corners import CornerNet, grey_levels
 from handcap.patterns.pattern import Pattern
-from handcap.detect.reader import GLYPHS, BlockReader, read_blocks, tag_probability
+from handcap.detect.reader import GLYPHS, BlockReader, read_blocks, reader_heads, tag_probability
 from handcap.detect.adapt import GATE as ADAPTED_GATE
 from handcap.detect.refine import CornerRefiner, locate_corners
 from handcap.detect.checker import BlockChecker, block_features
@@ -233,13 +233,14 @@ class Detector:
         """:meth:`image` on an image (or a region of a frame) with the frame's grey levels (3,)."""
         xy, cscore = locate_corners(self.corner_net, self.refiner, image, self.threshold, levels)
         quads, _ = white_blocks(image, xy, candidate_quads(xy, score=cscore), levels)
-        text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet) if len(quads) \
-            else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
+        heads = reader_heads(self.reader, image, xy[quads], self.alphabet) if len(quads) else None
+        text, reading, rotation, bscore = read_blocks(self.reader, image, xy[quads], self.alphabet, heads=heads) \
+            if len(quads) else (np.zeros(0, "<U2"), np.zeros((0, 4, 2)), np.zeros(0, int), np.zeros(0))
         names = np.full(len(xy), None, dtype=object)
         corrected = disowned = 0
         sure, read = (text != "") & (bscore >= self.gates(text)), int((text != "").sum())
         if self.pattern is not None and len(quads):
-            tags, turns, corrected = self.vote(image, xy, cscore, quads, text, rotation, bscore)
+            tags, turns, corrected = self.vote(image, xy, cscore, quads, text, rotation, bscore, heads)
             disowned = int((sure & ((tags != text) | (turns != rotation))).sum())
             names = name_corners(self.pattern, quads, tags, turns, len(xy))
             keep = tags != ""
@@ -280,7 +281,7 @@ class Detector:
         return np.where(risky, max(self.reader.min_score, LOOKALIKE_GATE), self.reader.min_score)
 
     def vote(self, image: np.ndarray, xy: np.ndarray, corner_score: np.ndarray, quads: np.ndarray, text, rotation,
-             score) -> tuple[np.ndarray, np.ndarray, int]:
+             score, heads=None) -> tuple[np.ndarray, np.ndarray, int]:
         """The template's vote over one image's read blocks, and the checks of the blocks it keeps.
 
         Parameters
@@ -293,6 +294,9 @@ class Detector:
             The white squares' corner indices in image order.
         text, rotation, score : ndarrays (B,)
             :func:`~handcap.detect.reader.read_blocks`'s readings of them.
+        heads : tuple of ndarrays, optional
+            :func:`~handcap.detect.reader.reader_heads` of the blocks in one turn, as they were read (the reader
+            then need not look again at the blocks whose voted tag it did not read).
 
         Returns
         -------
@@ -304,14 +308,15 @@ class Detector:
             Readings the vote changed.
         """
         if self.checker is not None:
-            return self._checked(image, xy, corner_score, quads, text, rotation, score)
+            return self._checked(image, xy, corner_score, quads, text, rotation, score, heads)
         tags, turns, corrected = vote(self.pattern, quads, text, rotation, score, self.reader.min_score, xy)
         agreed = (text == tags) & (rotation == turns)
         other = np.flatnonzero((tags != "") & ~agreed)
         voted_probability = np.ones(len(quads))
         if len(other):
-            voted_probability[other] = tag_probability(self.reader, image, xy[quads[other]], self.alphabet,
-                                                       tags[other], turns[other])
+            voted_probability[other] = tag_probability(
+                self.reader, image, xy[quads[other]], self.alphabet, tags[other], turns[other],
+                heads=None if heads is None else tuple(h[other] for h in heads))
         drop = unconfirmed(quads, tags, xy, agreed & (score >= self.reader.min_score), corner_score, agreed,
                            voted_probability)
         tags[drop], turns[drop] = "", -1
@@ -319,11 +324,12 @@ class Detector:
         tags[drop], turns[drop] = "", -1
         return tags, turns, corrected
 
-    def _checked(self, image, xy, corner_score, quads, text, rotation, score) -> tuple[np.ndarray, np.ndarray, int]:
+    def _checked(self, image, xy, corner_score, quads, text, rotation, score,
+                 heads=None) -> tuple[np.ndarray, np.ndarray, int]:
         """:meth:`vote` with the learned checker: each block the vote gives a tag is kept where the checker's
         probability of it reaches the checker's gate."""
         tags, turns, features = block_features(self.pattern, self.reader, self.alphabet, image, xy, corner_score,
-                                               quads, text, rotation, score)
+                                               quads, text, rotation, score, heads)
         drop = (tags != "") & ~self.checker.keeps(features, self.reader.min_score)
         tags[drop], turns[drop] = "", -1
         return tags, turns, int(((tags != "") & (text != "") & (tags != text)).sum())

@@ -114,8 +114,37 @@ def block_views(image: np.ndarray, quads: np.ndarray) -> np.ndarray:
     return ((views - mid[:, None, None]) / spread[:, None, None]).astype(np.float32)
 
 
+def reader_heads(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet: str, *, batch: int = 512,
+                 turns: int = TURNS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reader's three heads for each block, which :func:`read_blocks` and :func:`tag_probability` read.
+
+    Parameters
+    ----------
+    net : BlockReader
+    image : ndarray (H, W)
+    quads : ndarray (B, 4, 2)
+        Corners in image order, pixels.
+    alphabet : str
+        Glyphs that may be read (each must be in :data:`GLYPHS`).
+    batch : int
+        Views per network pass.
+    turns : int
+        Turns of each view read and averaged: 1, 2 or 4 (see :func:`read_blocks`).
+
+    Returns
+    -------
+    (ndarray (B, G + 1), ndarray (B, G + 1), ndarray (B, 5))
+        The first and second glyph's probabilities, each over ``alphabet`` and "no tag" only (G = len(GLYPHS);
+        the last class is "no tag"), and the rotation's (0-3, then "not a block"), averaged over the turns.
+    """
+    allowed = _allowed(alphabet)
+    if turns not in (1, 2, 4):
+        raise HandcapError(f"a block is read in 1, 2 or 4 turns, not {turns!r}")
+    return _heads(net, image, np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2), allowed, turns, batch)
+
+
 def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet: str, *, batch: int = 512,
-                turns: int = TURNS):
+                turns: int = TURNS, heads=None):
     """Read blocks: their tags in reading order and a confidence.
 
     Each block is read in ``turns`` evenly spaced turns (its corners rolled, so the view turns by quarter
@@ -134,6 +163,8 @@ def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet
         Views per network pass.
     turns : int
         Turns of each view read and averaged: 1, 2 (as printed and upside down) or 4 (every quarter turn).
+    heads : tuple of ndarrays, optional
+        :func:`reader_heads` of these blocks (with these ``turns``), already computed: the network is not run.
 
     Returns
     -------
@@ -147,10 +178,9 @@ def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet
         Product of the three heads' probabilities, each glyph head's over ``alphabet`` and "no tag" only.
     """
     allowed = _allowed(alphabet)
-    if turns not in (1, 2, 4):
-        raise HandcapError(f"a block is read in 1, 2 or 4 turns, not {turns!r}")
     quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
-    first, second, turn = _heads(net, image, quads, allowed, turns, batch)
+    first, second, turn = reader_heads(net, image, quads, alphabet, batch=batch, turns=turns) if heads is None \
+        else heads
     p1, p2 = first[:, allowed], second[:, allowed]
     i1, i2 = p1.argmax(axis=1), p2.argmax(axis=1)
     rot = turn.argmax(axis=1)
@@ -164,7 +194,7 @@ def read_blocks(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet
 
 
 def tag_probability(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabet: str, tags, rotation,
-                    *, batch: int = 512) -> np.ndarray:
+                    *, batch: int = 512, heads=None) -> np.ndarray:
     """The reader's probability that each block shows a given tag in a given turn (one view, as
     :func:`read_blocks` reads by default).
 
@@ -180,6 +210,8 @@ def tag_probability(net: BlockReader, image: np.ndarray, quads: np.ndarray, alph
         A two-glyph tag of ``alphabet`` for each block.
     rotation : ndarray (B,) int
         Index of the tag's top-left among each block's given corners (0-3).
+    heads : tuple of ndarrays, optional
+        :func:`reader_heads` of these blocks in one turn, already computed: the network is not run.
 
     Returns
     -------
@@ -198,7 +230,7 @@ def tag_probability(net: BlockReader, image: np.ndarray, quads: np.ndarray, alph
         raise HandcapError("tag_probability needs one tag and one rotation (0-3) per block")
     first_glyph = np.array([GLYPHS.index(t[0]) for t in tags], dtype=int)
     second_glyph = np.array([GLYPHS.index(t[1]) for t in tags], dtype=int)
-    first, second, turn = _heads(net, image, quads, allowed, 1, batch)
+    first, second, turn = _heads(net, image, quads, allowed, 1, batch) if heads is None else heads
     rows = np.arange(len(quads))
     return (first[rows, first_glyph] * second[rows, second_glyph] * turn[rows, rotation]).astype(np.float64)
 
