@@ -39,6 +39,18 @@ def test_every_white_square_and_nothing_else_on_a_flat_board():
         assert np.argmin(p.sum(axis=1)) == 0 and p[1, 0] > p[0, 0] and p[2, 1] > p[1, 1]
 
 
+def test_more_quads_than_opencv_maps_at_once_are_tested_alike():
+    # A textured backdrop can give hundreds of thousands of candidate quads; OpenCV's remap maps fewer than 32,767
+    # rows at once. The board's quads, repeated past that, give the board's blocks and contrasts.
+    image, corners = _checkerboard()
+    quads = candidate_quads(corners)
+    once = white_blocks(image, corners, quads)
+    many = np.tile(quads, (-(-40000 // len(quads)), 1))
+    blocks, contrast = white_blocks(image, corners, many)
+    assert len(many) > 40000 and {frozenset(b) for b in blocks} == {frozenset(b) for b in once[0]}
+    np.testing.assert_allclose(np.sort(contrast), np.sort(once[1]))
+
+
 def test_a_false_corner_beside_a_missed_one_makes_no_block():
     # The detector missed the bottom-right corner of the white square at row 2, column 2 and found a false
     # one 5-6 px off instead, along a side or inwards (a quarter of the side: within the parallelogram's

@@ -103,6 +103,7 @@ def test_videos_are_read_frame_by_frame(tmp_path):
     (lambda d: (d / "x.png").write_bytes(b""), "not an image"),
     (lambda d: (d / "x.txt").write_text("hello"), "not an image"),
     (lambda d: (d / "x.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(40)), "video"),
+    (lambda d: cv2.imwrite(str(d / "x.png"), np.zeros((10, 40000), np.uint8)), "at most 32766 pixels on a side"),
 ])
 def test_bad_image_files_are_one_clear_error(tmp_path, weights, capsys, make, match):
     make(tmp_path)

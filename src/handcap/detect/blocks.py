@@ -109,6 +109,8 @@ def _unique_rows(quads: np.ndarray, n: int) -> np.ndarray:
 
 #: Corners inside a quad shrunk by this share towards its centre refuse it (:func:`_empty`).
 SHRINK = 0.85
+#: Quads sampled in one call of OpenCV's remap, which maps fewer than 32,767 rows (and columns) at once.
+REMAP_ROWS = 16384
 
 
 def _empty(xy: np.ndarray, quads: np.ndarray, strong: np.ndarray) -> np.ndarray:
@@ -234,7 +236,10 @@ def _sample(img: np.ndarray, homs: np.ndarray, us: np.ndarray, vs: np.ndarray) -
     h = np.c_[gu.ravel(), gv.ravel(), np.ones(gu.size)]
     p = np.matmul(h[None], homs.transpose(0, 2, 1))
     p = (p[..., :2] / p[..., 2:3]).astype(np.float32)
-    return np.median(cv2.remap(img, p[..., 0], p[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), axis=1)
+    # One row of the map per quad; OpenCV maps fewer than 32,767 rows at once (a textured backdrop gives more).
+    return np.concatenate([np.median(cv2.remap(img, part[..., 0], part[..., 1], cv2.INTER_LINEAR,
+                                               borderMode=cv2.BORDER_REPLICATE), axis=1)
+                           for part in np.array_split(p, -(-len(p) // REMAP_ROWS))])
 
 
 def unit_square_homographies(pts: np.ndarray) -> np.ndarray:

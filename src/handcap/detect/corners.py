@@ -29,6 +29,8 @@ from handcap.core.errors import HandcapError
 
 #: Least corner probability kept, by default.
 THRESHOLD = 0.3
+#: Longest side of an image the detector takes, pixels: OpenCV warps images under 32,767 pixels on a side.
+MAX_SIDE = 32766
 #: Largest offset from a cell centre the head can give, pixels of the input.
 MAX_OFFSET = 1.5
 
@@ -275,6 +277,9 @@ def detect_corners(net: CornerNet, image: np.ndarray, *, threshold: float = 0.3,
     """
     if image.ndim != 2 or min(image.shape) < 8:
         raise HandcapError(f"a grey image of at least 8 x 8 pixels is needed, got shape {image.shape}")
+    if max(image.shape) > MAX_SIDE:
+        raise HandcapError(f"an image of {image.shape[1]} x {image.shape[0]} pixels: the detector takes at most "
+                           f"{MAX_SIDE} pixels on a side (OpenCV's warps); scale it down or cut it into parts first")
     if halo is None:
         halo = max(32, -(-net.reach() // 16) * 16)
     img = normalise(image, levels)
