@@ -5,8 +5,11 @@ command); these tests check the plumbing: cameras, frames, the detections contra
 
 from __future__ import annotations
 
+import os
 import re
 import struct
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -202,6 +205,54 @@ def test_photographs_are_turned_upright_as_their_exif_says(tmp_path, orientation
     # The calibration board's images are read by cv2.imread: the same upright pixels, so the rig and the
     # detections agree.
     np.testing.assert_array_equal(grey, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE))
+
+
+def _video(path, count):
+    """An MJPG video of ``count`` frames of 64 x 48 px; skips where OpenCV writes none."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48), False)
+    if not writer.isOpened():
+        pytest.skip("OpenCV here writes no MJPG video")
+    rng = np.random.default_rng(count)
+    for _ in range(count):
+        writer.write(rng.integers(0, 255, (48, 64), dtype=np.uint8))
+    writer.release()
+    return path
+
+
+def test_a_video_that_ends_before_its_header_says_is_a_stored_warning(weights, tmp_path, capsys):
+    for name in ("whole", "cut"):
+        (tmp_path / name).mkdir()
+    whole = _video(tmp_path / "whole" / "cam_0.avi", 40)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut" / "cam_0.avi"
+    cut.write_bytes(data[:int(len(data) * 0.55)])
+    said = {}
+    for name, path in (("whole", whole), ("cut", cut)):
+        out = tmp_path / f"{name}.npz"
+        assert main(["detect", str(path), "--out", str(out), "--no-refine", *weights]) == 0
+        said[name] = ([w for w in capsys.readouterr().err.splitlines() if "ended after" in w],
+                      [w for w in np.load(out)["warnings"] if "ended after" in w])
+    assert said["whole"] == ([], [])
+    read = int(re.search(r"ended after (\d+) of the 40 frames", said["cut"][1][0]).group(1))
+    assert 10 <= read < 30 and len(said["cut"][0]) == 1 and "cam_0.avi" in said["cut"][1][0]
+
+
+def test_ffmpegs_own_messages_do_not_join_the_one_line_of_an_error(weights, tmp_path):
+    whole = tmp_path / "cam_0.mp4"
+    writer = cv2.VideoWriter(str(whole), cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (64, 48), False)
+    if not writer.isOpened():
+        pytest.skip("OpenCV here writes no MPEG-4 video")
+    for k in range(10):
+        writer.write(np.full((48, 64), 20 * k, np.uint8))
+    writer.release()
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(whole.read_bytes()[:200])  # no index ("moov atom not found", says FFmpeg)
+    done = subprocess.run([sys.executable, "-m", "handcap.cli", "detect", str(cut), "--out", str(tmp_path / "d.npz"),
+                           *weights], capture_output=True, text=True, timeout=300,
+                          env={k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"})
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [f"handcap detect: error: {cut}: cannot be opened as a video "
+                                                "(unknown format or damaged file)"]
 
 
 def test_a_dropped_frame_is_a_stored_warning_and_keeps_the_frame_count(frames, weights, tmp_path, capsys):

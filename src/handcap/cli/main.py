@@ -76,6 +76,9 @@ def main(argv=None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    # FFmpeg, under OpenCV's video reader, prints its own errors ("moov atom not found") beside the one line that
+    # says which file could not be read; quiet unless the user set a level (read when the first video opens).
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
     try:
         # Every HandcapWarning the library issues is caught here and printed once, with those the verb returns
         # (the ones stored in its output); Python's own display of them would repeat each line.

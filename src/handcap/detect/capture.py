@@ -74,6 +74,8 @@ class CaptureDetections:
         (:class:`~handcap.detect.pipeline.ImageDetections`).
     read : int
         White squares in which the reader saw a tag, at any confidence.
+    frames : tuple of int
+        Images read from each camera, in the order of the sources.
     """
 
     arrays: dict
@@ -84,6 +86,7 @@ class CaptureDetections:
     sure: int = 0
     disowned: int = 0
     read: int = 0
+    frames: tuple = ()
 
 
 class Tracker:
@@ -234,6 +237,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
     blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
     images = empty = corrected = regions = sure = disowned = read = 0
+    frames = [0] * len(sources)
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
@@ -255,6 +259,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                 regions += region is not None
                 tracker.update(found, whole=region is None, missed=missed)
                 images += 1
+                frames[c] += 1
                 empty += len(found.corners) == 0
                 corrected, sure, disowned = corrected + found.corrected, sure + found.sure, disowned + found.disowned
                 read += found.read
@@ -283,7 +288,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
-    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read)
+    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read, tuple(frames))
 
 
 def check_size(source, frame: int, shape, size) -> None:

@@ -33,6 +33,9 @@ from handcap.core.files import natural_key
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
+#: Frames a video may fall short of its header's count without a warning (the count is an estimate in some
+#: containers); the slack is 1 % of the count where that is more.
+COUNT_SLACK = 2
 #: Photographs OpenCV cannot decode, and what to do with them.
 UNREADABLE = {**dict.fromkeys((".heic", ".heif"), "a HEIC/HEIF photograph (a phone's default), which OpenCV cannot "
                                                   "decode: convert it to JPEG or PNG first (heif-convert, or the "
@@ -275,6 +278,30 @@ def _numbered(sources: list[FrameSource]) -> list[FrameSource]:
     first = min(min(n) for n in usable)
     return [replace(s, numbers=tuple(k - first for k in numbers[s.camera])) if numbers.get(s.camera) else s
             for s in sources]
+
+
+def short_videos(sources, frames) -> list[str]:
+    """Warnings for the videos that ended before the frame count their header gives (a truncated or damaged file).
+
+    Parameters
+    ----------
+    sources : sequence of FrameSource
+    frames : sequence of int
+        Frames read from each source.
+
+    Returns
+    -------
+    list of str
+        One line per video that gave fewer frames than its header says, less a slack of :data:`COUNT_SLACK`
+        frames (a header's count is an estimate in some containers).
+    """
+    notes = []
+    for source, read in zip(sources, frames):
+        said = source.count() if source.kind == "video" else 0
+        if read < said - max(COUNT_SLACK, said // 100):
+            notes.append(f"{source.camera}: its video ended after {read} of the {said} frames its header gives "
+                         f"(truncated or damaged?); {source.path.name}'s later frames are missing")
+    return notes
 
 
 def frame_notes(sources) -> list[str]:

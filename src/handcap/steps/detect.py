@@ -10,7 +10,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
-from handcap.detect.sources import frame_notes, frame_sources
+from handcap.detect.sources import frame_notes, frame_sources, short_videos
 from handcap.io import read_rig
 from handcap.steps.step import Step
 
@@ -122,6 +122,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     sizes = None if rig is None else [cameras[s.camera].size for s in sources]
     run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes)
     images, corrected = run.images, run.corrected
+    warnings += short_videos(sources, run.frames)
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
     if template is not None and run.sure >= MIN_SURE and run.disowned > DISOWNED_SHARE * run.sure:
