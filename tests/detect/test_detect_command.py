@@ -22,7 +22,7 @@ from handcap.patterns import Pattern, session_pattern
 from handcap.detect.corners import CornerNet
 from handcap.detect.reader import BlockReader
 from handcap.detect.refine import CornerRefiner
-from handcap.detect.sources import frame_sources, read_image
+from handcap.detect.sources import eight_bit, frame_sources, read_image
 from handcap.detect.train import save_net
 from handcap import HandcapError
 
@@ -159,6 +159,24 @@ def test_read_image_converts_colour_and_16_bit(tmp_path):
     assert read_image(tmp_path / "d.png").dtype == np.uint8 and read_image(tmp_path / "d.png")[0, 0] == 255
     with pytest.raises(HandcapError, match="no such image"):
         read_image(tmp_path / "none.png")
+
+
+def test_a_machine_vision_cameras_10_and_12_bit_images_and_float_images_keep_their_grey_levels(tmp_path):
+    # 10- and 12-bit pixels in a 16-bit file (Mono10 and Mono12) fill 0..1023 and 0..4095 only: read as 16-bit they
+    # would come out in 4 or 16 grey levels, where a square's glyphs fall apart.
+    levels = np.random.default_rng(0).integers(0, 256, (20, 30)).astype(np.uint8)
+    deep = levels.astype(np.uint16)
+    for name, pixels in (("mono10.png", deep * 4 + 1), ("mono12.png", deep * 16), ("full.png", deep * 257),
+                         ("unit.tiff", levels / np.float32(255)), ("scaled.tiff", levels.astype(np.float32))):
+        cv2.imwrite(str(tmp_path / name), pixels)
+        got = read_image(tmp_path / name)
+        assert got.dtype == np.uint8 and np.abs(got.astype(int) - levels).max() <= 1, name
+    spoiled = (levels / np.float32(255)).copy()
+    spoiled[0, :3] = (np.nan, np.inf, -np.inf)
+    cv2.imwrite(str(tmp_path / "nan.tiff"), spoiled)
+    got = read_image(tmp_path / "nan.tiff")
+    assert (got[0, :3] == 0).all() and np.abs(got[1:].astype(int) - levels[1:]).max() <= 1
+    assert np.array_equal(eight_bit(levels), levels)
 
 
 def test_the_shipped_networks_say_how_good_they_measured(frames, tmp_path, capsys):

@@ -138,8 +138,8 @@ def read_image(path, colour: bool = False) -> np.ndarray:
     Returns
     -------
     ndarray (H, W) uint8
-        16-bit images are scaled to 8 bits; colour is converted to grey. The image is turned upright as its
-        EXIF orientation says (phone photographs are stored sideways with such a tag), as image viewers,
+        Deeper images are scaled to 8 bits (:func:`eight_bit`); colour is converted to grey. The image is turned
+        upright as its EXIF orientation says (phone photographs are stored sideways with such a tag), as image viewers,
         ``cv2.imread`` (which reads the calibration board's images) and OpenCV's video reader show it: every
         pixel position handcap reports is in the picture as the user sees it.
 
@@ -159,11 +159,37 @@ def read_image(path, colour: bool = False) -> np.ndarray:
     return _bgr(image) if colour else _grey(image)
 
 
+def eight_bit(image: np.ndarray) -> np.ndarray:
+    """An image of any depth as uint8, its grey levels kept apart.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, C)
+        uint8; uint16 (16-bit, or a machine-vision camera's 10- or 12-bit pixels in a 16-bit file); or float
+        (0..1, as OpenCV and most tools write float images, or 0..255).
+
+    Returns
+    -------
+    ndarray, same shape, uint8
+        16-bit pixels scaled from the least bit depth that holds the image's largest value (at least 8 bits): a
+        12-bit camera's 0..4095 fills 0..255 instead of 0..16, where its glyphs would fall apart. Floats whose
+        largest finite value is at most 1 are scaled by 255, larger ones from that value; NaN and infinity
+        are 0.
+    """
+    image = np.asarray(image)
+    if image.dtype == np.uint8:
+        return image
+    if image.dtype.kind in "ui":
+        bits = max(8, int(image.max(initial=0)).bit_length())
+        return np.clip(np.rint(image * (255.0 / (2 ** bits - 1))), 0, 255).astype(np.uint8)
+    image = np.where(np.isfinite(image), image, 0.0)
+    top = float(image.max(initial=0.0))
+    scale = 255.0 if top <= 1.0 else 1.0 if top <= 255.0 else 255.0 / top
+    return np.clip(np.rint(image * scale), 0, 255).astype(np.uint8)
+
+
 def _grey(image: np.ndarray) -> np.ndarray:
-    if image.dtype == np.uint16:
-        image = (image / 257.0).round().astype(np.uint8)
-    elif image.dtype != np.uint8:
-        image = np.clip(image, 0, 255).astype(np.uint8)
+    image = eight_bit(image)
     if image.ndim == 3 and image.shape[2] == 4:
         image = cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
     elif image.ndim == 3 and image.shape[2] == 3:
@@ -174,10 +200,7 @@ def _grey(image: np.ndarray) -> np.ndarray:
 
 
 def _bgr(image: np.ndarray) -> np.ndarray:
-    if image.dtype == np.uint16:
-        image = (image / 257.0).round().astype(np.uint8)
-    elif image.dtype != np.uint8:
-        image = np.clip(image, 0, 255).astype(np.uint8)
+    image = eight_bit(image)
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     elif image.shape[2] == 4:
