@@ -273,6 +273,23 @@ def test_ffmpegs_own_messages_do_not_join_the_one_line_of_an_error(weights, tmp_
                                                 "(unknown format or damaged file)"]
 
 
+def test_noisy_images_are_denoised_and_a_stored_warning_says_so(frames, weights, tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    for path in sorted(frames.glob("cam_1/*.png")):
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        cv2.imwrite(str(path), np.clip(image + rng.normal(0, 15, image.shape), 0, 255).astype(np.uint8))
+    said = {}
+    for flag in ((), ("--no-denoise",)):
+        out = tmp_path / f"d{len(flag)}.npz"
+        assert main(["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--out", str(out), *flag, *weights]) == 0
+        said[flag] = [w for w in np.load(out)["warnings"] if "sensor noise" in w]
+        assert said[flag] == [line.split("warning: ", 1)[1] for line in capsys.readouterr().err.splitlines()
+                              if "sensor noise" in line]
+    # cam_0's frames (noise of 3 grey levels) are searched as they are; cam_1's (15) are denoised first.
+    assert len(said[()]) == 1 and said[()][0].startswith("2 of 4 images") and "denoised first" in said[()][0]
+    assert len(said[("--no-denoise",)]) == 1 and "not denoised" in said[("--no-denoise",)][0]
+
+
 def test_a_dropped_frame_is_a_stored_warning_and_keeps_the_frame_count(frames, weights, tmp_path, capsys):
     image = cv2.imread(str(frames / "cam_0" / "000000.png"))
     for cam, numbers in (("a", (7, 8, 9)), ("b", (7, 9))):  # camera b dropped frame 8 of the rig's counter

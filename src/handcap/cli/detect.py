@@ -10,7 +10,7 @@ def _cmd_detect(a):
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
                               track=not a.whole_frames, checker_weights=a.checker_weights,
-                              checker=not a.no_checker, adapt_steps=a.adapt_steps)
+                              checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise)
 
 
 def add_detect(verbs) -> None:
@@ -47,4 +47,7 @@ def add_detect(verbs) -> None:
                    help="without --pattern: fine-tune a copy of the reader on the take's sure readings for N steps "
                         "(200: about 80 s for 20 photographs), which then vouches for more tags of the take's font "
                         "and glyph layout, a little more often wrong (README); default 0, the shipped reader only")
+    p.add_argument("--no-denoise", action="store_true",
+                   help="search noisy images as they are (default: an image with more sensor noise than the networks "
+                        "learned, about 5 grey levels, is denoised first; a warning says how many)")
     p.set_defaults(run=_cmd_detect)

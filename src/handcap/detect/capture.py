@@ -39,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from handcap.core.errors import HandcapError
+from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
 
 #: A camera's frame is searched whole at least once in this many frames.
@@ -76,6 +77,10 @@ class CaptureDetections:
         White squares in which the reader saw a tag, at any confidence.
     frames : tuple of int
         Images read from each camera, in the order of the sources.
+    noisy : int
+        Images with more sensor noise than the networks learned (:data:`~handcap.detect.noise.NOISE_LEARNED`).
+    noise : float
+        The most sensor noise of an image, grey levels (:func:`~handcap.detect.noise.noise_sigma`).
     """
 
     arrays: dict
@@ -87,6 +92,8 @@ class CaptureDetections:
     disowned: int = 0
     read: int = 0
     frames: tuple = ()
+    noisy: int = 0
+    noise: float = 0.0
 
 
 class Tracker:
@@ -237,7 +244,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
     blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
     images = empty = corrected = regions = sure = disowned = read = 0
-    frames = [0] * len(sources)
+    frames, noisy, noise = [0] * len(sources), 0, 0.0
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
@@ -260,6 +267,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                 tracker.update(found, whole=region is None, missed=missed)
                 images += 1
                 frames[c] += 1
+                noisy, noise = noisy + (found.noise > NOISE_LEARNED), max(noise, found.noise)
                 empty += len(found.corners) == 0
                 corrected, sure, disowned = corrected + found.corrected, sure + found.sure, disowned + found.disowned
                 read += found.read
@@ -288,7 +296,8 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
-    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read, tuple(frames))
+    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read, tuple(frames), noisy,
+                             noise)
 
 
 def check_size(source, frame: int, shape, size) -> None:

@@ -40,6 +40,7 @@ from handcap.detect.refine import CornerRefiner, locate_corners
 from handcap.detect.checker import BlockChecker, block_features
 from handcap.detect.checks import unconfirmed, uncrossed
 from handcap.detect.voting import name_corners, vote
+from handcap.detect.noise import NOISE_LEARNED, denoised, noise_sigma
 
 #: Least side of a region searched, pixels: the corner network's tiles need 8, the refiner's crops 17.
 MIN_REGION = 32
@@ -119,6 +120,9 @@ class ImageDetections:
         template dropped or changed: nearly all of them where the template is not the printed patches'.
     read : int
         White squares in which the reader saw a tag, at any confidence.
+    noise : float
+        The sensor noise of the image searched (:func:`~handcap.detect.noise.noise_sigma`), grey levels; over
+        :data:`~handcap.detect.noise.NOISE_LEARNED` it was denoised first (unless the detector was told not to).
     """
 
     corners: np.ndarray
@@ -131,6 +135,7 @@ class ImageDetections:
     sure: int = 0
     disowned: int = 0
     read: int = 0
+    noise: float = 0.0
 
 
 class Detector:
@@ -156,6 +161,9 @@ class Detector:
     checker : BlockChecker, optional
         The learned check of the voted blocks (:mod:`~handcap.detect.checker`); without it, the hand-set
         rules of :mod:`~handcap.detect.checks`.
+    denoise : bool
+        Take an image's sensor noise down first where it holds more than the networks learned
+        (:mod:`~handcap.detect.noise`).
 
     Attributes
     ----------
@@ -169,9 +177,9 @@ class Detector:
 
     def __init__(self, corner_net: CornerNet, reader: BlockReader, pattern: Pattern | None = None,
                  alphabet: str | None = None, threshold: float | None = None, refiner: CornerRefiner | None = None,
-                 pyramid: bool = True, checker: BlockChecker | None = None):
+                 pyramid: bool = True, checker: BlockChecker | None = None, denoise: bool = True):
         self.corner_net, self.reader, self.pattern, self.refiner = corner_net, reader, pattern, refiner
-        self.checker = checker
+        self.checker, self.denoise = checker, denoise
         if alphabet is None:
             alphabet = pattern.alphabet if pattern is not None else ALPHABET
         self.alphabet = check_alphabet(alphabet)
@@ -208,12 +216,13 @@ class Detector:
         if region is not None:
             x0, y0, x1, y1 = region_box(region, image.shape)
             image, origin = np.ascontiguousarray(image[y0:y1, x0:x1]), np.array([x0, y0], float)
+        noise = noise_sigma(image)
+        if self.denoise and noise > NOISE_LEARNED:
+            image = denoised(image, noise)
         found = self._detect(image, levels)
         if self.pyramid:
             found = self._coarser(image, levels, found)
-        if region is None:
-            return found
-        return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin)
+        return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin, noise=noise)
 
     def _coarser(self, image: np.ndarray, levels: np.ndarray, found: ImageDetections) -> ImageDetections:
         """``found`` in ``image``, or what a halved level of it reads where that holds more tags (module

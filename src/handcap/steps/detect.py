@@ -10,6 +10,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
+from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.sources import frame_notes, frame_sources, short_videos
 from handcap.io import read_rig
 from handcap.steps.step import Step
@@ -31,7 +32,7 @@ REPORTED_SHARE = 0.5
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
-           checker: bool = True, adapt_steps: int = 0) -> Step:
+           checker: bool = True, adapt_steps: int = 0, denoise: bool = True) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -69,6 +70,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Without a template: steps of fine-tuning a copy of the reader on the take's sure readings, which then
         vouches for more readings (:mod:`handcap.detect.adapt`; :data:`handcap.detect.adapt.STEPS` is a good
         number); 0 (the default) reads with the shipped reader only.
+    denoise : bool
+        Take an image's sensor noise down first where it holds more than the networks learned
+        (:mod:`handcap.detect.noise`); either way a warning says how many images did.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -100,7 +104,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     # The corner network's 8-bit twin where its weights carry activation ranges: the same corners, faster.
     detector = Detector(load_corner_net(corner_weights, int8=True), load_reader(reader_weights), template, alphabet,
                         threshold, load_refiner(refiner_weights) if refine else None,
-                        checker=load_checker(checker_weights) if checker else None)
+                        checker=load_checker(checker_weights) if checker else None, denoise=denoise)
     warnings = frame_notes(sources) + lookalike_warning(detector.alphabet)
     if corner_weights is None or reader_weights is None or (refine and refiner_weights is None):
         # Issue 16: the shipped networks are short of the targets; say how good they measured, every time.
@@ -123,6 +127,11 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes)
     images, corrected = run.images, run.corrected
     warnings += short_videos(sources, run.frames)
+    if run.noisy:
+        warnings.append(f"{run.noisy} of {images} images hold more sensor noise than the detector's networks learned "
+                        f"(up to {run.noise:.1f} grey levels, against {NOISE_LEARNED:g}): "
+                        + ("they were denoised first (non-local means); " if denoise else "not denoised "
+                           "(--no-denoise); ") + "fewer corners are found in them. More light, or less gain, helps")
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
     if template is not None and run.sure >= MIN_SURE and run.disowned > DISOWNED_SHARE * run.sure:
