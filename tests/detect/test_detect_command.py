@@ -334,16 +334,19 @@ def test_mirrored_photographs_read_nothing_and_say_so(tmp_path, capsys):
     pattern = tmp_path / "pattern.toml"
     session_pattern().save(pattern)
     image = maker.scene().image
-    for name, pixels in (("plain", image), ("selfie", image[:, ::-1])):
+    for name, pixels in (("plain", image), ("selfie", image[:, ::-1]), ("negative", 255 - image)):
         (tmp_path / name).mkdir()
         cv2.imwrite(str(tmp_path / name / "0.png"), pixels)
         assert main(["detect", str(tmp_path / name), "--pattern", str(pattern), "--out", str(tmp_path / f"{name}.npz"),
                      "--rate", "30"]) == 0
-    data = {name: np.load(tmp_path / f"{name}.npz") for name in ("plain", "selfie")}
+    data = {name: np.load(tmp_path / f"{name}.npz") for name in ("plain", "selfie", "negative")}
     assert len(data["plain"]["block_text"]) > 20 and len(data["selfie"]["block_text"]) == 0  # none read wrong
+    assert len(data["negative"]["block_text"]) == 0
     (warning,) = [w for w in data["selfie"]["warnings"] if "no tag was read" in w]
     assert "look mirrored" in warning and "flip them" in warning
-    assert not any("mirrored" in w or "do not fit" in w for w in data["plain"]["warnings"])
+    (warning,) = [w for w in data["negative"]["warnings"] if "no tag was read" in w]
+    assert "look inverted" in warning and "invert them" in warning
+    assert not any("mirrored" in w or "inverted" in w or "do not fit" in w for w in data["plain"]["warnings"])
     # Another template over the same patches (the same tags, shuffled among the squares): said, not silent.
     whole = session_pattern()
     tags = [t for p in whole.patches for row in p.tags for t in row if t]

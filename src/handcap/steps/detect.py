@@ -16,7 +16,8 @@ from handcap.io import read_rig
 from handcap.steps.step import Step
 
 DEFAULT_RATE = 20.0  # DexterCap's cameras; said in a warning when assumed
-#: Tags read in a first frame flipped left-right that call the images mirrored when none read as given.
+#: Tags read in a first frame flipped left-right (or inverted) that call the images mirrored (inverted) when none read
+#: as given.
 MIRRORED_TAGS = 3
 #: Share of the readings the reader trusts alone that the vote may drop or change before the template is said not to
 #: fit the patches, and the least such readings to judge by. Measured (2026-11-28): 4-6 % on rendered hands and 2 %
@@ -139,14 +140,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         f"patches where they were read: is {pattern} the pattern.toml these patches were printed "
                         "from? (tags of patches it lacks are dropped too)")
     elif images and not len(run.arrays["block_text"]):
-        # A front camera's selfie is mirrored: no tag reads (checked: none read wrong), but flipped back they do.
-        _, first = next(sources[0].frames())
-        flipped = len(detector.image(np.ascontiguousarray(first[:, ::-1])).block_text)
-        warnings.append(f"no tag was read in any image: the images look mirrored ({flipped} tags read in "
-                        f"{sources[0].camera}'s first frame flipped left-right: a front camera's selfie?); flip "
-                        "them before detecting" if flipped >= MIRRORED_TAGS else
-                        "no tag was read in any image: wrong --alphabet, patches too small in the images or printed "
-                        "in a font or glyph layout unlike handcap's, or not coded patches")
+        warnings.append(_nothing_read(detector, sources[0]))
     kept = len(run.arrays["block_text"])
     adapted = ""
     if adapt_steps and images and kept:
@@ -181,6 +175,26 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             + (f"; {run.regions} images searched around the previous frame's patches only" if run.regions else "")
             + adapted)
     return Step((line,), tuple(warnings), (str(out),), arrays)
+
+
+def _nothing_read(detector, source) -> str:
+    """The warning where no tag was read in any image, and why, as the first frame of ``source`` tells.
+
+    A front camera's selfie is mirrored, and patches printed white on black (or a negative) are inverted: no tag
+    reads (checked: none read wrong), but flipped or inverted back they do.
+    """
+    _, first = next(source.frames())
+    flipped = len(detector.image(np.ascontiguousarray(first[:, ::-1])).block_text)
+    if flipped >= MIRRORED_TAGS:
+        return (f"no tag was read in any image: the images look mirrored ({flipped} tags read in {source.camera}'s "
+                "first frame flipped left-right: a front camera's selfie?); flip them before detecting")
+    inverted = len(detector.image(255 - first).block_text)
+    if inverted >= MIRRORED_TAGS:
+        return (f"no tag was read in any image: the images look inverted ({inverted} tags read in {source.camera}'s "
+                "first frame with black and white swapped: patches printed white on black, or a negative?); invert "
+                "them before detecting")
+    return ("no tag was read in any image: wrong --alphabet, patches too small in the images or printed in a font or "
+            "glyph layout unlike handcap's, or not coded patches")
 
 
 def _spread(sources) -> list:
