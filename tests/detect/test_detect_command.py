@@ -87,14 +87,19 @@ def test_without_a_template_blocks_only_and_a_warning(frames, weights, tmp_path,
     assert "draw alike" in capsys.readouterr().err
 
 
-def test_videos_are_read_frame_by_frame(tmp_path):
-    path = tmp_path / "cam_9.avi"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48), False)
+def _video(path, images, codec="MJPG"):
+    """A grey video of ``images`` (each 48 x 64 px) at 25 frames a second; skips where OpenCV writes none."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*codec), 25.0, (64, 48), False)
     if not writer.isOpened():
-        pytest.skip("OpenCV here writes no MJPG video")
-    for k in range(3):
-        writer.write(np.full((48, 64), 40 * k, np.uint8))
+        pytest.skip(f"OpenCV here writes no {codec} video")
+    for image in images:
+        writer.write(image)
     writer.release()
+    return path
+
+
+def test_videos_are_read_frame_by_frame(tmp_path):
+    path = _video(tmp_path / "cam_9.avi", [np.full((48, 64), 40 * k, np.uint8) for k in range(3)])
     (source,) = frame_sources([path])
     frames = list(source.frames())
     assert source.camera == "cam_9" and [t for t, _ in frames] == [0, 1, 2] and frames[0][1].shape == (48, 64)
@@ -225,22 +230,11 @@ def test_photographs_are_turned_upright_as_their_exif_says(tmp_path, orientation
     np.testing.assert_array_equal(grey, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE))
 
 
-def _video(path, count):
-    """An MJPG video of ``count`` frames of 64 x 48 px; skips where OpenCV writes none."""
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48), False)
-    if not writer.isOpened():
-        pytest.skip("OpenCV here writes no MJPG video")
-    rng = np.random.default_rng(count)
-    for _ in range(count):
-        writer.write(rng.integers(0, 255, (48, 64), dtype=np.uint8))
-    writer.release()
-    return path
-
-
 def test_a_video_that_ends_before_its_header_says_is_a_stored_warning(weights, tmp_path, capsys):
     for name in ("whole", "cut"):
         (tmp_path / name).mkdir()
-    whole = _video(tmp_path / "whole" / "cam_0.avi", 40)
+    rng = np.random.default_rng(0)
+    whole = _video(tmp_path / "whole" / "cam_0.avi", rng.integers(0, 255, (40, 48, 64), dtype=np.uint8))
     data = whole.read_bytes()
     cut = tmp_path / "cut" / "cam_0.avi"
     cut.write_bytes(data[:int(len(data) * 0.55)])
@@ -256,13 +250,7 @@ def test_a_video_that_ends_before_its_header_says_is_a_stored_warning(weights, t
 
 
 def test_ffmpegs_own_messages_do_not_join_the_one_line_of_an_error(weights, tmp_path):
-    whole = tmp_path / "cam_0.mp4"
-    writer = cv2.VideoWriter(str(whole), cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (64, 48), False)
-    if not writer.isOpened():
-        pytest.skip("OpenCV here writes no MPEG-4 video")
-    for k in range(10):
-        writer.write(np.full((48, 64), 20 * k, np.uint8))
-    writer.release()
+    whole = _video(tmp_path / "cam_0.mp4", [np.full((48, 64), 20 * k, np.uint8) for k in range(10)], "mp4v")
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(whole.read_bytes()[:200])  # no index ("moov atom not found", says FFmpeg)
     done = subprocess.run([sys.executable, "-m", "handcap.cli", "detect", str(cut), "--out", str(tmp_path / "d.npz"),

@@ -120,16 +120,8 @@ def reader_heads(net: BlockReader, image: np.ndarray, quads: np.ndarray, alphabe
 
     Parameters
     ----------
-    net : BlockReader
-    image : ndarray (H, W)
-    quads : ndarray (B, 4, 2)
-        Corners in image order, pixels.
-    alphabet : str
-        Glyphs that may be read (each must be in :data:`GLYPHS`).
-    batch : int
-        Views per network pass.
-    turns : int
-        Turns of each view read and averaged: 1, 2 or 4 (see :func:`read_blocks`).
+    net, image, quads, alphabet, batch, turns
+        As :func:`read_blocks` takes them.
 
     Returns
     -------
