@@ -38,8 +38,7 @@ def noise_sigma(image: np.ndarray) -> float:
     float
         Sigma, grey levels of 255: the median magnitude of Immerkær's operator over the image (sampled at every
         fourth row and every other column: 7 ms for a 5 MP frame), which is 0.6745 times 6 sigma for Gaussian
-        noise. 0 for what is no grey uint8 image of 3 x 3 pixels or more
-        (the detector refuses those itself).
+        noise. 0 for anything but a grey uint8 image of 3 x 3 pixels or more (the detector refuses those itself).
     """
     image = np.asarray(image)
     if image.dtype != np.uint8 or image.ndim != 2 or min(image.shape) < 3:
@@ -47,15 +46,9 @@ def noise_sigma(image: np.ndarray) -> float:
     # The operator at every fourth row and every other column is as good a sample (a few hundred thousand pixels
     # of a frame) at an eighth of the work. Integer weights on uint8: the response is a whole number (at most
     # 16 x 255), so its median comes from counts.
-    rows = [image[k:len(image) - 2 + k:4].astype(np.int16) for k in range(3)]
-    if min(len(r) for r in rows) == 0:
-        return 0.0
-    n = min(len(r) for r in rows)
-    rows = [r[:n] for r in rows]
+    rows = [image[k:len(image) - 2 + k:4].astype(np.int16) for k in range(3)]  # each row's two below it
     response = sum(w * (r[:, :-2:2] - 2 * r[:, 1:-1:2] + r[:, 2::2]) for w, r in zip((1, -2, 1), rows))
     counts = np.bincount(np.abs(response).ravel())
-    if counts.sum() == 0:
-        return 0.0
     median = int(np.searchsorted(np.cumsum(counts), (counts.sum() + 1) / 2))
     return median / (0.6745 * 6.0)
 
