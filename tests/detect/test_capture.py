@@ -45,8 +45,10 @@ def _film(scene, folder):
 def test_tracked_frames_find_what_whole_frames_find(scenes, detector, tmp_path):
     sources = frame_sources([_film(scenes[0], tmp_path / "cam_0")])
     names = detector.pattern.corner_names()
-    whole = detect_capture(detector, sources, names, 30.0, track=False, progress=False)
-    tracked = detect_capture(detector, sources, names, 30.0, progress=False)
+    # The frames are searched as recorded (linear, as rendered): an auto response would search the first three both
+    # ways, and whole (tests/detect/test_response.py).
+    whole = detect_capture(detector, sources, names, 30.0, track=False, progress=False, response="linear")
+    tracked = detect_capture(detector, sources, names, 30.0, progress=False, response="linear")
     # Frame 1 is searched whole (no motion seen yet); from frame 0 to 1 the patches moved little, so frames 2
     # and 3 are searched in the region. Frame 4 jumps: the region finds too little and the frame is searched
     # whole; frame 5 is searched whole too (the tracker waits two frames after a miss).
@@ -216,7 +218,7 @@ def test_a_miss_the_whole_frame_does_not_confirm_makes_no_wait(tmp_path):
         return hand + [-250, 150] if t >= 9 else hand
 
     fake = _Listed(shown)
-    run = detect_capture(fake, frame_sources([folder]), [], 20.0, progress=False)
+    run = detect_capture(fake, frame_sources([folder]), [], 20.0, progress=False, response="linear")
     searched = {}
     for t, in_region in fake.searches:
         searched.setdefault(t, []).append("region" if in_region else "whole")

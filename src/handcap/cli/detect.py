@@ -10,7 +10,8 @@ def _cmd_detect(a):
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
                               track=not a.whole_frames, checker_weights=a.checker_weights,
-                              checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise)
+                              checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise,
+                              response=a.response)
 
 
 def add_detect(verbs) -> None:
@@ -50,4 +51,9 @@ def add_detect(verbs) -> None:
     p.add_argument("--no-denoise", action="store_true",
                    help="search noisy images as they are (default: an image with more sensor noise than the networks "
                         "learned, about 5 grey levels, is denoised first; a warning says how many)")
+    p.add_argument("--response", choices=("auto", "linear", "srgb"), default="auto",
+                   help="the cameras' response to light: linear (a machine-vision camera's raw grey levels) or sRGB "
+                        "(display-encoded, as phones, webcams and most video record), decoded to linear light before "
+                        "the search; default auto: chosen for each camera on its first frames that read tags, "
+                        "searched both ways (a warning names the cameras read as sRGB)")
     p.set_defaults(run=_cmd_detect)

@@ -41,6 +41,7 @@ from tqdm import tqdm
 from handcap.core.errors import HandcapError
 from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
+from handcap.detect.response import ResponseChoice
 
 #: A camera's frame is searched whole at least once in this many frames.
 FULL_EVERY = 10
@@ -81,6 +82,9 @@ class CaptureDetections:
         Images with more sensor noise than the networks learned (:data:`~handcap.detect.noise.NOISE_LEARNED`).
     noise : float
         The most sensor noise of an image, grey levels (:func:`~handcap.detect.noise.noise_sigma`).
+    responses : tuple of str
+        Each camera's response to light as its frames were read, ``linear`` or ``srgb``
+        (:mod:`~handcap.detect.response`), in the order of the sources.
     """
 
     arrays: dict
@@ -94,6 +98,7 @@ class CaptureDetections:
     frames: tuple = ()
     noisy: int = 0
     noise: float = 0.0
+    responses: tuple = ()
 
 
 class Tracker:
@@ -209,7 +214,8 @@ class Tracker:
 
 
 def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
-                   progress: bool | None = None, track: bool = True, sizes=None) -> CaptureDetections:
+                   progress: bool | None = None, track: bool = True, sizes=None,
+                   response="auto") -> CaptureDetections:
     """Run ``detector`` on every frame of ``sources`` (one per camera, in the rig's order).
 
     Parameters
@@ -230,6 +236,10 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     sizes : sequence of (int, int), optional
         Image (width, height) of each source's camera in the rig, pixels: a frame of another size is an error
         (its pixels would not be those the rig was calibrated for), raised at that frame.
+    response : {"auto", "linear", "srgb"} or sequence of them
+        The cameras' response to light (or each source's): chosen for each camera on its first frames
+        (``auto``), linear as recorded, or display-encoded, decoded to linear light first
+        (:mod:`~handcap.detect.response`).
 
     Returns
     -------
@@ -244,25 +254,30 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
     blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
     images = empty = corrected = regions = sure = disowned = read = 0
-    frames, noisy, noise = [0] * len(sources), 0, 0.0
+    frames, noisy, noise, responses = [0] * len(sources), 0, 0.0, []
+    given = [response] * len(sources) if isinstance(response, str) else list(response)
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
         for c, source in enumerate(sources):
-            tracker = None
+            tracker, choice = None, ResponseChoice(given[c])
             for t, image in source.frames():
                 if sizes is not None:
                     check_size(source, t, image.shape, sizes[c])
                 if tracker is None or tracker.shape != image.shape[:2]:
                     tracker = Tracker(image.shape)
-                region = tracker.region() if track else None
-                found = detector.image(image, region) if region is not None else None
-                missed = found is not None and tracker.missed(found, region)
-                if found is None or missed:
-                    partial, found, region = found, detector.image(image), None
-                    # Only a miss the whole frame confirms, a tag it reads that the region did not, makes the
-                    # camera wait before it tries a region again; on a rendered grasp take 14 of 15 were not.
-                    missed = missed and bool(set(found.block_text.tolist()) - set(partial.block_text.tolist()))
+                if choice.response is None:  # still choosing the camera's response: the whole frame, both ways
+                    found, region, missed = choice.look(detector, image), None, False
+                else:
+                    image = choice.prepared(image)
+                    region = tracker.region() if track else None
+                    found = detector.image(image, region) if region is not None else None
+                    missed = found is not None and tracker.missed(found, region)
+                    if found is None or missed:
+                        partial, found, region = found, detector.image(image), None
+                        # Only a miss the whole frame confirms, a tag it reads that the region did not, makes the
+                        # camera wait before it tries a region again; on a rendered grasp take 14 of 15 were not.
+                        missed = missed and bool(set(found.block_text.tolist()) - set(partial.block_text.tolist()))
                 regions += region is not None
                 tracker.update(found, whole=region is None, missed=missed)
                 images += 1
@@ -283,6 +298,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                 blocks["block_xy"] += list(found.block_xy)
                 blocks["block_score"] += list(found.block_score)
                 bar.update()
+            responses.append(choice.leaning())
     arrays = {
         "camera_names": np.array([s.camera for s in sources]), "marker_names": np.array(marker_names, dtype=str),
         "frame": np.array(rows["frame"], dtype=np.int64), "camera": np.array(rows["camera"], dtype=np.int64),
@@ -297,7 +313,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         "block_score": np.array(blocks["block_score"], dtype=np.float64),
     }
     return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read, tuple(frames), noisy,
-                             noise)
+                             noise, tuple(responses))
 
 
 def check_size(source, frame: int, shape, size) -> None:

@@ -11,6 +11,7 @@ from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.noise import NOISE_LEARNED
+from handcap.detect.response import ResponseChoice, linear_light
 from handcap.detect.sources import frame_notes, frame_sources, short_videos
 from handcap.io import read_rig
 from handcap.steps.step import Step
@@ -33,7 +34,7 @@ REPORTED_SHARE = 0.5
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
-           checker: bool = True, adapt_steps: int = 0, denoise: bool = True) -> Step:
+           checker: bool = True, adapt_steps: int = 0, denoise: bool = True, response: str = "auto") -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -74,6 +75,11 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     denoise : bool
         Take an image's sensor noise down first where it holds more than the networks learned
         (:mod:`handcap.detect.noise`); either way a warning says how many images did.
+    response : {"auto", "linear", "srgb"}
+        The cameras' response to light (:mod:`handcap.detect.response`): chosen for each camera on its first
+        frames that read tags (the default), linear as recorded (a machine-vision camera), or display-encoded
+        (sRGB: a phone, a webcam, most video), decoded to linear light before the search. A warning names the
+        cameras read as sRGB.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -125,8 +131,16 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
 
     marker_names = template.corner_names() if template is not None else []
     sizes = None if rig is None else [cameras[s.camera].size for s in sources]
-    run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes)
+    ResponseChoice(response)  # an unknown response is refused before the first frame is read
+    run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes,
+                         response=response)
     images, corrected = run.images, run.corrected
+    decoded = [s.camera for s, r in zip(sources, run.responses) if r == "srgb"]
+    if decoded:
+        chosen = "chosen on their first frames, where they read more tags so" if response == "auto" else "--response"
+        warnings.append(f"{_listed(decoded)} read as display-encoded (sRGB, as phones, webcams and most video record "
+                        f"light; {chosen}): decoded to linear light, as the detector's networks learned, before the "
+                        "search" + ("; --response linear reads them as recorded" if response == "auto" else ""))
     warnings += short_videos(sources, run.frames)
     if run.noisy:
         warnings.append(f"{run.noisy} of {images} images hold more sensor noise than the detector's networks learned "
@@ -146,14 +160,15 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     if adapt_steps and images and kept:
         from handcap.detect.adapt import MIN_READINGS, adapt_reader, take_views  # loads torch
 
-        views = take_views(detector, _spread(sources), progress=progress)
+        views = take_views(detector, _spread(sources, run.responses), progress=progress)
         if len(views.blocks) < MIN_READINGS:
             warnings.append(f"the reader was not adapted to this take: {len(views.blocks)} sure readings in "
                             f"{len(views.images)} images, and it needs {MIN_READINGS}")
         else:
             detector.adapted = adapt_reader(detector.reader, views, steps=adapt_steps, progress=progress)
             detector.confused = views.confused
-            run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes)
+            run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes,
+                                 response=run.responses)
             adapted = (f"; the reader adapted to this take ({len(views.blocks)} sure readings in {len(views.images)} "
                        f"images, {adapt_steps} steps) vouched for {len(run.arrays['block_text']) - kept} more"
                        + (f" (none with {views.confused}, glyphs it confuses here)" if views.confused else ""))
@@ -197,15 +212,22 @@ def _nothing_read(detector, source) -> str:
             "glyph layout unlike handcap's, or not coded patches")
 
 
-def _spread(sources) -> list:
-    """At most :data:`handcap.detect.adapt.MAX_IMAGES` of the sources' frames, evenly spread over them."""
+def _spread(sources, responses) -> list:
+    """At most :data:`handcap.detect.adapt.MAX_IMAGES` of the sources' frames, evenly spread over them, each
+    decoded to linear light where its camera's response is sRGB (``responses``, one per source)."""
     from handcap.detect.adapt import MAX_IMAGES  # loads torch
 
     every = max(1, -(-sum(s.count() for s in sources) // MAX_IMAGES))
     images, k = [], 0
-    for source in sources:
+    for source, response in zip(sources, responses):
         for _, image in source.frames():
             if k % every == 0 and len(images) < MAX_IMAGES:
-                images.append(image)
+                images.append(linear_light(image) if response == "srgb" else image)
             k += 1
     return images
+
+
+def _listed(cameras) -> str:
+    """Cameras named for a warning: all of up to three, else the first three and how many more."""
+    head = ", ".join(cameras[:3]) + (f" and {len(cameras) - 3} more" if len(cameras) > 3 else "")
+    return ("camera " if len(cameras) == 1 else "cameras ") + head
