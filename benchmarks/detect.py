@@ -211,6 +211,7 @@ def main() -> None:
     checked = "the block checker" if checker is not None else "the hand-set checks (no checker)"
     print(f"hand scenes, full-size cameras, {reader_note}, {checked}: "
           + evaluate_detector(hand_detector, hands).summary())
+    print_response(hand_detector, hands, pattern)
     if checker is not None:
         ruled = evaluate_detector(Detector(fast, reader, pattern, refiner=refiner), hands)
         print("the same hand scenes with the hand-set checks instead of the block checker: " + ruled.summary())
@@ -335,6 +336,8 @@ def print_conditions(detector, pages, rng) -> None:
     import numpy as np
 
     from handcap.detect.evaluation import evaluate_detector
+    from handcap.detect.response import linear_light
+    from handcap.detect.samples import phone_look
 
     def noisy(sigma):
         return lambda im: np.clip(im + rng.normal(0.0, sigma, im.shape), 0, 255).astype(np.uint8)
@@ -343,7 +346,13 @@ def print_conditions(detector, pages, rng) -> None:
         table = np.clip(np.rint(255 * (np.arange(256) / 255) ** gamma), 0, 255).astype(np.uint8)
         return lambda im: cv2.LUT(im, table)
 
+    def phone(im):  # the same draws for an image read as recorded and decoded: seeded by its own pixels
+        look = np.random.default_rng(int(im[::97, ::89].sum()))
+        code = cv2.imencode(".jpg", phone_look(srgb(im), look), [cv2.IMWRITE_JPEG_QUALITY, int(look.integers(70, 96))])
+        return cv2.imdecode(code[1], cv2.IMREAD_GRAYSCALE)
+
     streak = np.full((1, 5), 1 / 5, np.float32)
+    srgb = encoded_srgb
     conditions = {
         "sensor noise 8 grey levels": noisy(8.0), "sensor noise 14": noisy(14.0),
         "motion blur 5 px": lambda im: cv2.filter2D(im, -1, streak),
@@ -351,6 +360,10 @@ def print_conditions(detector, pages, rng) -> None:
         "light falling to a fifth across the frame": lambda im: np.clip(
             np.rint(im * np.linspace(1.0, 0.2, im.shape[1])[None]), 0, 255).astype(np.uint8),
         "grey levels squared by 2.2 (linear light)": powered(2.2), "grey levels to 0.45 (display)": powered(0.45),
+        "encoded as sRGB (a phone's or a webcam's response), read as recorded": srgb,
+        "the same decoded to linear light first (--response srgb)": lambda im: linear_light(srgb(im)),
+        "a phone's photograph (sRGB, sharpened, JPEG 70-95), read as recorded": phone,
+        "the same decoded first": lambda im: linear_light(phone(im)),
     }
     plain = evaluate_detector(detector, pages)
     parts = [f"as rendered {100 * plain.right / max(plain.blocks, 1):.1f} % / {plain.wrong} wrong"]
@@ -365,6 +378,57 @@ def print_conditions(detector, pages, rng) -> None:
             parts.append(f"the same not denoised {100 * raw.right / max(raw.blocks, 1):.1f} % / {raw.wrong} wrong")
     print(f"the same sheets under other cameras' conditions, tags read right / wrong (of {plain.blocks} visible): "
           + "; ".join(parts))
+
+
+def encoded_srgb(image):
+    """A grey image linear in the light encoded as a phone or a webcam records it: sRGB (IEC 61966-2-1)."""
+    import cv2
+    import numpy as np
+
+    light = np.arange(256) / 255.0
+    code = np.where(light <= 0.0031308, 12.92 * light, 1.055 * light ** (1 / 2.4) - 0.055)
+    return cv2.LUT(image, np.clip(np.rint(255 * code), 0, 255).astype(np.uint8))
+
+
+def print_response(detector, hands, pattern, frames: int = 3, cameras: int = 10) -> None:
+    """The hand scenes encoded as sRGB: tags read right as recorded and decoded to linear light; and the response
+    ``detect`` chooses for cameras of ``frames`` scenes each, sRGB-encoded and as rendered (linear)."""
+    from dataclasses import replace
+
+    from handcap.detect.capture import detect_capture
+    from handcap.detect.evaluation import evaluate_detector
+    from handcap.detect.response import linear_light
+
+    encoded = [replace(h, image=encoded_srgb(h.image)) for h in hands]
+    parts = []
+    for name, scenes in (("as recorded", encoded), ("decoded", [replace(h, image=linear_light(h.image))
+                                                                for h in encoded])):
+        score = evaluate_detector(detector, scenes)
+        parts.append(f"{name} {100 * score.right / max(score.blocks, 1):.1f} % right / {score.wrong} wrong, "
+                     f"corners named right {score.named_right / max(score.corners, 1):.1%}")
+
+    class Frames:  # one camera's frames held in memory (detect_capture's FrameSource interface)
+        def __init__(self, camera, images):
+            self.camera, self.images = camera, images
+
+        def frames(self):
+            yield from enumerate(self.images)
+
+        def count(self):
+            return len(self.images)
+
+        def span(self):
+            return len(self.images)
+
+    chosen = {}
+    for name, scenes in (("sRGB", encoded), ("linear", hands)):
+        groups = [scenes[k:k + frames] for k in range(0, min(len(scenes), frames * cameras), frames)]
+        run = detect_capture(detector, [Frames(f"cam{k}", [s.image for s in g]) for k, g in enumerate(groups)],
+                             pattern.corner_names(), 30.0, progress=False)
+        chosen[name] = f"{run.responses.count('srgb')} of {len(groups)} read as sRGB"
+    print(f"the hand scenes encoded as sRGB ({len(hands)}, of {sum(len(h.block_text) for h in hands)} visible tags): "
+          + "; ".join(parts) + f"; cameras of {frames} scenes each (the response chosen on them, --response auto): "
+          f"sRGB-encoded {chosen['sRGB']}, as rendered (linear) {chosen['linear']}")
 
 
 def print_video(detector, video, pattern) -> None:
@@ -389,7 +453,8 @@ def print_video(detector, video, pattern) -> None:
     runs = {}
     for track in (False, True):
         start = time.perf_counter()
-        runs[track] = detect_capture(detector, [Frames()], pattern.corner_names(), 30.0, track=track, progress=False)
+        runs[track] = detect_capture(detector, [Frames()], pattern.corner_names(), 30.0, track=track, progress=False,
+                                     response="linear")  # rendered: linear light, nothing to choose
         runs[track] = (runs[track], (time.perf_counter() - start) / len(video))
     (whole, whole_s), (tracked, tracked_s) = runs[False], runs[True]
     a, b = whole.arrays, tracked.arrays
