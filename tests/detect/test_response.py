@@ -122,7 +122,8 @@ def test_the_command_says_which_cameras_it_read_as_srgb(tmp_path, capsys):
             data = np.load(out)
             counts[name, response] = len(data["block_text"])
             named = data["marker_names"][data["marker"]]
-            error[name, response] = np.median([np.linalg.norm(xy - truth[n]) for n, xy in zip(named, data["xy"]) if n in truth])
+            error[name, response] = np.median([np.linalg.norm(xy - truth[n])
+                                               for n, xy in zip(named, data["xy"]) if n in truth])
             said = [w for w in data["warnings"] if "read as display-encoded (sRGB" in w]
             assert len(said) == (name == "phone" and response == "auto")
     assert "camera phone read as display-encoded" in capsys.readouterr().err

@@ -149,6 +149,30 @@ def test_synth_images_writes_frames_and_their_truth(gl_ok, tmp_path):
             assert a == (tmp_path / "b" / "images" / cam / f"{frame:06d}.png").read_bytes()  # same seed, same bytes
             image = cv2.imread(str(tmp_path / "a" / "images" / cam / f"{frame:06d}.png"), cv2.IMREAD_UNCHANGED)
             assert image.dtype == np.uint8 and image.shape == tuple(truth["image_size"][0][::-1])
+    # A phone's camera: the same take, its grey levels encoded as sRGB; decoded they are the linear ones (to the
+    # rounding of both, at most 1.2 levels at white), and the truth is the same.
+    from handcap.detect.response import linear_light
+
+    assert main(args + ["--image-response", "srgb", "--out", str(tmp_path / "c")]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "c" / "image_truth.npz")["all_xy"], truth["all_xy"])
+    for cam in truth["camera_names"]:
+        linear, encoded = (cv2.imread(str(tmp_path / k / "images" / cam / "000001.png"), cv2.IMREAD_UNCHANGED)
+                           for k in ("a", "c"))
+        assert np.abs(linear_light(encoded).astype(int) - linear).max() <= 2
+        assert encoded.mean() > linear.mean() + 20  # the printed black and the shadows come out grey
+
+
+def test_a_cameras_srgb_response_follows_the_standard():
+    from dataclasses import replace
+
+    from handcap.synth.images import camera_effects
+
+    light = np.array([[0.0, 0.002, 0.2159, 0.5, 1.0]], np.float32)
+    rng = np.random.default_rng(0)
+    linear = camera_effects(light, ImageStyle.clean(), rng)
+    srgb = camera_effects(light, replace(ImageStyle.clean(), response="srgb"), rng)
+    assert linear.tolist() == [[0, 1, 55, 128, 255]]
+    assert srgb.tolist() == [[0, 7, 128, 188, 255]]  # IEC 61966-2-1: 0.2159 of white is its middle grey
 
 
 def test_synth_images_needs_a_patch_layout(tmp_path, capsys):
@@ -161,3 +185,9 @@ def test_synth_images_needs_a_patch_layout(tmp_path, capsys):
     assert main(["synth", "--layout", "dense-patches", "--images", "--image-scale", "3", "--out",
                  str(tmp_path / "y")]) == 2
     assert "--image-scale" in capsys.readouterr().err
+    from handcap.core.errors import HandcapError
+    from handcap.steps.synth import synth
+
+    with pytest.raises(HandcapError, match="--image-response 'log'"):
+        synth(tmp_path / "z", images=True, image_response="log")
+    assert not (tmp_path / "z").exists()

@@ -21,7 +21,7 @@ def _cmd_synth(a):
     config = None if a.scene else SynthConfig(**{k: getattr(a, k) for k in _SETTINGS}, betas=betas, motion=motion,
                                               moves=a.moves, max_view_angle_deg=a.max_view_angle)
     return synth.synth(a.out, config, scene=a.scene, force=a.force, images=a.images, image_scale=a.image_scale,
-                       image_style=a.image_style)
+                       image_style=a.image_style, image_response=a.image_response)
 
 
 def _cmd_demo(a):
@@ -77,6 +77,9 @@ def add_synth(verbs) -> None:
                    help="image size relative to the cameras' (default %(default)s: 2448 x 2048)")
     p.add_argument("--image-style", choices=("default", "clean"), default="default",
                    help="default: blur, noise, exposure, glints and occluders drawn per image; clean: none")
+    p.add_argument("--image-response", choices=("linear", "srgb"), default="linear",
+                   help="the cameras' response: grey levels linear in the light, as a machine-vision camera records "
+                        "(default), or encoded as sRGB, as phones, webcams and most video do")
     p.add_argument("--scene", help="take every setting from a scene.toml written by an earlier run")
     p.add_argument("--out", required=True, help="output folder (new or empty, unless --force)")
     p.add_argument("--force", action="store_true", help="write into --out even if it holds files (those of the "

@@ -13,8 +13,9 @@ grey, which moves the corners the refiner places. Measured with the shipped netw
 Decoded back to linear light first (:func:`linear_light`) they read 84.1 % (0.150 px) and 87.7 % (0.166 px).
 Decoding images that were linear already costs as much the other way (hands 76.8 %, 0.357 px), so each camera's
 response is chosen on its own frames (:class:`ResponseChoice`): its first :data:`LOOKS` frames that read a tag
-are searched both ways, and the way that read more tags in them is kept for all its frames (within its first
-:data:`MOST_LOOKS` frames: linear, where none read a tag).
+are searched both ways, and the way that read more tags in them is kept for all its frames (as many tags: the
+way whose blocks scored higher, as a camera whose squares are large and sharp reads as many either way; within its
+first :data:`MOST_LOOKS` frames: linear, where none read a tag).
 """
 
 from __future__ import annotations
@@ -73,6 +74,8 @@ class ResponseChoice:
         ``linear`` or ``srgb``; None while it is being chosen.
     tags : ndarray (2,) int
         Tags read in the frames looked at: as recorded, and decoded from sRGB.
+    scores : ndarray (2,)
+        The sums of their block scores, which decide where both ways read as many tags.
     looks : int
         Frames looked at both ways that read a tag.
     frames : int
@@ -84,6 +87,7 @@ class ResponseChoice:
             raise HandcapError(f"--response {response!r}: give one of {', '.join(RESPONSES)}")
         self.response = None if response == "auto" else response
         self.tags = np.zeros(2, np.int64)
+        self.scores = np.zeros(2)
         self.looks = self.frames = 0
 
     def prepared(self, image: np.ndarray) -> np.ndarray:
@@ -92,10 +96,12 @@ class ResponseChoice:
         return linear_light(image) if self.leaning() == "srgb" else image
 
     def leaning(self) -> str:
-        """The response chosen, or while choosing the one that read more tags so far (``linear`` on a tie)."""
+        """The response chosen, or while choosing the one that read more tags so far (as many: the surer, by the
+        sum of their block scores; ``linear`` where that ties too)."""
         if self.response is not None:
             return self.response
-        return "srgb" if self.tags[1] > self.tags[0] else "linear"
+        decoded = self.tags[1] > self.tags[0] or (self.tags[1] == self.tags[0] and self.scores[1] > self.scores[0])
+        return "srgb" if decoded else "linear"
 
     def look(self, detector, image: np.ndarray):
         """Search a frame both ways while the response is being chosen, and count the tags each read.
@@ -114,6 +120,7 @@ class ResponseChoice:
         found = detector.image(image), detector.image(linear_light(image))
         counts = np.array([len(f.block_text) for f in found])
         self.tags += counts
+        self.scores += [float(f.block_score.sum()) for f in found]
         self.looks += int(counts.any())
         self.frames += 1
         if self.looks >= LOOKS or self.frames >= MOST_LOOKS:

@@ -17,7 +17,7 @@ from handcap.synth.scene import SynthConfig, config_from_scene, synthesize, writ
 
 
 def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = False, images: bool = False,
-          image_scale: float = 1.0, image_style: str = "default") -> Step:
+          image_scale: float = 1.0, image_style: str = "default", image_response: str = "linear") -> Step:
     """Make a synthetic capture and write it into the folder ``out`` (see :func:`handcap.synth.scene.synthesize`).
 
     Parameters
@@ -36,11 +36,16 @@ def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = F
         Image size relative to the rig's cameras.
     image_style : {'default', 'clean'}
         The look: blur, noise, glints and occluders drawn per image, or none of them.
+    image_response : {'linear', 'srgb'}
+        The cameras' response: grey levels linear in the light (a machine-vision camera), or encoded as sRGB (a
+        phone, a webcam, most video; :attr:`handcap.synth.images.ImageStyle.response`).
     """
     config = config_from_scene(scene) if scene else config or SynthConfig()
     check_output_folder(out, scene, force=force)
     if image_style not in ("default", "clean"):
         raise HandcapError(f"--image-style {image_style!r}: choose default or clean")
+    if image_response not in ("linear", "srgb"):
+        raise HandcapError(f"--image-response {image_response!r}: choose linear or srgb")
     if images:
         check_filmable(config, image_scale)
     capture = synthesize(config)
@@ -55,7 +60,7 @@ def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = F
                                                       **q.motion_figures(capture.hand_motion)}, m.warnings)
     lines = [line]
     if images:
-        style = ImageStyle.clean() if image_style == "clean" else ImageStyle()
+        style = replace(ImageStyle.clean() if image_style == "clean" else ImageStyle(), response=image_response)
         filmed = film_capture(capture, out, scale=image_scale, style=style)
         lines.append(f"images: {filmed['images']} frames in {Path(out) / 'images'}, {filmed['visible']} visible "
                      f"corners and {filmed['blocks']} visible tags in image_truth.npz, template pattern.toml")

@@ -245,7 +245,7 @@ def _truth_arrays(patches, names, cameras, all_xy, visible, positions, rate) -> 
     }
 
 
-def film_take(config, folder, *, progress: bool | None = None):
+def film_take(config, folder, *, progress: bool | None = None, style: ImageStyle | None = None):
     """Synthesize a take of printed patches and film it into ``folder``, as a user's camera take would arrive.
 
     The cameras read out the window of their sensor that holds the hand (:func:`region_rig`). Writes
@@ -259,6 +259,8 @@ def film_take(config, folder, *, progress: bool | None = None):
     folder : str or Path
     progress : bool, optional
         Progress bars (default: on a terminal).
+    style : ImageStyle, optional
+        The look of the images (default :class:`~handcap.synth.images.ImageStyle`).
 
     Returns
     -------
@@ -273,5 +275,5 @@ def film_take(config, folder, *, progress: bool | None = None):
     capture = replace(capture, rig=region_rig(capture.rig, hand_points[np.isfinite(hand_points).all(axis=-1)]))
     capture.rig.save(folder / "cameras.toml")
     write_hand_motion(capture.hand_motion, folder / "truth.npz")
-    film_capture(capture, folder, progress=progress)
+    film_capture(capture, folder, progress=progress, style=style)
     return capture

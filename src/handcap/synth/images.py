@@ -60,6 +60,10 @@ class ImageStyle:
         How many occluding blobs near the hand (both inclusive).
     background : (float, float)
         Mean background grey level, 0..1.
+    response : {"linear", "srgb"}
+        The grey levels written: linear in the light, as a machine-vision camera records them, or encoded as
+        sRGB (IEC 61966-2-1), as phones, webcams and most video do (after the noise: a camera encodes its raw
+        levels).
     """
 
     blur_sigma: tuple = (0.3, 1.2)
@@ -71,6 +75,7 @@ class ImageStyle:
     specular: tuple = (0.0, 0.35)
     occluders: tuple = (0, 2)
     background: tuple = (0.05, 0.5)
+    response: str = "linear"
 
     @classmethod
     def clean(cls) -> "ImageStyle":
@@ -425,7 +430,7 @@ class PatchRenderer:
 
 
 def camera_effects(image: np.ndarray, style: ImageStyle, rng) -> np.ndarray:
-    """What a camera does to a clean picture: defocus and motion blur, exposure, gamma, noise, 8 bits.
+    """What a camera does to a clean picture: defocus and motion blur, exposure, gamma, noise, its response, 8 bits.
 
     Parameters
     ----------
@@ -454,4 +459,8 @@ def camera_effects(image: np.ndarray, style: ImageStyle, rng) -> np.ndarray:
     level = image * 255.0
     noise = rng.normal(0, 1, image.shape) * np.sqrt(style.shot_noise ** 2 * level
                                                     + rng.uniform(*style.read_noise) ** 2)
-    return np.clip(np.round(level + noise), 0, 255).astype(np.uint8)
+    level = np.clip(level + noise, 0, 255)
+    if style.response == "srgb":
+        light = level / 255.0
+        level = 255.0 * np.where(light <= 0.0031308, 12.92 * light, 1.055 * light ** (1 / 2.4) - 0.055)
+    return np.clip(np.round(level), 0, 255).astype(np.uint8)
