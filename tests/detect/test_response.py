@@ -3,6 +3,8 @@ chosen on its own frames, so display-encoded frames read as their linear origina
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -61,6 +63,45 @@ def test_the_choice_looks_at_a_few_frames_only(grey, response, searches):
         choice.look(fake, frame)
     assert choice.response == response and fake.searches == searches
     assert choice.prepared(frame)[0, 0] == (147 if response == "srgb" else grey)
+
+
+class _Frames:
+    """One camera's frames held in memory (detect_capture's FrameSource interface)."""
+
+    camera = "cam"
+
+    def __init__(self, images):
+        self.images = images
+
+    def frames(self):
+        yield from enumerate(self.images)
+
+    def count(self):
+        return len(self.images)
+
+    def span(self):
+        return len(self.images)
+
+
+def test_the_frames_looked_at_are_read_the_way_chosen():
+    # Frame 0 reads more decoded (3 against 1), but the first three frames read more as recorded (9 against 5): the
+    # camera is linear, and frame 0 is read as recorded too. Its second pixel tells the frame (100 + 10 t, decoded
+    # 32, 40, 48).
+    tags = {(200, 100): 1, (147, 32): 3, (200, 110): 4, (147, 40): 1, (200, 120): 4, (147, 48): 1}
+
+    class Fake(_Counting):
+        def image(self, image, region=None):
+            found = super().image(image)
+            n = tags.get((int(image[0, 0]), int(image[0, 1])), 0)
+            return replace(found, block_text=np.array([f"A{k}" for k in range(n)]), block_xy=np.zeros((n, 4, 2)),
+                           block_score=np.ones(n))
+
+    frames = [np.full((4, 4), 200, np.uint8) for _ in range(4)]
+    for t, frame in enumerate(frames[:3]):
+        frame[0, 1] = 100 + 10 * t
+    run = detect_capture(Fake(), [_Frames(frames)], [], 20.0, progress=False)
+    assert run.responses == ("linear",)
+    assert np.bincount(run.arrays["block_frame"], minlength=4).tolist() == [1, 4, 4, 0]
 
 
 @pytest.fixture(scope="module")

@@ -250,70 +250,101 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     HandcapError
         A frame whose size is not its camera's.
     """
-    index = {n: k for k, n in enumerate(marker_names)}
-    rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
-    blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
-    images = empty = corrected = regions = sure = disowned = read = 0
-    frames, noisy, noise, responses = [0] * len(sources), 0, 0.0, []
+    out = _Rows(marker_names)
+    regions, responses = 0, []
     given = [response] * len(sources) if isinstance(response, str) else list(response)
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
               leave=False) as bar:
         for c, source in enumerate(sources):
-            tracker, choice = None, ResponseChoice(given[c])
+            tracker, choice, pending = None, ResponseChoice(given[c]), []
             for t, image in source.frames():
                 if sizes is not None:
                     check_size(source, t, image.shape, sizes[c])
                 if tracker is None or tracker.shape != image.shape[:2]:
                     tracker = Tracker(image.shape)
                 if choice.response is None:  # still choosing the camera's response: the whole frame, both ways
-                    found, region, missed = choice.look(detector, image), None, False
-                else:
-                    image = choice.prepared(image)
-                    region = tracker.region() if track else None
-                    found = detector.image(image, region) if region is not None else None
-                    missed = found is not None and tracker.missed(found, region)
-                    if found is None or missed:
-                        partial, found, region = found, detector.image(image), None
-                        # Only a miss the whole frame confirms, a tag it reads that the region did not, makes the
-                        # camera wait before it tries a region again; on a rendered grasp take 14 of 15 were not.
-                        missed = missed and bool(set(found.block_text.tolist()) - set(partial.block_text.tolist()))
+                    both = choice.look(detector, image)
+                    tracker.update(both[choice.leaning() == "srgb"], whole=True)
+                    pending.append((t, both))
+                    if choice.response is not None:  # chosen: the frames looked at, read the way chosen
+                        out.add_all(pending, c, choice.response)
+                        pending = []
+                    bar.update()
+                    continue
+                image = choice.prepared(image)
+                region = tracker.region() if track else None
+                found = detector.image(image, region) if region is not None else None
+                missed = found is not None and tracker.missed(found, region)
+                if found is None or missed:
+                    partial, found, region = found, detector.image(image), None
+                    # Only a miss the whole frame confirms, a tag it reads that the region did not, makes the
+                    # camera wait before it tries a region again; on a rendered grasp take 14 of 15 were not.
+                    missed = missed and bool(set(found.block_text.tolist()) - set(partial.block_text.tolist()))
                 regions += region is not None
                 tracker.update(found, whole=region is None, missed=missed)
-                images += 1
-                frames[c] += 1
-                noisy, noise = noisy + (found.noise > NOISE_LEARNED), max(noise, found.noise)
-                empty += len(found.corners) == 0
-                corrected, sure, disowned = corrected + found.corrected, sure + found.sure, disowned + found.disowned
-                read += found.read
-                named = [k for k, n in enumerate(found.names) if n is not None and n in index]
-                rows["frame"] += [t] * len(named)
-                rows["camera"] += [c] * len(named)
-                rows["marker"] += [index[found.names[k]] for k in named]
-                rows["xy"] += [found.corners[k] for k in named]
-                rows["score"] += [found.corner_score[k] for k in named]
-                blocks["block_text"] += list(found.block_text)
-                blocks["block_frame"] += [t] * len(found.block_text)
-                blocks["block_camera"] += [c] * len(found.block_text)
-                blocks["block_xy"] += list(found.block_xy)
-                blocks["block_score"] += list(found.block_score)
+                out.add(found, t, c)
                 bar.update()
+            out.add_all(pending, c, choice.leaning())  # a camera with fewer frames than the choice looks at
             responses.append(choice.leaning())
-    arrays = {
-        "camera_names": np.array([s.camera for s in sources]), "marker_names": np.array(marker_names, dtype=str),
-        "frame": np.array(rows["frame"], dtype=np.int64), "camera": np.array(rows["camera"], dtype=np.int64),
-        "marker": np.array(rows["marker"], dtype=np.int64),
-        "xy": np.array(rows["xy"], dtype=np.float64).reshape(-1, 2),
-        "score": np.array(rows["score"], dtype=np.float64), "rate": np.array(float(rate)),
-        "n_frames": np.array(max((s.span() for s in sources), default=0), dtype=np.int64),
-        "block_text": np.array(blocks["block_text"], dtype="<U2"),
-        "block_frame": np.array(blocks["block_frame"], dtype=np.int64),
-        "block_camera": np.array(blocks["block_camera"], dtype=np.int64),
-        "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
-        "block_score": np.array(blocks["block_score"], dtype=np.float64),
-    }
-    return CaptureDetections(arrays, images, empty, corrected, regions, sure, disowned, read, tuple(frames), noisy,
-                             noise, tuple(responses))
+    return CaptureDetections(out.arrays(sources, rate), out.images, out.empty, out.corrected, regions, out.sure,
+                             out.disowned, out.read, tuple(out.frames.get(c, 0) for c in range(len(sources))),
+                             out.noisy, out.noise, tuple(responses))
+
+
+class _Rows:
+    """The detections of a capture as they are added, frame by frame, and what is counted on the way."""
+
+    def __init__(self, marker_names):
+        self.marker_names = marker_names
+        self.index = {n: k for k, n in enumerate(marker_names)}
+        self.rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
+        self.blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
+        self.images = self.empty = self.corrected = self.sure = self.disowned = self.read = self.noisy = 0
+        self.noise, self.frames = 0.0, {}
+
+    def add_all(self, pending, camera: int, response: str) -> None:
+        """Frames searched both ways, ``pending`` [(frame, (as recorded, decoded))], read as ``response``."""
+        for t, both in pending:
+            self.add(both[response == "srgb"], t, camera)
+
+    def add(self, found: ImageDetections, t: int, camera: int) -> None:
+        """Frame ``t`` of ``camera``: its named corners' rows, its blocks, and the counts."""
+        self.images += 1
+        self.frames[camera] = self.frames.get(camera, 0) + 1
+        self.noisy, self.noise = self.noisy + (found.noise > NOISE_LEARNED), max(self.noise, found.noise)
+        self.empty += len(found.corners) == 0
+        self.corrected, self.sure = self.corrected + found.corrected, self.sure + found.sure
+        self.disowned, self.read = self.disowned + found.disowned, self.read + found.read
+        named = [k for k, n in enumerate(found.names) if n is not None and n in self.index]
+        self.rows["frame"] += [t] * len(named)
+        self.rows["camera"] += [camera] * len(named)
+        self.rows["marker"] += [self.index[found.names[k]] for k in named]
+        self.rows["xy"] += [found.corners[k] for k in named]
+        self.rows["score"] += [found.corner_score[k] for k in named]
+        self.blocks["block_text"] += list(found.block_text)
+        self.blocks["block_frame"] += [t] * len(found.block_text)
+        self.blocks["block_camera"] += [camera] * len(found.block_text)
+        self.blocks["block_xy"] += list(found.block_xy)
+        self.blocks["block_score"] += list(found.block_score)
+
+    def arrays(self, sources, rate: float) -> dict:
+        """The detections file's arrays (the module docstring), in the order the frames were added."""
+        rows, blocks = self.rows, self.blocks
+        return {
+            "camera_names": np.array([s.camera for s in sources]),
+            "marker_names": np.array(self.marker_names, dtype=str),
+            "frame": np.array(rows["frame"], dtype=np.int64), "camera": np.array(rows["camera"], dtype=np.int64),
+            "marker": np.array(rows["marker"], dtype=np.int64),
+            "xy": np.array(rows["xy"], dtype=np.float64).reshape(-1, 2),
+            "score": np.array(rows["score"], dtype=np.float64), "rate": np.array(float(rate)),
+            "n_frames": np.array(max((s.span() for s in sources), default=0), dtype=np.int64),
+            "block_text": np.array(blocks["block_text"], dtype="<U2"),
+            "block_frame": np.array(blocks["block_frame"], dtype=np.int64),
+            "block_camera": np.array(blocks["block_camera"], dtype=np.int64),
+            "block_xy": np.array(blocks["block_xy"], dtype=np.float64).reshape(-1, 4, 2),
+            "block_score": np.array(blocks["block_score"], dtype=np.float64),
+        }
 
 
 def check_size(source, frame: int, shape, size) -> None:

@@ -114,8 +114,9 @@ class ResponseChoice:
 
         Returns
         -------
-        ImageDetections
-            The frame's detections read the way that has read more tags so far (this frame included).
+        (ImageDetections, ImageDetections)
+            The frame's detections as recorded and decoded; read them as :attr:`response` once it is chosen
+            (:meth:`leaning` before).
         """
         found = detector.image(image), detector.image(linear_light(image))
         counts = np.array([len(f.block_text) for f in found])
@@ -125,4 +126,4 @@ class ResponseChoice:
         self.frames += 1
         if self.looks >= LOOKS or self.frames >= MOST_LOOKS:
             self.response = self.leaning()
-        return found[self.leaning() == "srgb"]
+        return found
