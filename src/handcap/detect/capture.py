@@ -85,6 +85,9 @@ class CaptureDetections:
     responses : tuple of str
         Each camera's response to light as its frames were read, ``linear`` or ``srgb``
         (:mod:`~handcap.detect.response`), in the order of the sources.
+    looked : tuple of (int, int)
+        Each camera's tags read in the frames its response was chosen on: as recorded and decoded ((0, 0) where
+        the response was given).
     """
 
     arrays: dict
@@ -99,6 +102,7 @@ class CaptureDetections:
     noisy: int = 0
     noise: float = 0.0
     responses: tuple = ()
+    looked: tuple = ()
 
 
 class Tracker:
@@ -251,7 +255,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         A frame whose size is not its camera's.
     """
     out = _Rows(marker_names)
-    regions, responses = 0, []
+    regions, responses, looked = 0, [], []
     given = [response] * len(sources) if isinstance(response, str) else list(response)
     hidden = None if progress is None else not progress
     with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
@@ -287,9 +291,10 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                 bar.update()
             out.add_all(pending, c, choice.leaning())  # a camera with fewer frames than the choice looks at
             responses.append(choice.leaning())
+            looked.append(tuple(int(n) for n in choice.tags))
     return CaptureDetections(out.arrays(sources, rate), out.images, out.empty, out.corrected, regions, out.sure,
                              out.disowned, out.read, tuple(out.frames.get(c, 0) for c in range(len(sources))),
-                             out.noisy, out.noise, tuple(responses))
+                             out.noisy, out.noise, tuple(responses), tuple(looked))
 
 
 class _Rows:

@@ -137,7 +137,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     images, corrected = run.images, run.corrected
     decoded = [s.camera for s, r in zip(sources, run.responses) if r == "srgb"]
     if decoded:
-        chosen = "chosen on their first frames, where they read more tags so" if response == "auto" else "--response"
+        tags = np.sum([n for n, r in zip(run.looked, run.responses) if r == "srgb"], axis=0)
+        chosen = (f"chosen on their first frames, which read {tags[1]} tags so against {tags[0]} as recorded"
+                  if response == "auto" else "--response")
         warnings.append(f"{_listed(decoded)} read as display-encoded (sRGB, as phones, webcams and most video record "
                         f"light; {chosen}): decoded to linear light, as the detector's networks learned, before the "
                         "search" + ("; --response linear reads them as recorded" if response == "auto" else ""))
