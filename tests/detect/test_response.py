@@ -168,7 +168,8 @@ def test_the_command_says_which_cameras_it_read_as_srgb(tmp_path, capsys):
             said = [w for w in data["warnings"] if "read as display-encoded (sRGB" in w]
             assert len(said) == (name == "phone" and response == "auto")
     err = capsys.readouterr().err
-    assert "camera phone read as display-encoded" in err and "which read 117 tags so against 114 as recorded" in err
+    assert "camera phone read as display-encoded" in err
+    assert "which read 117 tags decoded against 114 as recorded" in err
     assert counts["machine", "auto"] == counts["machine", "linear"] > 20
     assert counts["phone", "auto"] > counts["phone", "linear"]
     # Decoded, the phone's corners are placed as the machine's are (0.115 and 0.119 px from the truth, median); as
@@ -178,3 +179,13 @@ def test_the_command_says_which_cameras_it_read_as_srgb(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["detect", str(tmp_path / "phone"), "--out", str(tmp_path / "x.npz"), "--response", "log"])
     assert exit_.value.code == 2 and "invalid choice: 'log'" in capsys.readouterr().err
+
+
+def test_the_adapted_readers_views_are_decoded_where_the_camera_is_srgb():
+    from handcap.steps.detect import _spread
+
+    frames = [np.full((4, 4), 128, np.uint8), np.full((4, 4), 200, np.uint8)]
+    linear, phone = _Frames(frames), _Frames(frames)
+    images = _spread([linear, phone], ("linear", "srgb"))
+    assert [int(im[0, 0]) for im in images] == [128, 200, 55, 147]
+
