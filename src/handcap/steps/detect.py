@@ -101,6 +101,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                          shipped_notes)  # loads torch
     from handcap.detect.pipeline import Detector  # loads torch
 
+    ResponseChoice(response)  # an unknown response is refused before the networks load
     if adapt_steps < 0:
         raise HandcapError(f"--adapt-steps {adapt_steps}: give 0 (the shipped reader only) or more steps")
     if adapt_steps and template is not None:
@@ -131,14 +132,13 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
 
     marker_names = template.corner_names() if template is not None else []
     sizes = None if rig is None else [cameras[s.camera].size for s in sources]
-    ResponseChoice(response)  # an unknown response is refused before the first frame is read
     run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes,
                          response=response)
     images, corrected = run.images, run.corrected
     decoded = [s.camera for s, r in zip(sources, run.responses) if r == "srgb"]
     if decoded:
         tags = np.sum([n for n, r in zip(run.looked, run.responses) if r == "srgb"], axis=0)
-        chosen = (f"chosen on their first frames, which read {tags[1]} tags so against {tags[0]} as recorded"
+        chosen = (f"chosen on their first frames, which read {tags[1]} tags decoded against {tags[0]} as recorded"
                   if response == "auto" else "--response")
         warnings.append(f"{_listed(decoded)} read as display-encoded (sRGB, as phones, webcams and most video record "
                         f"light; {chosen}): decoded to linear light, as the detector's networks learned, before the "
