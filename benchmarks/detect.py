@@ -385,9 +385,9 @@ def encoded_srgb(image):
     import cv2
     import numpy as np
 
-    light = np.arange(256) / 255.0
-    code = np.where(light <= 0.0031308, 12.92 * light, 1.055 * light ** (1 / 2.4) - 0.055)
-    return cv2.LUT(image, np.clip(np.rint(255 * code), 0, 255).astype(np.uint8))
+    from handcap.core.srgb import srgb_encoded
+
+    return cv2.LUT(image, np.clip(np.rint(255 * srgb_encoded(np.arange(256) / 255.0)), 0, 255).astype(np.uint8))
 
 
 def print_response(detector, hands, pattern, frames: int = 3, cameras: int = 10) -> None:
@@ -398,6 +398,7 @@ def print_response(detector, hands, pattern, frames: int = 3, cameras: int = 10)
     from handcap.detect.capture import detect_capture
     from handcap.detect.evaluation import evaluate_detector
     from handcap.detect.response import linear_light
+    from handcap.detect.sources import ArrayFrames
 
     encoded = [replace(h, image=encoded_srgb(h.image)) for h in hands]
     parts = []
@@ -407,23 +408,10 @@ def print_response(detector, hands, pattern, frames: int = 3, cameras: int = 10)
         parts.append(f"{name} {100 * score.right / max(score.blocks, 1):.1f} % right / {score.wrong} wrong, "
                      f"corners named right {score.named_right / max(score.corners, 1):.1%}")
 
-    class Frames:  # one camera's frames held in memory (detect_capture's FrameSource interface)
-        def __init__(self, camera, images):
-            self.camera, self.images = camera, images
-
-        def frames(self):
-            yield from enumerate(self.images)
-
-        def count(self):
-            return len(self.images)
-
-        def span(self):
-            return len(self.images)
-
     chosen = {}
     for name, scenes in (("sRGB", encoded), ("linear", hands)):
         groups = [scenes[k:k + frames] for k in range(0, min(len(scenes), frames * cameras), frames)]
-        run = detect_capture(detector, [Frames(f"cam{k}", [s.image for s in g]) for k, g in enumerate(groups)],
+        run = detect_capture(detector, [ArrayFrames(f"cam{k}", [s.image for s in g]) for k, g in enumerate(groups)],
                              pattern.corner_names(), 30.0, progress=False)
         chosen[name] = f"{run.responses.count('srgb')} of {len(groups)} read as sRGB"
     print(f"the hand scenes encoded as sRGB ({len(hands)}, of {sum(len(h.block_text) for h in hands)} visible tags): "
@@ -437,24 +425,13 @@ def print_video(detector, video, pattern) -> None:
     import numpy as np
 
     from handcap.detect.capture import detect_capture
-
-    class Frames:  # a camera's frames held in memory (detect_capture's FrameSource interface)
-        camera = "cam"
-
-        def frames(self):
-            yield from enumerate(video)
-
-        def count(self):
-            return len(video)
-
-        def span(self):
-            return len(video)
+    from handcap.detect.sources import ArrayFrames
 
     runs = {}
     for track in (False, True):
         start = time.perf_counter()
-        runs[track] = detect_capture(detector, [Frames()], pattern.corner_names(), 30.0, track=track, progress=False,
-                                     response="linear")  # rendered: linear light, nothing to choose
+        runs[track] = detect_capture(detector, [ArrayFrames("cam", video)], pattern.corner_names(), 30.0,
+                                     track=track, progress=False, response="linear")  # rendered: linear light
         runs[track] = (runs[track], (time.perf_counter() - start) / len(video))
     (whole, whole_s), (tracked, tracked_s) = runs[False], runs[True]
     a, b = whole.arrays, tracked.arrays

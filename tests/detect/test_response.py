@@ -14,7 +14,7 @@ from handcap.cli import main
 from handcap.detect.capture import detect_capture
 from handcap.detect.pipeline import ImageDetections
 from handcap.detect.response import LOOKS, MOST_LOOKS, ResponseChoice, linear_light
-from handcap.detect.sources import frame_sources
+from handcap.detect.sources import ArrayFrames, frame_sources
 from handcap.patterns import session_pattern
 
 DEXTERCAP = "0123456789ACEFHPUY"  # the alphabet of the shared rendered scenes (tests/detect/conftest.py)
@@ -65,24 +65,6 @@ def test_the_choice_looks_at_a_few_frames_only(grey, response, searches):
     assert choice.prepared(frame)[0, 0] == (147 if response == "srgb" else grey)
 
 
-class _Frames:
-    """One camera's frames held in memory (detect_capture's FrameSource interface)."""
-
-    camera = "cam"
-
-    def __init__(self, images):
-        self.images = images
-
-    def frames(self):
-        yield from enumerate(self.images)
-
-    def count(self):
-        return len(self.images)
-
-    def span(self):
-        return len(self.images)
-
-
 def test_the_frames_looked_at_are_read_the_way_chosen():
     # Frame 0 reads more decoded (3 against 1), but the first three frames read more as recorded (9 against 5): the
     # camera is linear, and frame 0 is read as recorded too. Its second pixel tells the frame (100 + 10 t, decoded
@@ -99,7 +81,7 @@ def test_the_frames_looked_at_are_read_the_way_chosen():
     frames = [np.full((4, 4), 200, np.uint8) for _ in range(4)]
     for t, frame in enumerate(frames[:3]):
         frame[0, 1] = 100 + 10 * t
-    run = detect_capture(Fake(), [_Frames(frames)], [], 20.0, progress=False)
+    run = detect_capture(Fake(), [ArrayFrames("cam", frames)], [], 20.0, progress=False)
     assert run.responses == ("linear",) and run.looked == ((9, 5),)
     assert np.bincount(run.arrays["block_frame"], minlength=4).tolist() == [1, 4, 4, 0]
 
@@ -186,7 +168,7 @@ def test_the_adapted_readers_views_are_decoded_where_the_camera_is_srgb():
     from handcap.steps.detect import _spread
 
     frames = [np.full((4, 4), 128, np.uint8), np.full((4, 4), 200, np.uint8)]
-    linear, phone = _Frames(frames), _Frames(frames)
+    linear, phone = ArrayFrames("linear", frames), ArrayFrames("phone", frames)
     images = _spread([linear, phone], ("linear", "srgb"))
     assert [int(im[0, 0]) for im in images] == [128, 200, 55, 147]
 

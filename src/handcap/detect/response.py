@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.core.srgb import srgb_decoded
 
 #: The responses a camera's frames may be read with: chosen on them, as recorded, or decoded from sRGB.
 RESPONSES = ("auto", "linear", "srgb")
@@ -35,14 +36,8 @@ LOOKS = 3
 MOST_LOOKS = 10
 
 
-def _srgb_table() -> np.ndarray:
-    """sRGB grey levels 0-255 to linear light (IEC 61966-2-1's decoding), as 0-255 (256,) uint8."""
-    v = np.arange(256) / 255.0
-    light = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-    return np.clip(np.rint(255.0 * light), 0, 255).astype(np.uint8)
-
-
-_SRGB_TO_LINEAR = _srgb_table()
+#: sRGB grey levels 0-255 to linear light (IEC 61966-2-1's decoding), as 0-255 (256,) uint8.
+_SRGB_TO_LINEAR = np.clip(np.rint(255.0 * srgb_decoded(np.arange(256) / 255.0)), 0, 255).astype(np.uint8)
 
 
 def linear_light(image: np.ndarray) -> np.ndarray:

@@ -126,6 +126,34 @@ class FrameSource:
         return self.numbers[-1] + 1 if self.numbers else self.count()
 
 
+class ArrayFrames:
+    """One camera's frames held in memory, read as a :class:`FrameSource` is (by
+    :func:`handcap.detect.capture.detect_capture`): frame ``t`` is ``images[t]``.
+
+    Parameters
+    ----------
+    camera : str
+        The camera's name.
+    images : sequence of ndarray (H, W) uint8
+        Its grey frames in order.
+    """
+
+    def __init__(self, camera: str, images):
+        self.camera, self.images = str(camera), list(images)
+
+    def frames(self):
+        """Yield (index, image) for every frame, in order."""
+        yield from enumerate(self.images)
+
+    def count(self) -> int:
+        """Number of frames."""
+        return len(self.images)
+
+    def span(self) -> int:
+        """One more than the last frame index."""
+        return len(self.images)
+
+
 def read_image(path, colour: bool = False) -> np.ndarray:
     """One image file as grey uint8 ``(H, W)``.
 

@@ -25,6 +25,7 @@ import numpy as np
 import trimesh
 
 from handcap.core.errors import HandcapError
+from handcap.core.srgb import srgb_encoded
 from handcap.synth.textures import PatchAtlas
 
 #: The GLSL shaders (files beside this module): vertex positions through the projection; grey shading of
@@ -461,6 +462,6 @@ def camera_effects(image: np.ndarray, style: ImageStyle, rng) -> np.ndarray:
                                                     + rng.uniform(*style.read_noise) ** 2)
     level = np.clip(level + noise, 0, 255)
     if style.response == "srgb":
-        light = level / 255.0
-        level = 255.0 * np.where(light <= 0.0031308, 12.92 * light, 1.055 * light ** (1 / 2.4) - 0.055)
+        level = 255.0 * srgb_encoded(level / 255.0)
     return np.clip(np.round(level), 0, 255).astype(np.uint8)
+
