@@ -349,6 +349,47 @@ def test_mirrored_photographs_read_nothing_and_say_so(tmp_path, capsys):
     assert "do not fit" in capsys.readouterr().err
 
 
+def test_an_object_added_to_a_printed_session_is_named_with_the_extended_template(tmp_path, capsys):
+    """`handcap pattern --extend` gives a lab's own object tags the printed hand patches do not use: photographs
+    of both are named right with the new template, and the object's tags do not fit the old one (a warning)."""
+    from handcap.detect.scenes import PageMaker
+    from handcap.synth.pages import PageLook
+
+    first, later = tmp_path / "first", tmp_path / "later"
+    assert main(["pattern", "--out", str(first), "--hands", "right", "--objects", "none", "--no-svg"]) == 0
+    assert main(["pattern", "--out", str(later), "--extend", str(first / "pattern.toml"), "--object",
+                 "mug=side:3x8,lid:3x3", "--no-svg"]) == 0
+    whole = Pattern.load(later / "pattern.toml")
+    sheet = Pattern((whole.patch("right:index_middle"), whole.patch("mug:side"), whole.patch("mug:lid")),
+                    whole.alphabet, whole.pitch)
+    maker = PageMaker(8, pattern=sheet, look=PageLook(square_px=(22.0, 28.0), tilt_deg=(0.0, 15.0), occluders=(0, 0),
+                                                      size=(640, 480), glint=0.0))
+    (tmp_path / "cam").mkdir()
+    scenes = [maker.scene() for _ in range(3)]
+    for k, scene in enumerate(scenes):
+        cv2.imwrite(str(tmp_path / "cam" / f"{k}.png"), scene.image)
+    runs = {}
+    for name, template in (("extended", later), ("printed", first)):
+        out = tmp_path / f"{name}.npz"
+        assert main(["detect", str(tmp_path / "cam"), "--pattern", str(template / "pattern.toml"), "--rate", "30",
+                     "--response", "linear", "--out", str(out)]) == 0
+        runs[name] = np.load(out)
+    data = runs["extended"]
+    names = data["marker_names"][data["marker"]]
+    mug = np.char.startswith(names, "mug:")
+    truth = [dict(zip(s.corner_names, s.corners)) for s in scenes]
+    visible = sum(n.startswith("mug:") for s in scenes for n in s.corner_names)
+    assert mug.sum() > 0.6 * visible and (~mug).sum() > 0.6 * (sum(len(s.corner_names) for s in scenes) - visible)
+    error = [np.linalg.norm(xy - truth[t][n]) for t, n, xy in zip(data["frame"], names, data["xy"])]
+    assert max(error) < 1.0  # every corner named where the truth puts that name
+    old = runs["printed"]
+    assert not np.char.startswith(old["marker_names"][old["marker"]], "mug:").any()
+    (warning,) = [w for w in old["warnings"] if "do not fit" in w]
+    assert "first/pattern.toml the pattern.toml these patches were printed from" in warning
+    assert not any("do not fit" in w for w in data["warnings"])
+    capsys.readouterr()
+
+
 def test_a_sheet_read_unsurely_without_a_template_says_so(tmp_path, capsys):
     """Another generator's sheet (DexterCap's glyphs and layout, a font the reader never saw), read without a
     template: the reader sees tags in most squares but reports few, and the warning says so with its counts;

@@ -20,6 +20,7 @@ from handcap.patterns import (ALPHABET, DEXTERCAP_ALPHABET, HAND_PATCHES, Patch,
 from handcap.patterns.alphabet import lookalike_warning, lookalikes
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.pattern import checker_tags
+from handcap.patterns.session import own_object
 from handcap.patterns.sheet import write_sheets
 from handcap.layouts import load_layout
 
@@ -147,6 +148,54 @@ def test_a_binary_file_is_not_a_template(tmp_path):
         Pattern.load(path)
 
 
+MUG = {"side": (3, 12), "lid": (3, 3)}
+
+
+def test_own_objects_are_read_from_their_spec():
+    assert own_object("mug=side:3x12,lid:3x3") == ("mug", MUG)
+    assert list(own_object(" drill-2=grip:4X6 , trigger:1x3 ")[1]) == ["grip", "trigger"]  # the order given
+    pattern = session_pattern(("left",), (), own=dict([own_object("mug=side:3x12,lid:3x3")]))
+    side = pattern.patch("mug:side")
+    assert (side.rows, side.cols, side.segment) == (3, 12, "object:mug")
+    assert len(pattern.of_owner("mug")) == 2 and len(pattern.tags) == len(set(pattern.tags)) == 188 + 18 + 5
+    assert "mug:lid_r3c3" in pattern.corner_names()
+
+
+@pytest.mark.parametrize("spec, match", [
+    ("mug", "NAME=FACE:RxC"), ("mug=", "NAME=FACE:RxC"), ("mug=side", "not FACE:RxC"), ("mug=side:3", "not FACE:RxC"),
+    ("mug=side:3x12,", "not FACE:RxC"), ("mug=side:0x3", "1 to 200"), ("mug=side:3x201", "1 to 200"),
+    ("mug=side:3x3,side:2x2", "given twice"), ("left=back:3x3", "hand's or a standard object's"),
+    ("cuboid=xp:4x4", "hand's or a standard object's"), ("my mug=side:3x3", "NAME=FACE:RxC"),
+    ("mug=si/de:3x3", "not FACE:RxC"),
+])
+def test_bad_own_objects_are_one_clear_error(spec, match):
+    with pytest.raises(HandcapError, match=match):
+        own_object(spec)
+
+
+def test_an_extended_session_keeps_its_tags_and_gives_the_new_patches_unused_ones():
+    mug = {"mug": MUG}
+    whole = session_pattern(("right",), ("cuboid",), own=mug)
+    # Extending the first part of a session gives the session made whole at once.
+    assert session_pattern((), ("cuboid",), own=mug, base=session_pattern(("right",), ())) == whole
+    # A session whose tags are not the first ones: the left hand printed alone, the right hand added later.
+    left = session_pattern(("left",), ("sphere",))
+    left = Pattern(tuple(p for p in left.patches if p.owner == "left"), left.alphabet, left.pitch)  # tags after 0
+    both = session_pattern(("right",), (), own=mug, base=left)
+    assert both.patches[:19] == left.patches and both.owners == ("left", "right", "mug")
+    new = {t for p in both.patches[19:] for row in p.tags for t in row if t}
+    assert not new & set(left.tags) and len(both.tags) == len(set(both.tags)) == 2 * 188 + 23
+    assert sorted(both.tags) == sorted(set(both.tags))
+    # What cannot be added to a printed session.
+    for kwargs, match in (({"hands": ("left",)}, "'left' already has patches"),
+                          ({"own": {"right": MUG}}, "hand's or a standard object's"),
+                          ({"pitch": 0.004, "own": mug}, "4 mm squares|5 mm squares"),
+                          ({"alphabet": DEXTERCAP_ALPHABET, "own": mug}, "alphabet"),
+                          ({"own": {"big": {"a": (40, 30)}}}, "uses 188 of the 729 tags .* need 600 more")):
+        with pytest.raises(HandcapError, match=match):
+            session_pattern(**{"hands": (), "objects": (), **kwargs}, base=left)
+
+
 def _page_objects(pdf_path, page: int = 0):
     doc = pdfium.PdfDocument(str(pdf_path))
     pdf_page = doc[page]
@@ -211,6 +260,38 @@ def test_the_pattern_command(tmp_path, capsys):
     assert (again / "pattern.pdf").exists() and not (again / "pattern.toml").exists()
     err = capsys.readouterr().err
     assert "Traceback" not in err
+
+
+def test_the_pattern_command_extends_a_printed_session(tmp_path, capsys):
+    first, later = tmp_path / "first", tmp_path / "later"
+    assert main(["pattern", "--out", str(first), "--hands", "right", "--objects", "none", "--no-svg"]) == 0
+    before = (first / "pattern.toml").read_bytes()
+    assert main(["pattern", "--out", str(later), "--extend", str(first / "pattern.toml"), "--object",
+                 "mug=side:3x12,lid:3x3", "--object", "drill=grip:4x6", "--objects", "cuboid", "--no-svg"]) == 0
+    out = capsys.readouterr().out
+    assert "19 patches of" in out and "prints the 9 new ones (cuboid, mug, drill)" in out
+    assert (first / "pattern.toml").read_bytes() == before  # the printed session's template is untouched
+    old, new = Pattern.load(first / "pattern.toml"), Pattern.load(later / "pattern.toml")
+    assert new.patches[:19] == old.patches and new.owners == ("right", "cuboid", "mug", "drill")
+    assert new == session_pattern(("right",), ("cuboid",), own={"mug": MUG, "drill": {"grip": (4, 6)}})
+    # The PDF prints the new patches only: their names under them, none of the hand's.
+    doc = pdfium.PdfDocument(str(later / "pattern.pdf"))
+    text = " ".join(doc[k].get_textpage().get_text_range() for k in range(len(doc)))
+    assert "mug:side" in text and "drill:grip" in text and "cuboid:zn" in text and "right:" not in text
+    pages = len(doc)
+    doc.close()
+    assert pages == 1
+    # Not into the printed session's folder, not with --template, and not with nothing to add.
+    for args, match in ((["--out", str(first), "--force", "--object", "m=a:2x2"], "holds the input"),
+                        (["--out", str(tmp_path / "x"), "--template", str(first / "pattern.toml")], "give one of"),
+                        (["--out", str(tmp_path / "x")], "nothing to add"),
+                        (["--out", str(tmp_path / "x"), "--hands", "right"], "already has patches"),
+                        (["--out", str(tmp_path / "x"), "--object", "m=a:2x2", "--object", "m=b:2x2"], "given twice"),
+                        (["--out", str(tmp_path / "x"), "--pitch", "4", "--object", "m=a:2x2"], "5 mm squares")):
+        assert main(["pattern", "--extend", str(first / "pattern.toml"), *args]) == 2
+        err = capsys.readouterr().err
+        assert match in err and len(err.strip().splitlines()) == 1
+    assert (first / "pattern.toml").read_bytes() == before and not (tmp_path / "x").exists()
 
 
 def test_alphabets_with_glyphs_fonts_draw_alike_are_warned_of(tmp_path, capsys):

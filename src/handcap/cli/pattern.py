@@ -13,9 +13,10 @@ def _list(text: str) -> tuple[str, ...]:
 
 
 def _cmd_pattern(a):
-    return pattern_step.pattern(a.out, hands=_list(a.hands), objects=_list(a.objects), alphabet=a.alphabet,
-                                pitch_mm=a.pitch, font=a.font, paper=a.paper, template=a.template,
-                                svg=not a.no_svg, force=a.force)
+    return pattern_step.pattern(a.out, hands=None if a.hands is None else _list(a.hands),
+                                objects=None if a.objects is None else _list(a.objects), own=a.object or (),
+                                alphabet=a.alphabet, pitch_mm=a.pitch, font=a.font, paper=a.paper,
+                                template=a.template, extend=a.extend, svg=not a.no_svg, force=a.force)
 
 
 def add_pattern(verbs) -> None:
@@ -26,14 +27,20 @@ def add_pattern(verbs) -> None:
                                      "at exact physical size with a 50 mm scale bar; and pattern.toml, the "
                                      "template that handcap detect and the layouts use.")
     p.add_argument("--out", required=True, help="folder to write pattern.toml, pattern.pdf and pattern-N.svg into")
-    p.add_argument("--hands", default=",".join(HANDS), help="hands that wear patches: right,left, right, left or "
-                                                            "none (default %(default)s)")
-    p.add_argument("--objects", default=",".join(OBJECT_PATCHES),
-                   help=f"objects with patches, comma-separated from {', '.join(OBJECT_PATCHES)}, or none "
-                        "(default %(default)s)")
-    p.add_argument("--alphabet", default=ALPHABET, help="glyphs of the tags (default %(default)s; DexterCap's "
-                                                        "patches use 0123456789ACEFHPUY)")
-    p.add_argument("--pitch", type=float, default=5.0, help="side of a square, mm (default %(default)s)")
+    p.add_argument("--hands", help=f"hands that wear patches: right,left, right, left or none (default "
+                                   f"{','.join(HANDS)}; none with --extend)")
+    p.add_argument("--objects", help=f"standard objects with patches, comma-separated from "
+                                     f"{', '.join(OBJECT_PATCHES)}, or none (default all; none with --extend)")
+    p.add_argument("--object", action="append", metavar="NAME=FACE:RxC,...",
+                   help="an object of your own and the patch of each face, rows x columns of squares, e.g. "
+                        "mug=side:3x12,lid:3x3 (repeat for more objects); track it with track-object "
+                        "--markers 'mug:*'")
+    p.add_argument("--extend", metavar="PATTERN_TOML",
+                   help="add to a session already printed: the new pattern.toml keeps its patches and tags, the new "
+                        "patches get tags it does not use, and the PDF prints the new ones only")
+    p.add_argument("--alphabet", help=f"glyphs of the tags (default {ALPHABET}, or those of --extend; DexterCap's "
+                                      "patches use 0123456789ACEFHPUY)")
+    p.add_argument("--pitch", type=float, help="side of a square, mm (default 5, or that of --extend)")
     p.add_argument("--font", help="a bold monospace .ttf/.otf font for the glyphs (default: DejaVu Sans Mono Bold, "
                                   "shipped with matplotlib)")
     p.add_argument("--paper", choices=tuple(PAPERS), default="a4", help="page size (default %(default)s)")

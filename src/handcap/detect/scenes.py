@@ -118,16 +118,20 @@ class PageMaker:
         hand's where the alphabet has too few tags for a session.
     layout : GlyphLayout, optional
         Where the glyphs sit in a square (default: handcap's).
+    pattern : Pattern, optional
+        The patches the sheet holds instead (``alphabet`` is then its own).
     """
 
     def __init__(self, seed: int = 0, *, look: PageLook | None = None, style: ImageStyle | None = None,
-                 font=None, alphabet: str | None = None, layout: GlyphLayout | None = None):
+                 font=None, alphabet: str | None = None, layout: GlyphLayout | None = None,
+                 pattern: Pattern | None = None):
         self.rng = np.random.default_rng(seed)
         kwargs = {} if alphabet is None else {"alphabet": alphabet}
-        try:
-            pattern = session_pattern(**kwargs)
-        except HandcapError:  # too few tags for a whole session
-            pattern = session_pattern(("right",), (), **kwargs)
+        if pattern is None:
+            try:
+                pattern = session_pattern(**kwargs)
+            except HandcapError:  # too few tags for a whole session
+                pattern = session_pattern(("right",), (), **kwargs)
         self.alphabet = pattern.alphabet
         self.names, self.blocks_index, self.block_text = _block_truth(pattern.patches)
         atlas = build_atlas(pattern.patches, load_font(font, pattern.alphabet), square=48, layout=layout)

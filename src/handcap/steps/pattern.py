@@ -9,53 +9,83 @@ from handcap.core.files import check_output_folder
 from handcap.patterns.alphabet import ALPHABET, lookalike_warning
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.pattern import Pattern
-from handcap.patterns.session import HANDS, session_pattern
+from handcap.patterns.session import HANDS, own_object, session_pattern
 from handcap.patterns.sheet import write_sheets
 from handcap.steps.step import Step
 
 DEFAULT_OBJECTS = ("cuboid", "cylinder", "sphere", "cube2x2")
 
 
-def pattern(out, *, hands=HANDS, objects=DEFAULT_OBJECTS, alphabet: str = ALPHABET, pitch_mm: float = 5.0,
-            font=None, paper: str = "a4", template=None, svg: bool = True, force: bool = False) -> Step:
+def pattern(out, *, hands=None, objects=None, own=(), alphabet: str | None = None, pitch_mm: float | None = None,
+            font=None, paper: str = "a4", template=None, extend=None, svg: bool = True, force: bool = False) -> Step:
     """Write a session's coded patches into folder ``out``: ``pattern.toml``, ``pattern.pdf``, ``pattern-N.svg``.
 
     Parameters
     ----------
     out : str or Path
         Folder to write into (new or empty, or ``force``).
-    hands : sequence of {'right', 'left'}
-        Hands that wear the 19 patches.
-    objects : sequence of str
-        Objects whose faces carry patches (see :data:`handcap.patterns.session.OBJECT_PATCHES`).
-    alphabet : str
-        Glyphs of the tags.
-    pitch_mm : float
-        Side of a square, millimetres.
+    hands : sequence of {'right', 'left'}, optional
+        Hands that wear the 19 patches (default both; none with ``extend``).
+    objects : sequence of str, optional
+        Objects whose faces carry patches (see :data:`handcap.patterns.session.OBJECT_PATCHES`; default all
+        four; none with ``extend``).
+    own : sequence of str
+        Objects of the user's own, each ``NAME=FACE:RxC[,FACE:RxC...]``
+        (:func:`handcap.patterns.session.own_object`).
+    alphabet : str, optional
+        Glyphs of the tags (default handcap's 27, or those of ``extend``).
+    pitch_mm : float, optional
+        Side of a square, millimetres (default 5, or that of ``extend``).
     font : str, Path or None
         A .ttf/.otf font for the glyphs (default: DejaVu Sans Mono Bold).
     paper : {'a4', 'letter'}
     template : str, Path or None
         Print this ``pattern.toml`` instead of making one (``hands``, ``objects``, ``alphabet`` and
         ``pitch_mm`` are then taken from it).
+    extend : str, Path or None
+        The ``pattern.toml`` of patches already printed: the new template holds them, unchanged, and the new
+        hands and objects with tags they do not use; the pages print the new patches only.
     svg : bool
         Also write one SVG per page.
     force : bool
         Write into a folder that holds files.
     """
-    folder = check_output_folder(out, template, force=force)
+    folder = check_output_folder(out, template, extend, force=force)
+    if template is not None and extend is not None:
+        raise HandcapError("--template prints a template as it is and --extend adds to one; give one of them")
+    base = Pattern.load(extend) if extend is not None else None
     if template is not None:
         chosen = Pattern.load(template)
     else:
+        own_objects = [own_object(spec) for spec in own]
+        names = [name for name, _ in own_objects]
+        if len(set(names)) != len(names):
+            raise HandcapError(f"object {next(n for n in names if names.count(n) > 1)!r} is given twice; give each "
+                               "object once, with all its faces")
+        hands = tuple(hands) if hands is not None else () if base else HANDS
+        objects = tuple(objects) if objects is not None else () if base else DEFAULT_OBJECTS
+        if base is not None and not (hands or objects or own_objects):
+            raise HandcapError(f"--extend {extend}: nothing to add; give --hands, --objects or --object")
+        alphabet = alphabet or (base.alphabet if base else ALPHABET)
+        pitch_mm = pitch_mm if pitch_mm is not None else base.pitch * 1000 if base else 5.0
         if not 0.5 <= pitch_mm <= 100:
             raise HandcapError(f"--pitch {pitch_mm} mm: give the side of a square in millimetres, 0.5 to 100")
-        chosen = session_pattern(hands, objects, alphabet=alphabet, pitch=pitch_mm / 1000)
+        chosen = session_pattern(hands, objects, own=dict(own_objects), alphabet=alphabet, pitch=pitch_mm / 1000,
+                                 base=base)
     glyph_font = load_font(font, chosen.alphabet)
+    warnings = lookalike_warning(chosen.alphabet)
     if template is None:
-        chosen = Pattern(chosen.patches, chosen.alphabet, chosen.pitch, glyph_font.name)
+        font_name = base.font if base is not None and base.font else glyph_font.name
+        if font_name != glyph_font.name:
+            warnings.append(f"the new patches are printed in {glyph_font.name} and those of {extend} in {font_name} "
+                            "(give --font to match them); the detector reads both, a little less surely in a font "
+                            "it did not learn")
+        chosen = Pattern(chosen.patches, chosen.alphabet, chosen.pitch, font_name)
+    printed = chosen if base is None else Pattern(chosen.patches[len(base.patches):], chosen.alphabet, chosen.pitch,
+                                                  chosen.font)
     folder.mkdir(parents=True, exist_ok=True)
     toml_path = chosen.save(folder / "pattern.toml") if template is None else None
-    written = write_sheets(chosen, glyph_font, folder / "pattern.pdf", folder / "pattern" if svg else None,
+    written = write_sheets(printed, glyph_font, folder / "pattern.pdf", folder / "pattern" if svg else None,
                            paper=paper)
     outputs = ([str(toml_path)] if toml_path else []) + [str(p) for p in written]
     pages = sum(p.suffix == ".svg" for p in written)
@@ -63,4 +93,9 @@ def pattern(out, *, hands=HANDS, objects=DEFAULT_OBJECTS, alphabet: str = ALPHAB
     lines = (chosen.summary(),
              f"wrote {', '.join(Path(p).name for p in outputs)} in {folder}{count}",
              "print the PDF at 100 % (actual size) and check its 50 mm scale bar with a ruler")
-    return Step(lines, tuple(lookalike_warning(chosen.alphabet)), tuple(outputs), chosen)
+    if base is not None:
+        new = len(printed.patches)
+        lines += (f"{len(base.patches)} patches of {extend} kept, their tags unchanged; the PDF prints the {new} new "
+                  f"one{'s' if new > 1 else ''} ({', '.join(printed.owners)}). Detect the whole session with the new "
+                  f"{toml_path}",)
+    return Step(lines, tuple(warnings), tuple(outputs), chosen)
