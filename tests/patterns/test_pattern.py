@@ -292,6 +292,17 @@ def test_the_pattern_command_extends_a_printed_session(tmp_path, capsys):
         err = capsys.readouterr().err
         assert match in err and len(err.strip().splitlines()) == 1
     assert (first / "pattern.toml").read_bytes() == before and not (tmp_path / "x").exists()
+    # A worn patch printed again: the PDF holds it alone.
+    assert main(["pattern", "--out", str(tmp_path / "worn"), "--template", str(later / "pattern.toml"), "--only",
+                 "mug:s*,right:index_distal", "--no-svg"]) == 0
+    assert "prints 2 of the template's 28 patches (--only): right:index_distal, mug:side" in capsys.readouterr().out
+    doc = pdfium.PdfDocument(str(tmp_path / "worn" / "pattern.pdf"))
+    text = doc[0].get_textpage().get_text_range()
+    doc.close()
+    assert "right:index_distal" in text and "mug:side" in text and "mug:lid" not in text and "index_middle" not in text
+    assert main(["pattern", "--out", str(tmp_path / "y"), "--template", str(later / "pattern.toml"), "--only",
+                 "mug:handle"]) == 2
+    assert "--only 'mug:handle': no patch" in capsys.readouterr().err and not (tmp_path / "y").exists()
 
 
 def test_alphabets_with_glyphs_fonts_draw_alike_are_warned_of(tmp_path, capsys):

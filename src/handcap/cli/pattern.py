@@ -16,7 +16,8 @@ def _cmd_pattern(a):
     return pattern_step.pattern(a.out, hands=None if a.hands is None else _list(a.hands),
                                 objects=None if a.objects is None else _list(a.objects), own=a.object or (),
                                 alphabet=a.alphabet, pitch_mm=a.pitch, font=a.font, paper=a.paper,
-                                template=a.template, extend=a.extend, svg=not a.no_svg, force=a.force)
+                                template=a.template, extend=a.extend, only=_list(a.only or ""), svg=not a.no_svg,
+                                force=a.force)
 
 
 def add_pattern(verbs) -> None:
@@ -45,6 +46,9 @@ def add_pattern(verbs) -> None:
                                   "shipped with matplotlib)")
     p.add_argument("--paper", choices=tuple(PAPERS), default="a4", help="page size (default %(default)s)")
     p.add_argument("--template", help="print the patches of this pattern.toml instead of making a new template")
+    p.add_argument("--only", metavar="PATCHES",
+                   help="print only these patches, OWNER:NAME comma-separated (shell patterns such as "
+                        "'right:index_*' work): a worn patch printed again with --template")
     p.add_argument("--no-svg", action="store_true", help="write the PDF only")
     p.add_argument("--force", action="store_true", help="write into a folder that already holds files")
     p.set_defaults(run=_cmd_pattern)

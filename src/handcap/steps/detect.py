@@ -154,7 +154,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     if template is not None and run.sure >= MIN_SURE and run.disowned > DISOWNED_SHARE * run.sure:
         warnings.append(f"{run.disowned} of the {run.sure} tags the reader was sure of do not fit the template's "
                         f"patches where they were read: is {pattern} the pattern.toml these patches were printed "
-                        "from? (tags of patches it lacks are dropped too)")
+                        "from? (tags of patches it lacks are dropped too; patches printed by two handcap pattern "
+                        "runs share tags, which pattern --extend avoids)")
     elif images and not len(run.arrays["block_text"]):
         warnings.append(_nothing_read(detector, sources[0]))
     kept = len(run.arrays["block_text"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from fnmatch import fnmatchcase
 from pathlib import Path
 
 from handcap.core.errors import HandcapError
@@ -17,7 +18,8 @@ DEFAULT_OBJECTS = ("cuboid", "cylinder", "sphere", "cube2x2")
 
 
 def pattern(out, *, hands=None, objects=None, own=(), alphabet: str | None = None, pitch_mm: float | None = None,
-            font=None, paper: str = "a4", template=None, extend=None, svg: bool = True, force: bool = False) -> Step:
+            font=None, paper: str = "a4", template=None, extend=None, only=(), svg: bool = True,
+            force: bool = False) -> Step:
     """Write a session's coded patches into folder ``out``: ``pattern.toml``, ``pattern.pdf``, ``pattern-N.svg``.
 
     Parameters
@@ -45,6 +47,9 @@ def pattern(out, *, hands=None, objects=None, own=(), alphabet: str | None = Non
     extend : str, Path or None
         The ``pattern.toml`` of patches already printed: the new template holds them, unchanged, and the new
         hands and objects with tags they do not use; the pages print the new patches only.
+    only : sequence of str
+        Print only the patches whose ``OWNER:NAME`` matches one of these (shell patterns such as
+        ``right:index_*``): a worn patch printed again. The template still holds every patch.
     svg : bool
         Also write one SVG per page.
     force : bool
@@ -83,6 +88,8 @@ def pattern(out, *, hands=None, objects=None, own=(), alphabet: str | None = Non
         chosen = Pattern(chosen.patches, chosen.alphabet, chosen.pitch, font_name)
     printed = chosen if base is None else Pattern(chosen.patches[len(base.patches):], chosen.alphabet, chosen.pitch,
                                                   chosen.font)
+    if only:
+        printed = _only(printed, only)
     folder.mkdir(parents=True, exist_ok=True)
     toml_path = chosen.save(folder / "pattern.toml") if template is None else None
     written = write_sheets(printed, glyph_font, folder / "pattern.pdf", folder / "pattern" if svg else None,
@@ -93,9 +100,23 @@ def pattern(out, *, hands=None, objects=None, own=(), alphabet: str | None = Non
     lines = (chosen.summary(),
              f"wrote {', '.join(Path(p).name for p in outputs)} in {folder}{count}",
              "print the PDF at 100 % (actual size) and check its 50 mm scale bar with a ruler")
-    if base is not None:
+    if only:
+        lines += (f"the PDF prints {len(printed.patches)} of the template's {len(chosen.patches)} patches (--only): "
+                  f"{', '.join(p.key for p in printed.patches[:6])}"
+                  + (f" and {len(printed.patches) - 6} more" if len(printed.patches) > 6 else ""),)
+    elif base is not None:
         new = len(printed.patches)
         lines += (f"{len(base.patches)} patches of {extend} kept, their tags unchanged; the PDF prints the {new} new "
                   f"one{'s' if new > 1 else ''} ({', '.join(printed.owners)}). Detect the whole session with the new "
                   f"{toml_path}",)
     return Step(lines, tuple(warnings), tuple(outputs), chosen)
+
+
+def _only(pattern: Pattern, only) -> Pattern:
+    """The patches of ``pattern`` whose key matches one of the shell patterns ``only``; each must match one."""
+    for want in only:
+        if not any(fnmatchcase(p.key, want) for p in pattern.patches):
+            raise HandcapError(f"--only {want!r}: no patch to print is called so (patches are OWNER:NAME, e.g. "
+                               f"{pattern.patches[0].key}; patterns such as 'right:index_*' work)")
+    return Pattern(tuple(p for p in pattern.patches if any(fnmatchcase(p.key, w) for w in only)), pattern.alphabet,
+                   pattern.pitch, pattern.font)
