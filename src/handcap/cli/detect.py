@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from handcap.steps import detect as detect_step
+from handcap.steps import overlay as overlay_step
 
 
 def _cmd_detect(a):
@@ -57,3 +58,26 @@ def add_detect(verbs) -> None:
                         "the search; default auto: chosen for each camera on its first frames that read tags, "
                         "searched both ways (a warning names the cameras read as sRGB)")
     p.set_defaults(run=_cmd_detect)
+
+
+def _cmd_overlay(a):
+    return overlay_step.overlay(a.detections, a.inputs, a.out, every=a.every, markers=a.markers, rig=a.rig,
+                                force=a.force)
+
+
+def add_overlay(verbs) -> None:
+    p = verbs.add_parser("overlay", help="draw 2D detections over the images they came from, to check them by eye",
+                         description="One JPEG per camera and frame (OUT/CAMERA/FRAME.jpg): every named corner a "
+                                     "dot in its owner's colour (right hand orange, left hand blue, objects in "
+                                     "turn), each patch's name over it, every read tag outlined with its text and "
+                                     "its underlined side drawn thick (a tag read upside down shows); with --markers "
+                                     "and --rig the 3D markers reprojected as crosses.")
+    p.add_argument("detections", help="2D detections file (handcap detect's, or any other with named corners)")
+    p.add_argument("inputs", nargs="+", help="the images or videos detect was given, one per camera (or a folder of "
+                                             "them), matched to the file's cameras by name")
+    p.add_argument("--out", required=True, help="folder to write the pictures into")
+    p.add_argument("--every", type=int, default=1, metavar="N", help="draw every N-th frame (default 1: all)")
+    p.add_argument("--markers", help="3D markers (triangulate's or clean's) to draw reprojected; needs --rig")
+    p.add_argument("--rig", help="cameras file to reproject --markers with")
+    p.add_argument("--force", action="store_true", help="write into a folder that already holds files")
+    p.set_defaults(run=_cmd_overlay)

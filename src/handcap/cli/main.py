@@ -9,7 +9,7 @@ import warnings
 
 from handcap.cli.calibrate import add_calibrate
 from handcap.cli.convert import add_convert
-from handcap.cli.detect import add_detect
+from handcap.cli.detect import add_detect, add_overlay
 from handcap.cli.export import add_export
 from handcap.cli.label import add_label
 from handcap.cli.layout import add_layout
@@ -48,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_layout(verbs)
     add_pattern(verbs)
     add_detect(verbs)
+    add_overlay(verbs)
     add_markerless(verbs)
     add_export(verbs)
     add_report(verbs)

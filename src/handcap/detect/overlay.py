@@ -1,0 +1,179 @@
+"""Detections drawn over the camera images they came from, to check them by eye.
+
+Every named corner is a dot in its owner's colour (the right hand, the left
+hand and each object apart), every patch's name is written at the middle of
+its corners, and every read block is outlined, its underlined side (the bottom, in reading order)
+drawn thicker, and the tag it was read as written on the black square above it
+(in reading order), beside the printed glyphs, so a misreading or a tag read
+upside down shows. Reprojected 3D markers, where given, are crosses beside the
+dots: a cross far from its dot is a corner the triangulation (or the
+calibration) does not agree with.
+
+Coordinates are pixels ``(x, y)`` at column x, row y, pixel centres at integers (as the detections file
+gives them); images are BGR uint8 ``(H, W, 3)``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: Owner colours, BGR: the right hand orange, the left hand blue, then objects in turn.
+HAND_COLOURS = {"right": (0, 140, 255), "left": (255, 120, 0)}
+OBJECT_COLOURS = ((60, 200, 60), (200, 60, 200), (0, 220, 220), (220, 220, 0), (60, 60, 230), (160, 160, 160))
+#: Outline drawn under text, BGR.
+_SHADE = (0, 0, 0)
+_CORNER = re.compile(r"^(?:(?P<owner>[^:]+):)?(?P<patch>.+)_r\d+c\d+$")
+
+
+@dataclass(frozen=True)
+class FrameMarks:
+    """What to draw over one camera's frame.
+
+    Attributes
+    ----------
+    xy : ndarray (N, 2)
+        Named corners, pixels.
+    names : ndarray (N,) str
+        Their marker names (``OWNER:PATCH_rRcC`` for coded patches; any name otherwise).
+    blocks : ndarray (B, 4, 2)
+        Read blocks' corners in reading order (top-left, top-right, bottom-right, bottom-left), pixels.
+    tags : ndarray (B,) str
+        Their tags.
+    projected : ndarray (P, 2), optional
+        Reprojected 3D markers, pixels.
+    projected_names : ndarray (P,) str, optional
+        Their names (matched to ``names`` for the colour).
+    """
+
+    xy: np.ndarray
+    names: np.ndarray
+    blocks: np.ndarray
+    tags: np.ndarray
+    projected: np.ndarray | None = None
+    projected_names: np.ndarray | None = None
+
+
+def owner_colour(name: str, owners: dict) -> tuple:
+    """The BGR colour of a marker's owner (the part of its name before ``:``; one colour for unowned names).
+
+    Parameters
+    ----------
+    name : str
+        A marker name.
+    owners : dict
+        Owner -> colour given so far; a new object owner gets the next colour and is added.
+
+    Returns
+    -------
+    tuple of 3 int
+    """
+    owner = name.split(":", 1)[0] if ":" in name else ""
+    if owner in HAND_COLOURS:
+        return HAND_COLOURS[owner]
+    if owner not in owners:
+        owners[owner] = OBJECT_COLOURS[len(owners) % len(OBJECT_COLOURS)]
+    return owners[owner]
+
+
+def draw_frame(image: np.ndarray, marks: FrameMarks, title: str = "", owners: dict | None = None) -> np.ndarray:
+    """``image`` with ``marks`` drawn over it (see the module docstring).
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, 3) uint8
+        The camera's frame, grey or BGR.
+    marks : FrameMarks
+    title : str
+        A line written at the top left (the camera, the frame, the counts).
+    owners : dict, optional
+        Owner colours shared across frames (:func:`owner_colour`), so an object keeps its colour.
+
+    Returns
+    -------
+    ndarray (H, W, 3) uint8
+        A new image; ``image`` is not changed.
+    """
+    owners = {} if owners is None else owners
+    canvas = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
+    canvas = (canvas.astype(np.float32) * 0.75).astype(np.uint8)  # dimmed, so the marks stand out
+    side = _block_side(marks, canvas.shape)
+    thin = max(1, int(round(side / 24)))
+    for quad, text in zip(np.asarray(marks.blocks, float).reshape(-1, 4, 2), marks.tags):
+        points = _fixed(quad)
+        cv2.polylines(canvas, [points], True, (255, 255, 255), thin, cv2.LINE_AA, shift=4)
+        cv2.line(canvas, tuple(points[3]), tuple(points[2]), (255, 255, 255), 2 * thin + 1, cv2.LINE_AA, shift=4)
+        width = float(np.linalg.norm(quad[1] - quad[0]))
+        # On the black square above the tag (in reading order), so the printed glyphs stay in view beside it.
+        above = quad.mean(axis=0) + 2.0 * ((quad[0] + quad[1]) / 2 - quad.mean(axis=0))
+        _text(canvas, str(text), above, max(width, 6.0) * 0.8, (255, 255, 0))
+    radius = max(2.0, side / 10)
+    colours = [owner_colour(str(n), owners) for n in marks.names]
+    for (x, y), colour in zip(np.asarray(marks.xy, float).reshape(-1, 2), colours):
+        cv2.circle(canvas, _fixed(np.array([x, y])), int(round(radius * 16)), colour, -1, cv2.LINE_AA, shift=4)
+    if marks.projected is not None:
+        names = marks.projected_names if marks.projected_names is not None else [""] * len(marks.projected)
+        arm = int(round(radius * 1.6 * 16))
+        for (x, y), name in zip(np.asarray(marks.projected, float).reshape(-1, 2), names):
+            centre = _fixed(np.array([x, y]))
+            colour = owner_colour(str(name), owners)
+            for dx, dy in ((arm, arm), (arm, -arm)):
+                cv2.line(canvas, (centre[0] - dx, centre[1] - dy), (centre[0] + dx, centre[1] + dy), colour, thin,
+                         cv2.LINE_AA, shift=4)
+    for patch, where, colour in _patch_labels(marks, owners, side):
+        _text(canvas, patch, where, 3.0 * max(side, 8.0), colour)
+    if title:
+        scale = max(0.5, canvas.shape[1] / 1600)
+        _text(canvas, title, None, 0.0, (255, 255, 255), scale=scale)
+    return canvas
+
+
+def _block_side(marks: FrameMarks, shape) -> float:
+    """The median side of the read blocks (pixels), or of the grid the corners make, or a share of the image."""
+    blocks = np.asarray(marks.blocks, float).reshape(-1, 4, 2)
+    if len(blocks):
+        return float(np.median(np.linalg.norm(blocks - np.roll(blocks, 1, axis=1), axis=2)))
+    xy = np.asarray(marks.xy, float).reshape(-1, 2)
+    if len(xy) > 1:
+        gaps = np.linalg.norm(xy[:, None] - xy[None], axis=2) if len(xy) <= 2000 else None
+        if gaps is not None:
+            np.fill_diagonal(gaps, np.inf)
+            return float(np.median(gaps.min(axis=1)))
+    return max(shape[:2]) / 100
+
+
+def _patch_labels(marks: FrameMarks, owners: dict, side: float):
+    """(patch name, where to write it, its colour) for every coded patch with corners in the frame: centred over
+    its corners, a square's side above the highest."""
+    groups = {}
+    for name, xy in zip(marks.names, np.asarray(marks.xy, float).reshape(-1, 2)):
+        match = _CORNER.match(str(name))
+        if match is not None:
+            key = (match.group("owner") + ":" if match.group("owner") else "") + match.group("patch")
+            groups.setdefault(key, (str(name), []))[1].append(xy)
+    return [(key, np.array([np.mean(points, axis=0)[0], np.min(points, axis=0)[1] - side]), owner_colour(name, owners))
+            for key, (name, points) in groups.items()]
+
+
+def _fixed(points: np.ndarray) -> np.ndarray:
+    """Pixel positions as OpenCV's drawing takes them with ``shift=4`` (sixteenths of a pixel)."""
+    return np.round(np.asarray(points, float) * 16).astype(np.int32)
+
+
+def _text(canvas, text: str, centre, width: float, colour, scale: float | None = None) -> None:
+    """``text`` centred on ``centre`` and fitted to ``width`` pixels (or at the top left at ``scale``), shaded."""
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    if scale is None:
+        (w, _), _ = cv2.getTextSize(text, font, 1.0, 1)
+        scale = min(max(width / max(w, 1), 0.3), 4.0)
+    thick = max(1, int(round(scale * 1.5)))
+    (w, h), _ = cv2.getTextSize(text, font, scale, thick)
+    if centre is None:
+        origin = (int(8 * scale), int(8 * scale) + h)
+    else:
+        origin = (int(round(centre[0] - w / 2)), int(round(centre[1] + h / 2)))
+    cv2.putText(canvas, text, origin, font, scale, _SHADE, thick + 2, cv2.LINE_AA)
+    cv2.putText(canvas, text, origin, font, scale, colour, thick, cv2.LINE_AA)
