@@ -230,6 +230,31 @@ def test_triangulation_with_moved_cameras_is_reported(capture, tmp_path):
     assert f"{100 * (1 - bad.used.mean()):.0f} % of the detections were rejected" in line
 
 
+def test_markers_too_few_cameras_saw_are_told_apart_from_a_wrong_cameras_file(capture, tmp_path, capsys):
+    from handcap.cli import main
+    from handcap.io import save_npz, write_rig
+    two = {k: v for k, v in capture.detections.items()}
+    pairs = list(zip(np.asarray(two["frame"]).tolist(), np.asarray(two["marker"]).tolist()))
+    keep = np.array([pairs[:k].count(pair) < 2 for k, pair in enumerate(pairs)])  # two views of each marker at most
+    for key in ("frame", "camera", "marker", "xy", "score"):
+        two[key] = np.asarray(two[key])[keep]
+    two.pop("wrong_id", None)
+    save_npz(tmp_path / "two.npz", two)
+    write_rig(capture.rig, tmp_path / "cameras.toml")
+    assert main(["triangulate", str(tmp_path / "two.npz"), "--cameras", str(tmp_path / "cameras.toml"), "--out",
+                 str(tmp_path / "m.npz")]) == 0
+    err = capsys.readouterr().err
+    assert "none was seen by 3 cameras in one frame (--min-views 3); at most 2 saw one" in err
+    assert "cameras file" not in err
+    assert main(["triangulate", str(tmp_path / "two.npz"), "--cameras", str(tmp_path / "cameras.toml"), "--out",
+                 str(tmp_path / "m2.npz"), "--min-views", "2"]) == 0
+    assert "no marker was triangulated" not in capsys.readouterr().err
+    # Where the views were there but disagree, the cameras file is blamed, as before.
+    (line,) = p.triangulation_warnings(np.full((3, 4), np.nan), np.zeros((3, 4)), threshold_px=5.0,
+                                       seen=np.full((3, 4), 4), min_views=3)
+    assert "check that the cameras file matches the detections" in line
+
+
 def test_camera_checks():
     assert p.camera_warnings([0.3, 0.6], names=["a", "b"]) == []
     (line,) = p.camera_warnings([0.3, 2.5, np.nan], names=["a", "b", "c"])

@@ -128,8 +128,8 @@ def object_warnings(track, *, threshold: float, rate: float | None = None) -> li
     return out
 
 
-def triangulation_warnings(error_px, views, *, threshold_px: float, used=None, min_fraction: float = 0.5
-                           ) -> list[str]:
+def triangulation_warnings(error_px, views, *, threshold_px: float, used=None, min_fraction: float = 0.5,
+                           seen=None, min_views: int | None = None) -> list[str]:
     """Checks of triangulated markers: reprojection error against the inlier threshold, rejected views,
     markers rarely reconstructed.
 
@@ -145,6 +145,11 @@ def triangulation_warnings(error_px, views, *, threshold_px: float, used=None, m
         Per detection: kept as an inlier.
     min_fraction : float
         Fewest plausible fraction of frames in which a marker is reconstructed.
+    seen : ndarray of shape (T, M) int, optional
+        Cameras that detected each marker in each frame: where none was seen by ``min_views``, the warning for
+        no marker triangulated says so instead of blaming the cameras file.
+    min_views : int, optional
+        The inlier views a marker needed.
 
     Returns
     -------
@@ -154,6 +159,12 @@ def triangulation_warnings(error_px, views, *, threshold_px: float, used=None, m
     out = []
     found = np.isfinite(error_px)
     if not found.any():
+        most = int(np.max(seen, initial=0)) if seen is not None else None
+        if most is not None and min_views is not None and 0 < most < min_views:
+            fewer = int(np.sum(np.asarray(seen) == most))
+            return [f"no marker was triangulated in any frame: none was seen by {min_views} cameras in one frame "
+                    f"(--min-views {min_views}); at most {most} saw one ({fewer} marker-frames). Give --min-views "
+                    f"{most} (then no view can be outvoted as an outlier), or film with more cameras overlapping"]
         return ["no marker was triangulated in any frame; check that the cameras file matches the detections"]
     mean = float(error_px[found].mean())
     if mean > 0.5 * threshold_px:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from handcap.io import check_not_input, marker_suffix, read_markers, write_markers
 from handcap.io.camera_formats import read_rig
 from handcap.layouts import load_layout
@@ -66,9 +68,12 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     seconds = time.perf_counter() - start
     markers = result.to_markers()
     pitch_figures, pitch_warnings = q.pitch_check(markers, merged.pitch)
+    seen = np.zeros((merged.n_frames, len(merged.marker_names)), dtype=np.int64)
+    looks = np.unique(np.stack([merged.frame, merged.marker, merged.camera]), axis=1)  # one per camera
+    np.add.at(seen, (looks[0], looks[1]), 1)
     markers = q.attach(markers, [*rig.warnings, *q.triangulation_warnings(
-        result.error_px, result.views, threshold_px=threshold_px, used=result.used), *q.marker_warnings(markers),
-        *pitch_warnings])
+        result.error_px, result.views, threshold_px=threshold_px, used=result.used, seen=seen,
+        min_views=min_views), *q.marker_warnings(markers), *pitch_warnings])
     write_markers(markers, out)
     quality = write_quality(result, out)
     s = result.counts()
