@@ -13,7 +13,7 @@ from handcap import HandcapError
 from handcap.cli import main
 from handcap.detect.capture import detect_capture
 from handcap.detect.pipeline import ImageDetections
-from handcap.detect.response import LOOKS, MOST_LOOKS, ResponseChoice, linear_light
+from handcap.detect.response import LOOKS, MOST_LOOKS, NEAR, ResponseChoice, block_contrast, linear_light
 from handcap.detect.sources import ArrayFrames, frame_sources
 from handcap.patterns import session_pattern
 
@@ -84,6 +84,50 @@ def test_the_frames_looked_at_are_read_the_way_chosen():
     run = detect_capture(Fake(), [ArrayFrames("cam", frames)], [], 20.0, progress=False)
     assert run.responses == ("linear",) and run.looked == ((9, 5),)
     assert np.bincount(run.arrays["block_frame"], minlength=4).tolist() == [1, 4, 4, 0]
+
+
+def test_the_ink_is_measured_against_the_paper_in_each_block():
+    from handcap.detect.scenes import PageMaker
+    from handcap.synth.images import ImageStyle
+    from handcap.synth.pages import PageLook
+
+    maker = PageMaker(3, look=PageLook(square_px=(24.0, 30.0), tilt_deg=(0.0, 20.0), curl=(0.0, 0.0), ink=(0.1, 0.1),
+                                       shade=(1.0, 1.0), occluders=(0, 0), size=(640, 480), glint=0.0),
+                      style=ImageStyle.clean())
+    scene = maker.scene()
+    ink = block_contrast(scene.image, scene.blocks)
+    assert len(ink) > 20 and np.nanmedian(ink) == pytest.approx(0.1, abs=0.015)  # the ink printed at 0.1
+    # Encoded as sRGB: the ink over the paper as the standard's encoding gives it, for this photograph's paper.
+    paper = np.percentile(scene.image, 95) / 255.0
+    expected = _srgb_level(0.1 * paper) / _srgb_level(paper)
+    assert np.nanmedian(block_contrast(_srgb(scene.image), scene.blocks)) == pytest.approx(expected, rel=0.1)
+    assert 0.3 < expected < 0.4
+    # Blocks it cannot measure: too small, off the image.
+    odd = np.array([np.zeros((4, 2)), scene.blocks[0] + 5000.0, [[0, 0], [1, 0], [1, 1], [0, 1]]])
+    assert np.isnan(block_contrast(scene.image, odd)).all()
+
+
+def _srgb_level(x):
+    from handcap.core.srgb import srgb_encoded
+
+    return float(srgb_encoded(np.array(x)))
+
+
+def test_where_both_ways_read_as_many_tags_the_ink_decides(detector):
+    from handcap.detect.scenes import PageMaker
+    from handcap.synth.images import ImageStyle
+    from handcap.synth.pages import PageLook
+
+    maker = PageMaker(4, alphabet=DEXTERCAP, look=PageLook(square_px=(26.0, 30.0), tilt_deg=(0.0, 10.0),
+                                                           occluders=(0, 0), size=(640, 480), glint=0.0),
+                      style=ImageStyle.clean())
+    images = [maker.scene().image for _ in range(LOOKS)]
+    for given, frames in (("linear", images), ("srgb", [_srgb(i) for i in images])):
+        choice = ResponseChoice()
+        for image in frames:
+            choice.look(detector, image)
+        assert abs(int(choice.tags[0]) - int(choice.tags[1])) <= NEAR * max(choice.tags)  # as many either way
+        assert choice.tags.min() > 20 and choice.response == given
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.noise import NOISE_LEARNED
-from handcap.detect.response import ResponseChoice, linear_light
+from handcap.detect.response import NEAR, ResponseChoice, linear_light
 from handcap.detect.sources import frame_notes, frame_sources, short_videos
 from handcap.io import read_rig
 from handcap.steps.step import Step
@@ -138,7 +138,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     decoded = [s.camera for s, r in zip(sources, run.responses) if r == "srgb"]
     if decoded:
         tags = np.sum([n for n, r in zip(run.looked, run.responses) if r == "srgb"], axis=0)
+        near = abs(int(tags[1]) - int(tags[0])) <= NEAR * max(tags)
         chosen = (f"chosen on their first frames, which read {tags[1]} tags decoded against {tags[0]} as recorded"
+                  + ("; about as many, so the printed ink's grey level against the paper's decided" if near else "")
                   if response == "auto" else "--response")
         warnings.append(f"{_listed(decoded)} read as display-encoded (sRGB, as phones, webcams and most video record "
                         f"light; {chosen}): decoded to linear light, as the detector's networks learned, before the "
