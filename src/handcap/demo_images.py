@@ -16,7 +16,8 @@
 
 Writes into the output folder (rewritten on every run): ``calibration/`` and
 ``take/``, each with ``cameras.toml``, ``images/CAM/FRAME.png``,
-``image_truth.npz``, ``pattern.toml``, ``detections.npz`` (from the images),
+``image_truth.npz``, ``pattern.toml``, ``detections.npz`` (from the images), ``overlay/CAM/FRAME.jpg``
+(the first camera's detections drawn over its frames, :mod:`handcap.detect.overlay`),
 ``triangulated.c3d``, ``cleaned.c3d`` and ``truth.npz`` (the true hand motion);
 ``attachment.npz``, ``motion.npz`` and ``summary.json``/``summary.txt`` beside them.
 """
@@ -30,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from handcap.core.files import atomic_output, file_stamps, save_npz, written_since
+from handcap.detect.overlay import write_pictures
 from handcap.detect.capture import detect_capture
 from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector
@@ -93,6 +95,8 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
                              response="linear")
         seconds = time.perf_counter() - start
         save_npz(folder / "detections.npz", run.arrays | {"pitch": np.array(pattern.pitch)})
+        # To look at: the detections drawn over one camera's frames (handcap overlay draws any camera's).
+        write_pictures(run.arrays, sources[:1], folder / "overlay", progress=False)
         summary.update(_detection_figures(key, run, folder / "image_truth.npz", seconds))
         triangulated = triangulate_detections(read_detections(folder / "detections.npz"), capture.rig,
                                               min_views=config.min_views, progress=progress)

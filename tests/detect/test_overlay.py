@@ -130,3 +130,13 @@ def test_detections_of_other_images_are_said_not_to_fit(tmp_path, capsys):
         cv2.imwrite(str(tmp_path / "images" / "cam_b" / f"{t:04d}.png"), np.zeros((40, 40), np.uint8))
     assert main(["overlay", "--out", str(tmp_path / "o"), str(tmp_path / "det.npz"), str(tmp_path / "images")]) == 0
     assert "lie outside their images: are these the images" in capsys.readouterr().err
+
+
+def test_a_file_with_part_of_the_block_rows_is_one_clear_error(tmp_path, capsys):
+    _take(tmp_path)
+    data = dict(np.load(tmp_path / "det.npz"))
+    del data["block_xy"]
+    save_npz(tmp_path / "part.npz", data)
+    assert main(["overlay", str(tmp_path / "part.npz"), str(tmp_path / "images"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "but not block_xy" in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "o").exists()

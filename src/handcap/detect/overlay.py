@@ -18,9 +18,19 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from pathlib import Path
+
 import cv2
 import numpy as np
+from tqdm import tqdm
 
+from handcap.core.errors import HandcapError
+from handcap.core.files import atomic_output
+
+#: Block rows ``handcap detect`` adds to the detections file (optional: other detections files lack them).
+BLOCK_KEYS = ("block_text", "block_frame", "block_camera", "block_xy")
+#: JPEG quality of the pictures written.
+QUALITY = 90
 #: Owner colours, BGR: the right hand orange, the left hand blue, then objects in turn.
 HAND_COLOURS = {"right": (0, 140, 255), "left": (255, 120, 0)}
 OBJECT_COLOURS = ((60, 200, 60), (200, 60, 200), (0, 220, 220), (220, 220, 0), (60, 60, 230), (160, 160, 160))
@@ -177,3 +187,102 @@ def _text(canvas, text: str, centre, width: float, colour, scale: float | None =
         origin = (int(round(centre[0] - w / 2)), int(round(centre[1] + h / 2)))
     cv2.putText(canvas, text, origin, font, scale, _SHADE, thick + 2, cv2.LINE_AA)
     cv2.putText(canvas, text, origin, font, scale, colour, thick, cv2.LINE_AA)
+
+
+def read_blocks(arrays: dict, what: str = "detections") -> dict:
+    """The read blocks of a detections file's arrays, checked: ``text`` (B,), ``frame``, ``camera`` (B,) int,
+    ``xy`` (B, 4, 2) pixels, and ``present`` (whether the file has block rows; none is no error).
+
+    Parameters
+    ----------
+    arrays : dict
+        The file's arrays (:data:`BLOCK_KEYS` where ``handcap detect`` wrote them).
+    what : str
+        The file, for messages.
+
+    Raises
+    ------
+    HandcapError
+        Some block keys without the others, or arrays that disagree in length or shape.
+    """
+    present = [k for k in BLOCK_KEYS if k in arrays]
+    if not present:
+        return {"present": False, "text": np.zeros(0, str), "frame": np.zeros(0, int), "camera": np.zeros(0, int),
+                "xy": np.zeros((0, 4, 2))}
+    if len(present) != len(BLOCK_KEYS):
+        raise HandcapError(f"{what}: has {', '.join(present)} but not "
+                           f"{', '.join(k for k in BLOCK_KEYS if k not in present)}; the read blocks need all four")
+    n = len(arrays["block_text"])
+    try:
+        xy = np.asarray(arrays["block_xy"], dtype=float).reshape(n, 4, 2)
+        frame, camera = (np.asarray(arrays[k]).astype(np.int64).reshape(n) for k in ("block_frame", "block_camera"))
+    except (ValueError, TypeError):
+        raise HandcapError(f"{what}: its read blocks' arrays disagree in length or shape") from None
+    return {"present": True, "text": np.asarray(arrays["block_text"]).astype(str), "frame": frame,
+            "camera": camera, "xy": xy}
+
+
+def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=None, progress: bool | None = None,
+                   what: str = "detections") -> tuple[int, int, int]:
+    """Draw a capture's detections over its cameras' frames into ``folder/CAMERA/FRAME.jpg`` (atomically).
+
+    Parameters
+    ----------
+    arrays : dict
+        The detections file's arrays (``camera_names``, ``marker_names``, ``frame``, ``camera``, ``marker``,
+        ``xy`` pixels; the block rows where there are).
+    sources : sequence
+        The cameras to draw (:class:`handcap.detect.sources.FrameSource`), named as in ``camera_names``.
+    folder : str or Path
+    every : int
+        Draw every ``every``-th frame.
+    projected : callable, optional
+        (camera name, frame) -> (pixels (P, 2), names (P,)) of 3D markers to draw reprojected.
+    progress : bool, optional
+        A progress bar over frames (default: when stderr is a terminal).
+    what : str
+        The detections' source, for messages.
+
+    Returns
+    -------
+    written : int
+        Pictures written.
+    outside, total : int
+        Corners drawn outside their image, and all drawn.
+    """
+    folder, names = Path(folder), [str(n) for n in arrays["camera_names"]]
+    blocks = read_blocks(arrays, what)
+    marker_names = np.asarray(arrays["marker_names"])
+    frame, camera, xy_all = (np.asarray(arrays[k]) for k in ("frame", "camera", "xy"))
+    owners, written, outside, total = {}, 0, 0, 0
+    frames = sum(-(-max(s.span(), 1) // every) for s in sources)
+    bar = tqdm(total=frames, unit="frame", desc="overlay", disable=(not progress) if progress is not None else None)
+    try:
+        for source in sources:
+            c = names.index(source.camera)
+            rows, block_rows = camera == c, blocks["camera"] == c
+            (folder / source.camera).mkdir(parents=True, exist_ok=True)
+            for t, image in source.frames(colour=True):
+                if t % every:
+                    continue
+                here, block_here = rows & (frame == t), block_rows & (blocks["frame"] == t)
+                xy = np.asarray(xy_all[here], dtype=float).reshape(-1, 2)
+                height, width = image.shape[:2]
+                total += len(xy)
+                outside += int(np.sum((xy[:, 0] < -0.5) | (xy[:, 1] < -0.5) | (xy[:, 0] > width - 0.5)
+                                      | (xy[:, 1] > height - 0.5)))
+                marks = FrameMarks(xy, marker_names[np.asarray(arrays["marker"])[here]], blocks["xy"][block_here],
+                                   blocks["text"][block_here], *(projected(source.camera, t) if projected else ()))
+                title = (f"{source.camera} frame {t}: {len(xy)} named corners"
+                         + (f", {int(block_here.sum())} tags" if blocks["present"] else ""))
+                ok, code = cv2.imencode(".jpg", draw_frame(image, marks, title, owners),
+                                        [cv2.IMWRITE_JPEG_QUALITY, QUALITY])
+                if not ok:
+                    raise HandcapError(f"{source.camera} frame {t}: the picture could not be encoded as JPEG")
+                with atomic_output(folder / source.camera / f"{t:06d}.jpg", "wb") as fh:
+                    fh.write(code.tobytes())
+                written += 1
+                bar.update(1)
+    finally:
+        bar.close()
+    return written, outside, total
