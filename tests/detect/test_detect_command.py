@@ -390,6 +390,41 @@ def test_an_object_added_to_a_printed_session_is_named_with_the_extended_templat
     capsys.readouterr()
 
 
+def test_patches_printed_twice_are_said_to_be(tmp_path, capsys):
+    """Two copies of a patch in view (a page printed twice, or two sessions' patches sharing tags): every tag is read
+    at two white squares of one image. The vote drops them, and a warning says why; one copy reads as before."""
+    from handcap.detect.scenes import PageMaker
+    from handcap.synth.pages import PageLook
+
+    whole = session_pattern(("right",), ())
+    sheet = Pattern((whole.patch("right:dorsum_proximal"),), whole.alphabet, whole.pitch)
+    whole.save(tmp_path / "pattern.toml")
+    maker = PageMaker(6, pattern=sheet, look=PageLook(square_px=(22.0, 26.0), tilt_deg=(0.0, 10.0), curl=(0.0, 0.0),
+                                                      occluders=(0, 0), size=(480, 400), glint=0.0))
+    one, other = maker.scene().image, maker.scene().image
+    h = min(len(one), len(other))
+    for name, image in (("once", one), ("twice", np.hstack([one[:h], other[:h]]))):
+        (tmp_path / name).mkdir()
+        cv2.imwrite(str(tmp_path / name / "0.png"), image)
+    runs = {}
+    for name, extra in (("once", ["--pattern"]), ("twice", ["--pattern"]), ("free", [])):
+        out = tmp_path / f"{name}.npz"
+        folder = tmp_path / ("once" if name == "once" else "twice")
+        assert main(["detect", str(folder), *extra, *([str(tmp_path / "pattern.toml")] if extra else []), "--rate",
+                     "30", "--response", "linear", "--out", str(out)]) == 0
+        runs[name] = np.load(out)
+    said = {k: [w for w in v["warnings"] if "read at another white square" in w] for k, v in runs.items()}
+    assert said["once"] == [] and len(runs["once"]["block_text"]) > 15
+    (warning,) = said["twice"]
+    assert "patches printed twice" in warning and "the vote drops such tags" in warning
+    assert len(runs["twice"]["block_text"]) < len(runs["once"]["block_text"])  # two copies: fewer kept than one
+    (warning,) = said["free"]
+    assert "both are reported" in warning
+    texts = runs["free"]["block_text"].tolist()
+    assert sum(texts.count(t) == 2 for t in set(texts)) > 10  # without a template each copy's tag is reported
+    capsys.readouterr()
+
+
 def test_a_sheet_read_unsurely_without_a_template_says_so(tmp_path, capsys):
     """Another generator's sheet (DexterCap's glyphs and layout, a font the reader never saw), read without a
     template: the reader sees tags in most squares but reports few, and the warning says so with its counts;

@@ -88,6 +88,10 @@ class CaptureDetections:
     looked : tuple of (int, int)
         Each camera's tags read in the frames its response was chosen on: as recorded and decoded ((0, 0) where
         the response was given).
+    twice : int
+        Sure readings whose tag the reader was sure of at another white square of the same image too.
+    twice_images : int
+        Images that hold such readings.
     """
 
     arrays: dict
@@ -103,6 +107,8 @@ class CaptureDetections:
     noise: float = 0.0
     responses: tuple = ()
     looked: tuple = ()
+    twice: int = 0
+    twice_images: int = 0
 
 
 class Tracker:
@@ -294,7 +300,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
             looked.append(tuple(int(n) for n in choice.tags))
     return CaptureDetections(out.arrays(sources, rate), out.images, out.empty, out.corrected, regions, out.sure,
                              out.disowned, out.read, tuple(out.frames.get(c, 0) for c in range(len(sources))),
-                             out.noisy, out.noise, tuple(responses), tuple(looked))
+                             out.noisy, out.noise, tuple(responses), tuple(looked), out.twice, out.twice_images)
 
 
 class _Rows:
@@ -306,6 +312,7 @@ class _Rows:
         self.rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
         self.blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
         self.images = self.empty = self.corrected = self.sure = self.disowned = self.read = self.noisy = 0
+        self.twice = self.twice_images = 0
         self.noise, self.frames = 0.0, {}
 
     def add_all(self, pending, camera: int, response: str) -> None:
@@ -321,6 +328,7 @@ class _Rows:
         self.empty += len(found.corners) == 0
         self.corrected, self.sure = self.corrected + found.corrected, self.sure + found.sure
         self.disowned, self.read = self.disowned + found.disowned, self.read + found.read
+        self.twice, self.twice_images = self.twice + found.twice, self.twice_images + (found.twice > 0)
         named = [k for k, n in enumerate(found.names) if n is not None and n in self.index]
         self.rows["frame"] += [t] * len(named)
         self.rows["camera"] += [camera] * len(named)

@@ -24,6 +24,7 @@ scenes give the same figures).
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, replace
 
 import cv2
@@ -123,6 +124,9 @@ class ImageDetections:
     noise : float
         The sensor noise of the image searched (:func:`~handcap.detect.noise.noise_sigma`), grey levels; over
         :data:`~handcap.detect.noise.NOISE_LEARNED` it was denoised first (unless the detector was told not to).
+    twice : int
+        Sure readings (as ``sure``) whose tag the reader was sure of at another white square of the image too: a
+        tag printed twice, or two sessions' patches that share tags. With a template the vote drops them all.
     """
 
     corners: np.ndarray
@@ -136,6 +140,7 @@ class ImageDetections:
     disowned: int = 0
     read: int = 0
     noise: float = 0.0
+    twice: int = 0
 
 
 class Detector:
@@ -248,6 +253,8 @@ class Detector:
         names = np.full(len(xy), None, dtype=object)
         corrected = disowned = 0
         sure, read = (text != "") & (bscore >= self.gates(text)), int((text != "").sum())
+        seen = Counter(text[sure].tolist())
+        twice = sum(n for n in seen.values() if n > 1)
         if self.pattern is not None and len(quads):
             tags, turns, corrected = self.vote(image, xy, cscore, quads, text, rotation, bscore, heads)
             disowned = int((sure & ((tags != text) | (turns != rotation))).sum())
@@ -261,7 +268,7 @@ class Detector:
             if self.adapted is not None and len(quads):
                 keep |= self._vouched(image, xy[quads], text, rotation, bscore)
         return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected, int(sure.sum()),
-                               disowned, read)
+                               disowned, read, twice=twice)
 
     def _vouched(self, image: np.ndarray, quads: np.ndarray, text, rotation, score) -> np.ndarray:
         """The readings (B,) the reader adapted to the take vouches for: it reads the same tag and turn at

@@ -29,6 +29,10 @@ DISOWNED_SHARE, MIN_SURE = 0.5, 10
 #: alone) before it says so. Measured (2026-11-29, 10 photographs each): 0.82-0.86 on handcap's own sheets in two
 #: fonts, 0.14-0.39 on another generator's sheets (22 and 18 glyphs, its layout and handcap's), 0.25 on hands.
 REPORTED_SHARE = 0.5
+#: Share of the sure readings whose tag was read surely at another white square of the same image too, above
+#: which the patches are said to be printed twice. Measured (2026-11-30): none of 247 on a rendered 4-camera hand
+#: take, none of 361 on six photographed sheets; every tag of a patch seen twice.
+TWICE_SHARE = 0.05
 
 
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
@@ -151,6 +155,12 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         f"(up to {run.noise:.1f} grey levels, against {NOISE_LEARNED:g}): "
                         + ("they were denoised first (non-local means); " if denoise else "not denoised "
                            "(--no-denoise); ") + "fewer corners are found in them. More light, or less gain, helps")
+    if run.twice >= MIN_SURE and run.twice > TWICE_SHARE * run.sure:
+        warnings.append(f"{run.twice} of the {run.sure} tags the reader was sure of were read at another white square "
+                        f"of the same image too ({run.twice_images} images): patches printed twice (two copies of a "
+                        "page, or patches of two handcap pattern runs, whose tags collide: pattern --extend adds "
+                        "patches with tags of their own)" + ("; the vote drops such tags" if template is not None
+                                                             else "; both are reported"))
     if run.empty:
         warnings.append(f"no corner found in {run.empty} of {images} images (no patches in view, or not in focus)")
     if template is not None and run.sure >= MIN_SURE and run.disowned > DISOWNED_SHARE * run.sure:
