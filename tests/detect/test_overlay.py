@@ -140,3 +140,33 @@ def test_a_file_with_part_of_the_block_rows_is_one_clear_error(tmp_path, capsys)
     assert main(["overlay", str(tmp_path / "part.npz"), str(tmp_path / "images"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "but not block_xy" in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_hand_keypoints_are_drawn_with_their_bones(tmp_path, capsys):
+    from handcap.markerless.keypoints import KEYPOINT_NAMES
+
+    (tmp_path / "images" / "cam_a").mkdir(parents=True)
+    cv2.imwrite(str(tmp_path / "images" / "cam_a" / "0000.png"), np.full(SIZE[::-1], 90, np.uint8))
+    # A left hand's 21 keypoints: the wrist at (40, 200), each finger a straight chain upwards; the index finger's
+    # tip not detected in this frame.
+    xy = {"wrist": (40.0, 200.0)}
+    for f, finger in enumerate(("thumb", "index", "middle", "ring", "pinky")):
+        joints = ("cmc", "mcp", "ip", "tip") if finger == "thumb" else ("mcp", "pip", "dip", "tip")
+        for j, joint in enumerate(joints):
+            xy[f"{finger}_{joint}"] = (80.0 + 45.0 * f, 160.0 - 35.0 * j)
+    names = [f"left:{n}" for n in KEYPOINT_NAMES]
+    seen = [k for k, n in enumerate(KEYPOINT_NAMES) if n != "index_tip"]
+    save_npz(tmp_path / "kp.npz", {
+        "camera_names": np.array(["cam_a"]), "marker_names": np.array(names), "frame": np.zeros(len(seen), int),
+        "camera": np.zeros(len(seen), int), "marker": np.array(seen), "xy": np.array([xy[KEYPOINT_NAMES[k]]
+                                                                                      for k in seen]),
+        "score": np.ones(len(seen)), "rate": np.array(30.0)})
+    out = tmp_path / "o"
+    assert main(["overlay", str(tmp_path / "kp.npz"), str(tmp_path / "images"), "--out", str(out)]) == 0
+    picture = cv2.imread(str(out / "cam_a" / "000000.jpg"))
+    left = HAND_COLOURS["left"]
+    assert _near(picture, (125.0, 142.5), left, tol=60)  # the middle of the index finger's first bone
+    assert _near(picture, (60.0, 180.0), left, tol=60)  # wrist to the thumb's base
+    grey = int(90 * 0.75)
+    assert _near(picture, (125.0, 72.5), (grey,) * 3, tol=12)  # index dip to its tip: the tip was not detected
+    capsys.readouterr()

@@ -71,7 +71,8 @@ def add_overlay(verbs) -> None:
                                      "dot in its owner's colour (right hand orange, left hand blue, objects in "
                                      "turn), each patch's name over it, every read tag outlined with its text and "
                                      "its underlined side drawn thick (a tag read upside down shows); with --markers "
-                                     "and --rig the 3D markers reprojected as crosses.")
+                                     "and --rig the 3D markers reprojected as crosses. 2D hand keypoints (handcap "
+                                     "keypoints) are drawn joined by their hand's bones.")
     p.add_argument("detections", help="2D detections file (handcap detect's, or any other with named corners)")
     p.add_argument("inputs", nargs="+", help="the images or videos detect was given, one per camera (or a folder of "
                                              "them), matched to the file's cameras by name")

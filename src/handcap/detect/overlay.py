@@ -7,7 +7,8 @@ drawn thicker, and the tag it was read as written on the black square above it
 (in reading order), beside the printed glyphs, so a misreading or a tag read
 upside down shows. Reprojected 3D markers, where given, are crosses beside the
 dots: a cross far from its dot is a corner the triangulation (or the
-calibration) does not agree with.
+calibration) does not agree with. 2D hand keypoints (``handcap keypoints``) are
+dots joined by their hand's bones, where the caller gives them (``links``).
 
 Coordinates are pixels ``(x, y)`` at column x, row y, pixel centres at integers (as the detections file
 gives them); images are BGR uint8 ``(H, W, 3)``.
@@ -57,6 +58,9 @@ class FrameMarks:
         Reprojected 3D markers, pixels.
     projected_names : ndarray (P,) str, optional
         Their names (matched to ``names`` for the colour).
+    links : ndarray (L, 2) int, optional
+        Pairs of indices into ``xy`` joined by a line in the first one's colour: a hand's bones where the names
+        are 2D hand keypoints.
     """
 
     xy: np.ndarray
@@ -65,6 +69,7 @@ class FrameMarks:
     tags: np.ndarray
     projected: np.ndarray | None = None
     projected_names: np.ndarray | None = None
+    links: np.ndarray | None = None
 
 
 def owner_colour(name: str, owners: dict) -> tuple:
@@ -122,6 +127,10 @@ def draw_frame(image: np.ndarray, marks: FrameMarks, title: str = "", owners: di
         _text(canvas, str(text), above, max(width, 6.0) * 0.8, (255, 255, 0))
     radius = max(2.0, side / 10)
     colours = [owner_colour(str(n), owners) for n in marks.names]
+    points = np.asarray(marks.xy, float).reshape(-1, 2)
+    for a, b in np.asarray(marks.links if marks.links is not None else np.zeros((0, 2)), int).reshape(-1, 2):
+        cv2.line(canvas, tuple(_fixed(points[a])), tuple(_fixed(points[b])), colours[a], thin + 1, cv2.LINE_AA,
+                 shift=4)
     for (x, y), colour in zip(np.asarray(marks.xy, float).reshape(-1, 2), colours):
         cv2.circle(canvas, _fixed(np.array([x, y])), int(round(radius * 16)), colour, -1, cv2.LINE_AA, shift=4)
     if marks.projected is not None:
@@ -224,8 +233,8 @@ def read_blocks(arrays: dict, what: str = "detections") -> dict:
             "camera": camera, "xy": xy}
 
 
-def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=None, progress: bool | None = None,
-                   what: str = "detections") -> tuple[int, int, int]:
+def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=None, links=None,
+                   progress: bool | None = None, what: str = "detections") -> tuple[int, int, int]:
     """Draw a capture's detections over its cameras' frames into ``folder/CAMERA/FRAME.jpg`` (atomically).
 
     Parameters
@@ -240,6 +249,8 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
         Draw every ``every``-th frame.
     projected : callable, optional
         (camera name, frame) -> (pixels (P, 2), names (P,)) of 3D markers to draw reprojected.
+    links : ndarray (L, 2) int, optional
+        Pairs of markers (indices into ``marker_names``) joined by a line where a frame has both: a hand's bones.
     progress : bool, optional
         A progress bar over frames (default: when stderr is a terminal).
     what : str
@@ -273,8 +284,10 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
                 total += len(xy)
                 outside += int(np.sum((xy[:, 0] < -0.5) | (xy[:, 1] < -0.5) | (xy[:, 0] > width - 0.5)
                                       | (xy[:, 1] > height - 0.5)))
-                marks = FrameMarks(xy, marker_names[np.asarray(arrays["marker"])[here]], blocks["xy"][block_here],
-                                   blocks["text"][block_here], *(projected(source.camera, t) if projected else ()))
+                markers = np.asarray(arrays["marker"])[here]
+                marks = FrameMarks(xy, marker_names[markers], blocks["xy"][block_here], blocks["text"][block_here],
+                                   *(projected(source.camera, t) if projected else (None, None)),
+                                   links=_frame_links(links, markers))
                 title = (f"{source.camera} frame {t}: {len(xy)} named corners"
                          + (f", {int(block_here.sum())} tags" if blocks["present"] else ""))
                 ok, code = cv2.imencode(".jpg", draw_frame(image, marks, title, owners),
@@ -288,3 +301,15 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
     finally:
         bar.close()
     return written, outside, total
+
+
+def _frame_links(links, markers: np.ndarray) -> np.ndarray | None:
+    """``links`` (pairs of marker indices) as pairs of rows of one frame whose ``markers`` hold both ends (the first
+    row of a marker seen twice)."""
+    if links is None or not len(markers):
+        return None
+    row = {}
+    for k, m in enumerate(markers.tolist()):
+        row.setdefault(m, k)
+    return np.array([(row[a], row[b]) for a, b in np.asarray(links, int).reshape(-1, 2) if a in row and b in row],
+                    int).reshape(-1, 2)

@@ -11,6 +11,7 @@ from handcap.core.files import check_output_folder, load_npz
 from handcap.detect.overlay import BLOCK_KEYS, read_blocks, write_pictures
 from handcap.detect.sources import frame_sources
 from handcap.io import read_markers, read_rig
+from handcap.markerless.keypoints import BONES, KEYPOINT_NAMES, is_keypoints
 from handcap.multiview.detections import read_detections
 from handcap.steps.step import Step
 
@@ -81,8 +82,8 @@ def overlay(detections, inputs, out, *, every: int = 1, markers=None, rig=None, 
     rows = {"camera_names": np.asarray(found.camera_names), "marker_names": np.asarray(found.marker_names),
             "frame": found.frame, "camera": found.camera, "marker": found.marker, "xy": found.xy,
             **{k: arrays[k] for k in BLOCK_KEYS if k in arrays}}
-    written, outside, total = write_pictures(rows, drawn, folder, every=every, projected=projected, progress=progress,
-                                             what=str(detections))
+    written, outside, total = write_pictures(rows, drawn, folder, every=every, projected=projected,
+                                             links=_bones(found.marker_names), progress=progress, what=str(detections))
     if total and outside > OUTSIDE_SHARE * total:
         warnings.append(f"{outside} of {total} drawn corners lie outside their images: are these the images "
                         f"{detections} was detected in (the same cameras, in the same order, at the same size)?")
@@ -112,3 +113,20 @@ def _projected(markers, rig, cameras):
         return pixels[keep], names[seen][keep]
 
     return at
+
+
+def _bones(marker_names) -> np.ndarray | None:
+    """Where the markers are 2D hand keypoints (``[HAND:]wrist``, ...), each hand's bones as pairs of marker
+    indices (:data:`handcap.markerless.keypoints.BONES`); None otherwise."""
+    if not is_keypoints(marker_names):
+        return None
+    index = {str(n): k for k, n in enumerate(marker_names)}
+    hands = dict.fromkeys(str(n).rpartition(":")[0] for n in marker_names)
+    pairs = []
+    for hand in hands:
+        prefix = f"{hand}:" if hand else ""
+        for a, b in BONES:
+            ends = index.get(prefix + KEYPOINT_NAMES[a]), index.get(prefix + KEYPOINT_NAMES[b])
+            if None not in ends:
+                pairs.append(ends)
+    return np.array(pairs, int).reshape(-1, 2)
