@@ -288,7 +288,8 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
                 marks = FrameMarks(xy, marker_names[markers], blocks["xy"][block_here], blocks["text"][block_here],
                                    *(projected(source.camera, t) if projected else (None, None)),
                                    links=_frame_links(links, markers))
-                title = (f"{source.camera} frame {t}: {len(xy)} named corners"
+                what_points = "keypoints" if links is not None else "named corners"
+                title = (f"{source.camera} frame {t}: {len(xy)} {what_points}"
                          + (f", {int(block_here.sum())} tags" if blocks["present"] else ""))
                 ok, code = cv2.imencode(".jpg", draw_frame(image, marks, title, owners),
                                         [cv2.IMWRITE_JPEG_QUALITY, QUALITY])

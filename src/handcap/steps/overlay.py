@@ -82,13 +82,15 @@ def overlay(detections, inputs, out, *, every: int = 1, markers=None, rig=None, 
     rows = {"camera_names": np.asarray(found.camera_names), "marker_names": np.asarray(found.marker_names),
             "frame": found.frame, "camera": found.camera, "marker": found.marker, "xy": found.xy,
             **{k: arrays[k] for k in BLOCK_KEYS if k in arrays}}
-    written, outside, total = write_pictures(rows, drawn, folder, every=every, projected=projected,
-                                             links=_bones(found.marker_names), progress=progress, what=str(detections))
+    bones = _bones(found.marker_names)
+    written, outside, total = write_pictures(rows, drawn, folder, every=every, projected=projected, links=bones,
+                                             progress=progress, what=str(detections))
     if total and outside > OUTSIDE_SHARE * total:
         warnings.append(f"{outside} of {total} drawn corners lie outside their images: are these the images "
                         f"{detections} was detected in (the same cameras, in the same order, at the same size)?")
-    lines = (f"{folder}: {written} pictures of {len(drawn)} camera(s), every {every} frame(s); named corners are "
-             "dots in their owner's colour, read tags outlined with their underlined side drawn thick"
+    drew = ("hand keypoints are dots joined by their hand's bones, in its colour" if bones is not None else
+            "named corners are dots in their owner's colour, read tags outlined with their underlined side drawn thick")
+    lines = (f"{folder}: {written} pictures of {len(drawn)} camera(s), every {every} frame(s); {drew}"
              + ("; the 3D markers reprojected are crosses" if markers is not None else ""),)
     return Step(lines, tuple(warnings), (str(folder),), written)
 
