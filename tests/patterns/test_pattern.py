@@ -7,6 +7,7 @@ squares' sides and the spacing of their centres give the pitch, the scale bar's 
 from __future__ import annotations
 
 import itertools
+import re
 import tomllib
 import xml.etree.ElementTree as ET
 
@@ -303,6 +304,24 @@ def test_the_pattern_command_extends_a_printed_session(tmp_path, capsys):
     assert main(["pattern", "--out", str(tmp_path / "y"), "--template", str(later / "pattern.toml"), "--only",
                  "mug:handle"]) == 2
     assert "--only 'mug:handle': no patch" in capsys.readouterr().err and not (tmp_path / "y").exists()
+
+
+def test_the_check_reads_the_print_back_and_warns_of_a_font_that_reads_poorly(tmp_path, capsys):
+    import matplotlib
+    from pathlib import Path
+
+    italic = Path(matplotlib.__file__).parent / "mpl-data" / "fonts" / "ttf" / "STIXGeneralItalic.ttf"
+    figures = {}
+    for name, font in (("default", []), ("italic", ["--font", str(italic)])):
+        assert main(["pattern", "--out", str(tmp_path / name), "--hands", "none", "--objects", "cuboid,cylinder",
+                     "--no-svg", "--check", *font]) == 0
+        captured = capsys.readouterr()
+        (line,) = [x for x in captured.out.splitlines() if x.startswith("check:")]
+        right, visible = re.search(r"tags: ([0-9.]+) % of (\d+) visible read right", line).groups()
+        figures[name] = float(right), int(visible), captured.err
+    assert figures["default"][0] >= 95 and figures["default"][1] > 50 and "reads best" not in figures["default"][2]
+    assert figures["italic"][0] < figures["default"][0] - 5  # read back against the truth of the rendered print
+    assert f"read {figures['italic'][0]:.1f} % of the tags printed in STIXGeneral Italic right" in figures["italic"][2]
 
 
 def test_alphabets_with_glyphs_fonts_draw_alike_are_warned_of(tmp_path, capsys):

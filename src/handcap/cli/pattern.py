@@ -17,7 +17,7 @@ def _cmd_pattern(a):
                                 objects=None if a.objects is None else _list(a.objects), own=a.object or (),
                                 alphabet=a.alphabet, pitch_mm=a.pitch, font=a.font, paper=a.paper,
                                 template=a.template, extend=a.extend, only=_list(a.only or ""), svg=not a.no_svg,
-                                force=a.force)
+                                force=a.force, check=a.check)
 
 
 def add_pattern(verbs) -> None:
@@ -49,6 +49,9 @@ def add_pattern(verbs) -> None:
     p.add_argument("--only", metavar="PATCHES",
                    help="print only these patches, OWNER:NAME comma-separated (shell patterns such as "
                         "'right:index_*' work): a worn patch printed again with --template")
+    p.add_argument("--check", action="store_true",
+                   help="also render photographs of the printed patches in their font and read them back with the "
+                        "shipped networks: how well handcap detect reads this print (a few seconds)")
     p.add_argument("--no-svg", action="store_true", help="write the PDF only")
     p.add_argument("--force", action="store_true", help="write into a folder that already holds files")
     p.set_defaults(run=_cmd_pattern)
