@@ -131,8 +131,7 @@ def _check(printed: Pattern, whole: Pattern, font, font_name: str) -> tuple[str,
     from handcap.detect.evaluation import evaluate_detector  # loads torch
     from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner  # loads torch
     from handcap.detect.pipeline import Detector  # loads torch
-    from handcap.detect.scenes import PageMaker  # loads torch
-    from handcap.synth.pages import PageLook
+    from handcap.detect.scenes import PageLook, PageMaker  # loads torch
 
     maker = PageMaker(0, pattern=printed, font=font, look=PageLook(square_px=(24.0, 32.0), tilt_deg=(0.0, 20.0),
                                                                    curl=(0.0, 0.5), occluders=(0, 0), glint=0.0))
