@@ -306,9 +306,13 @@ def test_the_pattern_command_extends_a_printed_session(tmp_path, capsys):
     assert "--only 'mug:handle': no patch" in capsys.readouterr().err and not (tmp_path / "y").exists()
 
 
-def test_the_check_reads_the_print_back_and_warns_of_a_font_that_reads_poorly(tmp_path, capsys):
+def test_the_check_reads_the_print_back_and_warns_of_a_font_that_reads_poorly(tmp_path, capsys, monkeypatch):
     import matplotlib
     from pathlib import Path
+
+    from handcap.steps import pattern as pattern_step
+
+    monkeypatch.setattr(pattern_step, "CHECK_PHOTOS", 4)  # half the photographs, for the suite's time
 
     italic = Path(matplotlib.__file__).parent / "mpl-data" / "fonts" / "ttf" / "STIXGeneralItalic.ttf"
     figures = {}
