@@ -329,8 +329,10 @@ def _calibration_frames(markers, layout, frames, max_frames):
     target, observed, chosen = target[usable], observed[usable], chosen[usable]
     never = [n for n, seen in zip(names, observed.any(axis=0)) if not seen]
     if never:
-        raise HandcapError(f"markers never seen in the calibration frames: {', '.join(never)}; "
-                           f"use frames where the hand shows every marker")
+        raise HandcapError(f"{len(never)} of the layout's {len(names)} markers never seen in the calibration frames: "
+                           f"{', '.join(never[:5])}" + (f" and {len(never) - 5} more" if len(never) > 5 else "")
+                           + "; use frames where the hand shows every marker, or give --drop-unseen to calibrate the "
+                           "others (dense patches: corners that no two cameras saw)")
     return target, observed, chosen
 
 
