@@ -383,3 +383,28 @@ def test_cli_bad_files_exit_2_with_one_line(take, tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith("handcap clean: error: ") and message in err
     assert _digest(take) == before
+
+
+@pytest.mark.parametrize("rate, filled", [(100.0, True), (4.0, False)])
+def test_interpolated_fills_follow_the_takes_rate(rate, filled):
+    from handcap.multiview.clean import MAX_LINEAR, MAX_LINEAR_S, MAX_SPLINE, MAX_SPLINE_S, gap_frames
+
+    # At 100 Hz the defaults are the frames they always were; at 4 Hz a frame lasts 0.25 s and none is interpolated.
+    assert gap_frames(MAX_LINEAR_S, 100.0) == MAX_LINEAR and gap_frames(MAX_SPLINE_S, 100.0) == MAX_SPLINE
+    # A fingertip circling 5 cm around a point once a second, with gaps of 1, 2 and 5 frames.
+    t = np.arange(int(3 * rate)) / rate
+    truth = np.stack([0.05 * np.cos(2 * np.pi * t), 0.05 * np.sin(2 * np.pi * t), np.full_like(t, 1.0)], -1)[:, None]
+    seen = truth.copy()
+    gaps = [slice(3, 4), slice(6, 8), slice(10, 15) if rate > 50 else slice(10, 11)]
+    for gap in gaps:
+        seen[gap] = np.nan
+    markers = MarkerSequence(seen, ("tip",), rate)
+    cleaned, report = clean_markers(markers)
+    error = np.linalg.norm(cleaned.positions - truth, axis=-1)[:, 0]
+    hidden = np.isnan(seen[:, 0, 0])
+    if filled:  # 0.01-0.05 s gaps at 100 Hz: filled within a millimetre
+        assert report.linear_filled.sum() + report.spline_filled.sum() == hidden.sum() and error[hidden].max() < 1e-3
+    else:  # left missing, where the frame-count defaults of 100 Hz filled them tens of millimetres off
+        assert report.linear_filled.sum() == report.spline_filled.sum() == 0 and np.isnan(error[hidden]).all()
+        old, _ = clean_markers(markers, max_linear_frames=MAX_LINEAR, max_spline_frames=MAX_SPLINE)
+        assert np.nanmax(np.linalg.norm(old.positions - truth, axis=-1)[hidden]) > 0.02

@@ -17,7 +17,7 @@ def _cmd_triangulate(a):
 
 def _cmd_clean(a):
     for name in ("max_linear", "max_rigid", "max_spline"):
-        if getattr(a, name) < 0:
+        if getattr(a, name) is not None and getattr(a, name) < 0:
             raise HandcapError(f"--{name.replace('_', '-')} must be 0 or more frames, got {getattr(a, name)}")
     return multiview.clean(a.input, a.out, layout=a.layout, radius=None if a.radius_mm is None else a.radius_mm / 1000,
                            window=a.window, z=a.z, floor=a.floor_mm / 1000, max_linear_frames=a.max_linear,
@@ -76,10 +76,12 @@ def add_clean(verbs) -> None:
                    help="smaller deviations are never outliers, millimetres (default %(default)s)")
     p.add_argument("--max-rigid", type=int, default=clean.MAX_RIGID, metavar="FRAMES",
                    help="longest gap filled by the rigid motion of the patch (default %(default)s; 0: off)")
-    p.add_argument("--max-linear", type=int, default=clean.MAX_LINEAR, metavar="FRAMES",
-                   help="longest gap filled by linear interpolation (default %(default)s; 0: off)")
-    p.add_argument("--max-spline", type=int, default=clean.MAX_SPLINE, metavar="FRAMES",
-                   help="longest gap filled by a cubic spline (default %(default)s; 0: off)")
+    p.add_argument("--max-linear", type=int, metavar="FRAMES",
+                   help=f"longest gap filled by linear interpolation (default {clean.MAX_LINEAR_S:g} s of the take's "
+                        f"frames: {clean.MAX_LINEAR} at 100 Hz, none at 20 Hz; 0: off)")
+    p.add_argument("--max-spline", type=int, metavar="FRAMES",
+                   help=f"longest gap filled by a cubic spline (default {clean.MAX_SPLINE_S:g} s of the take's frames: "
+                        f"{clean.MAX_SPLINE} at 100 Hz, 2 at 20 Hz, none at 4 Hz; 0: off)")
     p.add_argument("--rigid-tolerance-mm", type=float, default=1000 * clean.RIGID_TOLERANCE,
                    help="largest RMS residual of a rigid fill's fit, millimetres (default %(default)s)")
     p.add_argument("--out", required=True, help="cleaned markers (.c3d .trc .npz)")

@@ -51,8 +51,9 @@ import numpy as np
 from handcap.core.checks import check_frames, check_odd_window, check_positive
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
-from handcap.multiview.clean_gaps import (MAX_LINEAR, MAX_RIGID, MAX_SPLINE, RIGID_MIN_SPREAD, RIGID_TOLERANCE,
-                                          fill_linear, fill_rigid, fill_spline)
+from handcap.multiview.clean_gaps import (MAX_LINEAR, MAX_LINEAR_S, MAX_RIGID, MAX_SPLINE, MAX_SPLINE_S,
+                                          RIGID_MIN_SPREAD, RIGID_TOLERANCE, fill_linear, fill_rigid, fill_spline,
+                                          gap_frames)
 from handcap.multiview.clean_groups import (PATCH_MARGIN, PATCH_SCALE, SEGMENT_MARGIN, SEGMENT_SCALE, MarkerGroups,
                                             layout_groups, remove_cluster_outliers)
 from handcap.multiview.clean_spikes import FLOOR, MAD_TO_STD, WINDOW, Z, remove_window_outliers
@@ -70,6 +71,8 @@ class CleanReport:
     missing : samples missing in the result.
     groups : MarkerGroups or None
         The groups used in steps 1 and 3 (None without a layout).
+    limits : tuple of 3 int
+        The longest gaps, frames, the rigid, linear and spline fills were allowed (0: not used).
     """
 
     cluster_removed: np.ndarray
@@ -79,12 +82,15 @@ class CleanReport:
     spline_filled: np.ndarray
     missing: np.ndarray
     groups: MarkerGroups | None = None
+    limits: tuple = ()
 
     def summary(self) -> str:
-        """One line: samples removed and filled by each step, and those left missing."""
+        """One line: samples removed and filled by each step (and the longest gaps each could fill), and those
+        left missing."""
         n = self.counts()
+        gaps = (" (gaps of up to {} / {} / {} frames)".format(*self.limits) if len(self.limits) == 3 else "")
         return (f"removed {n['cluster_removed']} samples away from their patch and {n['outlier_removed']} spikes; "
-                f"filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, {n['spline_filled']} spline; "
+                f"filled {n['rigid_filled']} rigid, {n['linear_filled']} linear, {n['spline_filled']} spline{gaps}; "
                 f"{n['missing']} of {self.missing.size} samples missing")
 
     def counts(self) -> dict:
@@ -94,8 +100,8 @@ class CleanReport:
 
 
 def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None = None, window: int = WINDOW,
-                  z: float = Z, floor: float = FLOOR, max_linear_frames: int = MAX_LINEAR,
-                  max_rigid_frames: int = MAX_RIGID, max_spline_frames: int = MAX_SPLINE,
+                  z: float = Z, floor: float = FLOOR, max_linear_frames: int | None = None,
+                  max_rigid_frames: int = MAX_RIGID, max_spline_frames: int | None = None,
                   rigid_tolerance: float = RIGID_TOLERANCE) -> tuple[MarkerSequence, CleanReport]:
     """Remove wrong samples and fill gaps of triangulated markers (DexterCap section 3.3).
 
@@ -115,7 +121,8 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
     window, z, floor
         See :func:`remove_window_outliers` (frames, robust standard deviations, metres).
     max_linear_frames, max_rigid_frames, max_spline_frames : int
-        Longest gap, frames, each method fills (0: the method is not used).
+        Longest gap, frames, each method fills (0: the method is not used). Linear and spline by default
+        :data:`MAX_LINEAR_S` and :data:`MAX_SPLINE_S` of the take's frames (2 and 10 at 100 Hz, none at 4 Hz).
     rigid_tolerance : float
         Metres, see :func:`fill_rigid`.
 
@@ -131,6 +138,10 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
         Unknown layout, bad window, threshold or gap length.
     """
     positions = markers.positions
+    if max_linear_frames is None:
+        max_linear_frames = gap_frames(MAX_LINEAR_S, markers.rate)
+    if max_spline_frames is None:
+        max_spline_frames = gap_frames(MAX_SPLINE_S, markers.rate)
     # Check every option before any work, also those of steps a missing layout skips.
     for value, what in ((max_linear_frames, "max_linear_frames"), (max_rigid_frames, "max_rigid_frames"),
                         (max_spline_frames, "max_spline_frames")):
@@ -159,11 +170,13 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
         residuals[linear | rigid | spline] = np.nan
     cleaned = MarkerSequence(positions, markers.names, markers.rate, residuals)
     report = CleanReport(cluster_removed=clustered, outlier_removed=spikes, rigid_filled=rigid, linear_filled=linear,
-                         spline_filled=spline, missing=cleaned.missing, groups=groups)
+                         spline_filled=spline, missing=cleaned.missing, groups=groups,
+                         limits=(max_rigid_frames, max_linear_frames, max_spline_frames))
     return cleaned, report
 
 
 __all__ = ["CleanReport", "MarkerGroups", "clean_markers", "fill_linear", "fill_rigid", "fill_spline",
            "layout_groups", "remove_cluster_outliers", "remove_window_outliers"]
-__all__ += ["FLOOR", "MAD_TO_STD", "MAX_LINEAR", "MAX_RIGID", "MAX_SPLINE", "PATCH_MARGIN", "PATCH_SCALE",
+__all__ += ["FLOOR", "MAD_TO_STD", "MAX_LINEAR", "MAX_LINEAR_S", "MAX_RIGID", "MAX_SPLINE", "MAX_SPLINE_S",
+            "PATCH_MARGIN", "PATCH_SCALE",
             "RIGID_MIN_SPREAD", "RIGID_TOLERANCE", "SEGMENT_MARGIN", "SEGMENT_SCALE", "WINDOW", "Z"]

@@ -84,11 +84,12 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
 
 
 def clean(path, out, *, layout: str | None = None, radius: float | None = None, window: int = cleaning.WINDOW,
-          z: float = cleaning.Z, floor: float = cleaning.FLOOR, max_linear_frames: int = cleaning.MAX_LINEAR,
-          max_rigid_frames: int = cleaning.MAX_RIGID, max_spline_frames: int = cleaning.MAX_SPLINE,
+          z: float = cleaning.Z, floor: float = cleaning.FLOOR, max_linear_frames: int | None = None,
+          max_rigid_frames: int = cleaning.MAX_RIGID, max_spline_frames: int | None = None,
           rigid_tolerance: float = cleaning.RIGID_TOLERANCE, units: str | None = None) -> Step:
     """Remove mislabelled points and spikes from 3D markers and fill short gaps (see
-    :func:`handcap.multiview.clean.clean_markers`, whose parameters these are; lengths in metres, gaps in frames).
+    :func:`handcap.multiview.clean.clean_markers`, whose parameters these are; lengths in metres, gaps in frames;
+    linear and spline gaps by default 0.02 s and 0.1 s of the take's frames).
 
     Parameters
     ----------
