@@ -89,7 +89,9 @@ def test_reprojected_markers_are_crosses(tmp_path, capsys):
     write_rig(CameraRig([camera, Camera("cam_b", SIZE, camera.matrix, translation=(0.1, 0.0, 0.0))]),
               tmp_path / "cameras.toml")
     point = np.array([-0.3, 0.2, 1.0])  # cam_a sees it at (70, 180)
-    write_markers(MarkerSequence(np.tile(point, (2, 1, 1)), ("mug:side_r2c3",), 30.0), tmp_path / "m.npz")
+    hidden = np.array([0.3, -0.2, 1.0])  # at (250, 60), but no camera detected this marker: no cross
+    write_markers(MarkerSequence(np.tile([point, hidden], (2, 1, 1)), ("mug:side_r2c3", "mug:lid_r0c0"), 30.0),
+                  tmp_path / "m.npz")
     out = tmp_path / "overlay"
     assert main(["overlay", str(tmp_path / "det.npz"), str(tmp_path / "images"), "--out", str(out), "--markers",
                  str(tmp_path / "m.npz"), "--rig", str(tmp_path / "cameras.toml")]) == 0
@@ -97,6 +99,7 @@ def test_reprojected_markers_are_crosses(tmp_path, capsys):
     grey = int(90 * 0.75)
     assert _near(picture, (70, 180), OBJECT_COLOURS[0], tol=60) and _near(picture, (70, 198), (grey,) * 3, tol=10)
     assert _near(picture, (66, 176), OBJECT_COLOURS[0], tol=60)  # an arm of the cross
+    assert _near(picture, (250, 60), (grey,) * 3, tol=8) and _near(picture, (246, 56), (grey,) * 3, tol=8)
     capsys.readouterr()
 
 

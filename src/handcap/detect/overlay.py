@@ -6,8 +6,8 @@ its corners, and every read block is outlined, its underlined side (the bottom, 
 drawn thicker, and the tag it was read as written on the black square above it
 (in reading order), beside the printed glyphs, so a misreading or a tag read
 upside down shows. Reprojected 3D markers, where given, are crosses beside the
-dots: a cross far from its dot is a corner the triangulation (or the
-calibration) does not agree with. 2D hand keypoints (``handcap keypoints``) are
+dots of the same name: a cross far from its dot is a corner the triangulation
+(or the calibration) does not agree with. 2D hand keypoints (``handcap keypoints``) are
 dots joined by their hand's bones, where the caller gives them (``links``).
 
 Coordinates are pixels ``(x, y)`` at column x, row y, pixel centres at integers (as the detections file
@@ -248,7 +248,8 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
     every : int
         Draw every ``every``-th frame.
     projected : callable, optional
-        (camera name, frame) -> (pixels (P, 2), names (P,)) of 3D markers to draw reprojected.
+        (camera name, frame) -> (pixels (P, 2), names (P,)) of 3D markers, drawn reprojected where the frame shows
+        a detection of the same name (a marker the camera does not see, behind the hand, would only clutter).
     links : ndarray (L, 2) int, optional
         Pairs of markers (indices into ``marker_names``) joined by a line where a frame has both: a hand's bones.
     progress : bool, optional
@@ -285,9 +286,13 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
                 outside += int(np.sum((xy[:, 0] < -0.5) | (xy[:, 1] < -0.5) | (xy[:, 0] > width - 0.5)
                                       | (xy[:, 1] > height - 0.5)))
                 markers = np.asarray(arrays["marker"])[here]
+                crosses = (None, None)
+                if projected:  # of the markers this frame shows: a cross beside its dot
+                    pixels, named = projected(source.camera, t)
+                    shown = np.isin(named, marker_names[markers])
+                    crosses = pixels[shown], named[shown]
                 marks = FrameMarks(xy, marker_names[markers], blocks["xy"][block_here], blocks["text"][block_here],
-                                   *(projected(source.camera, t) if projected else (None, None)),
-                                   links=_frame_links(links, markers))
+                                   *crosses, links=_frame_links(links, markers))
                 what_points = "keypoints" if links is not None else "named corners"
                 title = (f"{source.camera} frame {t}: {len(xy)} {what_points}"
                          + (f", {int(block_here.sum())} tags" if blocks["present"] else ""))
