@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 
 def main() -> None:
@@ -289,15 +290,30 @@ def main() -> None:
 
     theirs = GlyphLayout(cap_height=0.43, glyph_top=0.27, underline_top=0.8, underline_thickness=0.083, gap=0.067,
                          underline_span=(0.1, 0.5))
+    import json
+    import tempfile
+    from handcap.detect.scenes import renamed
+    from handcap.patterns.foreign import import_template
+
     for name, alphabet in (("DexterCap's 22", "0123456789ACEHNPRSTVXZ"), ("DexterCap's 18", DEXTERCAP_ALPHABET)):
         for where, layout in (("their", theirs), ("handcap's", None)):
             sheet = SheetMaker(args.seed + 7, alphabet, font=font, layout=layout,
                                look=PageLook(square_px=(12.0, 30.0), occluders=(0, 2)))
-            score = evaluate_detector(Detector(fast, reader, alphabet=alphabet, refiner=refiner),
-                                      [sheet.scene() for _ in range(args.scenes)], pattern=sheet.pattern)
-            print(f"another generator's sheet, no template, {name} glyphs, {where} glyph layout: tags "
+            shots = [sheet.scene() for _ in range(args.scenes)]
+            score = evaluate_detector(Detector(fast, reader, alphabet=alphabet, refiner=refiner), shots,
+                                      pattern=sheet.pattern)
+            # The same photographs read with that generator's template of the sheet's strips, imported as
+            # handcap pattern --import does: the vote over each strip.
+            grids, rename = sheet.strips()
+            with tempfile.TemporaryDirectory() as folder:
+                (Path(folder) / "theirs.json").write_text(json.dumps(grids))
+                imported, _ = import_template(Path(folder) / "theirs.json", owners=["*=sheet"], alphabet=alphabet)
+            voted = evaluate_detector(Detector(fast, reader, imported, refiner=refiner, checker=checker),
+                                      [renamed(shot, rename) for shot in shots])
+            print(f"another generator's sheet, {name} glyphs, {where} glyph layout: no template, tags "
                   f"{100 * score.right / max(score.blocks, 1):.1f} % of {score.blocks} visible read right, "
-                  f"{score.wrong} of {score.read} read wrong")
+                  f"{score.wrong} of {score.read} read wrong; its template imported ({len(imported.patches)} strips): "
+                  + voted.summary())
     # The pattern line: handcap's own page (its font and layout) printed flat and photographed square-on.
     own = PageMaker(args.seed + 3, look=PageLook(square_px=(30.0, 30.0), tilt_deg=(0.0, 5.0), curl=(0.0, 0.0),
                                                  occluders=(0, 0), glint=0.0), style=ImageStyle.clean())

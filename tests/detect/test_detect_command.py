@@ -455,3 +455,54 @@ def test_a_sheet_read_unsurely_without_a_template_says_so(tmp_path, capsys):
     assert f"reports {kept} (" in warning and seen >= 20 and kept < 0.5 * seen and "--pattern" in warning
     assert "white squares" in capsys.readouterr().err
     assert found["own"][0] > 30 and found["own"][1] == []
+
+
+def test_another_generators_patches_read_through_their_imported_template(tmp_path, capsys):
+    """Another generator's sheet (DexterCap's 22 glyphs and glyph layout, a font the reader never saw), cut into
+    strips as its template lists them: its template imported (``pattern --import``) lets the vote read far more of
+    the tags than the reader alone, none wrong, and names the strips' corners where the truth has them."""
+    import json
+
+    from handcap.detect.evaluation import tag_is_right
+    from handcap.detect.scenes import SheetMaker, renamed
+    from handcap.patterns.glyphs import GlyphLayout
+    from handcap.synth.pages import PageLook
+
+    alphabet = "0123456789ACEHNPRSTVXZ"
+    theirs = GlyphLayout(cap_height=0.43, glyph_top=0.27, underline_top=0.8, underline_thickness=0.083, gap=0.067,
+                         underline_span=(0.1, 0.5))
+    noto = "/usr/share/fonts/truetype/noto/NotoSansMono-Bold.ttf"
+    sheet = SheetMaker(5, alphabet, font=noto if Path(noto).is_file() else None, layout=theirs,
+                       look=PageLook(square_px=(16.0, 22.0), tilt_deg=(0.0, 15.0), occluders=(0, 0), size=(640, 480),
+                                     glint=0.0))
+    grids, rename = sheet.strips()
+    (tmp_path / "theirs.json").write_text(json.dumps(grids))
+    assert main(["pattern", "--import", str(tmp_path / "theirs.json"), "--owner", "*=sheet", "--alphabet", alphabet,
+                 "--out", str(tmp_path / "template")]) == 0
+    template = Pattern.load(tmp_path / "template" / "pattern.toml")
+    scenes = [renamed(sheet.scene(), rename) for _ in range(3)]
+    (tmp_path / "photos").mkdir()
+    for k, scene in enumerate(scenes):
+        cv2.imwrite(str(tmp_path / "photos" / f"{k}.png"), scene.image)
+    read = {}
+    for name, args in (("alone", ["--alphabet", alphabet, "--adapt-steps", "0"]),
+                       ("template", ["--pattern", str(tmp_path / "template" / "pattern.toml")])):
+        out = tmp_path / f"{name}.npz"
+        assert main(["detect", str(tmp_path / "photos"), "--out", str(out), "--rate", "30", *args]) == 0
+        data = np.load(out)
+        right = wrong = 0
+        for k, scene in enumerate(scenes):
+            here = data["block_frame"] == k
+            for tag, xy in zip(data["block_text"][here], data["block_xy"][here]):
+                # Right where the template's corners of that tag lie there (one at the image's edge, too).
+                ok = tag_is_right(template, str(tag), xy, scene.projected)
+                right, wrong = right + (ok and str(tag) in scene.block_text), wrong + (not ok)
+            if name == "template":
+                named = data["frame"] == k
+                assert named.sum() > 50
+                for index, xy in zip(data["marker"][named], data["xy"][named]):
+                    assert np.linalg.norm(scene.projected[str(data["marker_names"][index])] - xy) < 1.5
+        read[name] = right, wrong
+    visible = sum(len(s.block_text) for s in scenes)
+    assert read["template"][1] == 0 and read["alone"][1] == 0
+    assert read["template"][0] >= 0.5 * visible and read["template"][0] >= 1.5 * read["alone"][0]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from handcap.core.errors import HandcapError
 from handcap.patterns.alphabet import ALPHABET
 from handcap.patterns.session import HANDS, OBJECT_PATCHES
 from handcap.patterns.sheet import PAPERS
@@ -13,6 +14,17 @@ def _list(text: str) -> tuple[str, ...]:
 
 
 def _cmd_pattern(a):
+    if a.import_grids is not None:
+        given = [flag for flag, value in (("--hands", a.hands), ("--objects", a.objects), ("--object", a.object),
+                                          ("--extend", a.extend), ("--template", a.template), ("--only", a.only),
+                                          ("--font", a.font), ("--check", a.check)) if value]
+        if given:
+            raise HandcapError(f"--import reads the template of patches printed already; {given[0]} does not go "
+                               "with it (print them again afterwards with --template OUT/pattern.toml)")
+        return pattern_step.import_pattern(a.out, a.import_grids, owners=a.owner or (), alphabet=a.alphabet,
+                                           pitch_mm=5.0 if a.pitch is None else a.pitch, force=a.force)
+    if a.owner:
+        raise HandcapError("--owner gives the patches of an --import to hands and objects; give --import too")
     return pattern_step.pattern(a.out, hands=None if a.hands is None else _list(a.hands),
                                 objects=None if a.objects is None else _list(a.objects), own=a.object or (),
                                 alphabet=a.alphabet, pitch_mm=a.pitch, font=a.font, paper=a.paper,
@@ -49,6 +61,13 @@ def add_pattern(verbs) -> None:
     p.add_argument("--only", metavar="PATCHES",
                    help="print only these patches, OWNER:NAME comma-separated (shell patterns such as "
                         "'right:index_*' work): a worn patch printed again with --template")
+    p.add_argument("--import", dest="import_grids", metavar="JSON",
+                   help="write pattern.toml for patches printed already by another generator, from its template: "
+                        "DexterCap's JSON of patch grids, {name: [\"9F**CF\", ...]} (** for a black square); the "
+                        "alphabet is the glyphs its tags use unless --alphabet")
+    p.add_argument("--owner", action="append", metavar="PATCHES=OWNER",
+                   help="with --import: the patches whose name matches the shell pattern belong to this hand side or "
+                        "object, e.g. 'cube_*=cube' (repeat; the first that matches wins; default: right)")
     p.add_argument("--check", action="store_true",
                    help="also render photographs of the printed patches in their font and read them back with the "
                         "shipped networks: how well handcap detect reads this print (a few seconds)")

@@ -20,9 +20,10 @@ from torch import nn
 from torch.nn import functional as F
 
 from handcap.core.errors import HandcapError
+from handcap.patterns.alphabet import READABLE
 
-#: Every glyph the reader knows: digits, capitals and a few symbols of bold monospace fonts.
-GLYPHS = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ#%&+=@"
+#: Every glyph the reader knows: digits, capitals and a few symbols of bold monospace fonts (its heads' classes).
+GLYPHS = READABLE
 NONE = len(GLYPHS)  # class of "no glyph" (a black square, or not a block)
 VIEW = 32
 _INSET = 4.0  # pixels of the view outside the square on every side

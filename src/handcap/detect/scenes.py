@@ -191,7 +191,56 @@ class SheetMaker(PageMaker):
         self.blocks_index, self.block_text = blocks[tagged], texts[tagged]
         self.photographer = PagePhotographer(PatchAtlas(image, atlas.patches, atlas.origins, side), look)
         self.pattern = Pattern((patch,), alphabet)  # to score tags read without a template
+        self.rows, self.cols = rows, cols
         # PageMaker.scene and close work on these attributes; its own __init__ would build a session's sheet.
+
+    def strips(self) -> tuple[dict, dict]:
+        """The sheet cut into strips along its plain rows and columns, as that generator's template gives them.
+
+        Returns
+        -------
+        grids : dict
+            Strip name (``strip0``, ...) -> its rows, each a string of two-glyph cells, ``**`` for a black square
+            (DexterCap's patch JSON; :func:`handcap.patterns.foreign.read_grids`).
+        rename : dict
+            The sheet's corner name -> ``OWNER:STRIP_rRcC`` of the same corner, for the corners the strips hold,
+            where the strips belong to the owner ``sheet``.
+        """
+        tags = self.pattern.patches[0].tags
+        plain_cols = sorted({c for r, c in self.plain if r % 4})
+        row_spans = [(r0, min(r0 + 3, self.rows)) for r0 in range(1, self.rows, 4)]
+        cuts = [-1] + plain_cols + [self.cols]
+        col_spans = [(a + 1, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a + 1]
+        grids, rename = {}, {}
+        for r0, r1 in row_spans:
+            for c0, c1 in col_spans:
+                name = f"strip{len(grids)}"
+                grids[name] = ["".join(tags[r][c] if (r, c) not in self.plain and tags[r][c] else "**"
+                                       for c in range(c0, c1)) for r in range(r0, r1)]
+                for r in range(r1 - r0 + 1):
+                    for c in range(c1 - c0 + 1):
+                        rename[f"sheet:sheet_r{r0 + r}c{c0 + c}"] = f"sheet:{name}_r{r}c{c}"
+        return grids, rename
+
+
+def renamed(scene: Scene, rename: dict) -> Scene:
+    """``scene`` with its corners named as ``rename`` says, and without the corners it does not name.
+
+    Parameters
+    ----------
+    scene : Scene
+    rename : dict
+        Old corner name -> new (:meth:`SheetMaker.strips`).
+
+    Returns
+    -------
+    Scene
+    """
+    keep = np.array([str(n) in rename for n in scene.corner_names], bool)
+    projected = None if scene.projected is None else {rename[n]: xy for n, xy in scene.projected.items()
+                                                      if n in rename}
+    return Scene(scene.image, scene.corners[keep], np.array([rename[str(n)] for n in scene.corner_names[keep]]),
+                 scene.blocks, scene.block_text, scene.alphabet, projected)
 
 
 def _block_truth(patches):

@@ -22,6 +22,9 @@ from handcap.core.errors import HandcapError
 ALPHABET = "0123456789ACEFHJKLMNPRTUWXY"
 #: The 18 glyphs of DexterCap's patches (324 tags).
 DEXTERCAP_ALPHABET = "0123456789ACEFHPUY"
+#: Every glyph the detector's block reader knows (:data:`handcap.detect.reader.GLYPHS`): digits, capitals and a
+#: few symbols of bold monospace fonts.
+READABLE = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ#%&+=@"
 #: Characters that cannot be glyphs: a black square is written ``""`` in a template, and these have other uses
 #: or no visible shape.
 _RESERVED = set("*-\"'\\ \t\n")

@@ -195,7 +195,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         warnings.append(f"the reader saw tags in {run.read} white squares and reports {kept} "
                         f"({100 * kept / run.read:.0f} %), those it is sure of without a template: patches in a font "
                         "or glyph layout unlike handcap's, small or blurred squares, or a wrong --alphabet; with the "
-                        "patches' template (--pattern) the vote over them reads more"
+                        "patches' template (--pattern; another generator's, such as DexterCap's JSON, through "
+                        "handcap pattern --import) the vote over them reads more"
                         + ("" if adapt_steps else "; so may a reader adapted to this take (--adapt-steps 200)"))
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     arrays = {**run.arrays, **pitch, **warnings_entry(warnings)}

@@ -8,6 +8,7 @@ from pathlib import Path
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output_folder
 from handcap.patterns.alphabet import ALPHABET, lookalike_warning
+from handcap.patterns.foreign import DEFAULT_OWNER, import_template
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.pattern import Pattern
 from handcap.patterns.session import HANDS, own_object, session_pattern
@@ -122,6 +123,46 @@ def pattern(out, *, hands=None, objects=None, own=(), alphabet: str | None = Non
         lines += (line,)
         warnings += doubt
     return Step(lines, tuple(warnings), tuple(outputs), chosen)
+
+
+def import_pattern(out, source, *, owners=(), alphabet: str | None = None, pitch_mm: float = 5.0,
+                   force: bool = False) -> Step:
+    """Write ``pattern.toml`` into folder ``out`` from another generator's template of patches already printed.
+
+    Parameters
+    ----------
+    out : str or Path
+        Folder to write into (new or empty, or ``force``).
+    source : str or Path
+        The generator's JSON of patch grids (DexterCap's ``{patch_name: [row, ...]}``;
+        :func:`handcap.patterns.foreign.read_grids`).
+    owners : sequence of str
+        ``GLOB=OWNER`` rules: the patches whose name matches belong to that hand side or object (the first rule that
+        matches wins; the others belong to ``right``).
+    alphabet : str, optional
+        The printed glyphs (default: those the tags use).
+    pitch_mm : float
+        Side of a printed square, millimetres.
+    force : bool
+        Write into a folder that holds files.
+    """
+    folder = check_output_folder(out, source, force=force)
+    if not 0.5 <= pitch_mm <= 100:
+        raise HandcapError(f"--pitch {pitch_mm} mm: give the side of a square in millimetres, 0.5 to 100")
+    imported, warnings = import_template(source, owners=owners, alphabet=alphabet, pitch=pitch_mm / 1000)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = imported.save(folder / "pattern.toml")
+    counts = {}
+    for p in imported.patches:
+        counts[p.owner] = counts.get(p.owner, 0) + 1
+    lines = (imported.summary(),
+             f"imported {len(imported.patches)} patches from {source}: "
+             + ", ".join(f"{owner} {n}" for owner, n in counts.items())
+             + ("" if owners else f" (every patch to {DEFAULT_OWNER}: give --owner 'cube_*=cube' and the like to "
+                                  "give patches to objects)"),
+             f"wrote {path}; read the printed patches with handcap detect --pattern {path} (no PDF: they are "
+             "printed already; handcap pattern --template prints them again in handcap's font and layout)")
+    return Step(lines, tuple(lookalike_warning(imported.alphabet) + warnings), (str(path),), imported)
 
 
 def _check(printed: Pattern, whole: Pattern, font, font_name: str) -> tuple[str, list[str]]:
