@@ -3,6 +3,8 @@ and a tag or a corner that is not where its name says counts as wrong."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from handcap.detect.evaluation import evaluate_detector
@@ -43,7 +45,21 @@ def test_the_truth_scores_perfectly_and_a_moved_corner_is_wrong(scenes):
     # The moved block is wrong; the hidden tag is right but not counted among the visible tags read right.
     assert spoilt.read == perfect.blocks + 1 and spoilt.wrong == 1 and spoilt.right == perfect.blocks - 1
     assert spoilt.misnamed == 1 and spoilt.named_right == len(scene.corners) - 1
+    # The named corners' errors: none off in the truth; moved 0.5 px, each is off by 0.5 px (the 5 px one is wrong).
+    assert len(perfect.named_px) == len(scene.corners) and np.all(perfect.named_px < 1e-9)
+    nudged = evaluate_detector(_Nudged(scene), [scene])
+    assert len(nudged.named_px) == len(scene.corners) - 1 and np.allclose(nudged.named_px, 0.5)
     assert "read right" in spoilt.summary()
+
+
+class _Nudged(_Oracle):
+    """The truth with every corner moved 0.3 px right and 0.4 px down, one of them 5 px."""
+
+    def image(self, image):
+        found = super().image(image)
+        corners = found.corners + [0.3, 0.4]
+        corners[0] += 5.0
+        return replace(found, corners=corners)
 
 
 class _Reader:

@@ -6,7 +6,7 @@ Used by the training command (:mod:`handcap.detect.train`) to score held-out sce
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -251,6 +251,9 @@ class DetectorScore:
         Visible corners named right.
     corners : int
         Visible corners.
+    named_px : ndarray (N,)
+        Distance of each corner named right (within ``match_px`` of its truth) from its true position, pixels:
+        the accuracy of what the detector reports.
     """
 
     blocks: int
@@ -261,6 +264,7 @@ class DetectorScore:
     misnamed: int
     named_right: int
     corners: int
+    named_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def summary(self) -> str:
         """One line of the figures."""
@@ -293,7 +297,7 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0, pattern=None) -> 
     DetectorScore
     """
     pattern = detector.pattern if pattern is None else pattern
-    counts = np.zeros(8, int)
+    counts, named_px = np.zeros(8, int), []
     for scene in scenes:
         found = detector.image(scene.image)
         truth = scene.projected if scene.projected is not None else dict(zip(scene.corner_names, scene.corners))
@@ -311,12 +315,14 @@ def evaluate_detector(detector, scenes, match_px: float = 2.0, pattern=None) -> 
             wrong += bad
             right += not bad and str(tag) in visible
         named = [(n, xy) for n, xy in zip(found.names, found.corners) if n is not None]
-        bad = [n not in truth or np.linalg.norm(truth[n] - xy) > match_px for n, xy in named]
+        off = [np.linalg.norm(truth[n] - xy) if n in truth else np.inf for n, xy in named]
+        bad = [d > match_px for d in off]
+        named_px += [d for d in off if d <= match_px]
         seen = set(scene.corner_names)
         named_right = sum(1 for (n, _), b in zip(named, bad) if not b and n in seen)
         counts += (len(scene.blocks), len(found.block_text), wrong, right, len(named), sum(bad), named_right,
                    len(scene.corners))
-    return DetectorScore(*map(int, counts))
+    return DetectorScore(*map(int, counts), named_px=np.array(named_px, dtype=float))
 
 
 def tag_is_right(pattern, tag: str, corners: np.ndarray, truth: dict, match_px: float = 2.0) -> bool:
