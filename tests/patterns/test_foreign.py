@@ -180,3 +180,64 @@ def test_owner_without_import_and_output_beside_the_input_are_refused(tmp_path, 
     assert main(["pattern", "--import", str(path), "--out", str(tmp_path), "--force"]) == 2
     assert "holds the input" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["patches.json"]
+
+
+def test_a_layout_of_the_imported_hand_patches_has_every_corner_on_its_segment(tmp_path):
+    from handcap.patterns.layout import pattern_layout
+
+    pattern, _ = import_template(_write(tmp_path, DEXTERCAP), owners=["cube_*=cube"])
+    layout = pattern_layout(pattern, segments=["thumb_*=thumb_distal"], name="theirs")
+    assert layout.side == "right" and layout.marker_kind == "patch" and layout.rigid == ()
+    assert layout.names == tuple(pattern.patch("right:thumb_1").corner_names(owner=False))
+    assert set(layout.segments) == {"thumb_distal"} and all(m.position is None for m in layout.markers)
+    assert {m.patch for m in layout.markers} == {"thumb_1"}
+    # handcap's own patches know their segments: the layout agrees with the shipped dense-patches on each corner
+    # that one lists.
+    from handcap.layouts import load_layout
+    from handcap.patterns import session_pattern
+
+    own = pattern_layout(session_pattern(("right", "left"), ()), side="left")
+    dense = {m.name: m.segment for m in load_layout("dense-patches").markers}
+    assert own.side == "left" and len(own) > len(dense)
+    assert all(dense[m.name] == m.segment for m in own.markers if m.name in dense)
+    assert sum(m.name in dense for m in own.markers) == len(dense)
+
+
+@pytest.mark.parametrize("side, rules, match", [
+    (None, [], "1 patches of the right hand have no segment: thumb_1"),
+    (None, ["thumb_*=thumb_dist"], "no hand segment 'thumb_dist' \\(did you mean 'thumb_distal'\\?\\)"),
+    (None, ["thumb_*"], "PATCHES=SEGMENT"),
+    (None, ["thumb_1=thumb_distal", "index_*=index_distal"], "'index_\\*' matches no patch"),
+    ("left", ["thumb_*=thumb_distal"], "no patch of the left hand"),
+])
+def test_layouts_of_patches_without_a_segment_or_a_hand_are_refused(tmp_path, side, rules, match):
+    from handcap.patterns.layout import pattern_layout
+
+    pattern, _ = import_template(_write(tmp_path, DEXTERCAP), owners=["cube_*=cube"])
+    with pytest.raises(HandcapError, match=match):
+        pattern_layout(pattern, side, rules)
+
+
+def test_layout_new_from_a_pattern(tmp_path, capsys):
+    from handcap.layouts import load_layout
+
+    path = _write(tmp_path, DEXTERCAP)
+    assert main(["pattern", "--import", str(path), "--owner", "cube_*=cube", "--out", str(tmp_path / "p")]) == 0
+    template = tmp_path / "p" / "pattern.toml"
+    before = template.read_bytes()
+    out = tmp_path / "theirs.toml"
+    assert main(["layout", "new", "--pattern", str(template), "--segment", "thumb_1=thumb_distal", "--out",
+                 str(out)]) == 0
+    assert "26 corners of 1 patches of the right hand" in capsys.readouterr().out
+    layout = load_layout(str(out))
+    assert len(layout) == 26 and set(layout.segments) == {"thumb_distal"} and layout.marker_kind == "patch"
+    assert "handcap layout new --pattern" in out.read_text() and template.read_bytes() == before
+    for args, match in ((["--segment", "thumb_1=thumb_distal"], "give --pattern too"),
+                        (["--pattern", str(template), "--like", "glove-13"], "give one"),
+                        (["--pattern", str(template)], "have no segment: thumb_1"),
+                        (["--pattern", str(template), "--segment", "thumb_1=thumb_distal", "--side", "left"],
+                         "no patch of the left hand")):
+        assert main(["layout", "new", *args, "--out", str(tmp_path / "bad.toml")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and match in err[0]
+        assert not (tmp_path / "bad.toml").exists()

@@ -99,3 +99,34 @@ def test_the_shape_fit_reaches_the_optimum_of_scipys_least_squares(glove_session
     assert reached < 0.9 * start  # the shape mattered
     assert reached <= best * (1 + 1e-4)
     np.testing.assert_allclose(ours, theirs, atol=0.02)
+
+
+def test_patches_printed_by_another_generator_calibrate_and_solve_from_their_template(dense_session, tmp_path):
+    """The path of a lab whose patches another generator printed: its template (here handcap's hand patches
+    renamed p0, p1, ... so that nothing leans on handcap's names) imported, a layout made from it with each patch's
+    segment and no position, the markers placed by the calibration and the take solved."""
+    import json
+
+    from handcap.patterns import session_pattern
+    from handcap.patterns.foreign import import_template
+    from handcap.patterns.layout import pattern_layout
+
+    cal, take = dense_session
+    ours = session_pattern(("right",), ())
+    grids, rules, rename = {}, [], {}
+    for k, patch in enumerate(ours.patches):
+        grids[f"p{k}"] = ["".join(t or "**" for t in row) for row in patch.tags]
+        rules.append(f"p{k}={patch.segment}")
+        rename.update({patch.corner_name(r, c, owner=False): f"p{k}_r{r}c{c}"
+                       for r in range(patch.rows + 1) for c in range(patch.cols + 1)})
+    (tmp_path / "theirs.json").write_text(json.dumps(grids))
+    pattern, _ = import_template(tmp_path / "theirs.json")
+    layout = pattern_layout(pattern, segments=rules)
+    renamed = [replace(s.markers, names=tuple(rename.get(n, n) for n in s.markers.names)) for s in (cal, take)]
+    seen = {n for n, ok in zip(renamed[0].names, np.isfinite(renamed[0].positions).all(-1).any(0)) if ok}
+    layout = layout.subset(seen)
+    assert len(layout) > 300
+    result = calibrate_attachment(renamed[0], layout, betas=cal.attachment.betas, max_frames=40)
+    motion = solve_hand(renamed[1], result.attachment)
+    assert np.nanmean(motion.marker_residuals) < 0.001
+    assert _joint_error(motion, take).mean() < 0.003

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 from handcap.cli.common import add_units
+from handcap.core.errors import HandcapError
 from handcap.layouts import SHIPPED
 from handcap.steps import layout
 
 
 def _cmd_layout_new(a):
-    return layout.new(a.out, like=a.like, side=a.side, positions=not a.no_positions, force=a.force)
+    if a.pattern is not None and a.like is not None:
+        raise HandcapError("--like copies a layout and --pattern makes one from a template's patches; give one")
+    return layout.new(a.out, like=a.like or "glove-13", side=a.side, positions=not a.no_positions, force=a.force,
+                      pattern=a.pattern, segments=a.segment or ())
 
 
 def _cmd_layout_check(a):
@@ -26,8 +30,15 @@ def add_layout(verbs) -> None:
     what.required = True
     q = what.add_parser("new", help="write a commented layout file to edit",
                         description="Copy a layout with every field explained in comments.")
-    q.add_argument("--like", default="glove-13", help=f"layout to start from: {', '.join(SHIPPED)} or a .toml file "
-                                                      "(default %(default)s)")
+    q.add_argument("--like", help=f"layout to start from: {', '.join(SHIPPED)} or a .toml file (default glove-13)")
+    q.add_argument("--pattern", metavar="PATTERN_TOML",
+                   help="instead of --like: every corner of this template's hand patches is a marker, on the segment "
+                        "of its patch (--segment), without a position: calibrate-markers places them (patches printed "
+                        "by another generator, imported with handcap pattern --import)")
+    q.add_argument("--segment", action="append", metavar="PATCHES=SEGMENT",
+                   help="with --pattern: the patches whose name matches the shell pattern are stuck on this hand "
+                        "segment, e.g. 'thumb_1=thumb_distal' (repeat; the first that matches wins; handcap's own "
+                        "patches know theirs)")
     q.add_argument("--side", choices=("right", "left"), default=None, help="write it for this hand (default: as "
                                                                             "--like)")
     q.add_argument("--no-positions", action="store_true",

@@ -27,7 +27,7 @@ for _finger in ("index", "middle", "ring", "pinky"):
 
 _HEADER = """\
 # handcap marker layout: which marker sits on which segment of the hand.
-# Made by `handcap layout new --like {like}`; edit it for your marker set, then run
+# Made by `handcap layout new {made}`; edit it for your marker set, then run
 #   handcap layout check THIS.toml YOUR_TAKE.c3d
 # which lists the names it finds in the take, the segments, the positions and the rigid set.
 #
@@ -61,7 +61,8 @@ _HEADER = """\
 """
 
 
-def layout_template(layout: MarkerLayout, *, like: str | None = None, positions: bool = True) -> str:
+def layout_template(layout: MarkerLayout, *, like: str | None = None, positions: bool = True,
+                    made: str | None = None) -> str:
     """The TOML text of ``layout`` with every field explained in comments.
 
     Parameters
@@ -73,6 +74,8 @@ def layout_template(layout: MarkerLayout, *, like: str | None = None, positions:
     positions : bool
         Keep the positions of the hand markers; without them every hand marker is
         estimated by ``calibrate-markers`` (for a marker set placed otherwise).
+    made : str, optional
+        The ``handcap layout new`` arguments that made it, for the header (default ``--like LIKE``).
 
     Returns
     -------
@@ -89,7 +92,8 @@ def layout_template(layout: MarkerLayout, *, like: str | None = None, positions:
     segments = "\n".join(f"#                {s:{width}s}  {SEGMENT_HELP[s]}" for s in SEGMENT_NAMES)
     z_side = "towards the little finger; the thumb is at negative z" if layout.side == "right" else \
         "towards the little finger; the thumb is at positive z"
-    lines = [_HEADER.format(like=like or layout.name, segments=segments, side=layout.side, z_side=z_side)]
+    lines = [_HEADER.format(made=made or f"--like {like or layout.name}", segments=segments, side=layout.side,
+                            z_side=z_side)]
     table = layout.to_toml()
     markers = table.pop("markers")
     for key, value in table.items():

@@ -4,7 +4,9 @@
 the template (``pattern.toml``: every patch's tag grid and the corner ids it implies),
 :mod:`~handcap.patterns.session` the patches of a session (two hands, objects, the 2x2x2 cube),
 :mod:`~handcap.patterns.glyphs` the drawing of a patch (glyph outlines from a font) and
-:mod:`~handcap.patterns.sheet` the printable SVG and PDF pages. The renderer
+:mod:`~handcap.patterns.sheet` the printable SVG and PDF pages,
+:mod:`~handcap.patterns.foreign` the templates of patches another generator printed (DexterCap's JSON) and
+:mod:`~handcap.patterns.layout` the marker layout of a template's hand patches. The renderer
 (:mod:`handcap.synth.images`) and the detector (:mod:`handcap.detect`) both use them.
 """
 
