@@ -1,5 +1,6 @@
 """Attachment calibration recovers misplaced markers; bad inputs are refused."""
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -130,3 +131,37 @@ def test_patches_printed_by_another_generator_calibrate_and_solve_from_their_tem
     motion = solve_hand(renamed[1], result.attachment)
     assert np.nanmean(motion.marker_residuals) < 0.001
     assert _joint_error(motion, take).mean() < 0.003
+
+
+def test_drop_misfit_calibrates_again_without_the_markers_that_fit_no_bone(dense_session, tmp_path, capsys):
+    """A patch put on the wrong segment (the index fingertip's on the palm) fits nowhere: --drop-misfit leaves its
+    corners out, names them, and the calibration MRE falls; the right layout loses nothing."""
+    from handcap.cli import main
+    from handcap.io import write_markers
+    from handcap.layouts import layout_template
+
+    cal, _ = dense_session
+    write_markers(cal.markers, tmp_path / "cal.c3d")
+    dense = load_layout("dense-patches")
+    wrong = MarkerLayout("wrong", "right", tuple(LayoutMarker(m.name, "palm" if m.patch == "index_distal" else
+                                                              m.segment, None, m.patch) for m in dense.markers),
+                         (), dense.marker_radius, dense.marker_kind)
+    moved = {m.name for m in wrong.markers if m.patch == "index_distal"}
+    betas = ",".join(f"{b:.6f}" for b in cal.attachment.betas)  # known: the shape is not what is tested
+    for name, layout in (("wrong", wrong), ("right", dense)):
+        (tmp_path / f"{name}.toml").write_text(layout_template(layout, positions=False))
+        assert main(["calibrate-markers", str(tmp_path / "cal.c3d"), "--layout", str(tmp_path / f"{name}.toml"),
+                     "--drop-misfit", "--frames", "0:40", "--betas", betas, "--out",
+                     str(tmp_path / f"{name}.npz")]) == 0
+        out = capsys.readouterr()
+        kept = set(MarkerAttachment.load(tmp_path / f"{name}.npz").marker_names)
+        if name == "right":
+            assert "fit the hand worse" not in out.err and len(kept) == len(dense)
+            continue
+        dropped = {n for n in dense.names if n not in kept}
+        assert moved <= dropped and len(dropped) < len(moved) + 5
+        before, after = map(float, re.search(r"calibration MRE ([\d.]+) mm with them, ([\d.]+) mm", out.err).groups())
+        assert after < 0.5 * before and "index_distal_r" in out.err
+    assert main(["calibrate-markers", str(tmp_path / "cal.c3d"), "--layout", "dense-patches", "--drop-misfit", "0",
+                 "--out", str(tmp_path / "zero.npz")]) == 2
+    assert "give a residual in millimetres" in capsys.readouterr().err and not (tmp_path / "zero.npz").exists()

@@ -14,7 +14,7 @@ def _cmd_calibrate_markers(a):
     return solve.calibrate_markers(a.input, a.out, layout=a.layout, side=a.side, frames=frames_arg(a.frames),
                                    betas=betas_arg(a.betas), fit_shape=a.fit_shape, estimate_offset=a.estimate_offset,
                                    units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir,
-                                   drop_unseen=a.drop_unseen)
+                                   drop_unseen=a.drop_unseen, drop_misfit_mm=a.drop_misfit)
 
 
 def _cmd_solve(a):
@@ -45,6 +45,10 @@ def add_solve(verbs) -> None:
     p.add_argument("--drop-unseen", action="store_true",
                    help="leave out (with a warning) the layout's markers the take never shows, e.g. corners of dense "
                         "patches that no two cameras saw; without it they are an error")
+    p.add_argument("--drop-misfit", nargs="?", type=float, const=3.0, metavar="MM",
+                   help="calibrate again without the markers whose mean residual exceeds MM millimetres (default 3 "
+                        "when given without a value), with a warning that names them: corners of a patch that "
+                        "reaches over a joint move with two bones (layouts from layout new --pattern)")
     p.add_argument("--out", required=True, help="attachment .npz")
     add_units(p)
     add_hand_model(p)

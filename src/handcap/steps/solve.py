@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings as warnings_module
 
 import numpy as np
 
@@ -18,9 +19,14 @@ from handcap.solve import betas_from_measurements, betas_from_scan, calibrate_at
 from handcap.steps.step import Step
 
 
+#: Most rounds of ``--drop-misfit`` (each calibrates again without the worst misfits).
+MISFIT_ROUNDS = 6
+
+
 def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames: slice | None = None, betas=None,
                       fit_shape: bool | None = None, estimate_offset: bool | None = None, units: str | None = None,
-                      hand_model: str | None = None, mano_dir=None, drop_unseen: bool = False) -> Step:
+                      hand_model: str | None = None, mano_dir=None, drop_unseen: bool = False,
+                      drop_misfit_mm: float | None = None) -> Step:
     """Calibrate the marker attachment from a calibration take (see :func:`handcap.solve.calibrate_attachment`).
 
     Parameters
@@ -44,6 +50,10 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
     drop_unseen : bool
         Calibrate only the layout's markers that the take shows at least once, with a warning that counts the
         others (dense patches: corners that no camera pair saw); without it such a marker is an error.
+    drop_misfit_mm : float or None
+        Calibrate again without the markers whose mean calibration residual exceeds this many millimetres, with a
+        warning that names them: corners of a patch that reaches over a joint move with two bones and fit neither
+        (a layout made from a template with ``layout new --pattern``).
     """
     check_not_input(out, path)
     marker_layout = load_layout(layout, side=side)
@@ -58,16 +68,61 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
             raise HandcapError(f"{path}: shows none of layout {marker_layout.name}'s markers")
         marker_layout = marker_layout.subset(shown)
     hand = hand_model_from_options(hand_model, mano_dir, side=marker_layout.side, recorded=None, what="the input")
-    result = calibrate_attachment(markers, marker_layout, hand, betas=betas, frames=frames, fit_shape=fit_shape,
-                                  estimate_offset=estimate_offset)
+    if drop_misfit_mm is not None and not 0 < drop_misfit_mm < 1000:
+        raise HandcapError(f"--drop-misfit {drop_misfit_mm} mm: give a residual in millimetres, e.g. 3")
+    options = {"betas": betas, "frames": frames, "fit_shape": fit_shape, "estimate_offset": estimate_offset}
+    total = len(marker_layout.names) + len(dropped)
+    if drop_misfit_mm is None:
+        result, misfit = calibrate_attachment(markers, marker_layout, hand, **options), []
+    else:
+        # Only the last calibration's warnings hold: those of a round with misfits name them.
+        result, said = _quietly(calibrate_attachment, markers, marker_layout, hand, **options)
+        misfit, first, left_out = _misfits(result, drop_misfit_mm, path), 1000 * result.mre, []
+        for _ in range(MISFIT_ROUNDS):  # the worst first: a misfit drags its segment, and its neighbours fit badly
+            if not misfit:
+                break
+            left_out += misfit
+            marker_layout = marker_layout.subset(set(marker_layout.names) - set(misfit))
+            result, said = _quietly(calibrate_attachment, markers, marker_layout, hand, **options)
+            misfit = _misfits(result, drop_misfit_mm, path)
+        for w in said:
+            warnings_module.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        misfit = [f"{len(left_out)} markers fit the hand worse than {drop_misfit_mm:g} mm and are left out of the "
+                  f"attachment ({', '.join(left_out[:4])}{' ...' if len(left_out) > 4 else ''}); calibration MRE "
+                  f"{first:.2f} mm with them, {1000 * result.mre:.2f} mm without"] if left_out else []
     attachment, warnings = result.attachment, result.warnings
+    if misfit:
+        attachment = q.attach(attachment, misfit)
+        warnings = (*warnings, *misfit)
     if dropped:
-        note = (f"{len(dropped)} of the layout's {len(dropped) + len(marker_layout.names)} markers were never seen "
+        note = (f"{len(dropped)} of the layout's {total} markers were never seen "
                 f"in the calibration take ({', '.join(dropped[:3])}...): they are left out of the attachment")
         attachment = q.attach(attachment, [note])
         warnings = (*warnings, note)
     attachment.save(out)
     return Step((f"{out}: {result.summary()}",), warnings, (str(out),), result)
+
+
+def _quietly(fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` and the warnings it gave, held back (to be given where they still hold)."""
+    with warnings_module.catch_warnings(record=True) as said:
+        warnings_module.simplefilter("always")
+        out = fn(*args, **kwargs)
+    return out, list(said)
+
+
+def _misfits(result, limit_mm: float, path) -> list:
+    """The markers to leave out in one round of ``--drop-misfit``: of those whose mean calibration residual exceeds
+    ``limit_mm``, the ones over half the worst residual (its neighbours may fit again once the worst is gone);
+    an error if every marker is over the limit."""
+    with np.errstate(invalid="ignore"):
+        per_marker = np.nan_to_num(np.nanmean(result.residuals, axis=0) * 1000)
+    over = per_marker > limit_mm
+    if over.all():
+        raise HandcapError(f"{path}: every marker fits the hand worse than {limit_mm:g} mm (calibration MRE "
+                           f"{1000 * result.mre:.1f} mm); check the labels and the layout's segments")
+    worst = per_marker.max(initial=0.0)
+    return [n for n, r, o in zip(result.attachment.marker_names, per_marker, over) if o and r > 0.5 * worst]
 
 
 def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | None = None, filter_order: int = 2,
