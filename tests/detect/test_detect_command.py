@@ -506,3 +506,36 @@ def test_another_generators_patches_read_through_their_imported_template(tmp_pat
     visible = sum(len(s.block_text) for s in scenes)
     assert read["template"][1] == 0 and read["alone"][1] == 0
     assert read["template"][0] >= 0.5 * visible and read["template"][0] >= 1.5 * read["alone"][0]
+
+
+def test_a_selection_of_frames_reads_those_frames_as_a_take_of_their_own(tmp_path, capsys):
+    """detect --frames 1:6 --every 2 reads input frames 1, 3 and 5 as frames 0, 1 and 2 at half the rate: the
+    same tags at the same pixels as a run over every frame gives them there; overlay draws those three frames."""
+    from handcap.detect.scenes import PageMaker
+    from handcap.synth.pages import PageLook
+
+    maker = PageMaker(4, look=PageLook(square_px=(16.0, 22.0), tilt_deg=(0.0, 15.0), occluders=(0, 0),
+                                       size=(480, 360), glint=0.0))
+    (tmp_path / "cam").mkdir()
+    for t in range(6):
+        cv2.imwrite(str(tmp_path / "cam" / f"{t:04d}.png"), maker.scene().image)
+    runs = {}
+    for name, extra in (("all", []), ("some", ["--frames", "1:6", "--every", "2"])):
+        out = tmp_path / f"{name}.npz"
+        assert main(["detect", str(tmp_path / "cam"), "--out", str(out), "--rate", "30", "--whole-frames",
+                     *extra]) == 0
+        runs[name] = dict(np.load(out))
+    some, every = runs["some"], runs["all"]
+    assert float(some["rate"]) == 15.0 and int(some["first_frame"]) == 1 and int(some["frame_step"]) == 2
+    assert "first_frame" not in every and int(some["n_frames"]) == 3
+    assert "input frames 1:6 every 2: frame k of some.npz is input frame 1 + 2 k, at 15 Hz" in capsys.readouterr().out
+    for k in range(3):
+        mine = sorted(zip(some["block_text"][some["block_frame"] == k].tolist(),
+                          np.round(some["block_xy"][some["block_frame"] == k], 6).tolist()))
+        theirs = sorted(zip(every["block_text"][every["block_frame"] == 1 + 2 * k].tolist(),
+                            np.round(every["block_xy"][every["block_frame"] == 1 + 2 * k], 6).tolist()))
+        assert len(mine) > 5 and mine == theirs
+    assert main(["overlay", str(tmp_path / "some.npz"), str(tmp_path / "cam"), "--out", str(tmp_path / "look")]) == 0
+    assert sorted(p.name for p in (tmp_path / "look" / "cam").iterdir()) == ["000000.jpg", "000001.jpg", "000002.jpg"]
+    assert main(["detect", str(tmp_path / "cam"), "--out", str(tmp_path / "bad.npz"), "--frames", "7:9"]) == 2
+    assert "hold frames 0 to 5 only" in capsys.readouterr().err and not (tmp_path / "bad.npz").exists()

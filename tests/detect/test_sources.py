@@ -123,3 +123,28 @@ def test_a_take_folder_gives_a_camera_to_each_video_and_each_folder_of_images(tm
         frame_sources([frames / "empty"])
     with pytest.raises(HandcapError, match="both camera 'int_cam01_img'"):  # the take and one of its cameras
         frame_sources([frames, frames / "int_cam01_img"])
+
+
+def test_a_selection_of_frames_is_a_take_of_its_own(tmp_path):
+    """--frames A:B --every N: frame k is input frame A + k N, from a folder (its files' numbers, a dropped frame
+    still missing) and from a video (the frames between are stepped over), counted as the selection counts them."""
+    from handcap.detect.sources import FrameSelection, select_frames
+
+    names = [f"frame_{k:04d}.png" for k in range(100, 112)]
+    cam_0 = _folder(tmp_path, "cam_0", names)
+    cam_1 = _folder(tmp_path, "cam_1", names[:5] + names[6:])  # camera 1 dropped input frame 5
+    _video(tmp_path / "cam_2.avi", [10 * (k + 1) for k in range(12)])
+    pick = FrameSelection(2, 11, 3)  # input frames 2, 5, 8
+    sources = select_frames(frame_sources([cam_0, cam_1, tmp_path / "cam_2.avi"]), pick)
+    assert _frames(sources[0]) == [(0, 30), (1, 60), (2, 90)]
+    assert _frames(sources[1]) == [(0, 30), (2, 80)]  # its file of input frame 8 is its 8th: grey 80
+    levels = [(t, level) for t, level in _frames(sources[2])]
+    assert [t for t, _ in levels] == [0, 1, 2] and all(abs(v - 10 * (3 * t + 3)) <= 3 for t, v in levels)
+    assert [s.count() for s in sources] == [3, 2, 3] and [s.span() for s in sources] == [3, 3, 3]
+    # Open at the end, every frame from the start: the whole input.
+    assert _frames(select_frames(sources[:1], FrameSelection(0, None, 1))[0]) == _frames(frame_sources([cam_0])[0])
+    with pytest.raises(HandcapError, match="hold frames 0 to 11 only"):
+        select_frames(sources[:2], FrameSelection(20, 30))
+    for bad, match in (((-1, 4, 1), "0 <= A < B"), ((4, 4, 1), "0 <= A < B"), ((0, None, 0), "--every 0")):
+        with pytest.raises(HandcapError, match=match):
+            FrameSelection(*bad)

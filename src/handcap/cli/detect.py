@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from handcap.cli.common import frames_arg
 from handcap.steps import detect as detect_step
 from handcap.steps import overlay as overlay_step
 
@@ -12,7 +13,7 @@ def _cmd_detect(a):
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
                               track=not a.whole_frames, checker_weights=a.checker_weights,
                               checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise,
-                              response=a.response)
+                              response=a.response, frames=frames_arg(a.frames), every=a.every)
 
 
 def add_detect(verbs) -> None:
@@ -32,6 +33,12 @@ def add_detect(verbs) -> None:
     p.add_argument("--alphabet", help="glyphs of the printed tags (default: the template's; DexterCap's patches: "
                                       "0123456789ACEFHPUY)")
     p.add_argument("--rate", type=float, help="frames per second (default 20, with a warning)")
+    p.add_argument("--frames", metavar="A:B",
+                   help="read only input frames A to B-1 (0-based; either may be left out), e.g. 0:200 to try the "
+                        "first ten seconds of a long take")
+    p.add_argument("--every", type=int, default=1, metavar="N",
+                   help="read every N-th frame (of --frames): the frames read make a take of their own at 1/N of the "
+                        "rate (the file records first_frame and frame_step; overlay reads the same frames)")
     p.add_argument("--threshold", type=float, help="least corner probability (default 0.5 from the refiner, 0.3 "
                                                    "from the corner network with --no-refine)")
     p.add_argument("--no-refine", action="store_true", help="keep the corner network's positions (no refiner)")

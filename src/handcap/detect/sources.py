@@ -46,6 +46,42 @@ UNREADABLE = {**dict.fromkeys((".heic", ".heif"), "a HEIC/HEIF photograph (a pho
 
 
 @dataclass(frozen=True)
+class FrameSelection:
+    """The frames of a take to read, as a take of their own: its frame ``k`` is the input's frame
+    ``start + k * every`` (below ``stop``), at ``1 / every`` of the input's rate.
+
+    Attributes
+    ----------
+    start : int
+        First input frame read (0-based, as the frames are indexed: :class:`FrameSource`).
+    stop : int or None
+        Input frame the selection stops before (None: the end).
+    every : int
+        Read every ``every``-th frame from ``start``.
+    """
+
+    start: int = 0
+    stop: int | None = None
+    every: int = 1
+
+    def __post_init__(self):
+        if self.start < 0 or (self.stop is not None and self.stop <= self.start):
+            raise HandcapError(f"--frames {self.start}:{'' if self.stop is None else self.stop}: give A:B with "
+                               "0 <= A < B (input frame numbers, 0-based)")
+        if self.every < 1:
+            raise HandcapError(f"--every {self.every}: give 1 (every frame) or more")
+
+    def keeps(self, index: int) -> bool:
+        """Whether input frame ``index`` is read."""
+        return (index >= self.start and (self.stop is None or index < self.stop)
+                and (index - self.start) % self.every == 0)
+
+    def renumbered(self, index: int) -> int:
+        """The selection's frame number of a kept input frame."""
+        return (index - self.start) // self.every
+
+
+@dataclass(frozen=True)
 class FrameSource:
     """The frames of one camera.
 
@@ -61,6 +97,8 @@ class FrameSource:
     numbers : tuple of int
         Each file's frame index where the folder's file names give it (see the module docstring); empty
         where the frames are indexed by their order.
+    pick : FrameSelection or None
+        Read only these frames, numbered as the selection numbers them (:func:`select_frames`).
     """
 
     camera: str
@@ -68,6 +106,7 @@ class FrameSource:
     kind: str
     files: tuple = ()
     numbers: tuple = ()
+    pick: FrameSelection | None = None
 
     def frames(self, colour: bool = False):
         """Yield ``(frame_index, image)`` in order; images are grey uint8 ``(H, W)``.
@@ -79,17 +118,21 @@ class FrameSource:
         HandcapError
             A file that cannot be decoded, or a video with no readable frame.
         """
+        pick = self.pick or FrameSelection()
         if self.kind == "video":
             capture = cv2.VideoCapture(str(self.path))
             if not capture.isOpened():
                 raise HandcapError(f"{self.path}: cannot be opened as a video (unknown format or damaged file)")
             try:
                 index = 0
-                while True:
-                    ok, frame = capture.read()
-                    if not ok:
+                while pick.stop is None or index < pick.stop:
+                    if not capture.grab():  # a frame not read is only grabbed: its picture is not made
                         break
-                    yield index, _bgr(frame) if colour else _grey(frame)
+                    if pick.keeps(index):
+                        ok, frame = capture.retrieve()
+                        if not ok:
+                            break
+                        yield pick.renumbered(index), _bgr(frame) if colour else _grey(frame)
                     index += 1
             finally:
                 capture.release()
@@ -97,7 +140,9 @@ class FrameSource:
                 raise HandcapError(f"{self.path}: no frame could be read from this video (empty or damaged)")
             return
         for index, file in enumerate(self.files):
-            yield self.numbers[index] if self.numbers else index, read_image(file, colour=colour)
+            number = self.numbers[index] if self.numbers else index
+            if pick.keeps(number):
+                yield pick.renumbered(number), read_image(file, colour=colour)
 
     def fps(self) -> float | None:
         """A video's frame rate as its header says (None for images, or when it does not say)."""
@@ -111,19 +156,47 @@ class FrameSource:
         return fps if 0 < fps < 10000 else None
 
     def count(self) -> int:
-        """Number of frames (a video's as its header says; 0 when it does not say)."""
+        """Number of frames read (a video's as its header says; 0 when it does not say)."""
+        pick = self.pick or FrameSelection()
         if self.kind != "video":
-            return len(self.files)
+            return sum(pick.keeps(n) for n in (self.numbers or range(len(self.files))))
         capture = cv2.VideoCapture(str(self.path))
         try:
-            return max(int(capture.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+            total = max(int(capture.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
         finally:
             capture.release()
-
+        return len(range(pick.start, total if pick.stop is None else min(total, pick.stop), pick.every))
 
     def span(self) -> int:
         """One more than the last frame index (:meth:`count`, unless the files' numbers skip frames)."""
-        return self.numbers[-1] + 1 if self.numbers else self.count()
+        pick = self.pick or FrameSelection()
+        kept = [pick.renumbered(n) for n in self.numbers if pick.keeps(n)]
+        return (kept[-1] + 1 if kept else 0) if self.numbers else self.count()
+
+
+def select_frames(sources, pick: FrameSelection) -> list:
+    """The same cameras, each reading only the frames ``pick`` selects (numbered as it numbers them).
+
+    Parameters
+    ----------
+    sources : sequence of FrameSource
+    pick : FrameSelection
+
+    Returns
+    -------
+    list of FrameSource
+
+    Raises
+    ------
+    HandcapError
+        Where no camera holds a selected frame (its first frame past the take's end).
+    """
+    picked = [replace(s, pick=pick) for s in sources]
+    whole = [replace(s, pick=None).span() for s in sources]  # 0 for a video whose header gives no count
+    if not any(s.count() for s in picked) and all(whole):
+        raise HandcapError(f"--frames {pick.start}:{'' if pick.stop is None else pick.stop}: the inputs hold frames "
+                           f"0 to {max(whole) - 1} only")
+    return picked
 
 
 class ArrayFrames:

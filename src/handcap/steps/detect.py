@@ -12,7 +12,7 @@ from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.response import NEAR, ResponseChoice, linear_light
-from handcap.detect.sources import frame_notes, frame_sources, short_videos
+from handcap.detect.sources import FrameSelection, frame_notes, frame_sources, select_frames, short_videos
 from handcap.io import read_rig
 from handcap.steps.step import Step
 
@@ -38,7 +38,8 @@ TWICE_SHARE = 0.05
 def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, rate: float | None = None,
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
-           checker: bool = True, adapt_steps: int = 0, denoise: bool = True, response: str = "auto") -> Step:
+           checker: bool = True, adapt_steps: int = 0, denoise: bool = True, response: str = "auto",
+           frames: slice | None = None, every: int = 1) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -84,6 +85,11 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         frames that read tags (the default), linear as recorded (a machine-vision camera), or display-encoded
         (sRGB: a phone, a webcam, most video), decoded to linear light before the search. A warning names the
         cameras read as sRGB.
+    frames : slice, optional
+        Read only the input frames ``frames.start`` to ``frames.stop`` (0-based, stop excluded).
+    every : int
+        Read every ``every``-th of them. The frames read are a take of their own: its frame ``k`` is input frame
+        ``start + k * every``, at ``rate / every``; the file records ``first_frame`` and ``frame_step``.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -100,6 +106,10 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                "input folder or video after its camera")
         names = [n for n in cameras.names if n in names]
         sources = sorted(sources, key=lambda s: names.index(s.camera))
+    pick = FrameSelection(0 if frames is None or frames.start is None else frames.start,
+                          None if frames is None else frames.stop, every)
+    if pick != FrameSelection():
+        sources = select_frames(sources, pick)
     # The networks load torch (a second and a half): only when detecting, not with the command line.
     from handcap.detect.networks import (load_checker, load_corner_net, load_reader, load_refiner,
                                          shipped_notes)  # loads torch
@@ -132,6 +142,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             warnings.append(f"frame rate not given (--rate): {DEFAULT_RATE:g} Hz assumed")
     elif not 0 < rate < 100000:
         raise HandcapError(f"--rate {rate}: give frames per second, more than 0")
+    rate = rate / pick.every
     from handcap.detect.capture import detect_capture  # loads torch
 
     marker_names = template.corner_names() if template is not None else []
@@ -199,13 +210,19 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         "handcap pattern --import) the vote over them reads more"
                         + ("" if adapt_steps else "; so may a reader adapted to this take (--adapt-steps 200)"))
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
-    arrays = {**run.arrays, **pitch, **warnings_entry(warnings)}
+    picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
+                                                  "frame_step": np.array(pick.every)}
+    arrays = {**run.arrays, **pitch, **picked, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else "")
             + (f"; {run.regions} images searched around the previous frame's patches only" if run.regions else "")
             + adapted)
-    return Step((line,), tuple(warnings), (str(out),), arrays)
+    lines = (line,) if not picked else (line, f"input frames {pick.start}:{'' if pick.stop is None else pick.stop}"
+                                              + (f" every {pick.every}" if pick.every > 1 else "") + f": frame k of "
+                                              f"{out.name} is input frame {pick.start} + {pick.every} k, at "
+                                              f"{rate:g} Hz")
+    return Step(lines, tuple(warnings), (str(out),), arrays)
 
 
 def _nothing_read(detector, source) -> str:

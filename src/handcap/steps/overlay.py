@@ -9,7 +9,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.core.files import check_output_folder, load_npz
 from handcap.detect.overlay import BLOCK_KEYS, read_blocks, write_pictures
-from handcap.detect.sources import frame_sources
+from handcap.detect.sources import FrameSelection, frame_sources, select_frames
 from handcap.io import read_markers, read_rig
 from handcap.markerless.keypoints import BONES, KEYPOINT_NAMES, is_keypoints
 from handcap.multiview.detections import read_detections
@@ -61,6 +61,10 @@ def overlay(detections, inputs, out, *, every: int = 1, markers=None, rig=None, 
     arrays = load_npz(detections, (), what="detections file")
     read_blocks(arrays, detections)  # checked before any picture is drawn
     sources = frame_sources(inputs)
+    if "first_frame" in arrays:  # detect read a selection of the frames (--frames, --every): the same frames here
+        start, step = int(arrays["first_frame"]), int(arrays.get("frame_step", 1))
+        span = int(arrays["n_frames"]) if "n_frames" in arrays else int(found.frame.max(initial=-1)) + 1
+        sources = select_frames(sources, FrameSelection(start, start + step * max(span, 1), step))
     folder = Path(out)
     for source in sources:
         place, given = folder.resolve(), Path(source.path).resolve()
