@@ -106,6 +106,10 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     (lambda t: t.replace("[takes.settings.solve]", "[takes.settings.align]", 1),
      "takes[3].settings.align: unknown stage"),
     (lambda t: t.replace("[session]", "[session"), "not TOML"),
+    (lambda t: t.replace('layout = "dense-patches"', 'layout = "mine.toml"', 1),
+     ".layout 'mine.toml': neither a shipped layout"),
+    (lambda t: t.replace('layout = "glove-13"', 'layout = "glove-13"\ndrop_misfit_mm = "yes"', 1),
+     "stages.calibrate.drop_misfit_mm must be a number"),
 ])
 def test_bad_session_files(made, tmp_path, capsys, edit, message):
     text = (made / "session.toml").read_text()
@@ -149,3 +153,41 @@ def test_a_calibration_takes_own_attachment_solves_the_takes_naming_it(tmp_path)
     assert [(r.take, r.stage, r.status) for r in runs] == [("a", "solve", "done"), ("b", "solve", "done")]
     manifest = json.loads((tmp_path / "results/b/solve.manifest.json").read_text())
     assert manifest["input_paths"]["attachment"] == str(tmp_path / "a" / "attachment.npz")
+
+
+def test_a_layout_file_is_found_beside_the_session_file(made, tmp_path):
+    """A take's own layout (handcap layout new writes one) is a file relative to the session file, wherever the
+    command runs from; its calibration settings reach the stage."""
+    text = (made / "session.toml").read_text()
+    assert main(["layout", "new", "--like", "dense-patches", "--no-positions", "--out", str(made / "mine.toml")]) == 0
+    edited = made / "mine-session.toml"
+    edited.write_text(text.replace('layout = "dense-patches"', 'layout = "mine.toml"', 1)
+                      .replace('layout = "glove-13"', 'layout = "glove-13"\ndrop_misfit_mm = 3.0', 1))
+    try:
+        session = load_session(edited)
+        assert str(made / "mine.toml") in {t.layout for t in session.takes}
+        assert session.settings["calibrate"]["drop_misfit_mm"] == 3.0
+    finally:
+        edited.unlink()
+        (made / "mine.toml").unlink()
+
+
+def test_an_edited_layout_file_reruns_the_stages_that_read_it(made, tmp_path):
+    """A layout file is an input of calibrate: its manifest holds the file's hash, so editing the file reruns it."""
+    assert main(["layout", "new", "--like", "glove-13", "--out", str(made / "glove.toml")]) == 0
+    session_file = made / "glove-session.toml"
+    session_file.write_text('[session]\nname = "g"\nresults = "glove-results"\nstages = ["calibrate"]\n'
+                            '[stages.calibrate]\nlayout = "glove.toml"\n'
+                            '[[takes]]\nname = "take1"\nkind = "markers"\nmarkers = "take1/markers.c3d"\n'
+                            'calibration = "calibration/markers.c3d"\n')
+    try:
+        states = []
+        for edit in (False, False, True):
+            if edit:
+                (made / "glove.toml").write_text((made / "glove.toml").read_text() + "\n# edited\n")
+            runs = process(load_session(session_file), workers=1)
+            states.append([r.status for r in runs])
+        assert states == [["done"], ["skipped"], ["done"]]
+    finally:
+        session_file.unlink()
+        (made / "glove.toml").unlink()

@@ -24,6 +24,7 @@ from handcap import __version__
 from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.parallel import map_chunks
+from handcap.layouts.file import SHIPPED
 from handcap.session.spec import KIND_STAGES, Session, Take
 from handcap.steps import detect as detect_step
 from handcap.steps import markerless as markerless_step
@@ -105,12 +106,15 @@ def _inputs(session: Session, take: Take, stage: str, folder: Path) -> dict:
     owner = next(t for t in session.takes if t.name == _calibrated_by(session, take))
     attachment = owner.inputs.get("attachment", session.results / owner.name / OUTPUTS["calibrate"])
     markers = _markers_of(session, take)
+    # A layout file (not a shipped name) is an input of the stages that read it: editing it reruns them.
+    layout = take.layout or stage_settings(session, take, "calibrate").get("layout")
+    layout_file = None if layout is None or layout in SHIPPED else layout
     return {"detect": {"images": take.inputs.get("images"), "cameras": take.inputs.get("cameras"),
                        "pattern": take.inputs.get("pattern")},
             "triangulate": {"detections": take.inputs.get("detections", folder / OUTPUTS["detect"]),
                             "cameras": take.inputs.get("cameras")},
-            "clean": {"markers": folder / OUTPUTS["triangulate"]},
-            "calibrate": {"calibration": _calibration_of(session, take)},
+            "clean": {"markers": folder / OUTPUTS["triangulate"], "layout_file": layout_file},
+            "calibrate": {"calibration": _calibration_of(session, take), "layout_file": layout_file},
             "solve": {"markers": markers, "attachment": attachment},
             "fit": {"keypoints": take.inputs.get("keypoints")},
             "metrics": {"motion": folder / OUTPUTS["solve"], "markers": markers or take.inputs.get("keypoints"),

@@ -9,7 +9,8 @@ mistake naming the key and the file (issue 19).
     stages = ["calibrate", "solve", "fit", "metrics", "report"]   # default: all of STAGES that apply
 
     [stages.calibrate]
-    layout = "glove-13"                 # every take's layout unless the take names one
+    layout = "glove-13"                 # every take's layout unless the take names one (or a .toml file,
+                                        # relative to this file: handcap layout new writes one)
     [stages.solve]
     method = "lm"
     filter_cutoff = 8.0                 # Hz; omit (or 0) for none
@@ -48,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from handcap.core.errors import HandcapError
+from handcap.layouts.file import SHIPPED
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
@@ -56,7 +58,7 @@ STAGES = {
     "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,
               "max_spline_frames": int},
     "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str,
-                  "drop_unseen": bool},
+                  "drop_unseen": bool, "drop_misfit_mm": float},
     "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
     "fit": {"fit_shape": bool, "robust_scale": float, "filter_cutoff": float, "side": str, "label": str,
             "units": str},
@@ -152,6 +154,17 @@ def _settings(raw, where: str) -> dict:
     return settings
 
 
+def _layout_file(layout: str, path: Path, where: str) -> str:
+    """A shipped layout's name as it is; any other a layout file, relative to the session file, that must exist."""
+    if layout in SHIPPED:
+        return layout
+    file = path.parent / layout
+    if not file.is_file():
+        raise HandcapError(f"{where}.layout {layout!r}: neither a shipped layout ({', '.join(SHIPPED)}) nor a layout "
+                           f"file (no such file {file})")
+    return str(file)
+
+
 def load_session(path) -> Session:
     """Read and check a session file.
 
@@ -195,6 +208,9 @@ def load_session(path) -> Session:
             raise HandcapError(f"{path}: session.stages: unknown stage {stage!r} (choose from {', '.join(STAGES)})")
     raw = table.get("stages", {})
     settings = _settings(raw, f"{path}: stages")
+    if "layout" in settings.get("calibrate", {}):
+        settings["calibrate"]["layout"] = _layout_file(settings["calibrate"]["layout"], path,
+                                                       f"{path}: stages.calibrate")
     takes, seen = [], set()
     raw_takes = table.get("takes", [])
     if not isinstance(raw_takes, list) or not raw_takes:
@@ -224,7 +240,11 @@ def load_session(path) -> Session:
                 raise HandcapError(f"{where}.{key}: no such file {file}")
             inputs[key] = file
         named = {k: _typed(raw_take[k], str, f"{where}.{k}") for k in NAMES if k in raw_take}
+        if "layout" in named:
+            named["layout"] = _layout_file(named["layout"], path, where)
         own = _settings(raw_take.get("settings", {}), f"{where}.settings")
+        if "layout" in own.get("calibrate", {}):
+            own["calibrate"]["layout"] = _layout_file(own["calibrate"]["layout"], path, f"{where}.settings.calibrate")
         takes.append(Take(label, kind, inputs, named.get("layout"), named.get("calibration_take"), own))
     sources = {t.calibration_take for t in takes} - {None}
     by_name = {t.name: t for t in takes}
