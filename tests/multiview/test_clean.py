@@ -129,6 +129,26 @@ def test_segment_groups_without_patches_are_wider():
     assert np.isnan(groups.radii[1])  # a single marker has nothing to cluster with
 
 
+def test_patches_without_positions_are_sized_by_their_grid_and_the_takes_squares(synthetic):
+    """A layout made from a template (layout new --pattern) gives no positions: each patch's radius comes from its
+    corners' grid and the square side the take measures, as wide as the positions' radius or wider, and mislabels
+    far from their patch are removed as with the shipped layout."""
+    from handcap.layouts import LayoutMarker, MarkerLayout, load_layout
+
+    truth, names, groups = synthetic
+    dense = load_layout("dense-patches")
+    bare = MarkerLayout("bare", "right", tuple(LayoutMarker(m.name, m.segment, None, m.patch) for m in dense.markers),
+                        (), dense.marker_radius, dense.marker_kind)
+    assert np.isnan(layout_groups(names, bare).radii).all()  # without the take, nothing to size them by
+    sized = layout_groups(names, bare, positions=truth)
+    assert sized.names == groups.names and np.isfinite(sized.radii).all()
+    assert (sized.radii >= groups.radii - 0.002).all() and (sized.radii < 2 * groups.radii).all()
+    rng = np.random.default_rng(2)
+    observed, wrong, far = _mislabels(_noisy(truth, 2), truth, groups, rng, n_events=300, length=(1, 20))
+    removed = remove_cluster_outliers(observed, sized)[1]
+    assert removed[far].mean() >= 0.95 and (removed & ~wrong).sum() == 0
+
+
 # -- step 1: clusters -----------------------------------------------------------------------
 
 

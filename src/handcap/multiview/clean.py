@@ -153,7 +153,7 @@ def clean_markers(markers: MarkerSequence, layout=None, *, radius: float | None 
         check_positive(radius, "cluster radius (metres)")
     if not (np.isfinite(floor) and floor >= 0):
         raise HandcapError(f"floor must be a non-negative distance in metres, got {floor}")
-    groups = None if layout is None else layout_groups(markers.names, layout, radius=radius)
+    groups = None if layout is None else layout_groups(markers.names, layout, radius=radius, positions=positions)
     nothing = np.zeros(positions.shape[:2], bool)
     clustered = nothing
     if groups is not None:

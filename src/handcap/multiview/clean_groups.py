@@ -15,6 +15,7 @@ import numpy as np
 
 from handcap.core.checks import check_positions, check_positive
 from handcap.core.errors import HandcapError
+from handcap.core.grid import MIN_SIDES, grid_cell, grid_sides
 from handcap.layouts import MarkerLayout, load_layout
 
 # Default radius of a group from its template: scale x (largest template distance) + margin.
@@ -67,7 +68,7 @@ class MarkerGroups:
         return np.flatnonzero(self.labels == group)
 
 
-def layout_groups(names, layout, *, radius: float | None = None) -> MarkerGroups:
+def layout_groups(names, layout, *, radius: float | None = None, positions=None) -> MarkerGroups:
     """Group the markers ``names`` by the patch (else the segment) the layout puts them on.
 
     Parameters
@@ -81,7 +82,12 @@ def layout_groups(names, layout, *, radius: float | None = None) -> MarkerGroups
         Metres, the same for every group. Default: from the template, ``1.2 d + 5 mm``
         for a printed patch and ``1.5 d + 10 mm`` for a segment, with ``d`` the
         largest distance between two of the group's template positions (NaN
-        when a position is not given).
+        when a position is not given). A patch whose corners have no positions but grid names
+        (``PATCH_r{r}c{c}``: a layout made from a template) takes ``d`` from its grid, the largest distance
+        between two of its corners in squares times the take's square side (:func:`handcap.core.grid.grid_sides`
+        of ``positions``, the median); without ``positions``, or a group of other names, no radius.
+    positions : ndarray (T, M, 3), optional
+        The take (metres, NaN missing), to measure the patches' square side in.
 
     Returns
     -------
@@ -116,7 +122,26 @@ def layout_groups(names, layout, *, radius: float | None = None) -> MarkerGroups
             patch = layout.markers[idx[0]].patch is not None
             scale, margin = (PATCH_SCALE, PATCH_MARGIN) if patch else (SEGMENT_SCALE, SEGMENT_MARGIN)
             radii[g] = scale * largest + margin
+        unsized = [g for g, idx in enumerate(members) if np.isnan(radii[g]) and len(idx) >= 2
+                   and layout.markers[idx[0]].patch is not None]
+        if unsized and positions is not None:
+            _grid_radii(radii, unsized, [[layout.markers[i].name for i in members[g]] for g in unsized], positions,
+                        names)
     return MarkerGroups(labels, tuple(keys), radii)
+
+
+def _grid_radii(radii, unsized, corner_names, positions, names) -> None:
+    """Fill ``radii[g]`` of the patches ``unsized`` from their corners' grid (see :func:`layout_groups`)."""
+    sides = grid_sides(check_positions(positions), [str(n) for n in names])  # an OWNER: prefix keeps hands apart
+    if len(sides) < MIN_SIDES:
+        return
+    side = float(np.median(sides))
+    for g, group in zip(unsized, corner_names):
+        cells = [grid_cell(n) for n in group]
+        if any(c is None for c in cells):
+            continue
+        rc = np.array([(r, c) for _, r, c in cells], float)
+        radii[g] = PATCH_SCALE * side * np.linalg.norm(rc[:, None] - rc[None], axis=-1).max() + PATCH_MARGIN
 
 
 def check_groups(groups: MarkerGroups, n_markers: int) -> MarkerGroups:

@@ -3,12 +3,12 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from handcap.core.errors import merge_warnings, warn
+from handcap.core.grid import MIN_SIDES, grid_sides
 from handcap.hand.anthropometry import HAND_LENGTH as AVERAGE_HAND_LENGTH
 from handcap.quality.fit_checks import residual_warnings, shape_warnings
 from handcap.quality.limits import CAPTURE_SPREAD, MM, PITCH_TOLERANCE, REPROJECTION_PX, default_names, listed
@@ -206,8 +206,7 @@ def camera_warnings(rms, *, names=None, limit: float = REPROJECTION_PX) -> list[
 
 
 #: Least adjacent-corner distances (pairs times frames) to judge the pitch by.
-MIN_PITCH_SAMPLES = 20
-_GRID = re.compile(r"^(.*)_r(\d+)c(\d+)$")
+MIN_PITCH_SAMPLES = MIN_SIDES
 
 
 def pitch_check(markers, pitch: float | None) -> tuple[dict, list[str]]:
@@ -235,21 +234,7 @@ def pitch_check(markers, pitch: float | None) -> tuple[dict, list[str]]:
     """
     if pitch is None:
         return {}, []
-    index = {}
-    for i, name in enumerate(markers.names):
-        match = _GRID.match(str(name))
-        if match:
-            index[(match[1], int(match[2]), int(match[3]))] = i
-    pairs = [(i, index[(p, r + dr, c + dc)]) for (p, r, c), i in index.items() for dr, dc in ((0, 1), (1, 0))
-             if (p, r + dr, c + dc) in index]
-    if not pairs:
-        return {}, []
-    a, b = np.array(pairs).T
-    # At most 1,000 frames, evenly spread: the median needs no more, and a long take's pairs would not fit memory.
-    frames = np.unique(np.linspace(0, len(markers.positions) - 1, min(len(markers.positions), 1000)).astype(int))
-    positions = markers.positions[frames]
-    sides = np.linalg.norm(positions[:, a] - positions[:, b], axis=-1)
-    sides = sides[np.isfinite(sides)]
+    sides = grid_sides(markers.positions, markers.names)
     if len(sides) < MIN_PITCH_SAMPLES:
         return {}, []
     side = float(np.median(sides))
