@@ -7,6 +7,7 @@ import argparse
 from handcap.cli.common import add_hand_model, add_units, betas_arg, frames_arg, lengths_arg
 from handcap.layouts import SHIPPED
 from handcap.solve import MEASUREMENTS, METHODS
+from handcap.solve.misfit import LIMIT_MM
 from handcap.steps import solve
 
 
@@ -45,10 +46,10 @@ def add_solve(verbs) -> None:
     p.add_argument("--drop-unseen", action="store_true",
                    help="leave out (with a warning) the layout's markers the take never shows, e.g. corners of dense "
                         "patches that no two cameras saw; without it they are an error")
-    p.add_argument("--drop-misfit", nargs="?", type=float, const=3.0, metavar="MM",
-                   help="calibrate again without the markers whose mean residual exceeds MM millimetres (default 3 "
-                        "when given without a value), with a warning that names them: corners of a patch that "
-                        "reaches over a joint move with two bones (layouts from layout new --pattern)")
+    p.add_argument("--drop-misfit", nargs="?", type=float, const=LIMIT_MM, metavar="MM",
+                   help="calibrate again without the markers whose mean residual exceeds MM millimetres (default "
+                        f"{LIMIT_MM:g} when given without a value), with a warning that names them: corners of a "
+                        "patch that reaches over a joint move with two bones (layouts from layout new --pattern)")
     p.add_argument("--out", required=True, help="attachment .npz")
     add_units(p)
     add_hand_model(p)

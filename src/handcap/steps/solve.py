@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import time
-import warnings as warnings_module
 
 import numpy as np
 
@@ -15,12 +14,9 @@ from handcap.io import check_not_input, check_output, read_markers, read_scan_po
 from handcap.layouts import load_layout
 from handcap.quality import plausibility as q
 from handcap.solve.motion import observed_markers
-from handcap.solve import betas_from_measurements, betas_from_scan, calibrate_attachment, hand_measurements, solve_hand
+from handcap.solve import (betas_from_measurements, betas_from_scan, calibrate_attachment, calibrate_without_misfits,
+                           hand_measurements, solve_hand)
 from handcap.steps.step import Step
-
-
-#: Most rounds of ``--drop-misfit`` (each calibrates again without the worst misfits).
-MISFIT_ROUNDS = 6
 
 
 def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames: slice | None = None, betas=None,
@@ -68,28 +64,18 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
             raise HandcapError(f"{path}: shows none of layout {marker_layout.name}'s markers")
         marker_layout = marker_layout.subset(shown)
     hand = hand_model_from_options(hand_model, mano_dir, side=marker_layout.side, recorded=None, what="the input")
-    if drop_misfit_mm is not None and not 0 < drop_misfit_mm < 1000:
-        raise HandcapError(f"--drop-misfit {drop_misfit_mm} mm: give a residual in millimetres, e.g. 3")
     options = {"betas": betas, "frames": frames, "fit_shape": fit_shape, "estimate_offset": estimate_offset}
     total = len(marker_layout.names) + len(dropped)
+    misfit = []
     if drop_misfit_mm is None:
-        result, misfit = calibrate_attachment(markers, marker_layout, hand, **options), []
+        result = calibrate_attachment(markers, marker_layout, hand, **options)
     else:
-        # Only the last calibration's warnings hold: those of a round with misfits name them.
-        result, said = _quietly(calibrate_attachment, markers, marker_layout, hand, **options)
-        misfit, first, left_out = _misfits(result, drop_misfit_mm, path), 1000 * result.mre, []
-        for _ in range(MISFIT_ROUNDS):  # the worst first: a misfit drags its segment, and its neighbours fit badly
-            if not misfit:
-                break
-            left_out += misfit
-            marker_layout = marker_layout.subset(set(marker_layout.names) - set(misfit))
-            result, said = _quietly(calibrate_attachment, markers, marker_layout, hand, **options)
-            misfit = _misfits(result, drop_misfit_mm, path)
-        for w in said:
-            warnings_module.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        misfit = [f"{len(left_out)} markers fit the hand worse than {drop_misfit_mm:g} mm and are left out of the "
-                  f"attachment ({', '.join(left_out[:4])}{' ...' if len(left_out) > 4 else ''}); calibration MRE "
-                  f"{first:.2f} mm with them, {1000 * result.mre:.2f} mm without"] if left_out else []
+        result, left_out, first = calibrate_without_misfits(markers, marker_layout, hand, limit_mm=drop_misfit_mm,
+                                                            **options)
+        if left_out:
+            misfit = [f"{len(left_out)} markers fit the hand worse than {drop_misfit_mm:g} mm and are left out of the "
+                      f"attachment ({', '.join(left_out[:4])}{' ...' if len(left_out) > 4 else ''}); calibration MRE "
+                      f"{1000 * first:.2f} mm with them, {1000 * result.mre:.2f} mm without"]
     attachment, warnings = result.attachment, result.warnings
     if misfit:
         attachment = q.attach(attachment, misfit)
@@ -101,28 +87,6 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
         warnings = (*warnings, note)
     attachment.save(out)
     return Step((f"{out}: {result.summary()}",), warnings, (str(out),), result)
-
-
-def _quietly(fn, *args, **kwargs):
-    """``fn(*args, **kwargs)`` and the warnings it gave, held back (to be given where they still hold)."""
-    with warnings_module.catch_warnings(record=True) as said:
-        warnings_module.simplefilter("always")
-        out = fn(*args, **kwargs)
-    return out, list(said)
-
-
-def _misfits(result, limit_mm: float, path) -> list:
-    """The markers to leave out in one round of ``--drop-misfit``: of those whose mean calibration residual exceeds
-    ``limit_mm``, the ones over half the worst residual (its neighbours may fit again once the worst is gone);
-    an error if every marker is over the limit."""
-    with np.errstate(invalid="ignore"):
-        per_marker = np.nan_to_num(np.nanmean(result.residuals, axis=0) * 1000)
-    over = per_marker > limit_mm
-    if over.all():
-        raise HandcapError(f"{path}: every marker fits the hand worse than {limit_mm:g} mm (calibration MRE "
-                           f"{1000 * result.mre:.1f} mm); check the labels and the layout's segments")
-    worst = per_marker.max(initial=0.0)
-    return [n for n, r, o in zip(result.attachment.marker_names, per_marker, over) if o and r > 0.5 * worst]
 
 
 def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | None = None, filter_order: int = 2,
