@@ -151,14 +151,19 @@ def test_drop_misfit_calibrates_again_without_the_markers_that_fit_no_bone(dense
     for name, layout in (("wrong", wrong), ("right", dense)):
         (tmp_path / f"{name}.toml").write_text(layout_template(layout, positions=False))
         assert main(["calibrate-markers", str(tmp_path / "cal.c3d"), "--layout", str(tmp_path / f"{name}.toml"),
-                     "--drop-misfit", "--frames", "0:40", "--betas", betas, "--out",
+                     "--drop-misfit", "--frames", "0:20", "--drop-unseen", "--betas", betas, "--out",
                      str(tmp_path / f"{name}.npz")]) == 0
         out = capsys.readouterr()
         kept = set(MarkerAttachment.load(tmp_path / f"{name}.npz").marker_names)
+        # --drop-unseen judges the frames used (--frames 0:20), where some palm corners are never seen.
+        unseen = {n for n, ok in zip(cal.markers.names, np.isfinite(cal.markers.positions[:20]).all(-1).any(0))
+                  if not ok and n in dense.names}
+        assert unseen and f"{len(unseen)} of the layout's 395 markers were never seen in the calibration take's " \
+                          "frames used" in out.err
         if name == "right":
-            assert "fit the hand worse" not in out.err and len(kept) == len(dense)
+            assert "fit the hand worse" not in out.err and kept == set(dense.names) - unseen
             continue
-        dropped = {n for n in dense.names if n not in kept}
+        dropped = {n for n in dense.names if n not in kept} - unseen
         assert moved <= dropped and len(dropped) < len(moved) + 5
         before, after = map(float, re.search(r"calibration MRE ([\d.]+) mm with them, ([\d.]+) mm", out.err).groups())
         assert after < 0.5 * before and "index_distal_r" in out.err

@@ -57,7 +57,8 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
     dropped = []
     if drop_unseen:
         wanted = marker_layout.names
-        seen = np.isfinite(observed_markers(markers, wanted)[0]).all(axis=-1).any(axis=0)  # prefixes allowed
+        observed = observed_markers(markers, wanted)[0]  # prefixes allowed
+        seen = np.isfinite(observed if frames is None else observed[frames]).all(axis=-1).any(axis=0)  # as used
         shown = {n for n, s in zip(wanted, seen) if s}
         dropped = [n for n in wanted if n not in shown]
         if len(dropped) == len(marker_layout.names):
@@ -81,8 +82,9 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
         attachment = q.attach(attachment, misfit)
         warnings = (*warnings, *misfit)
     if dropped:
-        note = (f"{len(dropped)} of the layout's {total} markers were never seen "
-                f"in the calibration take ({', '.join(dropped[:3])}...): they are left out of the attachment")
+        note = (f"{len(dropped)} of the layout's {total} markers were never seen in the calibration take"
+                + ("'s frames used" if frames is not None else "")
+                + f" ({', '.join(dropped[:3])}...): they are left out of the attachment")
         attachment = q.attach(attachment, [note])
         warnings = (*warnings, note)
     attachment.save(out)
