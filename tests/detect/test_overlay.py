@@ -173,3 +173,18 @@ def test_hand_keypoints_are_drawn_with_their_bones(tmp_path, capsys):
     grey = int(90 * 0.75)
     assert _near(picture, (125.0, 72.5), (grey,) * 3, tol=12)  # index dip to its tip: the tip was not detected
     capsys.readouterr()
+
+
+def test_a_detections_file_whose_frame_selection_is_damaged_is_one_clear_error(tmp_path, capsys):
+    """first_frame / frame_step (written by detect --frames / --every) that are no whole numbers: exit 2, one line."""
+    (tmp_path / "cam").mkdir()
+    cv2.imwrite(str(tmp_path / "cam" / "0.png"), np.zeros((20, 30), np.uint8))
+    base = {"camera_names": np.array(["cam"]), "marker_names": np.array(["a"]), "frame": np.zeros(1, np.int64),
+            "camera": np.zeros(1, np.int64), "marker": np.zeros(1, np.int64), "xy": np.ones((1, 2)),
+            "score": np.ones(1), "rate": np.array(30.0), "n_frames": np.array(1)}
+    for bad in ({"first_frame": np.array(["x"])}, {"first_frame": np.array(-3)},
+                {"first_frame": np.array(0), "frame_step": np.array([1, 2])}):
+        np.savez(tmp_path / "det.npz", **base, **bad)
+        assert main(["overlay", str(tmp_path / "det.npz"), str(tmp_path / "cam"), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "first_frame, frame_step and n_frames must be whole numbers" in err[0]

@@ -62,9 +62,14 @@ def overlay(detections, inputs, out, *, every: int = 1, markers=None, rig=None, 
     read_blocks(arrays, detections)  # checked before any picture is drawn
     sources = frame_sources(inputs)
     if "first_frame" in arrays:  # detect read a selection of the frames (--frames, --every): the same frames here
-        start, step = int(arrays["first_frame"]), int(arrays.get("frame_step", 1))
-        span = int(arrays["n_frames"]) if "n_frames" in arrays else int(found.frame.max(initial=-1)) + 1
-        sources = select_frames(sources, FrameSelection(start, start + step * max(span, 1), step))
+        try:
+            start, step = int(arrays["first_frame"]), int(arrays.get("frame_step", 1))
+            span = int(arrays["n_frames"]) if "n_frames" in arrays else int(found.frame.max(initial=-1)) + 1
+            pick = FrameSelection(start, start + step * max(span, 1), step)
+        except (TypeError, ValueError, HandcapError):
+            raise HandcapError(f"{detections}: first_frame, frame_step and n_frames must be whole numbers, 0 or more "
+                               "(the input frames detect read)") from None
+        sources = select_frames(sources, pick)
     folder = Path(out)
     for source in sources:
         place, given = folder.resolve(), Path(source.path).resolve()
