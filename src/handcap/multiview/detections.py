@@ -221,11 +221,19 @@ def write_detections(detections: Detections, path) -> None:
                     "n_frames": np.array(detections.n_frames), **pitch})
 
 
-def merge_detections(parts) -> Detections:
+def merge_detections(parts, *, same_length: bool = True) -> Detections:
     """One :class:`Detections` from several (say one file per camera).
 
     Markers are matched by name (the union, in order of appearance); cameras
-    must not repeat; rates and frame counts must agree.
+    must not repeat; rates must agree, and frame counts too unless ``same_length``
+    is False (cameras started one by one, to be synchronised: the merged take
+    has the longest count).
+
+    Parameters
+    ----------
+    parts : iterable of Detections
+    same_length : bool
+        Refuse parts of different frame counts (parts of one take, cameras triggered together).
 
     Raises
     ------
@@ -247,9 +255,10 @@ def merge_detections(parts) -> Detections:
         markers.extend(name for name in part.marker_names if name not in markers)
         if part.rate != first.rate:
             raise HandcapError(f"{part.source}: rate {part.rate:g} Hz differs from {first.source} ({first.rate:g} Hz)")
-        if part.n_frames != first.n_frames:
+        if same_length and part.n_frames != first.n_frames:
             raise HandcapError(f"mismatched frame counts: {part.source} has {part.n_frames} frames, "
-                               f"{first.source} has {first.n_frames}")
+                               f"{first.source} has {first.n_frames} (cameras started one by one: synchronise them, "
+                               f"triangulate --sync auto)")
     pitches = {p.pitch for p in parts if p.pitch is not None}
     if len(pitches) > 1:
         raise HandcapError(f"the detections files give different pitches of the printed squares: "
@@ -268,7 +277,7 @@ def merge_detections(parts) -> Detections:
     order = np.lexsort((joined["marker"], joined["camera"], joined["frame"]))
     return Detections(tuple(cameras), tuple(markers), *(joined[k][order] for k in ("frame", "camera", "marker", "xy",
                                                                                   "score")),
-                      first.rate, first.n_frames, source=" + ".join(p.source for p in parts),
+                      first.rate, max(p.n_frames for p in parts), source=" + ".join(p.source for p in parts),
                       pitch=next(iter(pitches), None))
 
 

@@ -322,13 +322,16 @@ def quality_path(markers_path) -> Path:
     return path.with_name(path.stem + ".triangulation.npz")
 
 
-def write_quality(result: TriangulatedMarkers, markers_path) -> Path:
+def write_quality(result: TriangulatedMarkers, markers_path, *, sync=None) -> Path:
     """Write the per-marker quality of a triangulation beside its markers file.
 
     The ``.npz`` holds ``names (M,)``, ``rate``, ``error_px (T, M)`` (mean
     reprojection error of the inlier views, NaN where no point), ``views (T, M)``
     (inlier views), ``residual (T, M)`` (metres) and ``used (N,)`` (per
-    detection row of the input, in its order: used as an inlier view).
+    detection row of the input, in its order: used as an inlier view); for
+    cameras synchronised first, ``sync_cameras (C,)`` and ``sync_offsets (C,)``
+    (frames, see :mod:`handcap.multiview.sync`), and ``used`` is per row of the
+    synchronised detections.
 
     Parameters
     ----------
@@ -336,6 +339,8 @@ def write_quality(result: TriangulatedMarkers, markers_path) -> Path:
         The triangulation (pixels for ``error_px``, metres for ``residual``, frames per second for ``rate``).
     markers_path : str or Path
         The markers file it belongs to; it need not exist.
+    sync : Sync or None
+        The cameras' offsets, when they were synchronised.
 
     Returns
     -------
@@ -344,7 +349,9 @@ def write_quality(result: TriangulatedMarkers, markers_path) -> Path:
     """
     path = quality_path(markers_path)
     save_npz(path, {"names": np.array(result.names), "rate": np.array(result.rate), "error_px": result.error_px,
-                    "views": result.views, "residual": result.residual, "used": result.used})
+                    "views": result.views, "residual": result.residual, "used": result.used,
+                    **({} if sync is None else {"sync_cameras": np.array(sync.camera_names),
+                                                "sync_offsets": np.asarray(sync.offsets, dtype=np.float64)})})
     return path
 
 

@@ -1,0 +1,176 @@
+"""Cameras not triggered together: their offsets found from the detections against known truth.
+
+The truth: a take synthesised at four times the rate, each camera keeping every fourth frame from its own
+phase and starting its own number of frames late, so camera c's frame f is the moment of the reference's frame
+``f + start[c] + phase[c] / 4`` exactly.
+"""
+
+import numpy as np
+import pytest
+
+from handcap import HandcapError
+from handcap.cli import main
+from handcap.io.camera_formats import write_rig
+from handcap.multiview import Detections, read_detections, triangulate_detections, write_detections
+from handcap.multiview.sync import (check_sync, estimate_sync, offsets_from_names, parse_offsets,
+                                    shift_detections)
+from handcap.synth.config import SynthConfig
+from handcap.synth.scene import synthesize
+
+UP, FRAMES, RATE = 4, 120, 60.0
+START = np.array([0, 7, -5, 3, -9, 12])
+PHASE = np.array([0, 1, 2, 3, 0, 2])
+
+
+@pytest.fixture(scope="module")
+def capture():
+    return synthesize(SynthConfig(layout="glove-13", motion="random", frames=FRAMES * UP, rate=RATE * UP, seed=3,
+                                  cameras=6, outlier_rate=0.02, ghost_rate=0.0), progress=False)
+
+
+def _cameras(capture, start, phase, *, rate_of=None) -> Detections:
+    """Each camera's own frames (see the module docstring); ``rate_of`` {camera: factor} runs a camera's clock
+    that much fast."""
+    d = capture.detections
+    frames, rows = [], []
+    for c in range(len(d["camera_names"])):
+        mine = np.flatnonzero(d["camera"] == c)
+        factor = (rate_of or {}).get(c, 1.0)
+        wanted = np.round((np.arange(FRAMES) * UP + phase[c] + UP * start[c]) * factor).astype(int)
+        at = {int(f): k for k, f in enumerate(wanted)}
+        own = np.array([at.get(int(f), -1) for f in d["frame"][mine]])
+        frames.append(own[own >= 0])
+        rows.append(mine[own >= 0])
+    rows = np.concatenate(rows)
+    return Detections(d["camera_names"], d["marker_names"], np.concatenate(frames), d["camera"][rows],
+                      d["marker"][rows], d["xy"][rows], d["score"][rows], RATE, FRAMES, source="cameras")
+
+
+def _error_mm(capture, markers) -> float:
+    """Median distance of the triangulated hand markers from the truth at the reference's frames, mm."""
+    names = [str(n) for n in capture.truth["names"]]
+    index = [names.index(n) for n in markers.names]
+    truth = capture.truth["positions"][::UP][:markers.n_frames, index]
+    return 1000 * float(np.nanmedian(np.linalg.norm(markers.positions - truth[:len(markers.positions)], axis=-1)))
+
+
+def test_offsets_are_found_to_a_twentieth_of_a_frame_and_the_markers_land_on_the_truth(capture):
+    cameras = _cameras(capture, START, PHASE)
+    truth = START + PHASE / UP
+    sync = estimate_sync(cameras, capture.rig)
+    assert sync.reference == "cam_0" and sync.warnings == ()
+    assert np.abs(sync.offsets - truth).max() < 0.05, (sync.offsets, truth)
+    assert sync.before_px > 10 and sync.after_px < 1.0, sync.summary()
+    shifted, lost = shift_detections(cameras, sync.offsets)
+    assert 0 < lost < 0.2 * len(cameras.frame)
+    before = triangulate_detections(cameras, capture.rig, min_views=2, threshold_px=5.0)
+    after = triangulate_detections(shifted, capture.rig, min_views=2, threshold_px=5.0)
+    assert after.counts()["mean_views"] > before.counts()["mean_views"] + 1
+    assert _error_mm(capture, after.to_markers()) < 1.0 < 3 * _error_mm(capture, before.to_markers())
+    # another reference: the same offsets, counted from it
+    other = estimate_sync(cameras, capture.rig, reference="cam_3")
+    assert np.abs(other.offsets - (truth - truth[3])).max() < 0.05
+
+
+def test_shifting_renumbers_whole_offsets_and_interpolates_fractions():
+    rate, xy = 30.0, np.array([[10.0, 20.0], [14.0, 28.0], [30.0, 30.0], [50.0, 60.0]])
+    d = Detections(("a", "b"), ("m",), np.array([0, 1, 5, 6]), np.array([0, 0, 1, 1]), np.zeros(4, int), xy,
+                   np.array([1.0, 0.9, 0.8, 0.7]), rate, 8)
+    whole, lost = shift_detections(d, [0.0, 2.0])
+    assert lost == 0 and whole.frame.tolist() == [0, 1, 7, 8] and whole.n_frames == 9
+    assert np.array_equal(whole.xy, xy)
+    part, lost = shift_detections(d, [-1.0, 0.25])
+    # a's frame 0 falls before the reference's frame 0; b's frames 5 and 6 give the reference's frame 6:
+    # b's time 5.75, three quarters of the way from frame 5 to 6
+    assert lost == 2 and part.frame.tolist() == [0, 6] and part.camera.tolist() == [0, 1]
+    assert np.allclose(part.xy[1], 0.25 * xy[2] + 0.75 * xy[3]) and part.score[1] == 0.7
+    _, lost = shift_detections(d, [0.0, np.nan])
+    assert lost == 2
+    with pytest.raises(HandcapError, match="one offset per camera"):
+        shift_detections(d, [0.0])
+
+
+def test_the_check_warns_only_when_cameras_are_not_synchronised(capture):
+    together = _cameras(capture, np.zeros(6, int), np.zeros(6, int))
+    assert check_sync(together, capture.rig).warnings == ()
+    apart = _cameras(capture, START, PHASE)
+    found = check_sync(apart, capture.rig)
+    assert any("seem not synchronised" in w and "--sync auto" in w for w in found.warnings)
+    right = offsets_from_names(apart, {f"cam_{c}": START[c] + PHASE[c] / UP for c in range(6)})
+    assert check_sync(apart, capture.rig, right).warnings == ()
+    assert any("check their signs" in w for w in check_sync(apart, capture.rig, -right).warnings)
+
+
+def test_what_cannot_be_found_is_said(capture):
+    cameras = _cameras(capture, START, PHASE)
+    # a still take: every frame shows the first one, so no offset is better than another
+    first = cameras.frame == cameras.frame.min()
+    still = Detections(cameras.camera_names, cameras.marker_names,
+                       np.concatenate([cameras.frame[first] * 0 + f for f in range(40)]),
+                       np.tile(cameras.camera[first], 40), np.tile(cameras.marker[first], 40),
+                       np.tile(cameras.xy[first], (40, 1)), np.tile(cameras.score[first], 40), RATE, 40)
+    sync = estimate_sync(still, capture.rig)
+    assert np.isnan(sync.offsets[1:]).all() and any("no offset found" in w for w in sync.warnings)
+    # a camera that sees none of the others' markers
+    alone = Detections(cameras.camera_names, (*cameras.marker_names, *(f"x{m}" for m in cameras.marker_names)),
+                       cameras.frame, cameras.camera,
+                       cameras.marker + len(cameras.marker_names) * (cameras.camera == 4), cameras.xy, cameras.score,
+                       RATE, FRAMES)
+    sync = estimate_sync(alone, capture.rig)
+    assert np.isnan(sync.offsets[4]) and np.isfinite(np.delete(sync.offsets, 4)).all()
+    assert any("no offset found for camera cam_4" in w for w in sync.warnings)
+    # an offset past the search range
+    sync = estimate_sync(cameras, capture.rig, max_offset_s=0.1)
+    assert any("end of the search range" in w for w in sync.warnings)
+    # a camera whose clock runs 2 % fast drifts 1.6 frames between the take's first and last thirds
+    drifting = _cameras(capture, np.zeros(6, int), np.zeros(6, int), rate_of={2: 1.02})
+    assert any("camera cam_2 drifts" in w for w in estimate_sync(drifting, capture.rig).warnings)
+
+
+def test_offsets_given_by_name_and_refused_in_one_line(capture):
+    cameras = _cameras(capture, START, PHASE)
+    assert parse_offsets("cam_1=+7.25, cam_2 = -4.5") == {"cam_1": 7.25, "cam_2": -4.5}
+    assert parse_offsets(["cam_1=1", "cam_3=2"]) == {"cam_1": 1.0, "cam_3": 2.0}
+    assert offsets_from_names(cameras, {"cam_1": 3.0, "cam_2": 1.0}, "cam_2").tolist() == [-1, 2, 0, -1, -1, -1]
+    for bad, message in (("cam_1", "CAMERA=FRAMES"), ("=3", "CAMERA=FRAMES"), ("cam_1=x", "number of frames"),
+                         ("cam_1=1,cam_1=2", "two offsets"), ("cam_1=nan", "finite"), ("", "CAMERA=FRAMES")):
+        with pytest.raises(HandcapError, match=message):
+            parse_offsets(bad)
+    with pytest.raises(HandcapError, match="lack"):
+        offsets_from_names(cameras, {"cam_9": 1.0})
+    with pytest.raises(HandcapError, match="no camera 'cam_9'"):
+        estimate_sync(cameras, capture.rig, reference="cam_9")
+    with pytest.raises(HandcapError, match="positive number of seconds"):
+        estimate_sync(cameras, capture.rig, max_offset_s=0)
+
+
+def test_the_command_synchronises_files_of_one_camera_each(capture, tmp_path, capsys):
+    cameras = _cameras(capture, START, PHASE)
+    paths = []
+    for c, name in enumerate(cameras.camera_names):  # one file per camera, each as long as its camera recorded
+        mine = cameras.camera == c
+        length = int(cameras.frame[mine].max()) + 1
+        part = Detections((name,), cameras.marker_names, cameras.frame[mine], cameras.camera[mine] * 0,
+                          cameras.marker[mine], cameras.xy[mine], cameras.score[mine], RATE, length)
+        paths.append(tmp_path / f"{name}.npz")
+        write_detections(part, paths[-1])
+    rig = tmp_path / "cameras.toml"
+    write_rig(capture.rig, rig)
+    before = [p.read_bytes() for p in paths]
+    args = ["triangulate", *map(str, paths), "--cameras", str(rig), "--min-views", "2"]
+    assert main([*args, "--out", str(tmp_path / "apart.c3d")]) == 2  # different lengths: not one take as it is
+    assert "--sync auto" in capsys.readouterr().err
+    assert main([*args, "--sync", "auto", "--out", str(tmp_path / "synced.c3d")]) == 0
+    out = capsys.readouterr().out
+    assert "synchronised to cam_0" in out and "cam_1 +7.2" in out
+    quality = np.load(tmp_path / "synced.triangulation.npz")
+    assert np.abs(quality["sync_offsets"] - (START + PHASE / UP)).max() < 0.05
+    assert [p.read_bytes() for p in paths] == before
+    for extra, message in ((["--sync", "auto", "--sync", "cam_1=2"], "give it alone"),
+                           (["--sync-reference", "cam_1"], "goes with --sync"),
+                           (["--sync", "cam_7=2"], "lack"), (["--sync", "cam_1"], "CAMERA=FRAMES")):
+        assert main([*args, *extra, "--out", str(tmp_path / "bad.c3d")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "bad.c3d").exists()
+    assert read_detections(paths[0]).n_frames == FRAMES - START[0]
