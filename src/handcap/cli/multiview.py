@@ -6,13 +6,20 @@ from handcap.cli.common import add_units
 from handcap.core.errors import HandcapError
 from handcap.layouts import SHIPPED
 from handcap.multiview import clean
+from handcap.multiview.sync import MAX_OFFSET_S
 from handcap.steps import multiview
 
 
 def _cmd_triangulate(a):
+    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
+        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
+    if a.sync is None and a.sync_reference is not None:
+        raise HandcapError("--sync-reference goes with --sync")
     return multiview.triangulate(a.detections, a.cameras, a.out, min_views=a.min_views, threshold_px=a.threshold_px,
                                  chunk_frames=a.chunk_frames, scheduler=a.scheduler, workers=a.workers, units=a.units,
-                                 handedness=not a.no_handedness_repair)
+                                 handedness=not a.no_handedness_repair,
+                                 sync=None if a.sync is None else a.sync[0] if a.sync == ["auto"] else a.sync,
+                                 sync_reference=a.sync_reference, max_offset_s=a.max_offset)
 
 
 def _cmd_clean(a):
@@ -45,6 +52,16 @@ def add_multiview(verbs) -> None:
     p.add_argument("--no-handedness-repair", action="store_true",
                    help="hand keypoints: trust each view's left/right labels instead of deciding them by agreement "
                         "between the views")
+    p.add_argument("--sync", action="append", metavar="auto|CAM=FRAMES",
+                   help="cameras not triggered together (consumer cameras, phones): 'auto' finds each camera's "
+                        "offset from the detections; CAM=FRAMES (repeated, or joined by commas) gives it: CAM's "
+                        "frame f shows the reference camera's frame f + FRAMES (fractions interpolate); cameras not "
+                        "named 0. Without it the cameras are taken as synchronised, and a warning says when they "
+                        "seem not to be")
+    p.add_argument("--sync-reference", metavar="CAM", help="the camera whose frames the output counts (default: "
+                                                          "the detections' first camera)")
+    p.add_argument("--max-offset", type=float, default=MAX_OFFSET_S, metavar="SECONDS",
+                   help="how far --sync auto searches, seconds either way (default %(default)g)")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler, e.g. tcp://HOST:8786 (default: local "
                                                         "processes)")
     p.add_argument("--workers", type=int, help="local processes (default: chosen by the size of the take: a small "

@@ -452,5 +452,6 @@ def frame_notes(sources) -> list[str]:
     ordered = {s.camera: s.count() for s in sources if not s.numbers and s.kind != "image"}
     if len(ordered) > 1 and len(set(ordered.values())) > 1:
         notes.append("cameras hold different numbers of frames (" + ", ".join(f"{c}: {n}" for c, n in ordered.items())
-                     + ") and are matched by their order: check that they start together and drop no frame")
+                     + ") and are matched by their order: check that they start together and drop no frame "
+                       "(cameras started one by one: triangulate --sync auto finds each one's offset)")
     return notes

@@ -37,6 +37,8 @@ mistake naming the key and the file (issue 19).
     calibration_take = "patches-calib"  # another take of the session, run first; its markers calibrate this one
     [takes.settings.solve]              # this take's own settings over the session's
     filter_cutoff = 0                   # 0: no filter
+    [takes.settings.triangulate]
+    sync = "auto"                       # cameras started one by one: find each one's offset (or "cam_2=+12.5, ...")
 
 Paths are relative to the session file.
 """
@@ -50,11 +52,13 @@ from pathlib import Path
 
 from handcap.core.errors import HandcapError
 from handcap.layouts.file import SHIPPED
+from handcap.multiview.sync import parse_offsets
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
     "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str, "track": bool},
-    "triangulate": {"min_views": int, "threshold_px": float, "units": str},
+    "triangulate": {"min_views": int, "threshold_px": float, "units": str, "sync": str, "sync_reference": str,
+                    "max_offset_s": float},
     "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,
               "max_spline_frames": int},
     "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str,
@@ -151,6 +155,11 @@ def _settings(raw, where: str) -> dict:
                 known = ", ".join(STAGES[stage]) or "none"
                 raise HandcapError(f"{where}.{stage}.{key} is not a setting of {stage} ({known})")
             settings[stage][key] = _typed(value, STAGES[stage][key], f"{where}.{stage}.{key}")
+            if (stage, key) == ("triangulate", "sync") and value != "auto":
+                try:
+                    parse_offsets(value)
+                except HandcapError as error:
+                    raise HandcapError(f"{where}.{stage}.sync is \"auto\" or offsets; {error}") from None
     return settings
 
 

@@ -13,6 +13,8 @@ from handcap.markerless import repair_handedness
 from handcap.markerless.keypoints import is_keypoints
 from handcap.multiview import merge_detections, quality_path, read_detections, triangulate_detections, write_quality
 from handcap.multiview import clean as cleaning
+from handcap.multiview.sync import (MAX_OFFSET_S, check_sync, estimate_sync, offsets_from_names, parse_offsets,
+                                    shift_detections)
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
 
@@ -23,7 +25,8 @@ KEYPOINT_THRESHOLD_PX = 12.0
 
 def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: float | None = None,
                 chunk_frames: int | None = None, scheduler=None, workers: int | None = None,
-                units: str | None = None, handedness: bool = True) -> Step:
+                units: str | None = None, handedness: bool = True, sync=None, sync_reference: str | None = None,
+                max_offset_s: float = MAX_OFFSET_S) -> Step:
     """3D markers from the 2D detections of calibrated cameras (see
     :func:`handcap.multiview.triangulate_detections`); per-marker quality beside them (``OUT_STEM.triangulation.npz``).
 
@@ -48,14 +51,37 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
         For 2D hand keypoints (every marker name a keypoint name, see :mod:`handcap.markerless.keypoints`):
         first decide which candidate hand of each camera and frame is which hand by agreement between the
         views (:func:`handcap.markerless.repair_handedness`), as detectors swap left and right.
+    sync : None, 'auto', str or dict
+        Cameras not triggered together (:mod:`handcap.multiview.sync`): ``'auto'`` finds each camera's offset from
+        the detections; ``'CAM=FRAMES, ...'`` or ``{camera: frames}`` gives them (camera c's frame f shows the
+        reference's frame f + offset; cameras not named 0). None: the cameras are taken as synchronised, and a
+        quick check warns when they seem not to be.
+    sync_reference : str or None
+        The camera whose frames the output counts (default: the detections' first camera).
+    max_offset_s : float
+        How far ``'auto'`` searches, seconds either way.
     """
     detections = list(detections)
     check_not_input(out, cameras, *detections)
     check_not_input(quality_path(out), cameras, *detections)
-    merged = merge_detections([read_detections(path) for path in detections])
+    given = None if sync in (None, "auto") else dict(sync) if isinstance(sync, dict) else parse_offsets(sync)
+    merged = merge_detections([read_detections(path) for path in detections], same_length=sync is None)
     rig = read_rig(cameras, units=units)
     start = time.perf_counter()
-    lines = []
+    lines, sync_warnings, synced = [], [], None
+    if len(merged.camera_names) > 1:
+        merged.camera_order(rig)  # every camera in the rig, before the work
+        if sync == "auto":
+            found = estimate_sync(merged, rig, max_offset_s=max_offset_s, reference=sync_reference)
+        else:
+            offsets = None if given is None else offsets_from_names(merged, given, sync_reference)
+            found = check_sync(merged, rig, offsets, reference=sync_reference)
+        sync_warnings = list(found.warnings)
+        if sync is not None:
+            merged, lost = shift_detections(merged, found.offsets)
+            synced = found
+            lines.append(f"{found.summary()}; {lost} of the detections fall outside {found.reference}'s frames or "
+                         f"come from a camera with no offset, and are left out")
     keypoints = is_keypoints(merged.marker_names)
     if threshold_px is None:
         threshold_px = KEYPOINT_THRESHOLD_PX if keypoints else 5.0
@@ -71,11 +97,11 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     seen = np.zeros((merged.n_frames, len(merged.marker_names)), dtype=np.int64)
     looks = np.unique(np.stack([merged.frame, merged.marker, merged.camera]), axis=1)  # one per camera
     np.add.at(seen, (looks[0], looks[1]), 1)
-    markers = q.attach(markers, [*rig.warnings, *q.triangulation_warnings(
+    markers = q.attach(markers, [*rig.warnings, *sync_warnings, *q.triangulation_warnings(
         result.error_px, result.views, threshold_px=threshold_px, used=result.used, seen=seen,
         min_views=min_views), *q.marker_warnings(markers), *pitch_warnings])
     write_markers(markers, out)
-    quality = write_quality(result, out)
+    quality = write_quality(result, out, sync=synced)
     s = result.counts()
     line = q.summary(f"{out}: {result.summary()}, {s['frames'] * s['markers'] / max(seconds, 1e-9):,.0f} "
                      f"marker-frames/s; per-marker errors and view counts in {quality}",
