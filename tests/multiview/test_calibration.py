@@ -23,7 +23,9 @@ from handcap.cli import main
 from handcap.core.cameras import Camera, CameraRig
 from handcap.io.cameras import read_cameras_toml
 from handcap.multiview.boards import BoardDetections, detect_board, detect_in_files, detect_in_video, parse_board
+from handcap.multiview import Detections
 from handcap.multiview.calibration import bundle_adjust, calibrate_intrinsics, calibrate_rig
+from handcap.multiview.sync import check_sync, estimate_sync
 from handcap.objects.rigid import kabsch
 from handcap.synth.cameras import cage_rig
 
@@ -162,6 +164,38 @@ def test_caliscope_rig_matches_caliscope(caliscope_rig, caliscope_reference):
     assert np.linalg.norm(ours @ rotation.T + translation - theirs, axis=1).max() < 0.02
     distances = np.linalg.norm(ours[:, None] - ours[None], axis=-1)
     np.testing.assert_allclose(distances, np.linalg.norm(theirs[:, None] - theirs[None], axis=-1), atol=0.02)
+
+
+def _board_detections(views, names, late) -> Detections:
+    """The board's corners as named markers, each camera's frames renumbered as if it had started ``late`` frames
+    after the others."""
+    frames, cameras, markers, pixels = [], [], [], []
+    for c, view in enumerate(views):
+        t, m = np.nonzero(np.isfinite(view.pixels).all(axis=-1))
+        keep = view.frames[t] >= late[c]
+        frames.append(view.frames[t][keep] - late[c])
+        cameras.append(np.full(keep.sum(), c))
+        markers.append(m[keep])
+        pixels.append(view.pixels[t[keep], m[keep]])
+    n = views[0].board.n_corners
+    return Detections(names, tuple(f"corner{k}" for k in range(n)), np.concatenate(frames), np.concatenate(cameras),
+                      np.concatenate(markers), np.concatenate(pixels), np.ones(sum(map(len, frames))), 30.0,
+                      int(max(v.frames.max() for v in views)) + 1)
+
+
+def test_real_cameras_synchronised_and_one_started_late(caliscope_views, caliscope_rig):
+    """caliscope's four webcams, whose frames it paired by their time stamps: the offsets found are 0 to a tenth
+    of a frame; with camera 2's first 3 frames cut (it started late), its offset is 3 and the check warns."""
+    rig = caliscope_rig.rig
+    together = _board_detections(caliscope_views, rig.names, [0, 0, 0, 0])
+    assert check_sync(together, rig).warnings == ()
+    found = estimate_sync(together, rig)
+    assert found.warnings == () and np.abs(found.offsets).max() < 0.1 and found.after_px < 0.6
+    late = _board_detections(caliscope_views, rig.names, [0, 0, 3, 0])
+    assert any("seem not synchronised" in w for w in check_sync(late, rig).warnings)
+    shifted = estimate_sync(late, rig)
+    assert np.abs(shifted.offsets - found.offsets - [0, 0, 3, 0]).max() < 0.1, shifted.summary()
+    assert shifted.before_px > 2 * shifted.after_px
 
 
 def test_caliscope_extrinsics_from_its_intrinsics(caliscope_views, caliscope_reference):

@@ -156,7 +156,7 @@ class EpipolarViews:
             Frames, as :class:`handcap.multiview.sync.Sync` counts them; a camera with NaN is skipped.
         """
         distances = []
-        for a, b, _ in pairs:
+        for a, b, *_ in pairs:
             e = self.essential(a, b)
             if e is None or np.isnan(offsets[a]) or np.isnan(offsets[b]):
                 continue

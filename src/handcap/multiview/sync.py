@@ -213,8 +213,8 @@ def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, referenc
                max_offset_s: float = MAX_OFFSET_S) -> Sync:
     """How well the views agree with given offsets (default every camera at 0), without searching for others.
 
-    With offsets 0 and views that disagree by more than :data:`CHECK_PX` (median epipolar distance), each pair of
-    cameras is also tried at every whole offset within ``max_offset_s`` (on a few hundred of its views), and pairs
+    With offsets 0, each pair of cameras whose views disagree by more than :data:`CHECK_PX` (median epipolar
+    distance) is also tried at every whole offset within ``max_offset_s`` (on a few hundred of its views), and pairs
     that agree clearly better a frame or more apart give a warning that the cameras seem not synchronised. With
     offsets given, views that agree worse with them than without give a warning that they may be wrong (a sign
     turned, say).
@@ -248,8 +248,8 @@ def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, referenc
     before = views.median_distance(pairs, np.zeros(len(names)))
     after = views.median_distance(pairs, offsets) if given else before
     apart = 0
-    if not given and before > CHECK_PX:  # the views disagree: would they agree better apart?
-        for a, b, _ in pairs:
+    for a, b, _ in [] if given else pairs:
+        if views.median_distance([(a, b)], np.zeros(len(names))) > CHECK_PX:  # would they agree better apart?
             rows = np.arange(len(views.keys[a]))
             if len(rows) > CHECK_SAMPLES:
                 rows = np.sort(rng.choice(rows, CHECK_SAMPLES, replace=False))
