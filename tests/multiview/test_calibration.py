@@ -25,6 +25,7 @@ from handcap.io.cameras import read_cameras_toml
 from handcap.multiview.boards import BoardDetections, detect_board, detect_in_files, detect_in_video, parse_board
 from handcap.multiview import Detections
 from handcap.multiview.calibration import bundle_adjust, calibrate_intrinsics, calibrate_rig
+from handcap.multiview.board_sync import board_offsets, shift_boards
 from handcap.multiview.sync import check_sync, estimate_sync
 from handcap.objects.rigid import kabsch
 from handcap.synth.cameras import cage_rig
@@ -190,12 +191,28 @@ def test_real_cameras_synchronised_and_one_started_late(caliscope_views, calisco
     together = _board_detections(caliscope_views, rig.names, [0, 0, 0, 0])
     assert check_sync(together, rig).warnings == ()
     found = estimate_sync(together, rig)
-    assert found.warnings == () and np.abs(found.offsets).max() < 0.1 and found.after_px < 0.6
+    assert found.warnings == () and np.abs(found.offsets).max() < 0.1 and found.after < 0.6
     late = _board_detections(caliscope_views, rig.names, [0, 0, 3, 0])
     assert any("seem not synchronised" in w for w in check_sync(late, rig).warnings)
     shifted = estimate_sync(late, rig)
     assert np.abs(shifted.offsets - found.offsets - [0, 0, 3, 0]).max() < 0.1, shifted.summary()
-    assert shifted.before_px > 2 * shifted.after_px
+    assert shifted.before > 2 * shifted.after
+
+
+def test_real_cameras_offsets_from_the_board_before_the_rig_is_calibrated(caliscope_views, caliscope_reference):
+    """From the board's motion alone (caliscope's intrinsics, no extrinsics): camera 2 with its first 3 frames cut
+    comes out 3 frames later than with them."""
+    cameras = [Camera(f"cam_{i}", c["size"], c["matrix"], c["distortions"]) for i, c in enumerate(caliscope_reference)]
+    together = board_offsets(caliscope_views, cameras, max_offset=10)
+    assert together.warnings == () and np.abs(together.offsets).max() < 0.5
+    late = [BoardDetections(v.board, v.pixels[3:], v.size, v.source, v.labels[3:], v.frames[3:] - 3)
+            if i == 2 else v for i, v in enumerate(caliscope_views)]
+    offsets = board_offsets(late, cameras, max_offset=10).offsets
+    assert np.abs(offsets - together.offsets - [0, 0, 3, 0]).max() < 0.1, (offsets, together.offsets)
+    # on the reference's frames, the rig calibrates from them as from the videos as they are
+    rig = calibrate_rig(shift_boards(late, together.offsets + [0, 0, 3, 0]), cameras=cameras, origin="camera").rig
+    np.testing.assert_allclose(rig.centers, calibrate_rig(shift_boards(caliscope_views, together.offsets),
+                                                          cameras=cameras, origin="camera").rig.centers, atol=0.01)
 
 
 def test_caliscope_extrinsics_from_its_intrinsics(caliscope_views, caliscope_reference):
@@ -373,12 +390,15 @@ def test_cli_rig_on_rendered_images(rendered, tmp_path, capsys):
     np.testing.assert_allclose([c.matrix[0, 0] for c in rig], 800.0, rtol=0.01)
 
 
-def test_cli_rig_on_caliscope_videos_with_its_intrinsics(shared_data, caliscope_reference, tmp_path, capsys):
+@pytest.mark.parametrize("sync", [[], ["--sync", "auto"]])
+def test_cli_rig_on_caliscope_videos_with_its_intrinsics(shared_data, caliscope_reference, tmp_path, capsys, sync):
     out = tmp_path / "rig.toml"
     videos = [str(shared_data / CALISCOPE / f"cam_{i}.mp4") for i in range(4)]
     assert main(["calibrate", "rig", *videos, "--board", CALISCOPE_BOARD, "--every", "2", "--origin", "camera",
-                 "--intrinsics", str(shared_data / CALISCOPE / "camera_array.toml"), "--out", str(out)]) == 0
-    assert "board seen at 24 of 24 instants" in capsys.readouterr().out
+                 "--intrinsics", str(shared_data / CALISCOPE / "camera_array.toml"), *sync, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "board seen at 24 of 24 instants" in printed
+    assert ("synchronised to cam_0 from 6 pairs" in printed) == bool(sync)
     rig = read_cameras_toml(out)
     assert rig.names == ("cam_0", "cam_1", "cam_2", "cam_3")
     theirs = _caliscope_centres(caliscope_reference)

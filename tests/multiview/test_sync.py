@@ -60,7 +60,7 @@ def test_offsets_are_found_to_a_twentieth_of_a_frame_and_the_markers_land_on_the
     sync = estimate_sync(cameras, capture.rig)
     assert sync.reference == "cam_0" and sync.warnings == ()
     assert np.abs(sync.offsets - truth).max() < 0.05, (sync.offsets, truth)
-    assert sync.before_px > 10 and sync.after_px < 1.0, sync.summary()
+    assert sync.before > 10 and sync.after < 1.0, sync.summary()
     shifted, lost = shift_detections(cameras, sync.offsets)
     assert 0 < lost < 0.2 * len(cameras.frame)
     before = triangulate_detections(cameras, capture.rig, min_views=2, threshold_px=5.0)

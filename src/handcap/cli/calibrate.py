@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from handcap.cli.common import names_arg
+from handcap.core.errors import HandcapError
 from handcap.multiview.calibration import LOSSES, ORIGINS
 from handcap.steps import calibrate
 
@@ -17,7 +18,16 @@ def _cmd_calibrate_intrinsics(a):
 def _cmd_calibrate_rig(a):
     return calibrate.rig(a.recordings, a.out, board=a.board, names=names_arg(a.names), every=a.every,
                          intrinsics=a.intrinsics, refine_intrinsics=a.refine_intrinsics, fix_k3=a.fix_k3,
-                         origin=a.origin, origin_frame=a.origin_frame, loss=a.loss, f_scale=a.f_scale)
+                         origin=a.origin, origin_frame=a.origin_frame, loss=a.loss, f_scale=a.f_scale,
+                         sync=_sync_arg(a), max_offset=a.max_offset)
+
+
+def _sync_arg(a):
+    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
+        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
+    if a.max_offset is not None and a.max_offset < 1:
+        raise HandcapError(f"--max-offset must be at least one frame, got {a.max_offset}")
+    return None if a.sync is None else "auto" if a.sync == ["auto"] else a.sync
 
 
 def add_calibrate(verbs) -> None:
@@ -74,5 +84,13 @@ def add_calibrate(verbs) -> None:
     q.add_argument("--loss", choices=LOSSES, default="soft_l1", help="robust loss (default %(default)s)")
     q.add_argument("--f-scale", type=float, default=1.0, metavar="PX",
                    help="pixel error where the robust loss starts to discount (default %(default)s)")
+    q.add_argument("--sync", action="append", metavar="auto|CAM=FRAMES",
+                   help="cameras not triggered together (consumer cameras, phones): 'auto' finds each camera's "
+                        "offset from the board's motion (each camera's view of the board, one rigid transform "
+                        "between two cameras at the right offset); CAM=FRAMES (repeated, or joined by commas) "
+                        "gives it: CAM's frame f shows the first camera's frame f + FRAMES (fractions "
+                        "interpolate); cameras not named 0. The recordings may then differ in length")
+    q.add_argument("--max-offset", type=int, metavar="FRAMES",
+                   help="how far --sync auto searches, frames either way (default: half the shortest recording)")
     q.add_argument("--out", required=True, help="rig file (.toml)")
     q.set_defaults(run=_cmd_calibrate_rig)

@@ -117,6 +117,12 @@ def _spanning_tree(shared: np.ndarray, root: int = 0) -> tuple[list[tuple[int, i
     return edges, [c for c in range(c_count) if c not in placed]
 
 
+#: Most evaluations of each pass of the bundle adjustment. A rig of synchronised cameras converges in a few dozen;
+#: frames of different moments (cameras not triggered together) make it crawl for hours without a bound, and the
+#: cameras' reprojection RMS then tells what went wrong.
+MAX_EVALUATIONS = 300
+
+
 def calibrate_rig(detections: Sequence[BoardDetections], *, names: Sequence[str] | None = None,
                   cameras: Sequence[Camera] | CameraRig | None = None, refine_intrinsics: bool | None = None,
                   fix_k3: bool = False, origin: str = "board", origin_frame: int | None = None,
@@ -267,7 +273,7 @@ def calibrate_rig(detections: Sequence[BoardDetections], *, names: Sequence[str]
 
     # 5. bundle adjustment of everything
     adjusted = bundle_adjust(pixels, board, rig, board2ref, refine_intrinsics=refine_intrinsics,
-                             fix_k3=fix_k3, loss=loss, f_scale=f_scale)
+                             fix_k3=fix_k3, loss=loss, f_scale=f_scale, max_nfev=MAX_EVALUATIONS)
 
     # 6. the world frame
     if origin == "camera":

@@ -61,27 +61,34 @@ class Sync:
         Frames: camera c's frame f shows the reference's frame ``f + offsets[c]``; NaN where no pair fixed it.
     reference : str
         The camera whose frames the offsets count (its offset is 0).
-    before_px, after_px : float
-        Median epipolar distance of the pairs' matched views, pixels, with every offset 0 and with ``offsets``.
+    before, after : float
+        How far the pairs' views disagree, with every offset 0 and with ``offsets``: the median epipolar
+        distance of their matched views in pixels (:func:`estimate_sync`), or what ``measure`` and ``unit`` say.
     pairs : int
         Pairs of cameras whose offsets were joined.
     warnings : tuple of str
+    measure, unit : str
+        What ``before`` and ``after`` measure, and in what unit.
     """
 
     camera_names: tuple
     offsets: np.ndarray
     reference: str
-    before_px: float
-    after_px: float
+    before: float
+    after: float
     pairs: int
     warnings: tuple = ()
+    measure: str = "epipolar distance"
+    unit: str = "px"
 
     def summary(self) -> str:
-        """One line: each camera's offset and the epipolar distance before and after."""
+        """One line: each camera's offset and how far the views disagree before and after."""
         shown = ", ".join(f"{name} {'unknown' if np.isnan(o) else f'{o:+.2f}'}"
                           for name, o in zip(self.camera_names, self.offsets))
-        return (f"synchronised to {self.reference} from {self.pairs} pairs of cameras, offsets in frames: {shown}; "
-                f"epipolar distance {self.before_px:.2f} px -> {self.after_px:.2f} px (median)")
+        line = f"synchronised to {self.reference} from {self.pairs} pairs of cameras, offsets in frames: {shown}"
+        if np.isfinite(self.before) or np.isfinite(self.after):
+            line += f"; {self.measure} {self.before:.2f} {self.unit} -> {self.after:.2f} {self.unit} (median)"
+        return line
 
 
 def parse_offsets(items) -> dict:
@@ -189,7 +196,7 @@ def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float
                             f"({span} frames, {max_offset_s:g} s); search further (--max-offset)")
             continue
         found.append(pair[:3])
-    offsets, used, disagree = _join(found, len(names), ref)
+    offsets, used, disagree = join_offsets(found, len(names), ref)
     if disagree:
         warnings.append(f"{disagree} pairs of cameras disagreed with the joined offsets by more than "
                         f"{AGREE_FRAMES:g} frames and were left out")
@@ -349,9 +356,25 @@ def _pair_offset(views: EpipolarViews, a: int, b: int, span: int, rng) -> tuple 
     return (a, b, -shift, "") if shift is not None else None
 
 
-def _join(found: list, n: int, ref: int) -> tuple[np.ndarray, list, int]:
-    """One offset per camera from the pairs' (a, b, offset_b - offset_a), least squares with the reference at 0;
-    pairs that disagree with the rest are left out, worst first."""
+def join_offsets(found: list, n: int, ref: int) -> tuple[np.ndarray, list, int]:
+    """One offset per camera from pairs' offsets, by least squares with the reference at 0.
+
+    Pairs that disagree with the rest by more than :data:`AGREE_FRAMES` are left out, worst first.
+
+    Parameters
+    ----------
+    found : list of (int, int, float)
+        Pairs of cameras (a, b) and b's offset minus a's, frames.
+    n : int
+        Cameras.
+    ref : int
+        The reference camera.
+
+    Returns
+    -------
+    (ndarray (n,), list, int)
+        The offsets (NaN for a camera no pair joins to the reference), the pairs used, and the pairs left out.
+    """
     pairs = list(found)
     dropped = 0
     while True:

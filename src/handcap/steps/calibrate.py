@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
 from handcap.core.cameras import CameraRig, check_rig_suffix
 from handcap.core.errors import HandcapError
 from handcap.io import check_output
 from handcap.io.camera_formats import read_rig
 from handcap.multiview.boards import detect_in_files, parse_board
+from handcap.multiview.board_sync import board_offsets, shift_boards
 from handcap.multiview.calibration import calibrate_intrinsics, calibrate_rig
+from handcap.multiview.sync import Sync, parse_offsets
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
 
@@ -57,7 +63,8 @@ def intrinsics(inputs, out, *, board: str, name: str | None = None, every: int =
 
 def rig(recordings, out, *, board: str, names=None, every: int = 1, intrinsics=None,
         refine_intrinsics: bool | None = None, fix_k3: bool = False, origin: str = "board",
-        origin_frame: int | None = None, loss: str = "soft_l1", f_scale: float = 1.0) -> Step:
+        origin_frame: int | None = None, loss: str = "soft_l1", f_scale: float = 1.0, sync=None,
+        max_offset: int | None = None) -> Step:
     """Every camera of a rig from synchronised recordings of a board, by bundle adjustment (see
     :func:`handcap.multiview.calibration.calibrate_rig`), written as an anipose-style TOML.
 
@@ -85,6 +92,12 @@ def rig(recordings, out, *, board: str, names=None, every: int = 1, intrinsics=N
         Robust loss (one of :data:`handcap.multiview.calibration.LOSSES`).
     f_scale : float
         Pixel error where the robust loss starts to discount.
+    sync : None, 'auto', str or sequence of str
+        Cameras not triggered together (:mod:`handcap.multiview.board_sync`): ``'auto'`` finds each camera's
+        offset from the board's motion; ``'CAM=FRAMES'`` items give them (camera c's frame f shows the first
+        camera's frame f + offset). The recordings may then differ in length.
+    max_offset : int or None
+        How far ``'auto'`` searches, frames either way (default: half the shortest recording).
     """
     recordings = list(recordings)
     parsed = parse_board(board)
@@ -93,11 +106,38 @@ def rig(recordings, out, *, board: str, names=None, every: int = 1, intrinsics=N
     _camera_file_out(out, recordings + ([intrinsics] if intrinsics else []))
     cameras = None if intrinsics is None else read_rig(intrinsics, positions=False)  # extrinsics unused
     detections = [detect_in_files(path, parsed, every=every) for path in recordings]
+    lines, sync_warnings = [], []
+    if sync is not None:
+        found = _synchronise(detections, names, cameras, sync, max_offset, fix_k3)
+        detections = shift_boards(detections, found.offsets)
+        lines.append(found.summary())
+        sync_warnings = list(found.warnings)
     result = calibrate_rig(detections, names=names, cameras=cameras, refine_intrinsics=refine_intrinsics,
                            fix_k3=fix_k3, origin=origin, origin_frame=origin_frame, loss=loss, f_scale=f_scale)
-    calibrated = q.attach(result.rig, q.camera_warnings(result.rms, names=result.names))
+    checks = q.camera_warnings(result.rms, names=result.names)
+    if checks and sync is None:
+        checks.append("cameras started one by one pair frames of different moments of a moving board: "
+                      "calibrate rig --sync auto finds each camera's offset")
+    calibrated = q.attach(result.rig, [*sync_warnings, *checks])
     calibrated.save(out)  # the warnings go to the file's [metadata]
     warnings = calibrated.warnings
-    lines = (result.summary(), f"{out}: {len(result.rig)} cameras; " + (f"{len(warnings)} warning(s), see below"
-                                                                        if warnings else "no warnings"))
+    lines = (*lines, result.summary(), f"{out}: {len(result.rig)} cameras; "
+             + (f"{len(warnings)} warning(s), see below" if warnings else "no warnings"))
     return Step(lines, warnings, (str(out),), result)
+
+
+def _synchronise(detections, names, cameras, sync, max_offset, fix_k3):
+    """The cameras' offsets: found from the board's motion, or given by name (see :func:`rig`)."""
+    names = list(names) if names is not None else [Path(d.source).stem for d in detections]
+    if sync != "auto":
+        given = parse_offsets(sync)
+        unknown = sorted(set(given) - set(names))
+        if unknown:
+            raise HandcapError(f"an offset for camera {unknown[0]!r}, which the rig lacks (it has {', '.join(names)})")
+        offsets = np.array([given.get(n, 0.0) for n in names])
+        return Sync(tuple(names), offsets - offsets[0], names[0], np.nan, np.nan, 0, ())
+    if cameras is None:
+        cameras = [calibrate_intrinsics(d, name=n, fix_k3=fix_k3).camera for d, n in zip(detections, names)]
+    if max_offset is None:
+        max_offset = max(1, min(d.n_frames for d in detections) // 2)
+    return board_offsets(detections, list(cameras), max_offset=max_offset, names=names)
