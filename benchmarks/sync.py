@@ -78,7 +78,7 @@ def main() -> None:
         miss = np.abs(sync.offsets - truth)
         print(f"  offsets found: error median {np.nanmedian(miss):.3f}, largest {np.nanmax(miss):.3f} frames "
               f"({1000 * np.nanmax(miss) / RATE:.2f} ms); cameras without one: {int(np.isnan(sync.offsets).sum())}; "
-              f"epipolar distance {sync.before_px:.1f} px -> {sync.after_px:.2f} px; {seconds:.1f} s "
+              f"epipolar distance {sync.before:.1f} px -> {sync.after:.2f} px; {seconds:.1f} s "
               f"({len(detections.frame) / seconds:,.0f} detections/s); warnings: {list(sync.warnings) or 'none'}")
         apart, n_apart = error_mm(capture, detections)
         found, n_found = error_mm(capture, shift_detections(detections, sync.offsets)[0])
