@@ -173,4 +173,13 @@ def test_the_command_synchronises_files_of_one_camera_each(capture, tmp_path, ca
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "bad.c3d").exists()
+    # a take in which nothing moves: no offset can be told, which is one clear line, not a triangulation of one view
+    first = cameras.frame == 0
+    still = Detections(cameras.camera_names, cameras.marker_names, np.repeat(np.arange(30), first.sum()),
+                       np.tile(cameras.camera[first], 30), np.tile(cameras.marker[first], 30),
+                       np.tile(cameras.xy[first], (30, 1)), np.ones(30 * first.sum()), RATE, 30)
+    write_detections(still, tmp_path / "still.npz")
+    assert main(["triangulate", str(tmp_path / "still.npz"), "--cameras", str(rig), "--sync", "auto",
+                 "--out", str(tmp_path / "still.c3d")]) == 2
+    assert "placed no camera beside cam_0" in capsys.readouterr().err
     assert read_detections(paths[0]).n_frames == FRAMES - START[0]

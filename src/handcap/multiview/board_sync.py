@@ -177,7 +177,7 @@ def _pair(track_a, track_b, max_offset: int):
         return None
     best = int(np.argmin(cost))
     away = np.abs(shifts - shifts[best]) >= 2
-    if np.isfinite(cost[away]).any() and cost[best] > CLEAR * cost[away].min():
+    if not np.isfinite(cost[away]).any() or cost[best] > CLEAR * cost[away].min():  # no clear least
         return None
     if best in (0, len(shifts) - 1):
         return "edge"

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 
+from handcap.core.errors import HandcapError
 from handcap.io import check_not_input, marker_suffix, read_markers, write_markers
 from handcap.io.camera_formats import read_rig
 from handcap.layouts import load_layout
@@ -13,8 +14,8 @@ from handcap.markerless import repair_handedness
 from handcap.markerless.keypoints import is_keypoints
 from handcap.multiview import merge_detections, quality_path, read_detections, triangulate_detections, write_quality
 from handcap.multiview import clean as cleaning
-from handcap.multiview.sync import (MAX_OFFSET_S, check_sync, estimate_sync, offsets_from_names, parse_offsets,
-                                    shift_detections)
+from handcap.multiview.sync import (MAX_OFFSET_S, NOISE_PX, check_sync, estimate_sync, offsets_from_names,
+                                    parse_offsets, shift_detections)
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step
 
@@ -69,10 +70,17 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     rig = read_rig(cameras, units=units)
     start = time.perf_counter()
     lines, sync_warnings, synced = [], [], None
+    keypoints = is_keypoints(merged.marker_names)
+    if threshold_px is None:
+        threshold_px = KEYPOINT_THRESHOLD_PX if keypoints else 5.0
     if len(merged.camera_names) > 1:
         merged.camera_order(rig)  # every camera in the rig, before the work
         if sync == "auto":
-            found = estimate_sync(merged, rig, max_offset_s=max_offset_s, reference=sync_reference)
+            found = estimate_sync(merged, rig, max_offset_s=max_offset_s, reference=sync_reference,
+                                  noise_px=threshold_px / 2 if keypoints else NOISE_PX)
+            if np.isfinite(found.offsets).sum() < 2:
+                raise HandcapError(f"--sync auto placed no camera beside {found.reference}: "
+                                   + "; ".join(found.warnings))
         else:
             offsets = None if given is None else offsets_from_names(merged, given, sync_reference)
             found = check_sync(merged, rig, offsets, reference=sync_reference)
@@ -82,9 +90,6 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
             synced = found
             lines.append(f"{found.summary()}; {lost} of the detections fall outside {found.reference}'s frames or "
                          f"come from a camera with no offset, and are left out")
-    keypoints = is_keypoints(merged.marker_names)
-    if threshold_px is None:
-        threshold_px = KEYPOINT_THRESHOLD_PX if keypoints else 5.0
     if handedness and keypoints:
         repair = repair_handedness(merged, rig)
         merged = repair.detections
