@@ -12,6 +12,7 @@ from handcap import HandcapError
 from handcap.cli import main
 from handcap.io.camera_formats import write_rig
 from handcap.multiview import Detections, read_detections, triangulate_detections, write_detections
+from handcap.multiview.epipolar import EpipolarViews
 from handcap.multiview.sync import (check_sync, estimate_sync, offsets_from_names, parse_offsets,
                                     shift_detections)
 from handcap.synth.config import SynthConfig
@@ -79,6 +80,10 @@ def test_shifting_renumbers_whole_offsets_and_interpolates_fractions():
     whole, lost = shift_detections(d, [0.0, 2.0])
     assert lost == 0 and whole.frame.tolist() == [0, 1, 7, 8] and whole.n_frames == 9
     assert np.array_equal(whole.xy, xy)
+    # b's clock 10 % slow: its frames 5 and 6 show the reference's 4.5 and 5.4; the reference's frame 5 lies
+    # 0.5 / 0.9 of the way from b's frame 5 to 6
+    slow, _ = shift_detections(d, [0.0, 0.0], [0.0, -0.1])
+    assert slow.frame.tolist() == [0, 1, 5] and np.allclose(slow.xy[2], xy[2] + 5 / 9 * (xy[3] - xy[2]))
     part, lost = shift_detections(d, [-1.0, 0.25])
     # a's frame 0 falls before the reference's frame 0; b's frames 5 and 6 give the reference's frame 6:
     # b's time 5.75, three quarters of the way from frame 5 to 6
@@ -122,9 +127,35 @@ def test_what_cannot_be_found_is_said(capture):
     # an offset past the search range
     sync = estimate_sync(cameras, capture.rig, max_offset_s=0.1)
     assert any("end of the search range" in w for w in sync.warnings)
-    # a camera whose clock runs 2 % fast drifts 1.6 frames between the take's first and last thirds
-    drifting = _cameras(capture, np.zeros(6, int), np.zeros(6, int), rate_of={2: 1.02})
-    assert any("camera cam_2 drifts" in w for w in estimate_sync(drifting, capture.rig).warnings)
+    # a camera that drops 2 frames three quarters into the take: its offset jumps, which no line follows
+    d = _cameras(capture, START, PHASE)
+    mine = d.camera == 3
+    keep = ~(mine & (d.frame >= 90) & (d.frame < 92))
+    frame = np.where(mine & (d.frame >= 92), d.frame - 2, d.frame)[keep]
+    dropped = Detections(d.camera_names, d.marker_names, frame, d.camera[keep], d.marker[keep], d.xy[keep],
+                         d.score[keep], RATE, FRAMES)
+    assert any("camera cam_3's offset changes within the take" in w
+               for w in estimate_sync(dropped, capture.rig).warnings)
+
+
+def test_a_clock_that_runs_fast_is_followed(capture):
+    """Camera 2's clock runs 2 % fast: its frame f shows the reference's frame 1.02 (f + start + phase / 4)."""
+    drifting = _cameras(capture, START, PHASE, rate_of={2: 1.02})
+    sync = estimate_sync(drifting, capture.rig)
+    assert abs(sync.drift[2] - 0.02) < 0.002 and np.abs(np.delete(sync.drift, 2)).max() < 0.002, sync.summary()
+    truth = START + PHASE / UP
+    assert abs(sync.offsets[2] - 1.02 * truth[2]) < 0.2 and np.abs(np.delete(sync.offsets - truth, 2)).max() < 0.1
+    assert "cam_2's clock runs +" in sync.summary() and sync.after < 1.0
+    # camera 2's views agree with its partners' when its clock is followed, not with one offset alone
+    views = EpipolarViews(drifting, capture.rig)
+    pairs = [pair for pair in views.pairs() if 2 in pair]
+    followed, constant = views.median_distance(pairs, sync.offsets, sync.drift), views.median_distance(pairs,
+                                                                                                       sync.offsets)
+    assert followed < 1.0 < 3 * followed < constant, (followed, constant)
+    results = [triangulate_detections(shift_detections(drifting, sync.offsets, drift)[0], capture.rig, min_views=2,
+                                      threshold_px=5.0) for drift in (sync.drift, None)]
+    assert 2 * results[0].counts()["rejected"] < results[1].counts()["rejected"]
+    assert _error_mm(capture, results[0].to_markers()) < 0.5
 
 
 def test_offsets_given_by_name_and_refused_in_one_line(capture):

@@ -8,7 +8,7 @@ moment, but only when their frames are paired at the right offset. For every pai
 in common, :func:`board_offsets` slides b's frames against a's, fits that one transform to the board's corners of
 every frame by least squares (Kabsch), and keeps the offset with the least residual; then to a twentieth of a frame
 with b's board interpolated between its frames. The pairs join into one offset per camera as in
-:func:`handcap.multiview.sync.join_offsets`. :func:`shift_boards` puts every camera on the reference's frames,
+:func:`handcap.multiview.offsets.join_offsets`. :func:`shift_boards` puts every camera on the reference's frames,
 which :func:`handcap.multiview.calibration.calibrate_rig` takes.
 
 Offsets count as :class:`handcap.multiview.sync.Sync` counts them: camera c's frame f shows the moment of the
@@ -25,7 +25,8 @@ from handcap.core.cameras import Camera
 from handcap.core.errors import HandcapError
 from handcap.multiview.board_recordings import BoardDetections
 from handcap.multiview.intrinsics import board_poses
-from handcap.multiview.sync import CLEAR, Sync, join_offsets
+from handcap.multiview.offsets import join_offsets
+from handcap.multiview.sync import CLEAR, Sync
 from handcap.objects.rigid import kabsch
 
 #: Frames of the board a pair of cameras must both see at an offset to be judged there.

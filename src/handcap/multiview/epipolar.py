@@ -108,8 +108,8 @@ class EpipolarViews:
             Cameras.
         rows : ndarray (R,) int
             Sorted indices into a's views.
-        shift : int
-            Frames.
+        shift : int or ndarray (R,) int
+            Frames, one for all rows or one per row.
         """
         keys = self.keys[b]
         if not len(keys):
@@ -120,7 +120,7 @@ class EpipolarViews:
                                                                              < self.n_frames)
         return rows[hit], at[hit]
 
-    def at_offset(self, a: int, b: int, rows: np.ndarray, shift: float) -> np.ndarray:
+    def at_offset(self, a: int, b: int, rows: np.ndarray, shift) -> np.ndarray:
         """b's normalised points (R, 2) ``shift`` frames after a's ``rows``, interpolated between b's frames for a
         fraction; NaN where b lacks a frame.
 
@@ -130,23 +130,24 @@ class EpipolarViews:
             Cameras.
         rows : ndarray (R,) int
             Sorted indices into a's views.
-        shift : float
-            Frames.
+        shift : float or ndarray (R,)
+            Frames, one for all rows or one per row.
         """
-        whole = int(np.floor(shift))
+        shift = np.broadcast_to(np.asarray(shift, dtype=np.float64), rows.shape)
+        whole = np.floor(shift).astype(np.int64)
         part = shift - whole
-        first_a, first_b = self.matched(a, b, rows, whole)
         out = np.full((len(rows), 2), np.nan)
-        index = np.searchsorted(rows, first_a)
-        out[index] = self.points[b][first_b]
-        if part > 1e-9:
-            second_a, second_b = self.matched(a, b, rows, whole + 1)
-            nxt = np.full((len(rows), 2), np.nan)
-            nxt[np.searchsorted(rows, second_a)] = self.points[b][second_b]
-            out = (1 - part) * out + part * nxt
+        nxt = np.full((len(rows), 2), np.nan)
+        for target, step in ((out, 0), (nxt, 1)):
+            if step and not (part > 1e-9).any():
+                break
+            first_a, first_b = self.matched(a, b, rows, whole + step)
+            target[np.searchsorted(rows, first_a)] = self.points[b][first_b]
+        moving = part > 1e-9
+        out[moving] = (1 - part[moving, None]) * out[moving] + part[moving, None] * nxt[moving]
         return out
 
-    def median_distance(self, pairs, offsets: np.ndarray) -> float:
+    def median_distance(self, pairs, offsets: np.ndarray, drift=None) -> float:
         """Median epipolar distance (px) over the pairs' views, b interpolated at the offsets (NaN: no view).
 
         Parameters
@@ -154,14 +155,19 @@ class EpipolarViews:
         pairs : sequence of (a, b, ...)
         offsets : ndarray (C,)
             Frames, as :class:`handcap.multiview.sync.Sync` counts them; a camera with NaN is skipped.
+        drift : ndarray (C,) or None
+            Each clock's drift, as :class:`handcap.multiview.sync.Sync` counts it.
         """
+        drift = np.zeros(len(offsets)) if drift is None else np.asarray(drift, dtype=np.float64)
         distances = []
         for a, b, *_ in pairs:
             e = self.essential(a, b)
             if e is None or np.isnan(offsets[a]) or np.isnan(offsets[b]):
                 continue
             rows = np.arange(0, len(self.keys[a]), max(1, len(self.keys[a]) // FINE_SAMPLES))
-            xb = self.at_offset(a, b, rows, offsets[a] - offsets[b])
+            f = self.frames[a][rows]
+            shift = (f * (1 + drift[a]) + offsets[a] - offsets[b]) / (1 + drift[b]) - f
+            xb = self.at_offset(a, b, rows, shift)
             ok = np.isfinite(xb).all(axis=1)
             distances.append(self.distance(a, b, self.points[a][rows[ok]], xb[ok], e))
         return float(np.median(np.concatenate(distances))) if distances and sum(map(len, distances)) else np.nan

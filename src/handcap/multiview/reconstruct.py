@@ -329,9 +329,10 @@ def write_quality(result: TriangulatedMarkers, markers_path, *, sync=None) -> Pa
     reprojection error of the inlier views, NaN where no point), ``views (T, M)``
     (inlier views), ``residual (T, M)`` (metres) and ``used (N,)`` (per
     detection row of the input, in its order: used as an inlier view); for
-    cameras synchronised first, ``sync_cameras (C,)`` and ``sync_offsets (C,)``
-    (frames, see :mod:`handcap.multiview.sync`), and ``used`` is per row of the
-    synchronised detections.
+    cameras synchronised first, ``sync_cameras (C,)``, ``sync_offsets (C,)``
+    and ``sync_drift (C,)`` (frames and frames per frame, see
+    :mod:`handcap.multiview.sync`), and ``used`` is per row of the synchronised
+    detections.
 
     Parameters
     ----------
@@ -351,7 +352,9 @@ def write_quality(result: TriangulatedMarkers, markers_path, *, sync=None) -> Pa
     save_npz(path, {"names": np.array(result.names), "rate": np.array(result.rate), "error_px": result.error_px,
                     "views": result.views, "residual": result.residual, "used": result.used,
                     **({} if sync is None else {"sync_cameras": np.array(sync.camera_names),
-                                                "sync_offsets": np.asarray(sync.offsets, dtype=np.float64)})})
+                                                "sync_offsets": np.asarray(sync.offsets, dtype=np.float64),
+                                                "sync_drift": np.zeros(len(sync.offsets)) if sync.drift is None
+                                                else np.asarray(sync.drift, dtype=np.float64)})})
     return path
 
 

@@ -30,7 +30,9 @@ import numpy as np
 from handcap.core.cameras import CameraRig
 from handcap.core.errors import HandcapError
 from handcap.multiview.detections import Detections
-from handcap.multiview.epipolar import FINE_SAMPLES, MIN_MATCHES, EpipolarViews
+from handcap.multiview.epipolar import MIN_MATCHES, EpipolarViews
+from handcap.multiview.offsets import (AGREE_FRAMES, camera_index, join_offsets, offsets_from_names, parse_offsets,
+                                       shift_detections)
 
 #: Default search range of :func:`estimate_sync`, seconds either way.
 MAX_OFFSET_S = 3.0
@@ -46,10 +48,16 @@ CHECK_SAMPLES = 500
 #: A pair's best offset must be this much clearer than its best offset two or more frames away: its median
 #: epipolar distance at most this share of the other's.
 CLEAR = 0.6
-#: Pairs whose offset disagrees with the joined offsets by more than this many frames are left out.
-AGREE_FRAMES = 0.35
-#: Fractional offsets closer than this to a whole frame take that frame's pixels as they are.
-WHOLE = 0.02
+#: Pieces of the take in which each camera's offset is found again, to see its clock drift.
+WINDOWS = 6
+#: Least frames of a piece (shorter takes are taken as drifting not at all).
+DRIFT_PIECE = 20
+#: A piece's offset is searched this many frames either way of the whole take's.
+DRIFT_SEARCH = 3.0
+#: Views of a pair's first camera that each piece's search takes at most.
+WINDOW_SAMPLES = 2000
+#: A clock is corrected when it drifts this many frames or more over the take.
+DRIFT_MIN = 0.2
 
 
 @dataclass(frozen=True)
@@ -71,6 +79,11 @@ class Sync:
     warnings : tuple of str
     measure, unit : str
         What ``before`` and ``after`` measure, and in what unit.
+    drift : ndarray (C,) or None
+        Frames of offset per frame of the camera's own (its clock's rate against the reference's, less 1): camera
+        c's frame f shows the reference's frame ``f + offsets[c] + drift[c] * f``. None: no drift.
+    notes : tuple of str
+        What was corrected besides the offsets (a clock's drift).
     """
 
     camera_names: tuple
@@ -82,6 +95,8 @@ class Sync:
     warnings: tuple = ()
     measure: str = "epipolar distance"
     unit: str = "px"
+    drift: np.ndarray | None = None
+    notes: tuple = ()
 
     def summary(self) -> str:
         """One line: each camera's offset and how far the views disagree before and after."""
@@ -90,74 +105,7 @@ class Sync:
         line = f"synchronised to {self.reference} from {self.pairs} pairs of cameras, offsets in frames: {shown}"
         if np.isfinite(self.before) or np.isfinite(self.after):
             line += f"; {self.measure} {self.before:.2f} {self.unit} -> {self.after:.2f} {self.unit} (median)"
-        return line
-
-
-def parse_offsets(items) -> dict:
-    """``{camera: frames}`` from ``CAM=FRAMES`` items (a string may hold several, joined by commas).
-
-    Parameters
-    ----------
-    items : str or sequence of str
-        E.g. ``"cam_2=+12.5, cam_3=-4"`` or ``["cam_2=12.5", "cam_3=-4"]``.
-
-    Raises
-    ------
-    HandcapError
-        For an item without ``=``, a camera named twice, or an offset that is not a finite number.
-    """
-    items = [items] if isinstance(items, str) else list(items)
-    offsets = {}
-    for item in (part.strip() for text in items for part in str(text).split(",")):
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or not name:
-            raise HandcapError(f"an offset is CAMERA=FRAMES (e.g. cam_2=+12.5), got {item!r}")
-        if name in offsets:
-            raise HandcapError(f"camera {name!r} is given two offsets")
-        try:
-            offsets[name] = float(value)
-        except ValueError:
-            raise HandcapError(f"the offset of camera {name!r} must be a number of frames, got {value.strip()!r}") \
-                from None
-        if not np.isfinite(offsets[name]):
-            raise HandcapError(f"the offset of camera {name!r} must be a finite number of frames, got {value!r}")
-    if not offsets:
-        raise HandcapError("no offsets given: CAMERA=FRAMES, e.g. cam_2=+12.5")
-    return offsets
-
-
-def offsets_from_names(detections: Detections, given: dict, reference: str | None = None) -> np.ndarray:
-    """Offsets (C,) in the detections' camera order from ``{camera: frames}``; cameras not named get 0.
-
-    Parameters
-    ----------
-    detections : Detections
-    given : dict of str to float
-        Frames, as :class:`Sync` counts them.
-    reference : str or None
-        A camera to count from: its given offset is taken from every camera's.
-
-    Raises
-    ------
-    HandcapError
-        For a camera the detections lack, or an offset that is not a finite number.
-    """
-    names = list(detections.camera_names)
-    offsets = np.zeros(len(names))
-    for name, value in given.items():
-        if name not in names:
-            raise HandcapError(f"an offset for camera {name!r}, which the detections lack (they have "
-                               f"{', '.join(names)})")
-        try:
-            offsets[names.index(name)] = float(value)
-        except (TypeError, ValueError):
-            raise HandcapError(f"the offset of camera {name!r} must be a number of frames, got {value!r}") from None
-    if not np.isfinite(offsets).all():
-        raise HandcapError("every camera's offset must be a finite number of frames")
-    if reference is not None:
-        offsets -= offsets[_camera(names, reference)]
-    return offsets
+        return "; ".join((line, *self.notes))
 
 
 def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float = MAX_OFFSET_S,
@@ -187,7 +135,7 @@ def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float
     if not (np.isfinite(max_offset_s) and max_offset_s > 0):
         raise HandcapError(f"the search range must be a positive number of seconds, got {max_offset_s!r}")
     names = list(detections.camera_names)
-    ref = _camera(names, names[0] if reference is None else reference)
+    ref = camera_index(names, names[0] if reference is None else reference)
     span = max(1, int(round(max_offset_s * detections.rate)))
     views = EpipolarViews(detections, rig)
     rng = np.random.default_rng(seed)
@@ -215,10 +163,12 @@ def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float
     if np.isfinite(after) and after > noise_px:
         warnings.append(f"the views still disagree by {after:.1f} px (median epipolar distance) after synchronising: "
                         f"check the rig's calibration")
-    drift = _drift(views, used, offsets, detections)
-    if drift:
-        warnings.append(drift)
-    return Sync(tuple(names), offsets, names[ref], before, after, len(used), tuple(warnings))
+    offsets, drift, lines, jumps = _clocks(views, used, offsets, detections, ref)
+    warnings.extend(jumps)
+    if lines:
+        after = views.median_distance(used, offsets, drift)
+    return Sync(tuple(names), offsets, names[ref], before, after, len(used), tuple(warnings), drift=drift,
+                notes=tuple(lines))
 
 
 def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, reference: str | None = None,
@@ -252,7 +202,7 @@ def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, referenc
     offsets = np.zeros(len(names)) if offsets is None else np.asarray(offsets, dtype=np.float64).reshape(-1)
     if offsets.shape != (len(names),):
         raise HandcapError(f"need one offset per camera ({len(names)}), got {offsets.shape}")
-    ref = _camera(names, names[0] if reference is None else reference)
+    ref = camera_index(names, names[0] if reference is None else reference)
     views = EpipolarViews(detections, rig)
     rng = np.random.default_rng(0)
     span = max(1, int(round(max_offset_s * detections.rate)))
@@ -279,65 +229,6 @@ def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, referenc
     return Sync(tuple(names), offsets - offsets[ref], names[ref], before, after, len(pairs), tuple(warnings))
 
 
-def shift_detections(detections: Detections, offsets) -> tuple[Detections, int]:
-    """The detections on the reference camera's frames (see :class:`Sync`).
-
-    Parameters
-    ----------
-    detections : Detections
-    offsets : array_like (C,)
-        Frames per camera of ``detections.camera_names``; a camera with NaN is left out.
-
-    Returns
-    -------
-    (Detections, int)
-        The shifted detections, with as many frames as reach the last moment any camera saw; and the rows left
-        out (before the reference's frame 0, or of a camera with no offset). A fractional offset interpolates a
-        camera's pixels between its two frames, where both saw the marker; such a row's score is the lower.
-    """
-    offsets = np.asarray(offsets, dtype=np.float64).reshape(-1)
-    if offsets.shape != (len(detections.camera_names),):
-        raise HandcapError(f"need one offset per camera ({len(detections.camera_names)}), got {offsets.shape}")
-    d = detections
-    parts = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
-    for c, offset in enumerate(offsets):
-        rows = np.flatnonzero(d.camera == c)
-        if not len(rows) or np.isnan(offset):
-            continue
-        whole = np.floor(offset + WHOLE)
-        part = offset - whole
-        if part < WHOLE:  # a whole number of frames: each row as it is
-            frame, xy, score, marker = d.frame[rows] + int(whole), d.xy[rows], d.score[rows], d.marker[rows]
-        else:  # between this frame and the next: frame f and f + 1 give reference frame f + whole + 1
-            key = d.marker[rows] * (d.n_frames + 1) + d.frame[rows]
-            order = np.argsort(key, kind="stable")
-            key, rows = key[order], rows[order]
-            at = np.minimum(np.searchsorted(key, key + 1), len(key) - 1)
-            pair = key[at] == key + 1
-            first, second = rows[pair], rows[at[pair]]
-            frame = d.frame[first] + int(whole) + 1
-            xy = part * d.xy[first] + (1 - part) * d.xy[second]
-            score, marker = np.minimum(d.score[first], d.score[second]), d.marker[first]
-        for key, value in zip(parts, (frame, np.full(len(frame), c), marker, xy, score)):
-            parts[key].append(value)
-    if not parts["frame"]:
-        raise HandcapError("no camera has an offset: nothing to synchronise")
-    frame, camera, marker, xy, score = (np.concatenate(parts[key]) for key in parts)
-    keep = frame >= 0
-    n_frames = int(frame[keep].max()) + 1 if keep.any() else 0
-    order = np.lexsort((marker[keep], camera[keep], frame[keep]))
-    out = Detections(d.camera_names, d.marker_names, frame[keep][order], camera[keep][order],
-                     marker[keep][order], xy[keep][order], score[keep][order], d.rate, max(n_frames, 1),
-                     d.source, d.pitch)
-    return out, len(d.frame) - len(out.frame)
-
-
-def _camera(names: list, name: str) -> int:
-    if name not in names:
-        raise HandcapError(f"no camera {name!r} to count the offsets from (the detections have {', '.join(names)})")
-    return names.index(name)
-
-
 def _pair_offset(views: EpipolarViews, a: int, b: int, span: int, rng) -> tuple | None:
     """(a, b, offset of b minus a's in frames, 'edge' or '') or None where no offset is clearly best."""
     e = views.essential(a, b)
@@ -361,104 +252,87 @@ def _pair_offset(views: EpipolarViews, a: int, b: int, span: int, rng) -> tuple 
     return (a, b, -shift, "") if shift is not None else None
 
 
-def join_offsets(found: list, n: int, ref: int) -> tuple[np.ndarray, list, int]:
-    """One offset per camera from pairs' offsets, by least squares with the reference at 0.
+def _clocks(views: EpipolarViews, pairs: list, offsets: np.ndarray, detections: Detections, ref: int):
+    """Each camera's clock against the reference's: (offsets (C,), drift (C,), lines, warnings).
 
-    Pairs that disagree with the rest by more than :data:`AGREE_FRAMES` are left out, worst first.
-
-    Parameters
-    ----------
-    found : list of (int, int, float)
-        Pairs of cameras (a, b) and b's offset minus a's, frames.
-    n : int
-        Cameras.
-    ref : int
-        The reference camera.
-
-    Returns
-    -------
-    (ndarray (n,), list, int)
-        The offsets (NaN for a camera no pair joins to the reference), the pairs used, and the pairs left out.
+    The take is cut into :data:`WINDOWS` pieces of the reference's frames. In each, every pair's offset is found
+    again within :data:`DRIFT_SEARCH` frames of the whole take's, at the middle of the views it used; a line through
+    them gives the pair's change of offset over the take. The pairs' lines join into one per camera (least
+    squares, as the offsets do). A camera whose line moves :data:`DRIFT_MIN` frames or more over the take gets it
+    (its clock runs at another rate); one whose pairs' offsets jump about, off any line, gets a warning (dropped
+    frames, say) and keeps the take's offset.
     """
-    pairs = list(found)
-    dropped = 0
-    while True:
-        offsets = np.full(n, np.nan)
-        reached = _component(pairs, n, ref)
-        use = [p for p in pairs if p[0] in reached and p[1] in reached]
-        cams = sorted(reached - {ref})
-        if not cams or not use:
-            offsets[ref] = 0.0
-            return offsets, use, dropped
-        column = {c: i for i, c in enumerate(cams)}
-        rows = np.zeros((len(use), len(cams)))
-        for i, (a, b, _) in enumerate(use):
-            if b in column:
-                rows[i, column[b]] += 1
-            if a in column:
-                rows[i, column[a]] -= 1
-        value = np.array([p[2] for p in use])
-        solution = np.linalg.lstsq(rows, value, rcond=None)[0]
-        residual = np.abs(rows @ solution - value)
-        worst = int(np.argmax(residual))
-        if residual[worst] > AGREE_FRAMES and len(use) > 1:
-            pairs.remove(use[worst])
-            dropped += 1
-            continue
-        offsets[ref] = 0.0
-        offsets[cams] = solution
-        return offsets, use, dropped
-
-
-def _component(pairs: list, n: int, start: int) -> set:
-    reached, grow = {start}, True
-    while grow:
-        grow = False
-        for a, b, _ in pairs:
-            if (a in reached) != (b in reached):
-                reached |= {a, b}
-                grow = True
-    return reached
-
-
-def _drift(views: EpipolarViews, pairs: list, offsets: np.ndarray, detections: Detections) -> str:
-    """A warning naming the cameras whose pairs want offsets a frame or more apart in the take's first and last
-    thirds (clocks at different rates), else ''.
-
-    A pair counts only where both thirds show a clear least distance; a camera drifts when most of its pairs that
-    count, and two at least, drift.
-    """
-    third = detections.n_frames // 3
-    if third < 10 or not pairs:
-        return ""
-    judged, drifting, size = np.zeros(len(offsets)), np.zeros(len(offsets)), {}
+    n = detections.n_frames
+    piece = n // WINDOWS
+    drift = np.zeros(len(offsets))
+    if piece < DRIFT_PIECE or not pairs:
+        return offsets, drift, [], []
+    starts, changes, jumps = [], [], np.zeros(len(offsets), int)
     for a, b, _ in pairs:
-        e = views.essential(a, b)
-        grid = offsets[a] - offsets[b] + np.linspace(-3, 3, 61)
-        ends = []
-        for lo, hi in ((0, third), (detections.n_frames - third, detections.n_frames)):
-            rows = np.flatnonzero((views.frames[a] >= lo) & (views.frames[a] < hi))
-            rows = rows[::max(1, len(rows) // FINE_SAMPLES)]
-            cost = np.full(len(grid), np.inf)
-            for k, shift in enumerate(grid):
-                xb = views.at_offset(a, b, rows, shift)
-                ok = np.isfinite(xb).all(axis=1)
-                if ok.sum() >= MIN_MATCHES:
-                    cost[k] = np.median(views.distance(a, b, views.points[a][rows[ok]], xb[ok], e))
-            best = int(np.argmin(cost))
-            clear = np.isfinite(cost[best]) and cost[best] < CLEAR * max(cost[0], cost[-1])
-            ends.append(grid[best] if clear else np.nan)
-        change = abs(ends[1] - ends[0])
-        if np.isfinite(change):
-            judged[[a, b]] += 1
-            if change >= 1.0:
-                drifting[[a, b]] += 1
-                for c in (a, b):
-                    size[c] = max(size.get(c, 0.0), change)
-    cameras = [c for c in range(len(offsets)) if drifting[c] >= 2 and drifting[c] > judged[c] / 2]
-    if not cameras:
-        return ""
+        times, values = [], []
+        for k in range(WINDOWS):
+            lo, hi = k * piece - offsets[a], (k + 1) * piece - offsets[a]  # the piece in a's own frames
+            found = _window_shift(views, a, b, offsets[a] - offsets[b], lo, hi)
+            if found is not None:
+                times.append(found[1] + offsets[a])
+                values.append(-found[0])
+        if len(times) < 3:
+            continue
+        times, values = np.array(times), np.array(values)
+        slope, intercept = np.polyfit(times, values, 1)
+        if np.abs(values - intercept - slope * times).max() > 0.3:
+            jumps[[a, b]] += 1
+            continue
+        starts.append((a, b, intercept))
+        changes.append((a, b, slope * n))  # frames over the take
     names = detections.camera_names
-    return (f"camera {', '.join(names[c] for c in cameras)} drifts against the others by up to "
-            f"{max(size[c] for c in cameras):.1f} frames between the take's first and last thirds: its clock runs at "
-            f"another rate, so one offset does not hold for the whole take")
+    warnings = [f"camera {names[c]}'s offset changes within the take, not along a line (dropped frames?): one offset "
+                f"does not hold for the whole take" for c in np.flatnonzero(jumps >= 2)]
+    start, change = join_offsets(starts, len(offsets), ref)[0], join_offsets(changes, len(offsets), ref)[0]
+    offsets, lines = offsets.copy(), []
+    drifts = np.isfinite(change) & np.isfinite(start) & (np.abs(change) >= DRIFT_MIN)
+    if not drifts.any():
+        return offsets, drift, lines, warnings
+    offsets[np.isfinite(start)] = start[np.isfinite(start)]  # every camera's, with the drifting ones' lines
+    for c in np.flatnonzero(drifts):
+        rate = change[c] / n  # offset = start + rate * (the reference's frame): in the camera's own frames
+        offsets[c], drift[c] = start[c] / (1 - rate), rate / (1 - rate)
+        lines.append(f"{names[c]}'s clock runs {100 * drift[c]:+.3f} % against {names[ref]}'s ({change[c]:+.1f} "
+                     f"frames over the take), corrected")
+    return offsets, drift, lines, warnings
+
+
+def _window_shift(views: EpipolarViews, a: int, b: int, shift: float, lo: float, hi: float) -> tuple | None:
+    """A pair's shift in a's frames [lo, hi), within :data:`DRIFT_SEARCH` frames of ``shift``, and the middle of the
+    frames it used; None unless clear. Half frames first, then a sixteenth about the least."""
+    e = views.essential(a, b)
+    rows = np.flatnonzero((views.frames[a] >= lo) & (views.frames[a] < hi))
+    rows = rows[::max(1, len(rows) // WINDOW_SAMPLES)]
+
+    def costs(grid):
+        cost = np.full(len(grid), np.inf)
+        for k, s in enumerate(grid):
+            xb = views.at_offset(a, b, rows, s)
+            ok = np.isfinite(xb).all(axis=1)
+            if ok.sum() >= MIN_MATCHES:
+                cost[k] = np.median(views.distance(a, b, views.points[a][rows[ok]], xb[ok], e))
+        return cost
+
+    coarse = shift + np.arange(-DRIFT_SEARCH, DRIFT_SEARCH + 0.25, 0.5)
+    cost = costs(coarse)
+    best = int(np.argmin(cost))
+    if not np.isfinite(cost[best]) or best in (0, len(coarse) - 1) or cost[best] > CLEAR * max(cost[0], cost[-1]):
+        return None
+    grid = coarse[best] + np.linspace(-0.5, 0.5, 17)
+    cost = costs(grid)
+    best = int(np.argmin(cost))
+    middle = float(views.frames[a][rows].mean())
+    if 0 < best < len(grid) - 1 and np.isfinite(cost[best - 1:best + 2]).all():
+        left, mid, right = cost[best - 1:best + 2]
+        if left - 2 * mid + right > 0:
+            return grid[best] + 0.5 * (left - right) / (left - 2 * mid + right) * (grid[1] - grid[0]), middle
+    return float(grid[best]), middle
+
+
+__all__ = ["CHECK_PX", "MAX_OFFSET_S", "NOISE_PX", "Sync", "check_sync", "estimate_sync", "join_offsets",
+           "offsets_from_names", "parse_offsets", "shift_detections"]

@@ -86,7 +86,7 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
             found = check_sync(merged, rig, offsets, reference=sync_reference)
         sync_warnings = list(found.warnings)
         if sync is not None:
-            merged, lost = shift_detections(merged, found.offsets)
+            merged, lost = shift_detections(merged, found.offsets, found.drift)
             synced = found
             lines.append(f"{found.summary()}; {lost} of the detections fall outside {found.reference}'s frames or "
                          f"come from a camera with no offset, and are left out")

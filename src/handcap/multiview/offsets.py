@@ -1,0 +1,224 @@
+"""Cameras' time offsets as data: given by name, joined from pairs of cameras, and applied to detections.
+
+Offsets count as :class:`handcap.multiview.sync.Sync` counts them: camera c's frame f shows the moment of the
+reference camera's frame ``f + offset[c]`` (``+ drift[c] * f`` for a clock that runs at another rate).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.core.errors import HandcapError
+from handcap.multiview.detections import Detections
+
+#: Pairs whose offset disagrees with the joined offsets by more than this many frames are left out.
+AGREE_FRAMES = 0.35
+#: Fractional offsets closer than this to a whole frame take that frame's pixels as they are.
+WHOLE = 0.02
+
+
+def parse_offsets(items) -> dict:
+    """``{camera: frames}`` from ``CAM=FRAMES`` items (a string may hold several, joined by commas).
+
+    Parameters
+    ----------
+    items : str or sequence of str
+        E.g. ``"cam_2=+12.5, cam_3=-4"`` or ``["cam_2=12.5", "cam_3=-4"]``.
+
+    Raises
+    ------
+    HandcapError
+        For an item without ``=``, a camera named twice, or an offset that is not a finite number.
+    """
+    items = [items] if isinstance(items, str) else list(items)
+    offsets = {}
+    for item in (part.strip() for text in items for part in str(text).split(",")):
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise HandcapError(f"an offset is CAMERA=FRAMES (e.g. cam_2=+12.5), got {item!r}")
+        if name in offsets:
+            raise HandcapError(f"camera {name!r} is given two offsets")
+        try:
+            offsets[name] = float(value)
+        except ValueError:
+            raise HandcapError(f"the offset of camera {name!r} must be a number of frames, got {value.strip()!r}") \
+                from None
+        if not np.isfinite(offsets[name]):
+            raise HandcapError(f"the offset of camera {name!r} must be a finite number of frames, got {value!r}")
+    if not offsets:
+        raise HandcapError("no offsets given: CAMERA=FRAMES, e.g. cam_2=+12.5")
+    return offsets
+
+
+def offsets_from_names(detections: Detections, given: dict, reference: str | None = None) -> np.ndarray:
+    """Offsets (C,) in the detections' camera order from ``{camera: frames}``; cameras not named get 0.
+
+    Parameters
+    ----------
+    detections : Detections
+    given : dict of str to float
+        Frames, as :class:`Sync` counts them.
+    reference : str or None
+        A camera to count from: its given offset is taken from every camera's.
+
+    Raises
+    ------
+    HandcapError
+        For a camera the detections lack, or an offset that is not a finite number.
+    """
+    names = list(detections.camera_names)
+    offsets = np.zeros(len(names))
+    for name, value in given.items():
+        if name not in names:
+            raise HandcapError(f"an offset for camera {name!r}, which the detections lack (they have "
+                               f"{', '.join(names)})")
+        try:
+            offsets[names.index(name)] = float(value)
+        except (TypeError, ValueError):
+            raise HandcapError(f"the offset of camera {name!r} must be a number of frames, got {value!r}") from None
+    if not np.isfinite(offsets).all():
+        raise HandcapError("every camera's offset must be a finite number of frames")
+    if reference is not None:
+        offsets -= offsets[camera_index(names, reference)]
+    return offsets
+
+
+def shift_detections(detections: Detections, offsets, drift=None) -> tuple[Detections, int]:
+    """The detections on the reference camera's frames (see :class:`Sync`).
+
+    Parameters
+    ----------
+    detections : Detections
+    offsets : array_like (C,)
+        Frames per camera of ``detections.camera_names``; a camera with NaN is left out.
+    drift : array_like (C,) or None
+        Each camera's clock drift, as :class:`Sync` counts it (None: none).
+
+    Returns
+    -------
+    (Detections, int)
+        The shifted detections, with as many frames as reach the last moment any camera saw; and the rows left
+        out (before the reference's frame 0, or of a camera with no offset). A camera frame that falls between two
+        of the reference's is interpolated with its next frame, where both saw the marker; such a row's score is
+        the lower.
+    """
+    offsets = np.asarray(offsets, dtype=np.float64).reshape(-1)
+    if offsets.shape != (len(detections.camera_names),):
+        raise HandcapError(f"need one offset per camera ({len(detections.camera_names)}), got {offsets.shape}")
+    drift = np.zeros(len(offsets)) if drift is None else np.asarray(drift, dtype=np.float64).reshape(-1)
+    d = detections
+    parts = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
+    for c, offset in enumerate(offsets):
+        rows = np.flatnonzero(d.camera == c)
+        if not len(rows) or np.isnan(offset):
+            continue
+        key = d.marker[rows] * (d.n_frames + 1) + d.frame[rows]
+        order = np.argsort(key, kind="stable")
+        key, rows = key[order], rows[order]
+        moment = d.frame[rows] + offset + drift[c] * d.frame[rows]  # the reference's frame each row shows
+        on = np.abs(moment - np.rint(moment)) < WHOLE  # on a reference frame: the row as it is
+        at = np.minimum(np.searchsorted(key, key + 1), len(key) - 1)
+        pair = np.flatnonzero(key[at] == key + 1)  # the marker in the camera's next frame too
+        first, second = rows[pair], rows[at[pair]]
+        start, end = moment[pair], moment[at[pair]]
+        frame = np.floor(start + WHOLE).astype(np.int64) + 1  # the reference frame between the two
+        between = frame < end - WHOLE
+        first, second, start, end, frame = first[between], second[between], start[between], end[between], \
+            frame[between]
+        weight = ((frame - start) / (end - start))[:, None]
+        columns = (np.concatenate([np.rint(moment[on]).astype(np.int64), frame]), np.full(on.sum() + len(frame), c),
+                   np.concatenate([d.marker[rows[on]], d.marker[first]]),
+                   np.concatenate([d.xy[rows[on]], (1 - weight) * d.xy[first] + weight * d.xy[second]]),
+                   np.concatenate([d.score[rows[on]], np.minimum(d.score[first], d.score[second])]))
+        for name, value in zip(parts, columns):
+            parts[name].append(value)
+    if not parts["frame"]:
+        raise HandcapError("no camera has an offset: nothing to synchronise")
+    frame, camera, marker, xy, score = (np.concatenate(parts[key]) for key in parts)
+    keep = frame >= 0
+    n_frames = int(frame[keep].max()) + 1 if keep.any() else 0
+    order = np.lexsort((marker[keep], camera[keep], frame[keep]))
+    out = Detections(d.camera_names, d.marker_names, frame[keep][order], camera[keep][order],
+                     marker[keep][order], xy[keep][order], score[keep][order], d.rate, max(n_frames, 1),
+                     d.source, d.pitch)
+    return out, len(d.frame) - len(out.frame)
+
+
+def camera_index(names, name: str) -> int:
+    """The index of camera ``name`` among ``names``, the camera offsets count from.
+
+    Parameters
+    ----------
+    names : sequence of str
+    name : str
+
+    Raises
+    ------
+    HandcapError
+        Naming the cameras there are.
+    """
+    names = list(names)
+    if name not in names:
+        raise HandcapError(f"no camera {name!r} to count the offsets from (the detections have {', '.join(names)})")
+    return names.index(name)
+
+
+def join_offsets(found: list, n: int, ref: int) -> tuple[np.ndarray, list, int]:
+    """One offset per camera from pairs' offsets, by least squares with the reference at 0.
+
+    Pairs that disagree with the rest by more than :data:`AGREE_FRAMES` are left out, worst first.
+
+    Parameters
+    ----------
+    found : list of (int, int, float)
+        Pairs of cameras (a, b) and b's offset minus a's, frames.
+    n : int
+        Cameras.
+    ref : int
+        The reference camera.
+
+    Returns
+    -------
+    (ndarray (n,), list, int)
+        The offsets (NaN for a camera no pair joins to the reference), the pairs used, and the pairs left out.
+    """
+    pairs = list(found)
+    dropped = 0
+    while True:
+        offsets = np.full(n, np.nan)
+        reached = _component(pairs, n, ref)
+        use = [p for p in pairs if p[0] in reached and p[1] in reached]
+        cams = sorted(reached - {ref})
+        if not cams or not use:
+            offsets[ref] = 0.0
+            return offsets, use, dropped
+        column = {c: i for i, c in enumerate(cams)}
+        rows = np.zeros((len(use), len(cams)))
+        for i, (a, b, _) in enumerate(use):
+            if b in column:
+                rows[i, column[b]] += 1
+            if a in column:
+                rows[i, column[a]] -= 1
+        value = np.array([p[2] for p in use])
+        solution = np.linalg.lstsq(rows, value, rcond=None)[0]
+        residual = np.abs(rows @ solution - value)
+        worst = int(np.argmax(residual))
+        if residual[worst] > AGREE_FRAMES and len(use) > 1:
+            pairs.remove(use[worst])
+            dropped += 1
+            continue
+        offsets[ref] = 0.0
+        offsets[cams] = solution
+        return offsets, use, dropped
+
+
+def _component(pairs: list, n: int, start: int) -> set:
+    reached, grow = {start}, True
+    while grow:
+        grow = False
+        for a, b, _ in pairs:
+            if (a in reached) != (b in reached):
+                reached |= {a, b}
+                grow = True
+    return reached
