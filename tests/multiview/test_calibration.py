@@ -390,15 +390,16 @@ def test_cli_rig_on_rendered_images(rendered, tmp_path, capsys):
     np.testing.assert_allclose([c.matrix[0, 0] for c in rig], 800.0, rtol=0.01)
 
 
-@pytest.mark.parametrize("sync", [[], ["--sync", "auto"]])
-def test_cli_rig_on_caliscope_videos_with_its_intrinsics(shared_data, caliscope_reference, tmp_path, capsys, sync):
+def test_cli_rig_on_caliscope_videos_with_its_intrinsics(shared_data, caliscope_reference, tmp_path, capsys):
+    """With --sync auto (the path without it runs on rendered images above): its offsets are a fraction of a frame,
+    and the rig lands where caliscope put it."""
     out = tmp_path / "rig.toml"
     videos = [str(shared_data / CALISCOPE / f"cam_{i}.mp4") for i in range(4)]
     assert main(["calibrate", "rig", *videos, "--board", CALISCOPE_BOARD, "--every", "2", "--origin", "camera",
-                 "--intrinsics", str(shared_data / CALISCOPE / "camera_array.toml"), *sync, "--out", str(out)]) == 0
+                 "--intrinsics", str(shared_data / CALISCOPE / "camera_array.toml"), "--sync", "auto",
+                 "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "board seen at 24 of 24 instants" in printed
-    assert ("synchronised to cam_0 from 6 pairs" in printed) == bool(sync)
+    assert "board seen at 24 of 24 instants" in printed and "synchronised to cam_0 from 6 pairs" in printed
     rig = read_cameras_toml(out)
     assert rig.names == ("cam_0", "cam_1", "cam_2", "cam_3")
     theirs = _caliscope_centres(caliscope_reference)
