@@ -25,8 +25,8 @@ from handcap.core.cameras import Camera
 from handcap.core.errors import HandcapError
 from handcap.multiview.board_recordings import BoardDetections
 from handcap.multiview.intrinsics import board_poses
-from handcap.multiview.offsets import join_offsets
-from handcap.multiview.sync import CLEAR, Sync
+from handcap.multiview.offsets import clear_least, join_offsets, least_on_grid
+from handcap.multiview.sync import Sync
 from handcap.objects.rigid import kabsch
 
 #: Frames of the board a pair of cameras must both see at an offset to be judged there.
@@ -172,26 +172,14 @@ def _residual(track_a, track_b, shift: float) -> float:
 def _pair(track_a, track_b, max_offset: int):
     """b's offset minus a's (frames), 'edge', or None where no offset is clearly best."""
     shifts = np.arange(-max_offset, max_offset + 1)
-    cost = np.array([_residual(track_a, track_b, float(s)) for s in shifts])
-    cost[np.isnan(cost)] = np.inf
-    if not np.isfinite(cost).any():
-        return None
-    best = int(np.argmin(cost))
-    away = np.abs(shifts - shifts[best]) >= 2
-    if not np.isfinite(cost[away]).any() or cost[best] > CLEAR * cost[away].min():  # no clear least
+    best = clear_least(shifts, np.array([_residual(track_a, track_b, float(s)) for s in shifts]))
+    if best is None:
         return None
     if best in (0, len(shifts) - 1):
         return "edge"
     grid = shifts[best] + np.linspace(-1, 1, 41)
-    fine = np.array([_residual(track_a, track_b, float(s)) for s in grid])
-    fine[np.isnan(fine)] = np.inf
-    k = int(np.argmin(fine))
-    shift = grid[k]
-    if 0 < k < len(grid) - 1 and np.isfinite(fine[k - 1:k + 2]).all():
-        left, mid, right = fine[k - 1:k + 2]
-        if left - 2 * mid + right > 0:
-            shift += 0.5 * (left - right) / (left - 2 * mid + right) * (grid[1] - grid[0])
-    return -float(shift)  # a's frame f and b's frame f + shift show one moment
+    shift = least_on_grid(grid, np.array([_residual(track_a, track_b, float(s)) for s in grid]))
+    return -shift  # a's frame f and b's frame f + shift show one moment
 
 
 def _median(values) -> float:

@@ -12,6 +12,7 @@ import numpy as np
 
 from handcap.core.cameras import CameraRig
 from handcap.multiview.detections import Detections
+from handcap.multiview.offsets import least_on_grid
 
 #: Matched views a pair of cameras needs at an offset to be judged there.
 MIN_MATCHES = 30
@@ -248,10 +249,4 @@ class EpipolarViews:
         grid = shift + np.linspace(-1, 1, 41)
         cost = np.array([np.median(self.distance(a, b, self.points[a][rows], self.at_offset(a, b, rows, s), e))
                          for s in grid])
-        k = int(np.argmin(cost))
-        if 0 < k < len(grid) - 1:  # a parabola through the least and its neighbours
-            left, mid, right = cost[k - 1:k + 2]
-            curve = left - 2 * mid + right
-            if curve > 0:
-                return float(grid[k] + 0.5 * (left - right) / curve * (grid[1] - grid[0]))
-        return float(grid[k])
+        return least_on_grid(grid, cost)

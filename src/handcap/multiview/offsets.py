@@ -11,6 +11,9 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.multiview.detections import Detections
 
+#: A pair's best offset must be this much clearer than its best offset two or more frames away: its cost at most
+#: this share of the other's.
+CLEAR = 0.6
 #: Pairs whose offset disagrees with the joined offsets by more than this many frames are left out.
 AGREE_FRAMES = 0.35
 #: Fractional offsets closer than this to a whole frame take that frame's pixels as they are.
@@ -222,3 +225,44 @@ def _component(pairs: list, n: int, start: int) -> set:
                 reached |= {a, b}
                 grow = True
     return reached
+
+
+def clear_least(shifts: np.ndarray, cost: np.ndarray) -> int | None:
+    """The index of the least cost where it is clearly least: at most :data:`CLEAR` of the least cost two or more
+    frames away, which must be known too; else None.
+
+    Parameters
+    ----------
+    shifts : ndarray (S,)
+        Frames, ascending.
+    cost : ndarray (S,)
+        How far the views disagree at each shift (NaN or inf where unknown).
+    """
+    cost = np.where(np.isnan(cost), np.inf, cost)
+    if not np.isfinite(cost).any():
+        return None
+    best = int(np.argmin(cost))
+    away = np.abs(shifts - shifts[best]) >= 2
+    if not np.isfinite(cost[away]).any() or cost[best] > CLEAR * cost[away].min():
+        return None
+    return best
+
+
+def least_on_grid(grid: np.ndarray, cost: np.ndarray) -> float:
+    """Where ``cost`` is least on an evenly spaced ``grid``, refined by a parabola through the least and its two
+    neighbours where both are known and it curves upwards.
+
+    Parameters
+    ----------
+    grid : ndarray (G,)
+        Evenly spaced, ascending.
+    cost : ndarray (G,)
+        NaN or inf where unknown; at least one known.
+    """
+    cost = np.where(np.isnan(cost), np.inf, cost)
+    k = int(np.argmin(cost))
+    if 0 < k < len(grid) - 1 and np.isfinite(cost[k - 1:k + 2]).all():
+        left, mid, right = cost[k - 1:k + 2]
+        if left - 2 * mid + right > 0:
+            return float(grid[k] + 0.5 * (left - right) / (left - 2 * mid + right) * (grid[1] - grid[0]))
+    return float(grid[k])

@@ -31,8 +31,8 @@ from handcap.core.cameras import CameraRig
 from handcap.core.errors import HandcapError
 from handcap.multiview.detections import Detections
 from handcap.multiview.epipolar import MIN_MATCHES, EpipolarViews
-from handcap.multiview.offsets import (AGREE_FRAMES, camera_index, join_offsets, offsets_from_names, parse_offsets,
-                                       shift_detections)
+from handcap.multiview.offsets import (AGREE_FRAMES, CLEAR, camera_index, clear_least, join_offsets, least_on_grid,
+                                       offsets_from_names, parse_offsets, shift_detections)
 
 #: Default search range of :func:`estimate_sync`, seconds either way.
 MAX_OFFSET_S = 3.0
@@ -45,9 +45,6 @@ CHECK_PX = 2.0
 NOISE_PX = 3.0
 #: Views of the first camera of a pair that :func:`check_sync` samples.
 CHECK_SAMPLES = 500
-#: A pair's best offset must be this much clearer than its best offset two or more frames away: its median
-#: epipolar distance at most this share of the other's.
-CLEAR = 0.6
 #: Pieces of the take in which each camera's offset is found again, to see its clock drift.
 WINDOWS = 6
 #: Least frames of a piece (shorter takes are taken as drifting not at all).
@@ -238,12 +235,8 @@ def _pair_offset(views: EpipolarViews, a: int, b: int, span: int, rng) -> tuple 
     if len(rows) > SAMPLES:
         rows = np.sort(rng.choice(rows, SAMPLES, replace=False))
     shifts = np.arange(-span, span + 1)
-    cost = views.mean_by_shift(a, b, rows, shifts, e)
-    if not np.isfinite(cost).any():
-        return None
-    best = int(np.argmin(cost))
-    away = np.abs(shifts - shifts[best]) >= 2
-    if not np.isfinite(cost[away]).any() or cost[best] > CLEAR * cost[away].min():  # no clear least
+    best = clear_least(shifts, views.mean_by_shift(a, b, rows, shifts, e))
+    if best is None:
         return None
     if best in (0, len(shifts) - 1) and span > 1:
         return a, b, np.nan, "edge"
@@ -324,14 +317,7 @@ def _window_shift(views: EpipolarViews, a: int, b: int, shift: float, lo: float,
     if not np.isfinite(cost[best]) or best in (0, len(coarse) - 1) or cost[best] > CLEAR * max(cost[0], cost[-1]):
         return None
     grid = coarse[best] + np.linspace(-0.5, 0.5, 17)
-    cost = costs(grid)
-    best = int(np.argmin(cost))
-    middle = float(views.frames[a][rows].mean())
-    if 0 < best < len(grid) - 1 and np.isfinite(cost[best - 1:best + 2]).all():
-        left, mid, right = cost[best - 1:best + 2]
-        if left - 2 * mid + right > 0:
-            return grid[best] + 0.5 * (left - right) / (left - 2 * mid + right) * (grid[1] - grid[0]), middle
-    return float(grid[best]), middle
+    return least_on_grid(grid, costs(grid)), float(views.frames[a][rows].mean())
 
 
 __all__ = ["CHECK_PX", "MAX_OFFSET_S", "NOISE_PX", "Sync", "check_sync", "estimate_sync", "join_offsets",
