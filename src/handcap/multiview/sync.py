@@ -14,11 +14,11 @@ offset no pair fixes (a still scene, no shared marker) is named in a warning.
 
 Offsets are in frames of the detections' rate: camera c's frame f shows the
 moment of the reference camera's frame ``f + offset[c]`` (a camera that started
-recording 12 frames after the reference has +12). :func:`shift_detections`
-puts every camera on the reference's frames, interpolating a camera's pixels
-between its frames for a fractional offset. The offset is constant over the
-take: cameras whose clocks run at different rates drift, which the check of
-the take's first and last thirds reports.
+recording 12 frames after the reference has +12). Clocks that run at different
+rates drift apart: the offsets are found again in pieces of the take, and a
+camera whose offset moves along a line gets it, ``f + offset[c] + drift[c] * f``.
+:func:`shift_detections` puts every camera on the reference's frames,
+interpolating a camera's pixels between its frames.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from handcap.multiview.offsets import (AGREE_FRAMES, CLEAR, camera_index, clear_
 
 #: Default search range of :func:`estimate_sync`, seconds either way.
 MAX_OFFSET_S = 3.0
-#: Views of the first camera of a pair that the whole-frame search samples (the fine search takes all).
+#: Views of the first camera of a pair that the whole-frame search samples (the fine search takes more).
 SAMPLES = 2000
 #: :func:`check_sync` looks for better offsets only where the views disagree by more (median epipolar distance,
 #: pixels): synchronised views of markers agree to a pixel.
