@@ -75,7 +75,7 @@ def test_board_motion_gives_each_cameras_offset_and_the_rig_calibrates(filmed):
     assert sync.warnings == () and np.abs(sync.offsets - expected).max() < 0.1, sync.summary()
     assert sync.after < 0.5 * sync.before  # millimetres here
     synced = calibrate_rig(shift_boards(views, sync.offsets), names=truth.names, cameras=cameras)
-    assert _centres_mm(synced.rig, truth) < 6 and synced.rms.max() < 0.6
+    assert _centres_mm(synced.rig, truth) < 6 and synced.rms.max() < 0.6 and synced.converged
     # as they came, frame f of each camera another moment: the pairs' board fits are far off
     assert sync.before > 10 * sync.after
 
@@ -93,3 +93,11 @@ def test_shifted_boards_interpolate_and_keep_the_reference_frames(filmed):
         np.testing.assert_allclose(shifted[1].pixels[10], (views[1].pixels[9] + views[1].pixels[10]) / 2)
     with pytest.raises(HandcapError, match="one offset per camera"):
         shift_boards(views, [0.0])
+
+
+def test_a_bundle_adjustment_cut_short_says_so(filmed, monkeypatch):
+    truth, views = filmed
+    cameras = [calibrate_intrinsics(v, name=c.name).camera for v, c in zip(views, truth)]
+    monkeypatch.setattr("handcap.multiview.rig.MAX_EVALUATIONS", 2)
+    boards = shift_boards(views, START + PHASE / UP)
+    assert not calibrate_rig(boards, names=truth.names, cameras=cameras).converged

@@ -51,6 +51,8 @@ class RigCalibration:
         The world frame, in words.
     frames : ndarray of int, shape (T,)
         The frame numbers (of the first camera's source).
+    converged : bool
+        Whether the bundle adjustment converged within :data:`MAX_EVALUATIONS` evaluations per pass.
     """
 
     rig: CameraRig
@@ -64,6 +66,7 @@ class RigCalibration:
     tree: tuple[tuple[int, int], ...]
     origin: str
     frames: np.ndarray
+    converged: bool = True
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -304,7 +307,8 @@ def calibrate_rig(detections: Sequence[BoardDetections], *, names: Sequence[str]
     board2world = ref2world @ adjusted.board2world
     views = np.isfinite(adjusted.errors).any(axis=2).sum(axis=1)
     return RigCalibration(final, board2world, adjusted.errors, adjusted.rms, view_rms(start_errors), intrinsic_rms,
-                          views, shared, tuple(edges), description, detections[0].frames.copy())
+                          views, shared, tuple(edges), description, detections[0].frames.copy(),
+                          bool(adjusted.success))
 
 
 def _ranges(frames) -> str:

@@ -13,6 +13,7 @@ from handcap.io.camera_formats import read_rig
 from handcap.multiview.boards import detect_in_files, parse_board
 from handcap.multiview.board_sync import board_offsets, shift_boards
 from handcap.multiview.calibration import calibrate_intrinsics, calibrate_rig
+from handcap.multiview.rig import MAX_EVALUATIONS
 from handcap.multiview.sync import Sync, parse_offsets
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
@@ -115,6 +116,9 @@ def rig(recordings, out, *, board: str, names=None, every: int = 1, intrinsics=N
     result = calibrate_rig(detections, names=names, cameras=cameras, refine_intrinsics=refine_intrinsics,
                            fix_k3=fix_k3, origin=origin, origin_frame=origin_frame, loss=loss, f_scale=f_scale)
     checks = q.camera_warnings(result.rms, names=result.names)
+    if not result.converged:
+        checks.append(f"the bundle adjustment stopped after {MAX_EVALUATIONS} evaluations before it converged; the "
+                      f"rig may be less exact than it could be")
     if checks and sync is None:
         checks.append("cameras started one by one pair frames of different moments of a moving board: "
                       "calibrate rig --sync auto finds each camera's offset")
