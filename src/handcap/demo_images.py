@@ -7,7 +7,8 @@
    (:func:`~handcap.synth.filming.region_rig`): the same lens and pixels, a
    fraction of the rendering and detection time.
 2. Detect the coded patches in every image with the shipped networks and the
-   takes' template (:mod:`handcap.detect`).
+   takes' template (:mod:`handcap.detect`); name the squares a camera could not
+   read from the other cameras (:mod:`handcap.detect.views`).
 3. Triangulate the named corners (RANSAC over views), clean them, calibrate the
    marker attachment on the calibration take and solve the grasp take.
 4. Measure each stage against the truth: corners named per image and their
@@ -36,6 +37,7 @@ from handcap.detect.capture import detect_capture
 from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
+from handcap.detect.views import name_from_views
 from handcap.io import write_hand_motion, write_markers
 from handcap.layouts import load_layout
 from handcap.multiview import clean_markers, read_detections, triangulate_detections
@@ -93,11 +95,15 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         # synth renders grey levels linear in the light (handcap.synth.images): no camera's response to choose.
         run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=progress,
                              response="linear")
+        # The squares a camera could not read, named where the other cameras place them (handcap.detect.views).
+        naming = name_from_views(run.arrays, run.unread, capture.rig, pattern, progress=progress)
+        warnings += list(naming.warnings)
         seconds = time.perf_counter() - start
-        save_npz(folder / "detections.npz", run.arrays | {"pitch": np.array(pattern.pitch)})
+        save_npz(folder / "detections.npz", naming.arrays | {"pitch": np.array(pattern.pitch)})
         # To look at: the detections drawn over one camera's frames (handcap overlay draws any camera's).
-        write_pictures(run.arrays, sources[:1], folder / "overlay", progress=False)
-        summary.update(_detection_figures(key, run, folder / "image_truth.npz", seconds))
+        write_pictures(naming.arrays, sources[:1], folder / "overlay", progress=False)
+        summary.update(_detection_figures(key, run.images, naming.arrays, folder / "image_truth.npz", seconds))
+        summary[f"{key}_squares_named_from_views"] = naming.squares
         triangulated = triangulate_detections(read_detections(folder / "detections.npz"), capture.rig,
                                               min_views=config.min_views, progress=progress)
         found = q.triangulation_warnings(triangulated.error_px, triangulated.views, threshold_px=5.0,
@@ -153,22 +159,21 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
     return summary
 
 
-def _detection_figures(key: str, run, truth_path, seconds: float) -> dict:
+def _detection_figures(key: str, images: int, a: dict, truth_path, seconds: float) -> dict:
     """Named corners of the detector against the image truth: share found, share misnamed, pixel error."""
     truth = np.load(truth_path)
     names = list(truth["marker_names"])
     visible = len(truth["frame"])  # one row per visible corner in each image
     every = truth["all_xy"]  # (T, C, N, 2), hidden corners included
     index = {n: k for k, n in enumerate(names)}
-    a = run.arrays
     detected = [str(a["marker_names"][m]) for m in a["marker"]]
     true_xy = np.array([every[f, c, index[n]] if n in index else (np.nan, np.nan)
                         for f, c, n in zip(a["frame"], a["camera"], detected)]).reshape(-1, 2)
     error = np.linalg.norm(a["xy"] - true_xy, axis=1)
     right = error <= 2.0
     return {
-        f"{key}_images": run.images,
-        f"{key}_detect_seconds_per_image": round(seconds / max(run.images, 1), 3),
+        f"{key}_images": images,
+        f"{key}_detect_seconds_per_image": round(seconds / max(images, 1), 3),
         f"{key}_visible_corners": visible,
         f"{key}_named_corners": int(len(error)),
         f"{key}_named_right_of_visible_fraction": round(float(right.sum() / max(visible, 1)), 4),

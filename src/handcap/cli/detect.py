@@ -13,7 +13,8 @@ def _cmd_detect(a):
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
                               track=not a.whole_frames, checker_weights=a.checker_weights,
                               checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise,
-                              response=a.response, frames=frames_arg(a.frames), every=a.every)
+                              response=a.response, frames=frames_arg(a.frames), every=a.every,
+                              views=not a.no_views)
 
 
 def add_detect(verbs) -> None:
@@ -56,6 +57,10 @@ def add_detect(verbs) -> None:
                    help="without --pattern: fine-tune a copy of the reader on the take's sure readings for N steps "
                         "(200: about 80 s for 20 photographs), which then vouches for more tags of the take's font "
                         "and glyph layout, a little more often wrong (README); default 0, the shipped reader only")
+    p.add_argument("--no-views", action="store_true",
+                   help="with --rig and --pattern, leave a white square a camera could not read unnamed (default: it "
+                        "takes the tag of the template's square that the other cameras' named corners place on it "
+                        "to 1.5 px; the file marks such blocks in block_from_views)")
     p.add_argument("--no-denoise", action="store_true",
                    help="search noisy images as they are (default: an image with more sensor noise than the networks "
                         "learned, about 5 grey levels, is denoised first; a warning says how many)")

@@ -33,7 +33,7 @@ of a hand the region costs about a third of the whole frame
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
@@ -42,6 +42,7 @@ from handcap.core.errors import HandcapError
 from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
 from handcap.detect.response import ResponseChoice
+from handcap.detect.views import UnreadSquares
 
 #: A camera's frame is searched whole at least once in this many frames.
 FULL_EVERY = 10
@@ -92,6 +93,8 @@ class CaptureDetections:
         Sure readings whose tag the reader was sure of at another white square of the same image too.
     twice_images : int
         Images that hold such readings.
+    unread : list of UnreadSquares
+        Each image's white squares without a tag, for :func:`~handcap.detect.views.name_from_views`.
     """
 
     arrays: dict
@@ -109,6 +112,7 @@ class CaptureDetections:
     looked: tuple = ()
     twice: int = 0
     twice_images: int = 0
+    unread: list = field(default_factory=list)
 
 
 class Tracker:
@@ -300,7 +304,8 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
             looked.append(tuple(int(n) for n in choice.tags))
     return CaptureDetections(out.arrays(sources, rate), out.images, out.empty, out.corrected, regions, out.sure,
                              out.disowned, out.read, tuple(out.frames.get(c, 0) for c in range(len(sources))),
-                             out.noisy, out.noise, tuple(responses), tuple(looked), out.twice, out.twice_images)
+                             out.noisy, out.noise, tuple(responses), tuple(looked), out.twice, out.twice_images,
+                             out.unread)
 
 
 class _Rows:
@@ -313,7 +318,7 @@ class _Rows:
         self.blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
         self.images = self.empty = self.corrected = self.sure = self.disowned = self.read = self.noisy = 0
         self.twice = self.twice_images = 0
-        self.noise, self.frames = 0.0, {}
+        self.noise, self.frames, self.unread = 0.0, {}, []
 
     def add_all(self, pending, camera: int, response: str) -> None:
         """Frames searched both ways, ``pending`` [(frame, (as recorded, decoded))], read as ``response``."""
@@ -340,6 +345,9 @@ class _Rows:
         self.blocks["block_camera"] += [camera] * len(found.block_text)
         self.blocks["block_xy"] += list(found.block_xy)
         self.blocks["block_score"] += list(found.block_score)
+        if len(found.unread):
+            self.unread.append(UnreadSquares(camera, t, found.corners[found.unread].astype(np.float32),
+                                             found.corner_score[found.unread].astype(np.float32)))
 
     def arrays(self, sources, rate: float) -> dict:
         """The detections file's arrays (the module docstring), in the order the frames were added."""

@@ -25,7 +25,7 @@ scenes give the same figures).
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -127,6 +127,9 @@ class ImageDetections:
     twice : int
         Sure readings (as ``sure``) whose tag the reader was sure of at another white square of the image too: a
         tag printed twice, or two sessions' patches that share tags. With a template the vote drops them all.
+    unread : ndarray (U, 4) int
+        White squares given no tag (indices into ``corners``, in the order the corners go round): the other
+        cameras of a rig may name them (:mod:`~handcap.detect.views`).
     """
 
     corners: np.ndarray
@@ -141,6 +144,7 @@ class ImageDetections:
     read: int = 0
     noise: float = 0.0
     twice: int = 0
+    unread: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
 
 
 class Detector:
@@ -268,7 +272,7 @@ class Detector:
             if self.adapted is not None and len(quads):
                 keep |= self._vouched(image, xy[quads], text, rotation, bscore)
         return ImageDetections(xy, cscore, names, text[keep], reading[keep], bscore[keep], corrected, int(sure.sum()),
-                               disowned, read, twice=twice)
+                               disowned, read, twice=twice, unread=np.asarray(quads, dtype=np.int64)[~keep])
 
     def _vouched(self, image: np.ndarray, quads: np.ndarray, text, rotation, score) -> np.ndarray:
         """The readings (B,) the reader adapted to the take vouches for: it reads the same tag and turn at

@@ -56,7 +56,8 @@ from handcap.multiview.sync import parse_offsets
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
-    "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str, "track": bool},
+    "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str, "track": bool,
+               "views": bool},
     "triangulate": {"min_views": int, "threshold_px": float, "units": str, "sync": str, "sync_reference": str,
                     "max_offset_s": float},
     "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,

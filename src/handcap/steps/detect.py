@@ -12,6 +12,7 @@ from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.response import NEAR, ResponseChoice, linear_light
+from handcap.detect.views import name_from_views
 from handcap.detect.sources import FrameSelection, frame_notes, frame_sources, select_frames, short_videos
 from handcap.io import read_rig
 from handcap.steps.step import Step
@@ -39,7 +40,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
            checker: bool = True, adapt_steps: int = 0, denoise: bool = True, response: str = "auto",
-           frames: slice | None = None, every: int = 1) -> Step:
+           frames: slice | None = None, every: int = 1, views: bool = True) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -90,6 +91,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     every : int
         Read every ``every``-th of them. The frames read are a take of their own: its frame ``k`` is input frame
         ``start + k * every``, at ``rate / every``; the file records ``first_frame`` and ``frame_step``.
+    views : bool
+        With a rig and a template: name the white squares a camera could not read where the other cameras place a
+        square of the template (:mod:`handcap.detect.views`); the file marks them in ``block_from_views``.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -209,15 +213,20 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         "patches' template (--pattern; another generator's, such as DexterCap's JSON, through "
                         "handcap pattern --import) the vote over them reads more"
                         + ("" if adapt_steps else "; so may a reader adapted to this take (--adapt-steps 200)"))
+    found, by_views = run.arrays, ""
+    if views and template is not None and rig is not None and len(found["frame"]):
+        naming = name_from_views(found, run.unread, cameras, template, progress=progress)
+        found, warnings = naming.arrays, warnings + list(naming.warnings)
+        by_views = f"; {naming.summary()}"
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
                                                   "frame_step": np.array(pick.every)}
-    arrays = {**run.arrays, **pitch, **picked, **warnings_entry(warnings)}
+    arrays = {**found, **pitch, **picked, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else "")
             + (f"; {run.regions} images searched around the previous frame's patches only" if run.regions else "")
-            + adapted)
+            + adapted + by_views)
     lines = (line,) if not picked else (line, f"input frames {pick.start}:{'' if pick.stop is None else pick.stop}"
                                               + (f" every {pick.every}" if pick.every > 1 else "") + f": frame k of "
                                               f"{out.name} is input frame {pick.start} + {pick.every} k, at "

@@ -1,0 +1,314 @@
+"""Naming a camera's unread white squares from the other cameras of a calibrated rig.
+
+A white square whose four corners one camera found but whose tag it could not read (too small, blurred, a glyph
+cut by a finger's edge) is often read by other cameras at the same moment. The corners those cameras name are
+triangulated (:func:`~handcap.multiview.reconstruct.triangulate_detections`, at least two views that agree to
+:data:`AGREE_PX`), every square of the template whose four corners are known is projected into the camera, and an
+unread square takes a square's tag where
+
+- each of its four corners lies within :data:`GATE_PX` of that square's projected corners (in one of the four
+  turns, going round the same way as the camera's read squares do: a square facing away is never taken);
+- no other square's projection comes within :data:`MARGIN` times the gate of it, and no other unread square
+  takes the same tag;
+- the camera did not read that tag elsewhere in the frame, and none of the four corners is named otherwise.
+
+Its corners then get the template's names, and the detections file one block row more, marked in
+``block_from_views``. The squares named so give the corners more views, so the naming runs again
+(:data:`PASSES`). Cameras that were not triggered together disagree by more than the gate: nothing is taken
+where the views do not agree, and a warning says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from handcap.multiview.detections import Detections
+from handcap.multiview.reconstruct import triangulate_detections
+
+#: Farthest a found corner of an unread square may lie from where the other cameras put it, pixels.
+GATE_PX = 1.5
+#: No other square's projection may come within this many times :data:`GATE_PX` of the unread square.
+MARGIN = 3.0
+#: Largest reprojection error of a corner triangulated from the named views, pixels, for it to be projected.
+AGREE_PX = 1.0
+#: Rounds of triangulating and naming.
+PASSES = 2
+#: The cameras' views are said not to agree where the named corners' median reprojection error is over this, pixels
+#: (or where fewer than :data:`AGREEING` of the corners two cameras or more named triangulate within twice it).
+DISAGREE_PX = 2.0
+AGREEING = 0.5
+
+
+@dataclass(frozen=True)
+class UnreadSquares:
+    """One image's white squares without a tag.
+
+    Attributes
+    ----------
+    camera, frame : int
+        Index into the detections' cameras, and frame.
+    xy : ndarray (U, 4, 2)
+        Their corners in the order they go round the square, pixels.
+    score : ndarray (U, 4)
+        The corners' probabilities.
+    """
+
+    camera: int
+    frame: int
+    xy: np.ndarray
+    score: np.ndarray
+
+
+@dataclass(frozen=True)
+class ViewNaming:
+    """What the other cameras named.
+
+    Attributes
+    ----------
+    arrays : dict of str to ndarray
+        The detections file's arrays with the named squares' corner rows and block rows added
+        (``block_from_views`` (B,) bool marks the blocks named so).
+    squares : int
+        Unread squares named.
+    corners : int
+        Corner rows added.
+    unread : int
+        Unread squares there were.
+    refused : int
+        Squares that matched a projection but whose tag the camera read elsewhere or whose corners it names
+        otherwise.
+    warnings : tuple of str
+    """
+
+    arrays: dict
+    squares: int
+    corners: int
+    unread: int
+    refused: int = 0
+    warnings: tuple = ()
+
+    def summary(self) -> str:
+        """One line: the squares named and the corners added."""
+        return (f"named from the other cameras: {self.squares} of {self.unread} unread white squares, "
+                f"{self.corners} corners")
+
+
+def square_corners(pattern, marker_names) -> tuple[np.ndarray, np.ndarray]:
+    """Every tag of the template and the markers of its square's corners.
+
+    Parameters
+    ----------
+    pattern : Pattern
+    marker_names : sequence of str
+        The detections' marker names.
+
+    Returns
+    -------
+    tags : ndarray (S,) str
+        The tags whose four corners are all among ``marker_names``.
+    corners : ndarray (S, 4) int
+        Indices into ``marker_names`` in reading order (top-left, top-right, bottom-right, bottom-left).
+    """
+    index = {str(n): k for k, n in enumerate(marker_names)}
+    tags, corners = [], []
+    for patch in pattern.patches:
+        for tag, r, c in patch.blocks():
+            ids = [index.get(patch.corner_name(vr, vc), -1) for vr, vc in patch.block_vertices(r, c)]
+            if min(ids) >= 0:
+                tags.append(tag)
+                corners.append(ids)
+    return np.array(tags, dtype="<U2"), np.array(corners, dtype=np.int64).reshape(-1, 4)
+
+
+def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
+                    progress: bool | None = None) -> ViewNaming:
+    """Name unread white squares where the rig's other cameras place a square of the template (module docstring).
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        A detections file's arrays (:mod:`~handcap.detect.capture`), cameras named as in ``rig``.
+    unread : sequence of UnreadSquares
+    rig : CameraRig
+        Calibrated cameras, metres.
+    pattern : Pattern
+        The template that named the corners.
+    passes : int
+        Rounds of triangulating and naming.
+    progress : bool, optional
+        Progress bars of the triangulation.
+
+    Returns
+    -------
+    ViewNaming
+    """
+    arrays = dict(arrays)
+    arrays.setdefault("block_from_views", np.zeros(len(arrays["block_text"]), bool))
+    tags, corners = square_corners(pattern, arrays["marker_names"])
+    total = sum(len(u.xy) for u in unread)
+    left = [u for u in unread if len(u.xy)]
+    named = added = refused = 0
+    warnings = []
+    for _ in range(passes):
+        if not left or not len(tags) or len(arrays["frame"]) == 0:
+            break
+        known, disagree = _known(arrays, rig, progress)
+        if disagree is not None:
+            warnings.append(disagree)
+            break
+        rows, blocks, left, stats = _match_all(arrays, left, known, rig, tags, corners)
+        if not blocks["block_text"]:
+            break
+        named, added, refused = named + stats[0], added + len(rows["frame"]), refused + stats[1]
+        arrays = _appended(arrays, rows, blocks)
+    return ViewNaming(arrays, named, added, total, refused, tuple(warnings))
+
+
+def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
+    """The named corners triangulated where their views agree (T, M, 3), metres (NaN elsewhere), and a warning
+    where the views of most corners disagree (else None)."""
+    detections = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
+                            arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    tri = triangulate_detections(detections, rig, min_views=2, threshold_px=2 * DISAGREE_PX, progress=progress)
+    seen = np.zeros((detections.n_frames, len(detections.marker_names), len(detections.camera_names)), bool)
+    seen[detections.frame, detections.marker, detections.camera] = True
+    twice = int((seen.sum(axis=2) >= 2).sum())
+    error = tri.error_px[np.isfinite(tri.error_px)]
+    median = float(np.median(error)) if len(error) else np.inf
+    if twice and (len(error) < AGREEING * twice or median > DISAGREE_PX):
+        return tri.positions, (f"the cameras' views of the named corners disagree ({len(error)} of the {twice} corners "
+                               f"two cameras or more named agree to {2 * DISAGREE_PX:g} px, median {median:.1f} px): "
+                               "no unread square was named from the other cameras (cameras not synchronised, or the "
+                               "rig not the one that filmed the take?)")
+    agree = np.isfinite(tri.error_px) & (tri.error_px <= AGREE_PX)
+    return np.where(agree[..., None], tri.positions, np.nan), None
+
+
+def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners):
+    """Match every image's unread squares; returns the rows and blocks to add, the squares still unread, and
+    (squares named, squares refused)."""
+    rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
+    blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": []}
+    still, named, refused = [], 0, 0
+    by_image = _image_index(arrays)
+    signs = _turning(arrays)
+    for u in unread:
+        if u.frame >= len(known):
+            still.append(u)
+            continue
+        camera = rig[str(arrays["camera_names"][u.camera])]
+        mine, read = by_image.get((u.camera, u.frame), (np.zeros(0, int), set()))
+        names = dict(zip(arrays["marker"][mine].tolist(), arrays["xy"][mine]))
+        take = ~np.isin(tags, list(read))
+        points = known[u.frame][corners[take]]
+        seen = np.isfinite(points).all(axis=(1, 2))
+        pixels, depth = camera.project(points[seen])
+        facing = _area(pixels) * signs.get(u.camera, 1.0) > 0
+        match = _match(u.xy, pixels[facing], signs.get(u.camera, 1.0))
+        square_ids = np.flatnonzero(take)[seen][facing]
+        done = np.zeros(len(u.xy), bool)
+        for k, (s, order) in match.items():
+            ids = corners[square_ids[s]]
+            xy, score = u.xy[k][order], u.score[k][order]
+            if not _consistent(ids, xy, names, arrays["xy"][mine], arrays["marker"][mine]):
+                refused += 1
+                continue
+            new = [j for j in range(4) if int(ids[j]) not in names]
+            rows["frame"] += [u.frame] * len(new)
+            rows["camera"] += [u.camera] * len(new)
+            rows["marker"] += [int(ids[j]) for j in new]
+            rows["xy"] += [xy[j] for j in new]
+            rows["score"] += [float(score[j]) for j in new]
+            names.update({int(ids[j]): xy[j] for j in new})
+            blocks["block_text"].append(str(tags[square_ids[s]]))
+            blocks["block_frame"].append(u.frame)
+            blocks["block_camera"].append(u.camera)
+            blocks["block_xy"].append(xy)
+            done[k] = True
+            named += 1
+        if not done.all():
+            still.append(UnreadSquares(u.camera, u.frame, u.xy[~done], u.score[~done]))
+    return rows, blocks, still, (named, refused)
+
+
+def _match(quads: np.ndarray, squares: np.ndarray, sign: float) -> dict:
+    """Unread quads (U, 4, 2) that take one projected square (S, 4, 2, reading order): {quad: (square, order)},
+    ``order`` (4,) the quad's corners in the square's reading order."""
+    if not len(quads) or not len(squares):
+        return {}
+    # The quads go round the way the camera's read squares do, so only their four turns need trying.
+    ways = np.where((_area(quads) * sign < 0)[:, None], np.arange(4)[::-1], np.arange(4))  # (U, 4)
+    turned = np.take_along_axis(quads, ways[..., None], axis=1)
+    tree = cKDTree(squares.mean(axis=1))
+    sides = np.linalg.norm(np.roll(quads, -1, axis=1) - quads, axis=2).max(axis=1)
+    chosen = {}
+    for k, near in enumerate(tree.query_ball_point(turned.mean(axis=1), sides + MARGIN * GATE_PX)):
+        if not near:
+            continue
+        rolled = np.stack([np.roll(turned[k], -r, axis=0) for r in range(4)])  # (4 turns, 4, 2)
+        dist = np.linalg.norm(rolled[None] - squares[near][:, None], axis=-1).max(axis=-1)  # (n, 4 turns)
+        best = dist.min(axis=1)
+        first = int(np.argmin(best))
+        if best[first] > GATE_PX or np.any(np.delete(best, first) <= MARGIN * GATE_PX):
+            continue
+        r = int(np.argmin(dist[first]))
+        chosen[k] = (near[first], ways[k][(np.arange(4) + r) % 4])
+    taken = {}
+    for k, (s, _) in chosen.items():
+        taken.setdefault(s, []).append(k)
+    return {k: v for k, v in chosen.items() if len(taken[v[0]]) == 1}
+
+
+def _consistent(ids, xy, names: dict, image_xy, image_marker) -> bool:
+    """Whether the square's corners ``xy`` (4, 2) can take the markers ``ids`` (4,): a marker the image names
+    already lies at that corner, and no other marker the image names does."""
+    for m, p in zip(ids.tolist(), xy):
+        if m in names and np.linalg.norm(names[m] - p) > GATE_PX:
+            return False
+        if len(image_xy):
+            near = np.linalg.norm(image_xy - p, axis=1) <= GATE_PX
+            if np.any(near & (image_marker != m)):
+                return False
+    return True
+
+
+def _area(quads: np.ndarray) -> np.ndarray:
+    """Twice the signed area of each quad (..., 4, 2), positive going round clockwise on the image (y down)."""
+    x, y = quads[..., 0], quads[..., 1]
+    return (x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y).sum(axis=-1)
+
+
+def _turning(arrays: dict) -> dict:
+    """Each camera's way round of the squares it read, in reading order: +1 or -1 (a mirrored image)."""
+    areas = _area(np.asarray(arrays["block_xy"], dtype=np.float64).reshape(-1, 4, 2))
+    cameras = np.asarray(arrays["block_camera"])
+    return {int(c): 1.0 if np.median(areas[cameras == c]) >= 0 else -1.0 for c in np.unique(cameras)}
+
+
+def _image_index(arrays: dict) -> dict:
+    """(camera, frame) -> (the rows of its named corners, the tags it read)."""
+    key = arrays["camera"].astype(np.int64) * (int(arrays["frame"].max(initial=0)) + 1) + arrays["frame"]
+    order = np.argsort(key, kind="stable")
+    out = {}
+    if len(order):
+        starts = np.flatnonzero(np.r_[True, np.diff(key[order]) != 0])
+        for a, b in zip(starts, np.r_[starts[1:], len(order)]):
+            rows = order[a:b]
+            out[(int(arrays["camera"][rows[0]]), int(arrays["frame"][rows[0]]))] = (rows, set())
+    for text, c, f in zip(arrays["block_text"], arrays["block_camera"], arrays["block_frame"]):
+        out.setdefault((int(c), int(f)), (np.zeros(0, int), set()))[1].add(str(text))
+    return out
+
+
+def _appended(arrays: dict, rows: dict, blocks: dict) -> dict:
+    """``arrays`` with the rows and blocks added at the end (the blocks' scores 0: the reader did not read them)."""
+    n = len(blocks["block_text"])
+    new = {**rows, **blocks, "block_score": np.zeros(n), "block_from_views": np.ones(n, bool)}
+    out = dict(arrays)
+    for key, values in new.items():
+        old = np.asarray(arrays[key])
+        out[key] = np.concatenate([old, np.asarray(values, dtype=old.dtype).reshape((-1,) + old.shape[1:])])
+    return out
