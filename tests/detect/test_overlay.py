@@ -45,6 +45,10 @@ def test_corners_are_dots_in_their_owners_colour_and_blocks_show_their_underline
     text = np.all(np.abs(picture.astype(int) - np.array([255, 255, 0])) < 30, axis=2)
     rows = np.flatnonzero(text.any(axis=1))
     assert len(rows) and 60 <= rows.min() and rows.max() < 100
+    # A tag named from the other cameras, not read, is written in magenta instead.
+    named = draw_frame(image, FrameMarks(XY, NAMES, BLOCK, np.array(["7K"]), from_views=np.array([True])))
+    magenta = np.all(np.abs(named.astype(int) - np.array([255, 0, 255])) < 30, axis=2)
+    assert np.array_equal(magenta, text) and magenta.any()
 
 
 def _take(tmp_path):

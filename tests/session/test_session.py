@@ -4,6 +4,7 @@ their times), reruns only what an edited setting touches, and refuses a bad sess
 import json
 import re
 
+import numpy as np
 import pytest
 
 from handcap import HandcapError
@@ -64,6 +65,8 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     assert keypoints["figures"]["joint_error_mm"][0] < 4  # 2 mm of keypoint noise
     images = json.loads((made / "results/images1/metrics.manifest.json").read_text())
     assert images["figures"]["mre_mm"][0] < 1 and images["figures"]["joint_error_mm"][0] < 15
+    with np.load(made / "results/images1/detections.npz") as detections:  # rig and template: views name squares too
+        assert len(detections["block_from_views"]) == len(detections["block_text"])
     calibrate = json.loads((made / "results/calib-images/calibrate.manifest.json").read_text())
     assert calibrate["input_paths"]["calibration"].endswith("calib-images/cleaned.c3d")  # on its own corners
     solve = json.loads((made / "results/images1/solve.manifest.json").read_text())

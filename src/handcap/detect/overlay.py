@@ -5,9 +5,10 @@ hand and each object apart), every patch's name is written at the middle of
 its corners, and every read block is outlined, its underlined side (the bottom, in reading order)
 drawn thicker, and the tag it was read as written on the black square above it
 (in reading order), beside the printed glyphs, so a misreading or a tag read
-upside down shows. Reprojected 3D markers, where given, are crosses beside the
-dots of the same name: a cross far from its dot is a corner the triangulation
-(or the calibration) does not agree with. 2D hand keypoints (``handcap keypoints``) are
+upside down shows; a tag named from the other cameras (not read) is written in
+magenta. Reprojected 3D markers, where given, are crosses beside the dots of
+the same name: a cross far from its dot is a corner the triangulation (or the
+calibration) does not agree with. 2D hand keypoints (``handcap keypoints``) are
 dots joined by their hand's bones, where the caller gives them (``links``).
 
 Coordinates are pixels ``(x, y)`` at column x, row y, pixel centres at integers (as the detections file
@@ -35,6 +36,8 @@ QUALITY = 90
 #: Owner colours, BGR: the right hand orange, the left hand blue, then objects in turn.
 HAND_COLOURS = {"right": (0, 140, 255), "left": (255, 120, 0)}
 OBJECT_COLOURS = ((60, 200, 60), (200, 60, 200), (0, 220, 220), (220, 220, 0), (60, 60, 230), (160, 160, 160))
+#: Colour of a read tag's text, and of a tag named from the other cameras, BGR.
+READ_TEXT, VIEWS_TEXT = (255, 255, 0), (255, 0, 255)
 #: Outline drawn under text, BGR.
 _SHADE = (0, 0, 0)
 _CORNER = re.compile(r"^(?:(?P<owner>[^:]+):)?(?P<patch>.+)_r\d+c\d+$")
@@ -61,6 +64,9 @@ class FrameMarks:
     links : ndarray (L, 2) int, optional
         Pairs of indices into ``xy`` joined by a line in the first one's colour: a hand's bones where the names
         are 2D hand keypoints.
+    from_views : ndarray (B,) bool, optional
+        Blocks named from the other cameras (:mod:`~handcap.detect.views`), not read: their tag is written in
+        :data:`VIEWS_TEXT` instead of :data:`READ_TEXT`.
     """
 
     xy: np.ndarray
@@ -70,6 +76,7 @@ class FrameMarks:
     projected: np.ndarray | None = None
     projected_names: np.ndarray | None = None
     links: np.ndarray | None = None
+    from_views: np.ndarray | None = None
 
 
 def owner_colour(name: str, owners: dict) -> tuple:
@@ -117,14 +124,15 @@ def draw_frame(image: np.ndarray, marks: FrameMarks, title: str = "", owners: di
     canvas = (canvas.astype(np.float32) * 0.75).astype(np.uint8)  # dimmed, so the marks stand out
     side = _block_side(marks, canvas.shape)
     thin = max(1, int(round(side / 24)))
-    for quad, text in zip(np.asarray(marks.blocks, float).reshape(-1, 4, 2), marks.tags):
+    views = np.zeros(len(marks.tags), bool) if marks.from_views is None else np.asarray(marks.from_views, bool)
+    for quad, text, named in zip(np.asarray(marks.blocks, float).reshape(-1, 4, 2), marks.tags, views):
         points = _fixed(quad)
         cv2.polylines(canvas, [points], True, (255, 255, 255), thin, cv2.LINE_AA, shift=4)
         cv2.line(canvas, tuple(points[3]), tuple(points[2]), (255, 255, 255), 2 * thin + 1, cv2.LINE_AA, shift=4)
         width = float(np.linalg.norm(quad[1] - quad[0]))
         # On the black square above the tag (in reading order), so the printed glyphs stay in view beside it.
         above = quad.mean(axis=0) + 2.0 * ((quad[0] + quad[1]) / 2 - quad.mean(axis=0))
-        _text(canvas, str(text), above, max(width, 6.0) * 0.8, (255, 255, 0))
+        _text(canvas, str(text), above, max(width, 6.0) * 0.8, VIEWS_TEXT if named else READ_TEXT)
     radius = max(2.0, side / 10)
     colours = [owner_colour(str(n), owners) for n in marks.names]
     points = np.asarray(marks.xy, float).reshape(-1, 2)
@@ -202,7 +210,8 @@ def _text(canvas, text: str, centre, width: float, colour, scale: float | None =
 
 def read_blocks(arrays: dict, what: str = "detections") -> dict:
     """The read blocks of a detections file's arrays, checked: ``text`` (B,), ``frame``, ``camera`` (B,) int,
-    ``xy`` (B, 4, 2) pixels, and ``present`` (whether the file has block rows; none is no error).
+    ``xy`` (B, 4, 2) pixels, ``views`` (B,) bool (named from the other cameras) and ``present`` (whether the file
+    has block rows; none is no error).
 
     Parameters
     ----------
@@ -219,7 +228,7 @@ def read_blocks(arrays: dict, what: str = "detections") -> dict:
     present = [k for k in BLOCK_KEYS if k in arrays]
     if not present:
         return {"present": False, "text": np.zeros(0, str), "frame": np.zeros(0, int), "camera": np.zeros(0, int),
-                "xy": np.zeros((0, 4, 2))}
+                "xy": np.zeros((0, 4, 2)), "views": np.zeros(0, bool)}
     if len(present) != len(BLOCK_KEYS):
         raise HandcapError(f"{what}: has {', '.join(present)} but not "
                            f"{', '.join(k for k in BLOCK_KEYS if k not in present)}; the read blocks need all four")
@@ -227,10 +236,11 @@ def read_blocks(arrays: dict, what: str = "detections") -> dict:
     try:
         xy = np.asarray(arrays["block_xy"], dtype=float).reshape(n, 4, 2)
         frame, camera = (np.asarray(arrays[k]).astype(np.int64).reshape(n) for k in ("block_frame", "block_camera"))
+        views = np.asarray(arrays.get("block_from_views", np.zeros(n, bool))).astype(bool).reshape(n)
     except (ValueError, TypeError):
         raise HandcapError(f"{what}: its read blocks' arrays disagree in length or shape") from None
     return {"present": True, "text": np.asarray(arrays["block_text"]).astype(str), "frame": frame,
-            "camera": camera, "xy": xy}
+            "camera": camera, "xy": xy, "views": views}
 
 
 def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=None, links=None,
@@ -292,10 +302,13 @@ def write_pictures(arrays: dict, sources, folder, *, every: int = 1, projected=N
                     shown = np.isin(named, marker_names[markers])
                     crosses = pixels[shown], named[shown]
                 marks = FrameMarks(xy, marker_names[markers], blocks["xy"][block_here], blocks["text"][block_here],
-                                   *crosses, links=_frame_links(links, markers))
+                                   *crosses, links=_frame_links(links, markers),
+                                   from_views=blocks["views"][block_here])
                 what_points = "keypoints" if links is not None else "named corners"
                 title = (f"{source.camera} frame {t}: {len(xy)} {what_points}"
-                         + (f", {int(block_here.sum())} tags" if blocks["present"] else ""))
+                         + (f", {int(block_here.sum())} tags" if blocks["present"] else "")
+                         + (f" ({int(blocks['views'][block_here].sum())} from the other cameras)"
+                            if blocks["views"][block_here].any() else ""))
                 ok, code = cv2.imencode(".jpg", draw_frame(image, marks, title, owners),
                                         [cv2.IMWRITE_JPEG_QUALITY, QUALITY])
                 if not ok:
