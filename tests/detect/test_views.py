@@ -130,3 +130,14 @@ def test_squares_facing_away_are_not_taken_and_views_that_disagree_are_said(take
                for c, camera in enumerate(capture.rig.cameras)]
     named = name_from_views(arrays, unread, replace(capture.rig, cameras=tuple(cameras)), pattern, progress=False)
     assert named.squares == 0 and "disagree" in named.warnings[0]
+
+
+def test_one_camera_names_nothing_and_raises_nothing(take):
+    capture, pattern, _, _ = take
+    arrays, unread = _arrays(take, _chosen(take, 4))
+    mine = arrays["camera"] == CAMERA
+    alone = dict(arrays, camera_names=arrays["camera_names"][:1], frame=arrays["frame"][mine],
+                 camera=arrays["camera"][mine], marker=arrays["marker"][mine], xy=arrays["xy"][mine],
+                 score=arrays["score"][mine])
+    named = name_from_views(alone, unread, capture.rig, pattern, progress=False)
+    assert named.squares == 0 and named.unread == 4 and not named.warnings

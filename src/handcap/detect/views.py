@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+from tqdm import tqdm
 
 from handcap.multiview.detections import Detections
 from handcap.multiview.reconstruct import triangulate_detections
@@ -153,13 +154,13 @@ def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
     named = added = refused = 0
     warnings = []
     for _ in range(passes):
-        if not left or not len(tags) or len(arrays["frame"]) == 0:
+        if not left or not len(tags) or len(arrays["frame"]) == 0 or len(arrays["camera_names"]) < 2:
             break
         known, disagree = _known(arrays, rig, progress)
         if disagree is not None:
             warnings.append(disagree)
             break
-        rows, blocks, left, stats = _match_all(arrays, left, known, rig, tags, corners)
+        rows, blocks, left, stats = _match_all(arrays, left, known, rig, tags, corners, progress)
         if not blocks["block_text"]:
             break
         named, added, refused = named + stats[0], added + len(rows["frame"]), refused + stats[1]
@@ -187,7 +188,7 @@ def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
     return np.where(agree[..., None], tri.positions, np.nan), None
 
 
-def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners):
+def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners, progress=None):
     """Match every image's unread squares; returns the rows and blocks to add, the squares still unread, and
     (squares named, squares refused)."""
     rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
@@ -195,7 +196,8 @@ def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners):
     still, named, refused = [], 0, 0
     by_image = _image_index(arrays)
     signs = _turning(arrays)
-    for u in unread:
+    for u in tqdm(unread, desc="views", unit="image", disable=None if progress is None else not progress,
+                  leave=False):
         if u.frame >= len(known):
             still.append(u)
             continue
