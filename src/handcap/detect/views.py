@@ -3,8 +3,8 @@
 A white square whose four corners one camera found but whose tag it could not read (too small, blurred, a glyph
 cut by a finger's edge) is often read by other cameras at the same moment. The corners those cameras name are
 triangulated (:func:`~handcap.multiview.reconstruct.triangulate_detections`, at least two views that agree to
-:data:`AGREE_PX`), every square of the template whose four corners are known is projected into the camera, and an
-unread square takes a square's tag where
+:data:`AGREE_PX`, or to :data:`SPREAD` times the take's median where its rig agrees less well), every square of the
+template whose four corners are known is projected into the camera, and an unread square takes a square's tag where
 
 - each of its four corners lies within :data:`GATE_PX` of that square's projected corners (in one of the four
   turns, going round the same way as the camera's read squares do: a square facing away is never taken);
@@ -12,8 +12,12 @@ unread square takes a square's tag where
   takes the same tag;
 - the camera did not read that tag elsewhere in the frame, and none of the four corners is named otherwise.
 
-Its corners then get the template's names, and the detections file one block row more, marked in
-``block_from_views``. The squares named so give the corners more views, so the naming runs again
+A rig calibrated to half a pixel puts every projection that far off, mostly the same way over the hand: so each
+image's projections are first mapped by the affine map that takes the projections of the corners the camera named
+in that image onto where it named them (:func:`_local_fit`; with :data:`MIN_FIT` of them or more).
+
+A square that takes a tag gets the template's names for its corners, and the detections file one block row more,
+marked in ``block_from_views``. The squares named so give the corners more views, so the naming runs again
 (:data:`PASSES`). Cameras that were not triggered together disagree by more than the gate: nothing is taken
 where the views do not agree, and a warning says so.
 """
@@ -35,6 +39,11 @@ GATE_PX = 1.5
 MARGIN = 3.0
 #: Largest reprojection error of a corner triangulated from the named views, pixels, for it to be projected.
 AGREE_PX = 1.0
+#: A corner counts as placed where its reprojection error is within this many times the take's median too (a rig
+#: calibrated less well than :data:`AGREE_PX` puts every corner farther).
+SPREAD = 2.5
+#: Least named corners of an image with which its projections are mended (:func:`_local_fit`).
+MIN_FIT = 8
 #: Rounds of triangulating and naming.
 PASSES = 2
 #: The cameras' views are said not to agree where the named corners' median reprojection error is over this, pixels
@@ -184,7 +193,7 @@ def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
                                f"two cameras or more named agree to {2 * DISAGREE_PX:g} px, median {median:.1f} px): "
                                "no unread square was named from the other cameras (cameras not synchronised, or the "
                                "rig not the one that filmed the take?)")
-    agree = np.isfinite(tri.error_px) & (tri.error_px <= AGREE_PX)
+    agree = np.isfinite(tri.error_px) & (tri.error_px <= max(AGREE_PX, SPREAD * median))
     return np.where(agree[..., None], tri.positions, np.nan), None
 
 
@@ -207,7 +216,10 @@ def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners, prog
         take = ~np.isin(tags, list(read))
         points = known[u.frame][corners[take]]
         seen = np.isfinite(points).all(axis=(1, 2))
-        pixels, depth = camera.project(points[seen])
+        pixels, _ = camera.project(points[seen])
+        fit = _local_fit(camera, known[u.frame][arrays["marker"][mine]], arrays["xy"][mine])
+        if fit is not None:  # where the rig's small errors put the camera's projections, mended on its named corners
+            pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
         facing = _area(pixels) * signs.get(u.camera, 1.0) > 0
         match = _match(u.xy, pixels[facing], signs.get(u.camera, 1.0))
         square_ids = np.flatnonzero(take)[seen][facing]
@@ -234,6 +246,24 @@ def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners, prog
         if not done.all():
             still.append(UnreadSquares(u.camera, u.frame, u.xy[~done], u.score[~done]))
     return rows, blocks, still, (named, refused)
+
+
+def _local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray | None:
+    """The affine map (3, 2) that takes the camera's projections of ``points`` (N, 3, metres; NaN where unknown) to
+    where it named them (``detected`` (N, 2), pixels), fitted twice without the points over three times the median
+    distance from it; None with fewer than :data:`MIN_FIT` points."""
+    pixels, _ = camera.project(points)
+    ok = np.isfinite(pixels).all(axis=1)
+    src, dst = np.c_[pixels[ok], np.ones(int(ok.sum()))], detected[ok]
+    fit = None
+    for _ in range(2):
+        if len(src) < MIN_FIT:
+            return None
+        fit = np.linalg.lstsq(src, dst, rcond=None)[0]
+        distance = np.linalg.norm(src @ fit - dst, axis=1)
+        keep = distance <= max(3 * float(np.median(distance)), 0.5)
+        src, dst = src[keep], dst[keep]
+    return fit
 
 
 def _match(quads: np.ndarray, squares: np.ndarray, sign: float) -> dict:
