@@ -1,12 +1,14 @@
-"""Naming unread white squares from the other cameras (``handcap.detect.views``): what it adds, and how often wrong.
+"""Naming unread white squares from the neighbouring frames and the other cameras (``handcap.detect.motion``,
+``handcap.detect.views``): what they add, and how often wrong.
 
-    .venv/bin/python benchmarks/views.py            # three rendered takes, about 6 minutes on 2 cores
-    .venv/bin/python benchmarks/views.py --quick    # one
+    .venv/bin/python benchmarks/views.py            # four rendered takes, about 8 minutes on 2 cores
+    .venv/bin/python benchmarks/views.py --quick    # two
 
-Each take is ``handcap demo --images``'s kind: one subject in the ``dense-patches`` layout, 13 cameras at 4 Hz,
-rendered by ``handcap synth`` (images the networks never saw), a grasp of 11 frames. It is detected once with the
-shipped networks and the take's template, then the unread white squares are named from the other cameras. Against
-the image truth it prints, without and with the naming:
+Three takes are ``handcap demo --images``'s kind: one subject in the ``dense-patches`` layout, 13 cameras at 4 Hz,
+rendered by ``handcap synth`` (images the networks never saw), a grasp of 11 frames. The fourth is a video: 3
+cameras at 20 Hz, a grasp of 51 frames. Each is detected once with the shipped networks and the take's template,
+then the unread white squares are named as ``handcap detect`` names them: from the camera's neighbouring frames,
+then from the other cameras. Against the image truth it prints, without and with the naming:
 
 1. tags: the visible white squares (all four corners visible, as synth's truth lists them) whose tag is reported at
    their place, and the reported tags whose corners are not where that tag's square lies in that image (wrong);
@@ -34,6 +36,7 @@ from handcap.detect.capture import detect_capture
 from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
+from handcap.detect.motion import name_from_frames
 from handcap.detect.views import name_from_views, square_corners
 from handcap.multiview import Detections, triangulate_detections
 from handcap.patterns.pattern import Pattern
@@ -73,8 +76,8 @@ def scores(arrays: dict, truth, rig: CameraRig, pattern: Pattern) -> dict:
     ok = np.isfinite(error)
     return {"tags": found, "visible tags": len(visible), "tags reported": len(read), "tags wrong": wrong,
             "named right": int(right.sum()), "visible corners": len(truth["frame"]), "named wrong": int((~right).sum()),
-            "marker-frames": int(ok.sum()), "median mm": float(np.median(error[ok])),
-            "p95 mm": float(np.percentile(error[ok], 95))}
+            "marker-frames": int(ok.sum()), "median mm": float(np.median(error[ok])) if ok.any() else np.nan,
+            "p95 mm": float(np.percentile(error[ok], 95)) if ok.any() else np.nan}
 
 
 def rougher(rig: CameraRig, seed: int) -> CameraRig:
@@ -103,52 +106,74 @@ def line(what: str, s: dict) -> str:
             f"p95 {s['p95 mm']:.3f} mm")
 
 
+def detected(detector, config, folder):
+    """Film ``config`` into ``folder`` and detect it: (capture, pattern, run, seconds, truth)."""
+    capture = film_take(config, folder, progress=False)
+    pattern = Pattern.load(Path(folder) / "pattern.toml")
+    detector.pattern = pattern
+    sources = frame_sources([Path(folder) / "images" / c.name for c in capture.rig])
+    start = time.perf_counter()
+    run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=False, response="linear")
+    return capture, pattern, run, time.perf_counter() - start, np.load(Path(folder) / "image_truth.npz")
+
+
+def named(run, rig, pattern):
+    """As ``handcap detect`` names the unread squares: from the neighbouring frames, then from the other cameras;
+    returns both namings and the seconds they took."""
+    start = time.perf_counter()
+    moved = name_from_frames(run.arrays, run.unread, pattern, progress=False)
+    views = name_from_views(moved.arrays, moved.left, rig, pattern, progress=False)
+    return moved, views, time.perf_counter() - start
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="one take")
+    parser.add_argument("--quick", action="store_true", help="one take of 13 cameras, and the video")
     args = parser.parse_args()
     detector = Detector(load_corner_net(int8=True), load_reader(), refiner=load_refiner(), checker=load_checker())
-    totals = {"before": [], "after": [], "rough": []}
+    totals = {"before": [], "frames": [], "after": [], "rough": []}
     for seed, subject in SEEDS[:1] if args.quick else SEEDS:
         config = SynthConfig(layout="dense-patches", motion="grasp", frames=11, rate=4.0, seed=seed,
                              subject_seed=subject, cameras=13, min_views=3)
         with tempfile.TemporaryDirectory() as folder:
-            capture = film_take(config, folder, progress=False)
-            pattern = Pattern.load(Path(folder) / "pattern.toml")
-            detector.pattern = pattern
-            sources = frame_sources([Path(folder) / "images" / c.name for c in capture.rig])
-            start = time.perf_counter()
-            run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=False,
-                                 response="linear")
-            seconds = time.perf_counter() - start
-            start = time.perf_counter()
-            named = name_from_views(run.arrays, run.unread, capture.rig, pattern, progress=False)
-            naming = time.perf_counter() - start
-            truth = np.load(Path(folder) / "image_truth.npz")
-            before = scores(run.arrays, truth, capture.rig, pattern)
-            after = scores(named.arrays, truth, capture.rig, pattern)
+            capture, pattern, run, seconds, truth = detected(detector, config, folder)
+            moved, views, naming = named(run, capture.rig, pattern)
             rough = rougher(capture.rig, seed)
-            roughly = name_from_views(run.arrays, run.unread, rough, pattern, progress=False)
+            _, roughly, _ = named(run, rough, pattern)
             off = (reprojection(run.arrays, capture.rig), reprojection(run.arrays, rough))
-            rough_scores = scores(roughly.arrays, truth, capture.rig, pattern)
-        totals["before"].append(before)
-        totals["after"].append(after)
-        totals["rough"].append(rough_scores)
-        print(f"take seed {seed} (subject {subject}), {run.images} images: detection {seconds:.1f} s "
-              f"({seconds / run.images:.2f} s/image); {named.summary()}, {named.refused} refused, in {naming:.2f} s"
-              + (f"; warnings: {'; '.join(named.warnings)}" if named.warnings else ""))
-        print(line("detected", before))
-        print(line("named from the other cameras too", after))
+            figures = [scores(a, truth, capture.rig, pattern) for a in (run.arrays, moved.arrays, views.arrays,
+                                                                        roughly.arrays)]
+        for key, value in zip(totals, figures):
+            totals[key].append(value)
+        print(f"take seed {seed} (subject {subject}), 13 cameras at 4 Hz, {run.images} images: detection "
+              f"{seconds:.1f} s ({seconds / run.images:.2f} s/image); {moved.summary()}; {views.summary()}, "
+              f"{views.refused} refused; naming {naming:.2f} s"
+              + (f"; warnings: {'; '.join(views.warnings)}" if views.warnings else ""))
+        print(line("detected", figures[0]))
+        print(line("named from the neighbouring frames too", figures[1]))
+        print(line("and from the other cameras", figures[2]))
         print(line(f"the same with a rig calibrated less well (median reprojection {off[1]:.2f} px, against "
-                   f"{off[0]:.2f} px; {roughly.squares} squares named)", rough_scores))
+                   f"{off[0]:.2f} px; {roughly.squares} squares named from the other cameras)", figures[3]))
     if len(totals["before"]) > 1:
-        print("all takes:")
-        for key, what in (("before", "detected"), ("after", "named from the other cameras too"),
-                          ("rough", "the same with the rigs calibrated less well")):
+        print("all takes of 13 cameras:")
+        for key, what in zip(totals, ("detected", "named from the neighbouring frames too",
+                                      "and from the other cameras", "the same with the rigs calibrated less well")):
             summed = {k: sum(s[k] for s in totals[key]) for k in totals[key][0]}
             summed["median mm"] = float(np.median([s["median mm"] for s in totals[key]]))
             summed["p95 mm"] = float(np.median([s["p95 mm"] for s in totals[key]]))
             print(line(what + " (median of the takes' mm)", summed))
+    # A video: 3 cameras at 20 Hz, so few that they share few corners, and frames close enough in time.
+    config = SynthConfig(layout="dense-patches", motion="grasp", frames=51, rate=20.0, seed=5, subject_seed=21,
+                         cameras=3, min_views=2)
+    with tempfile.TemporaryDirectory() as folder:
+        capture, pattern, run, seconds, truth = detected(detector, config, folder)
+        moved, views, naming = named(run, capture.rig, pattern)
+        figures = [scores(a, truth, capture.rig, pattern) for a in (run.arrays, moved.arrays, views.arrays)]
+    print(f"video, 3 cameras at 20 Hz, {run.images} images: detection {seconds:.1f} s; {moved.summary()}; "
+          f"{views.summary()}; naming {naming:.2f} s")
+    for what, value in zip(("detected", "named from the neighbouring frames too", "and from the other cameras"),
+                           figures):
+        print(line(what, value))
 
 
 if __name__ == "__main__":

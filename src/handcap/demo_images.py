@@ -8,7 +8,8 @@
    fraction of the rendering and detection time.
 2. Detect the coded patches in every image with the shipped networks and the
    takes' template (:mod:`handcap.detect`); name the squares a camera could not
-   read from the other cameras (:mod:`handcap.detect.views`).
+   read from its neighbouring frames and the other cameras
+   (:mod:`handcap.detect.motion`, :mod:`handcap.detect.views`).
 3. Triangulate the named corners (RANSAC over views), clean them, calibrate the
    marker attachment on the calibration take and solve the grasp take.
 4. Measure each stage against the truth: corners named per image and their
@@ -37,6 +38,7 @@ from handcap.detect.capture import detect_capture
 from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
+from handcap.detect.motion import name_from_frames
 from handcap.detect.views import name_from_views
 from handcap.io import write_hand_motion, write_markers
 from handcap.layouts import load_layout
@@ -95,14 +97,17 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         # synth renders grey levels linear in the light (handcap.synth.images): no camera's response to choose.
         run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=progress,
                              response="linear")
-        # The squares a camera could not read, named where the other cameras place them (handcap.detect.views).
-        naming = name_from_views(run.arrays, run.unread, capture.rig, pattern, progress=progress)
+        # The squares a camera could not read, named where its neighbouring frames and the other cameras place them
+        # (handcap.detect.motion, handcap.detect.views).
+        moved = name_from_frames(run.arrays, run.unread, pattern, progress=progress)
+        naming = name_from_views(moved.arrays, moved.left, capture.rig, pattern, progress=progress)
         warnings += list(naming.warnings)
         seconds = time.perf_counter() - start
         save_npz(folder / "detections.npz", naming.arrays | {"pitch": np.array(pattern.pitch)})
         # To look at: the detections drawn over one camera's frames (handcap overlay draws any camera's).
         write_pictures(naming.arrays, sources[:1], folder / "overlay", progress=False)
         summary.update(_detection_figures(key, run.images, naming.arrays, folder / "image_truth.npz", seconds))
+        summary[f"{key}_squares_named_from_frames"] = moved.squares
         summary[f"{key}_squares_named_from_views"] = naming.squares
         triangulated = triangulate_detections(read_detections(folder / "detections.npz"), capture.rig,
                                               min_views=config.min_views, progress=progress)

@@ -7,72 +7,30 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from handcap.detect.views import GATE_PX, UnreadSquares, name_from_views, square_corners
-from handcap.patterns.session import session_pattern
-from handcap.synth.config import SynthConfig
-from handcap.synth.scene import synthesize
+from handcap.detect.views import GATE_PX, name_from_views
 
 CAMERA = 0  # the camera whose squares are left unread
 
 
 @pytest.fixture(scope="module")
-def take():
-    """A calibration take of 8 cameras: every camera's named corners (pixel noise 0.1 px, no wrong ids), the blocks
-    each camera sees whole, and the template."""
-    capture = synthesize(SynthConfig(layout="dense-patches", motion="calibration", frames=4, rate=4.0, seed=8,
-                                     cameras=8, outlier_rate=0.0, ghost_rate=0.0, swap_rate=0.0, dropout=0.0,
-                                     pixel_noise=0.1, object="none"), progress=False)
-    pattern = session_pattern(("right",), ())
-    d = capture.detections
-    names = np.array([f"right:{n}" for n in d["marker_names"]])
-    tags, corners = square_corners(pattern, names)
-    at = {(int(f), int(c), int(m)): k for k, (f, c, m) in enumerate(zip(d["frame"], d["camera"], d["marker"]))}
-    blocks = []  # (tag, camera, frame, xy (4, 2) in reading order)
-    for f in range(4):
-        for c in range(8):
-            for tag, ids in zip(tags, corners):
-                rows = [at.get((f, c, int(m))) for m in ids]
-                if None not in rows:
-                    blocks.append((str(tag), c, f, d["xy"][rows], rows))
-    return capture, pattern, names, blocks
-
-
-def _arrays(take, unread_blocks):
-    """The detections file's arrays with ``unread_blocks`` (indices into the take's blocks) left unread: their
-    rows and block rows out, their corners given back as unread squares (turned and reversed in turn)."""
-    capture, _, names, blocks = take
-    d = capture.detections
-    hidden = {r for k in unread_blocks for r in blocks[k][4]}
-    keep = np.array([k not in hidden for k in range(len(d["frame"]))])
-    kept = [b for k, b in enumerate(blocks) if k not in set(unread_blocks)]
-    arrays = {"camera_names": d["camera_names"], "marker_names": names, "frame": d["frame"][keep],
-              "camera": d["camera"][keep], "marker": d["marker"][keep], "xy": d["xy"][keep],
-              "score": d["score"][keep], "rate": np.array(4.0), "n_frames": np.array(4),
-              "block_text": np.array([b[0] for b in kept], dtype="<U2"),
-              "block_camera": np.array([b[1] for b in kept], dtype=np.int64),
-              "block_frame": np.array([b[2] for b in kept], dtype=np.int64),
-              "block_xy": np.array([b[3] for b in kept]).reshape(-1, 4, 2), "block_score": np.ones(len(kept))}
-    unread = []
-    for j, k in enumerate(unread_blocks):
-        xy = np.roll(blocks[k][3], j % 4, axis=0)
-        xy = xy[::-1] if j % 2 else xy
-        unread.append(UnreadSquares(blocks[k][1], blocks[k][2], xy[None], np.ones((1, 4))))
-    return arrays, unread
+def take(square_take):
+    """A calibration take of 8 cameras at 4 Hz (see ``square_take``)."""
+    return square_take(rate=4.0, frames=4, cameras=8)
 
 
 def _chosen(take, count=40):
     """``count`` of the blocks camera CAMERA sees whole and two other cameras see too, spread over the take."""
-    d = take[0].detections
-    views = np.zeros((4, len(take[2])), int)
+    d = take.capture.detections
+    views = np.zeros((4, len(take.names)), int)
     np.add.at(views, (d["frame"], d["marker"]), 1)
-    mine = [k for k, b in enumerate(take[3]) if b[1] == CAMERA and views[b[2], d["marker"][b[4]]].min() >= 3]
+    mine = [k for k, b in enumerate(take.blocks) if b[1] == CAMERA and views[b[2], d["marker"][b[4]]].min() >= 3]
     return mine[:: max(len(mine) // count, 1)][:count]
 
 
 def test_unread_squares_take_the_tags_and_corner_names_the_other_cameras_give(take):
-    capture, pattern, names, blocks = take
+    capture, pattern, names, blocks = take.capture, take.pattern, take.names, take.blocks
     chosen = _chosen(take)
-    arrays, unread = _arrays(take, chosen)
+    arrays, unread = take.without(chosen)
     named = name_from_views(arrays, unread, capture.rig, pattern, progress=False)
     # Refused: squares with a corner within the gate of another patch's corner (two patches that abut).
     assert named.squares + named.refused == named.unread == len(chosen) and named.refused <= 3
@@ -96,9 +54,9 @@ def test_unread_squares_take_the_tags_and_corner_names_the_other_cameras_give(ta
 
 
 def test_a_square_off_its_place_or_a_tag_read_elsewhere_names_nothing(take):
-    capture, pattern, _, blocks = take
+    capture, pattern, blocks = take.capture, take.pattern, take.blocks
     chosen = _chosen(take, 12)
-    arrays, unread = _arrays(take, chosen)
+    arrays, unread = take.without(chosen)
     moved = [replace(u, xy=u.xy + np.array([2 * GATE_PX, 0.0])) for u in unread]
     assert name_from_views(arrays, moved, capture.rig, pattern, progress=False).squares == 0
     # The camera read the square's tag at another white square of the frame: refused.
@@ -113,8 +71,8 @@ def test_a_square_off_its_place_or_a_tag_read_elsewhere_names_nothing(take):
 
 
 def test_a_camera_off_its_pose_is_mended_on_its_own_named_corners(take):
-    capture, pattern, _, _ = take
-    arrays, unread = _arrays(take, _chosen(take, 12))
+    capture, pattern = take.capture, take.pattern
+    arrays, unread = take.without(_chosen(take, 12))
     truth = name_from_views(arrays, unread, capture.rig, pattern, progress=False)
     # The rig's camera turned by a degree (its projections 50-80 px off): the affine map that takes them onto the
     # corners the camera named in the image takes the unread squares' too, so the same squares get the same tags.
@@ -135,8 +93,8 @@ def test_a_camera_off_its_pose_is_mended_on_its_own_named_corners(take):
 
 
 def test_squares_facing_away_are_not_taken_and_views_that_disagree_are_said(take):
-    capture, pattern, _, _ = take
-    arrays, unread = _arrays(take, _chosen(take, 12))
+    capture, pattern = take.capture, take.pattern
+    arrays, unread = take.without(_chosen(take, 12))
     # The camera's read squares go round the other way (a mirrored image): every square faces away from it.
     mirrored = dict(arrays, block_xy=np.where((arrays["block_camera"] == CAMERA)[:, None, None],
                                               arrays["block_xy"][:, ::-1], arrays["block_xy"]))
@@ -150,8 +108,8 @@ def test_squares_facing_away_are_not_taken_and_views_that_disagree_are_said(take
 
 
 def test_one_camera_names_nothing_and_raises_nothing(take):
-    capture, pattern, _, _ = take
-    arrays, unread = _arrays(take, _chosen(take, 4))
+    capture, pattern = take.capture, take.pattern
+    arrays, unread = take.without(_chosen(take, 4))
     mine = arrays["camera"] == CAMERA
     alone = dict(arrays, camera_names=arrays["camera_names"][:1], frame=arrays["frame"][mine],
                  camera=arrays["camera"][mine], marker=arrays["marker"][mine], xy=arrays["xy"][mine],

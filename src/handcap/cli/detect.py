@@ -58,9 +58,9 @@ def add_detect(verbs) -> None:
                         "(200: about 80 s for 20 photographs), which then vouches for more tags of the take's font "
                         "and glyph layout, a little more often wrong (README); default 0, the shipped reader only")
     p.add_argument("--no-views", action="store_true",
-                   help="with --rig and --pattern, leave a white square a camera could not read unnamed (default: it "
-                        "takes the tag of the template's square that the other cameras' named corners place on it "
-                        "to 1.5 px; the file marks such blocks in block_from_views)")
+                   help="with --pattern, leave a white square a camera could not read unnamed (default: it takes the "
+                        "tag of the template's square that the camera's neighbouring frames, or with --rig the other "
+                        "cameras, place on it to 1.5 px; the file marks such blocks in block_from_views)")
     p.add_argument("--no-denoise", action="store_true",
                    help="search noisy images as they are (default: an image with more sensor noise than the networks "
                         "learned, about 5 grey levels, is denoised first; a warning says how many)")

@@ -74,7 +74,7 @@ class UnreadSquares:
 
 @dataclass(frozen=True)
 class ViewNaming:
-    """What the other cameras named.
+    """What the other cameras (or the neighbouring frames, :mod:`~handcap.detect.motion`) named.
 
     Attributes
     ----------
@@ -91,6 +91,10 @@ class ViewNaming:
         Squares that matched a projection but whose tag the camera read elsewhere or whose corners it names
         otherwise.
     warnings : tuple of str
+    left : tuple of UnreadSquares
+        The squares still unread.
+    source : str
+        What named them, for the summary.
     """
 
     arrays: dict
@@ -99,10 +103,12 @@ class ViewNaming:
     unread: int
     refused: int = 0
     warnings: tuple = ()
+    left: tuple = ()
+    source: str = "the other cameras"
 
     def summary(self) -> str:
         """One line: the squares named and the corners added."""
-        return (f"named from the other cameras: {self.squares} of {self.unread} unread white squares, "
+        return (f"named from {self.source}: {self.squares} of {self.unread} unread white squares, "
                 f"{self.corners} corners")
 
 
@@ -169,12 +175,14 @@ def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
         if disagree is not None:
             warnings.append(disagree)
             break
-        rows, blocks, left, stats = _match_all(arrays, left, known, rig, tags, corners, progress)
-        if not blocks["block_text"]:
+        namer = Namer(tags, corners)
+        left = _match_all(arrays, left, known, rig, namer, progress)
+        # A refused square stays unread and is refused again in the next pass: counted once, in the last.
+        named, added, refused = named + namer.named, added + len(namer.rows["frame"]), namer.refused
+        if not namer.named:
             break
-        named, added, refused = named + stats[0], added + len(rows["frame"]), refused + stats[1]
-        arrays = _appended(arrays, rows, blocks)
-    return ViewNaming(arrays, named, added, total, refused, tuple(warnings))
+        arrays = namer.appended(arrays)
+    return ViewNaming(arrays, named, added, total, refused, tuple(warnings), tuple(left))
 
 
 def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
@@ -197,14 +205,13 @@ def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
     return np.where(agree[..., None], tri.positions, np.nan), None
 
 
-def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners, progress=None):
-    """Match every image's unread squares; returns the rows and blocks to add, the squares still unread, and
-    (squares named, squares refused)."""
-    rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
-    blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": []}
-    still, named, refused = [], 0, 0
-    by_image = _image_index(arrays)
-    signs = _turning(arrays)
+def _match_all(arrays: dict, unread, known: np.ndarray, rig, namer: Namer, progress=None) -> list:
+    """Match every image's unread squares to the projections of the known squares; ``namer`` takes the matches.
+    Returns the squares still unread."""
+    tags, corners = namer.tags, namer.corners
+    still = []
+    by_image = image_index(arrays)
+    signs = turning(arrays)
     for u in tqdm(unread, desc="views", unit="image", disable=None if progress is None else not progress,
                   leave=False):
         if u.frame >= len(known):
@@ -212,7 +219,6 @@ def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners, prog
             continue
         camera = rig[str(arrays["camera_names"][u.camera])]
         mine, read = by_image.get((u.camera, u.frame), (np.zeros(0, int), set()))
-        names = dict(zip(arrays["marker"][mine].tolist(), arrays["xy"][mine]))
         take = ~np.isin(tags, list(read))
         points = known[u.frame][corners[take]]
         seen = np.isfinite(points).all(axis=(1, 2))
@@ -221,31 +227,80 @@ def _match_all(arrays: dict, unread, known: np.ndarray, rig, tags, corners, prog
         if fit is not None:  # where the rig's small errors put the camera's projections, mended on its named corners
             pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
         facing = _area(pixels) * signs.get(u.camera, 1.0) > 0
-        match = _match(u.xy, pixels[facing], signs.get(u.camera, 1.0))
+        match = match_squares(u.xy, pixels[facing], signs.get(u.camera, 1.0))
         square_ids = np.flatnonzero(take)[seen][facing]
+        left = namer.take(u, {k: (square_ids[s], order) for k, (s, order) in match.items()}, arrays, mine)
+        if left is not None:
+            still.append(left)
+    return still
+
+
+class Namer:
+    """The corner rows and block rows of the unread squares named, as they are taken.
+
+    Parameters
+    ----------
+    tags : ndarray (S,) str
+    corners : ndarray (S, 4) int
+        The template's squares (:func:`square_corners`).
+    """
+
+    def __init__(self, tags: np.ndarray, corners: np.ndarray):
+        self.tags, self.corners = tags, corners
+        self.rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
+        self.blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": []}
+        self.named = self.refused = 0
+
+    def take(self, u: UnreadSquares, matches: dict, arrays: dict, mine: np.ndarray) -> UnreadSquares | None:
+        """Name ``u``'s squares that matched, where the image's named corners allow it.
+
+        Parameters
+        ----------
+        u : UnreadSquares
+        matches : dict of int to (int, ndarray (4,) int)
+            Unread square -> (the template square it matched, its corners in that square's reading order).
+        arrays : dict of str to ndarray
+            The detections file's arrays.
+        mine : ndarray (N,) int
+            The rows of the image's named corners.
+
+        Returns
+        -------
+        UnreadSquares or None
+            Those of ``u`` still unread (None: none).
+        """
+        names = dict(zip(arrays["marker"][mine].tolist(), arrays["xy"][mine]))
         done = np.zeros(len(u.xy), bool)
-        for k, (s, order) in match.items():
-            ids = corners[square_ids[s]]
+        for k, (square, order) in matches.items():
+            ids = self.corners[square]
             xy, score = u.xy[k][order], u.score[k][order]
             if not _consistent(ids, xy, names, arrays["xy"][mine], arrays["marker"][mine]):
-                refused += 1
+                self.refused += 1
                 continue
             new = [j for j in range(4) if int(ids[j]) not in names]
-            rows["frame"] += [u.frame] * len(new)
-            rows["camera"] += [u.camera] * len(new)
-            rows["marker"] += [int(ids[j]) for j in new]
-            rows["xy"] += [xy[j] for j in new]
-            rows["score"] += [float(score[j]) for j in new]
+            self.rows["frame"] += [u.frame] * len(new)
+            self.rows["camera"] += [u.camera] * len(new)
+            self.rows["marker"] += [int(ids[j]) for j in new]
+            self.rows["xy"] += [xy[j] for j in new]
+            self.rows["score"] += [float(score[j]) for j in new]
             names.update({int(ids[j]): xy[j] for j in new})
-            blocks["block_text"].append(str(tags[square_ids[s]]))
-            blocks["block_frame"].append(u.frame)
-            blocks["block_camera"].append(u.camera)
-            blocks["block_xy"].append(xy)
+            for key, value in zip(self.blocks, (str(self.tags[square]), u.frame, u.camera, xy)):
+                self.blocks[key].append(value)
             done[k] = True
-            named += 1
-        if not done.all():
-            still.append(UnreadSquares(u.camera, u.frame, u.xy[~done], u.score[~done]))
-    return rows, blocks, still, (named, refused)
+            self.named += 1
+        return None if done.all() else UnreadSquares(u.camera, u.frame, u.xy[~done], u.score[~done])
+
+    def appended(self, arrays: dict) -> dict:
+        """``arrays`` with the rows and blocks added at the end (the blocks' scores 0: the reader did not read
+        them; ``block_from_views`` True)."""
+        n = len(self.blocks["block_text"])
+        new = {**self.rows, **self.blocks, "block_score": np.zeros(n), "block_from_views": np.ones(n, bool)}
+        out = dict(arrays)
+        out.setdefault("block_from_views", np.zeros(len(arrays["block_text"]), bool))
+        for key, values in new.items():
+            old = np.asarray(out[key])
+            out[key] = np.concatenate([old, np.asarray(values, dtype=old.dtype).reshape((-1,) + old.shape[1:])])
+        return out
 
 
 def _local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray | None:
@@ -266,9 +321,23 @@ def _local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray |
     return fit
 
 
-def _match(quads: np.ndarray, squares: np.ndarray, sign: float) -> dict:
-    """Unread quads (U, 4, 2) that take one projected square (S, 4, 2, reading order): {quad: (square, order)},
-    ``order`` (4,) the quad's corners in the square's reading order."""
+def match_squares(quads: np.ndarray, squares: np.ndarray, sign: float) -> dict:
+    """The unread quads that take one of the squares where they are expected (module docstring).
+
+    Parameters
+    ----------
+    quads : ndarray (U, 4, 2)
+        Unread white squares' corners, in the order they go round, pixels.
+    squares : ndarray (S, 4, 2)
+        Where the template's squares are expected, corners in reading order, pixels.
+    sign : float
+        +1 where the camera's read squares go round clockwise on the image in reading order, -1 mirrored.
+
+    Returns
+    -------
+    dict of int to (int, ndarray (4,) int)
+        Quad -> (square, the quad's corners in the square's reading order).
+    """
     if not len(quads) or not len(squares):
         return {}
     # The quads go round the way the camera's read squares do, so only their four turns need trying.
@@ -313,15 +382,37 @@ def _area(quads: np.ndarray) -> np.ndarray:
     return (x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y).sum(axis=-1)
 
 
-def _turning(arrays: dict) -> dict:
-    """Each camera's way round of the squares it read, in reading order: +1 or -1 (a mirrored image)."""
+def turning(arrays: dict) -> dict:
+    """Each camera's way round of the squares it read, in reading order.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        A detections file's arrays.
+
+    Returns
+    -------
+    dict of int to float
+        Camera index -> +1 (clockwise on the image) or -1 (a mirrored image).
+    """
     areas = _area(np.asarray(arrays["block_xy"], dtype=np.float64).reshape(-1, 4, 2))
     cameras = np.asarray(arrays["block_camera"])
     return {int(c): 1.0 if np.median(areas[cameras == c]) >= 0 else -1.0 for c in np.unique(cameras)}
 
 
-def _image_index(arrays: dict) -> dict:
-    """(camera, frame) -> (the rows of its named corners, the tags it read)."""
+def image_index(arrays: dict) -> dict:
+    """The named corners and read tags of every image.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        A detections file's arrays.
+
+    Returns
+    -------
+    dict of (int, int) to (ndarray (N,) int, set of str)
+        (camera, frame) -> (the rows of its named corners, the tags it read).
+    """
     key = arrays["camera"].astype(np.int64) * (int(arrays["frame"].max(initial=0)) + 1) + arrays["frame"]
     order = np.argsort(key, kind="stable")
     out = {}
@@ -332,15 +423,4 @@ def _image_index(arrays: dict) -> dict:
             out[(int(arrays["camera"][rows[0]]), int(arrays["frame"][rows[0]]))] = (rows, set())
     for text, c, f in zip(arrays["block_text"], arrays["block_camera"], arrays["block_frame"]):
         out.setdefault((int(c), int(f)), (np.zeros(0, int), set()))[1].add(str(text))
-    return out
-
-
-def _appended(arrays: dict, rows: dict, blocks: dict) -> dict:
-    """``arrays`` with the rows and blocks added at the end (the blocks' scores 0: the reader did not read them)."""
-    n = len(blocks["block_text"])
-    new = {**rows, **blocks, "block_score": np.zeros(n), "block_from_views": np.ones(n, bool)}
-    out = dict(arrays)
-    for key, values in new.items():
-        old = np.asarray(arrays[key])
-        out[key] = np.concatenate([old, np.asarray(values, dtype=old.dtype).reshape((-1,) + old.shape[1:])])
     return out

@@ -12,6 +12,7 @@ from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.response import NEAR, ResponseChoice, linear_light
+from handcap.detect.motion import name_from_frames
 from handcap.detect.views import name_from_views
 from handcap.detect.sources import FrameSelection, frame_notes, frame_sources, select_frames, short_videos
 from handcap.io import read_rig
@@ -92,8 +93,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Read every ``every``-th of them. The frames read are a take of their own: its frame ``k`` is input frame
         ``start + k * every``, at ``rate / every``; the file records ``first_frame`` and ``frame_step``.
     views : bool
-        With a rig and a template: name the white squares a camera could not read where the other cameras place a
-        square of the template (:mod:`handcap.detect.views`); the file marks them in ``block_from_views``.
+        With a template: name the white squares a camera could not read where its neighbouring frames
+        (:mod:`handcap.detect.motion`) and, with a rig, the other cameras (:mod:`handcap.detect.views`) place a
+        square of the template; the file marks them in ``block_from_views``.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -214,10 +216,13 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         "handcap pattern --import) the vote over them reads more"
                         + ("" if adapt_steps else "; so may a reader adapted to this take (--adapt-steps 200)"))
     found, by_views = run.arrays, ""
-    if views and template is not None and rig is not None and len(found["frame"]):
-        naming = name_from_views(found, run.unread, cameras, template, progress=progress)
-        found, warnings = naming.arrays, warnings + list(naming.warnings)
-        by_views = f"; {naming.summary()}"
+    if views and template is not None and len(found["frame"]):
+        naming = name_from_frames(found, run.unread, template, progress=progress)
+        found, left, by_views = naming.arrays, naming.left, f"; {naming.summary()}"
+        if rig is not None:
+            naming = name_from_views(found, left, cameras, template, progress=progress)
+            found, warnings = naming.arrays, warnings + list(naming.warnings)
+            by_views += f"; {naming.summary()}"
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
                                                   "frame_step": np.array(pick.every)}
