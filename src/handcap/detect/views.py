@@ -199,8 +199,9 @@ def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
     if twice and (len(error) < AGREEING * twice or median > DISAGREE_PX):
         return tri.positions, (f"the cameras' views of the named corners disagree ({len(error)} of the {twice} corners "
                                f"two cameras or more named agree to {2 * DISAGREE_PX:g} px, median {median:.1f} px): "
-                               "no unread square was named from the other cameras (cameras not synchronised, or the "
-                               "rig not the one that filmed the take?)")
+                               "no unread square was named from the other cameras. Cameras not triggered together? "
+                               "triangulate --sync auto finds their offsets. Or the rig is not the one that filmed "
+                               "the take")
     agree = np.isfinite(tri.error_px) & (tri.error_px <= max(AGREE_PX, SPREAD * median))
     return np.where(agree[..., None], tri.positions, np.nan), None
 
