@@ -23,7 +23,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
-from handcap.detect.views import Namer, ViewNaming, image_index, match_squares, square_corners, turning
+from handcap.detect.views import (Namer, ViewNaming, affine_map, image_index, match_squares, square_corners,
+                                  turning)
 
 #: The corners of both frames within this many times the unread square's longest side fit the local motion.
 RADIUS = 3.0
@@ -107,9 +108,8 @@ def _matches(u, here: np.ndarray, there: np.ndarray, corners: np.ndarray, allowe
         near = common[tree.query_ball_point(quad.mean(axis=0), RADIUS * side)]
         if len(near) < MIN_FIT:
             continue
-        src = np.c_[there[near], np.ones(len(near))]
-        fit = np.linalg.lstsq(src, here[near], rcond=None)[0]
-        if np.median(np.linalg.norm(src @ fit - here[near], axis=1)) > FIT_PX:
+        fit, distance = affine_map(there[near], here[near], MIN_FIT)
+        if distance > FIT_PX:
             continue
         match = match_squares(quad[None], squares @ fit, sign)
         if 0 in match:

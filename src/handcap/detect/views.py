@@ -306,20 +306,43 @@ class Namer:
 
 def _local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray | None:
     """The affine map (3, 2) that takes the camera's projections of ``points`` (N, 3, metres; NaN where unknown) to
-    where it named them (``detected`` (N, 2), pixels), fitted twice without the points over three times the median
+    where it named them (``detected`` (N, 2), pixels), fitted again without the points over three times the median
     distance from it; None with fewer than :data:`MIN_FIT` points."""
     pixels, _ = camera.project(points)
     ok = np.isfinite(pixels).all(axis=1)
-    src, dst = np.c_[pixels[ok], np.ones(int(ok.sum()))], detected[ok]
-    fit = None
-    for _ in range(2):
-        if len(src) < MIN_FIT:
+    fit = affine_map(pixels[ok], detected[ok], MIN_FIT, rounds=2)
+    return None if fit is None else fit[0]
+
+
+def affine_map(src: np.ndarray, dst: np.ndarray, least: int, *, rounds: int = 1):
+    """The affine map that takes pixels ``src`` (N, 2) to ``dst`` (N, 2), least squares.
+
+    Parameters
+    ----------
+    src, dst : ndarray (N, 2)
+        Pixels.
+    least : int
+        Fewest points to fit with.
+    rounds : int
+        Fits: after each but the last, the points over three times the median distance (and over 0.5 px) are left
+        out.
+
+    Returns
+    -------
+    (ndarray (3, 2), float) or None
+        The map (pixels as rows ``(x, y, 1)`` times it) and the median distance of the points it was fitted to from
+        it, pixels; None where fewer than ``least`` points remain.
+    """
+    src, dst = np.c_[src, np.ones(len(src))], dst
+    for k in range(rounds):
+        if len(src) < least:
             return None
         fit = np.linalg.lstsq(src, dst, rcond=None)[0]
         distance = np.linalg.norm(src @ fit - dst, axis=1)
-        keep = distance <= max(3 * float(np.median(distance)), 0.5)
-        src, dst = src[keep], dst[keep]
-    return fit
+        if k + 1 < rounds:
+            keep = distance <= max(3 * float(np.median(distance)), 0.5)
+            src, dst = src[keep], dst[keep]
+    return fit, float(np.median(distance))
 
 
 def match_squares(quads: np.ndarray, squares: np.ndarray, sign: float) -> dict:
