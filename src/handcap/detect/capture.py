@@ -94,7 +94,8 @@ class CaptureDetections:
     twice_images : int
         Images that hold such readings.
     unread : list of UnreadSquares
-        Each image's white squares without a tag, for :func:`~handcap.detect.views.name_from_views`.
+        Each image's white squares without a tag, for :func:`~handcap.detect.views.name_from_views` and
+        :func:`~handcap.detect.motion.name_from_frames` (kept only where the detector has a template).
     """
 
     arrays: dict
@@ -264,7 +265,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     HandcapError
         A frame whose size is not its camera's.
     """
-    out = _Rows(marker_names)
+    out = _Rows(marker_names, keep_unread=getattr(detector, "pattern", None) is not None)  # a template names them
     regions, responses, looked = 0, [], []
     given = [response] * len(sources) if isinstance(response, str) else list(response)
     hidden = None if progress is None else not progress
@@ -311,14 +312,14 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
 class _Rows:
     """The detections of a capture as they are added, frame by frame, and what is counted on the way."""
 
-    def __init__(self, marker_names):
+    def __init__(self, marker_names, keep_unread: bool = True):
         self.marker_names = marker_names
         self.index = {n: k for k, n in enumerate(marker_names)}
         self.rows = {"frame": [], "camera": [], "marker": [], "xy": [], "score": []}
         self.blocks = {"block_text": [], "block_frame": [], "block_camera": [], "block_xy": [], "block_score": []}
         self.images = self.empty = self.corrected = self.sure = self.disowned = self.read = self.noisy = 0
         self.twice = self.twice_images = 0
-        self.noise, self.frames, self.unread = 0.0, {}, []
+        self.noise, self.frames, self.unread, self.keep_unread = 0.0, {}, [], keep_unread
 
     def add_all(self, pending, camera: int, response: str) -> None:
         """Frames searched both ways, ``pending`` [(frame, (as recorded, decoded))], read as ``response``."""
@@ -345,7 +346,7 @@ class _Rows:
         self.blocks["block_camera"] += [camera] * len(found.block_text)
         self.blocks["block_xy"] += list(found.block_xy)
         self.blocks["block_score"] += list(found.block_score)
-        if len(found.unread):
+        if self.keep_unread and len(found.unread):
             self.unread.append(UnreadSquares(camera, t, found.corners[found.unread].astype(np.float32),
                                              found.corner_score[found.unread].astype(np.float32)))
 
