@@ -37,7 +37,8 @@ from handcap.detect.networks import load_checker, load_corner_net, load_reader, 
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
 from handcap.detect.motion import name_from_frames
-from handcap.detect.views import name_from_views, square_corners
+from handcap.detect.naming import square_corners
+from handcap.detect.views import name_from_views
 from handcap.multiview import Detections, triangulate_detections
 from handcap.patterns.pattern import Pattern
 from handcap.synth.config import SynthConfig

@@ -44,7 +44,7 @@ class SquareTake:
     def without(self, unread_blocks):
         """The detections file's arrays with ``unread_blocks`` (indices into ``blocks``) left unread: their rows and
         block rows out, their corners given back as unread squares (turned and reversed in turn)."""
-        from handcap.detect.views import UnreadSquares
+        from handcap.detect.naming import UnreadSquares
 
         d = self.capture.detections
         hidden = {r for k in unread_blocks for r in self.blocks[k][4]}
@@ -67,7 +67,7 @@ class SquareTake:
 
 @lru_cache(maxsize=4)
 def _square_take(rate: float, frames: int, cameras: int) -> SquareTake:
-    from handcap.detect.views import square_corners
+    from handcap.detect.naming import square_corners
     from handcap.patterns.session import session_pattern
     from handcap.synth.config import SynthConfig
     from handcap.synth.scene import synthesize

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from handcap.detect.motion import name_from_frames
-from handcap.detect.views import GATE_PX, square_corners
+from handcap.detect.naming import GATE_PX, square_corners
 
 FRAME = 60  # the frame whose squares camera 0 leaves unread
 

@@ -7,7 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from handcap.detect.views import GATE_PX, name_from_views
+from handcap.detect.naming import GATE_PX
+from handcap.detect.views import name_from_views
 
 CAMERA = 0  # the camera whose squares are left unread
 

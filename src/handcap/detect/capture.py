@@ -42,7 +42,7 @@ from handcap.core.errors import HandcapError
 from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
 from handcap.detect.response import ResponseChoice
-from handcap.detect.views import UnreadSquares
+from handcap.detect.naming import UnreadSquares
 
 #: A camera's frame is searched whole at least once in this many frames.
 FULL_EVERY = 10

@@ -6,7 +6,7 @@ corners the camera named in both frames near the unread square (within :data:`RA
 the local motion: the affine map that takes their pixels in the other frame to their pixels in this one (least
 squares, :data:`MIN_FIT` corners or more, and used only where it fits them to :data:`FIT_PX` median). Every square
 the camera named whole in the other frame (its four corners) is mapped so, and an unread square takes one's tag under
-the tests of the other cameras' naming (:func:`~handcap.detect.views.match_squares`: within the gate in one of four
+the tests of the other cameras' naming (:func:`~handcap.detect.naming.match_squares`: within the gate in one of four
 turns, going round as the camera's read squares do, no other mapped square near; the tag not read elsewhere in the
 frame, its corners not named otherwise). Where the frame before and the frame after name an unread square
 differently, neither is taken.
@@ -23,8 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
-from handcap.detect.views import (Namer, ViewNaming, affine_map, image_index, match_squares, square_corners,
-                                  turning)
+from handcap.detect.naming import Namer, ViewNaming, affine_map, image_index, match_squares, square_corners, turning
 
 #: The corners of both frames within this many times the unread square's longest side fit the local motion.
 RADIUS = 3.0
