@@ -191,3 +191,27 @@ def test_synth_images_needs_a_patch_layout(tmp_path, capsys):
     with pytest.raises(HandcapError, match="--image-response 'log'"):
         synth(tmp_path / "z", images=True, image_response="log")
     assert not (tmp_path / "z").exists()
+
+
+def test_cameras_not_triggered_together_film_the_take_at_their_own_moments(gl_ok, tmp_path):
+    from handcap import HandcapError
+    from handcap.synth.config import SynthConfig
+    from handcap.synth.filming import Clocks, film_capture
+    from handcap.synth.scene import synthesize
+
+    capture = synthesize(SynthConfig(layout="dense-patches", motion="random", frames=5, cameras=3, object="none",
+                                     rate=60.0), progress=False)
+    film_capture(capture, tmp_path / "a", scale=0.2, progress=False)
+    clocks = Clocks((0, 1, 2), 2)  # each camera at 30 Hz, started half a frame after the one before
+    film_capture(capture, tmp_path / "b", scale=0.2, progress=False, clocks=clocks)
+    every, own = np.load(tmp_path / "a" / "image_truth.npz"), np.load(tmp_path / "b" / "image_truth.npz")
+    assert own["all_xy"].shape[0] == clocks.frames(5) == 2 and float(own["rate"]) == 30.0
+    np.testing.assert_array_equal(own["camera_offsets"], [0.0, 0.5, 1.0])
+    for c, start in enumerate(clocks.starts):
+        np.testing.assert_array_equal(own["all_xy"][:, c], every["all_xy"][start::2, c][:2])
+        assert sorted(p.name for p in (tmp_path / "b" / "images" / f"cam_{c}").iterdir()) == ["000000.png",
+                                                                                                "000001.png"]
+    np.testing.assert_array_equal(own["positions"], every["positions"][0::2][:2])  # at the first camera's moments
+    assert "camera_offsets" not in every
+    with pytest.raises(HandcapError, match="do not fit"):
+        film_capture(capture, tmp_path / "c", scale=0.2, progress=False, clocks=Clocks((0, 5, 0), 1))

@@ -20,6 +20,11 @@ Files, in the capture folder:
   whose four corners are visible; ``positions (T, N, 3)`` metres,
   ``all_xy (T, C, N, 2)``, ``visible (T, C, N)``, ``rate``, ``image_size (C, 2)``.
 
+Cameras not triggered together (:class:`Clocks`): camera c films the capture's frames ``starts[c] + every * k`` as
+its frames k, at ``rate / every``. Each camera's ``all_xy`` and ``visible`` are then at its own moments,
+``positions`` at the first camera's, and ``camera_offsets (C,)`` gives each camera's offset in frames as
+:class:`handcap.multiview.sync.Sync` counts it (``(starts[c] - starts[0]) / every``).
+
 The printed corners follow the skin of the template layout's nominal spots
 (the capture's ``--placement-mm`` moves single markers; a printed patch is one
 piece of tape), so ``image_truth.npz`` and not ``truth.npz`` holds their truth.
@@ -27,7 +32,7 @@ piece of tape), so ``image_truth.npz`` and not ``truth.npz`` holds their truth.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -136,7 +141,7 @@ def check_filmable(config, scale: float = 1.0):
 
 
 def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | None = None,
-                 progress: bool | None = None) -> dict:
+                 progress: bool | None = None, clocks: Clocks | None = None) -> dict:
     """Render every frame of ``capture`` from every camera into ``folder`` (see the module docstring).
 
     Parameters
@@ -151,6 +156,8 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
         The look of the images (default :class:`~handcap.synth.images.ImageStyle`).
     progress : bool, optional
         Show a progress bar (default: only on a terminal).
+    clocks : Clocks, optional
+        Cameras not triggered together (see the module docstring); default: every camera films every frame.
 
     Returns
     -------
@@ -161,10 +168,15 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     Raises
     ------
     HandcapError
-        A layout that is not made of printed patches, or a scale out of range.
+        A layout that is not made of printed patches, a scale out of range, or clocks that do not fit the capture.
     """
     config = capture.config
     layout = check_filmable(config, scale)
+    clocks = clocks or Clocks((0,) * len(capture.rig.cameras))
+    if (len(clocks.starts) != len(capture.rig.cameras) or min(clocks.starts) < 0 or clocks.every < 1
+            or clocks.frames(config.frames) < 1):
+        raise HandcapError(f"clocks {clocks} do not fit a capture of {len(capture.rig.cameras)} cameras and "
+                           f"{config.frames} frames")
     folder = Path(folder)
     pattern = session_pattern((config.side,), ())
     wanted = {m.patch for m in layout.markers if m.patch}
@@ -184,7 +196,7 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     if capture.object_motion is not None:
         obj = make_object(capture.object_motion.name, seed=config.seed)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, 16]))
-    n_frames, n_cams = len(vertices), len(cameras)
+    n_frames, n_cams = clocks.frames(len(vertices)), len(cameras)
     names = [f"{config.side}:{p.corner_name(int(r), int(c), owner=False)}" for p in patches for r, c in p.vertices()]
     all_xy = np.zeros((n_frames, n_cams, len(names), 2))
     visible = np.zeros((n_frames, n_cams, len(names)), bool)
@@ -193,31 +205,69 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     hidden = None if progress is None else not progress
     try:
         with tqdm(total=n_frames * n_cams, desc="images", unit="image", disable=hidden, leave=False) as bar:
-            for t in range(n_frames):
+            for t in range(len(vertices)):
+                filming = [c for c, start in enumerate(clocks.starts)
+                           if (t - start) % clocks.every == 0 and 0 <= (t - start) // clocks.every < n_frames]
+                if not filming:
+                    continue
                 frame_grids = [g[t] for g in grids]
                 occluders = random_blobs(vertices[t], rng, int(rng.integers(style.occluders[0],
                                                                             style.occluders[1] + 1)))
                 if obj is not None:
                     turn = Rotation.from_rotvec(capture.object_motion.rotation[t]).as_matrix()
                     occluders.append((obj.vertices @ turn.T + capture.object_motion.translation[t], obj.faces))
-                for c, camera in enumerate(cameras):
+                for c in filming:
+                    camera, k = cameras[c], (t - clocks.starts[c]) // clocks.every
                     shot = renderer.render(camera, vertices[t], frame_grids, rng, occluders=occluders)
-                    all_xy[t, c], visible[t, c] = shot.xy, shot.visible
-                    path = folder / "images" / camera.name / f"{t:06d}.png"
+                    all_xy[k, c], visible[k, c] = shot.xy, shot.visible
+                    path = folder / "images" / camera.name / f"{k:06d}.png"
                     path.parent.mkdir(parents=True, exist_ok=True)
                     ok, encoded = cv2.imencode(".png", shot.image)
                     with atomic_output(path) as fh:
                         fh.write(encoded.tobytes())
                     bar.update()
-                positions[t] = renderer.corner_points(frame_grids)
+                if 0 in filming:
+                    positions[(t - clocks.starts[0]) // clocks.every] = renderer.corner_points(frame_grids)
     finally:
         renderer.close()
     paths["pattern.toml"] = pattern.save(folder / "pattern.toml")
-    truth = _truth_arrays(patches, names, cameras, all_xy, visible, positions, config.rate)
+    truth = _truth_arrays(patches, names, cameras, all_xy, visible, positions, config.rate / clocks.every)
+    if clocks.every > 1 or any(clocks.starts):
+        truth["camera_offsets"] = clocks.offsets()
     paths["image_truth.npz"] = folder / "image_truth.npz"
     save_npz(paths["image_truth.npz"], truth)
     return {"images": n_frames * n_cams, "visible": int(visible.sum()), "blocks": len(truth["block_text"]),
             "paths": paths}
+
+
+@dataclass(frozen=True)
+class Clocks:
+    """Cameras not triggered together: camera c films the capture's frames ``starts[c] + every * k`` as its frame k.
+
+    Attributes
+    ----------
+    starts : tuple of int, length C
+        Each camera's first frame of the capture (0 or more).
+    every : int
+        Capture frames per camera frame (1 or more): the capture is synthesized at ``every`` times the cameras' rate.
+    """
+
+    starts: tuple
+    every: int = 1
+
+    def frames(self, n_frames: int) -> int:
+        """Frames every camera films of a capture of ``n_frames``.
+
+        Parameters
+        ----------
+        n_frames : int
+            The capture's frames.
+        """
+        return (n_frames - 1 - max(self.starts)) // self.every + 1
+
+    def offsets(self) -> np.ndarray:
+        """Each camera's offset (C,), frames of its own: its frame k shows the first camera's ``k + offset``."""
+        return (np.asarray(self.starts, float) - self.starts[0]) / self.every
 
 
 def _truth_arrays(patches, names, cameras, all_xy, visible, positions, rate) -> dict:
@@ -245,7 +295,8 @@ def _truth_arrays(patches, names, cameras, all_xy, visible, positions, rate) -> 
     }
 
 
-def film_take(config, folder, *, progress: bool | None = None, style: ImageStyle | None = None):
+def film_take(config, folder, *, progress: bool | None = None, style: ImageStyle | None = None,
+              clocks: Clocks | None = None):
     """Synthesize a take of printed patches and film it into ``folder``, as a user's camera take would arrive.
 
     The cameras read out the window of their sensor that holds the hand (:func:`region_rig`). Writes
@@ -261,6 +312,8 @@ def film_take(config, folder, *, progress: bool | None = None, style: ImageStyle
         Progress bars (default: on a terminal).
     style : ImageStyle, optional
         The look of the images (default :class:`~handcap.synth.images.ImageStyle`).
+    clocks : Clocks, optional
+        Cameras not triggered together (see the module docstring).
 
     Returns
     -------
@@ -275,5 +328,5 @@ def film_take(config, folder, *, progress: bool | None = None, style: ImageStyle
     capture = replace(capture, rig=region_rig(capture.rig, hand_points[np.isfinite(hand_points).all(axis=-1)]))
     capture.rig.save(folder / "cameras.toml")
     write_hand_motion(capture.hand_motion, folder / "truth.npz")
-    film_capture(capture, folder, progress=progress, style=style)
+    film_capture(capture, folder, progress=progress, style=style, clocks=clocks)
     return capture
