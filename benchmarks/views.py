@@ -3,6 +3,7 @@
 
     .venv/bin/python benchmarks/views.py            # four rendered takes, about 8 minutes on 2 cores
     .venv/bin/python benchmarks/views.py --quick    # two
+    .venv/bin/python benchmarks/views.py --unsynchronised   # cameras not triggered together, about 4 minutes
 
 Three takes are ``handcap demo --images``'s kind: one subject in the ``dense-patches`` layout, 13 cameras at 4 Hz,
 rendered by ``handcap synth`` (images the networks never saw), a grasp of 11 frames. The fourth is a video: 3
@@ -19,6 +20,10 @@ then from the other cameras. Against the image truth it prints, without and with
 5. the same naming with a rig calibrated less well: every camera turned by 0.2 mrad and moved by 0.2 mm (standard
    deviations, each axis), so that the named corners reproject about 0.8 px from where they were found (a good
    calibration of a real rig: 0.3-0.5 px).
+
+``--unsynchronised``: a grasp filmed by 8 cameras at 20 Hz, each started at its own third of a frame
+(:class:`~handcap.synth.filming.Clocks`), named as synchronised, with the offsets ``detect --sync auto`` finds, and
+with the true offsets.
 """
 
 from __future__ import annotations
@@ -40,16 +45,19 @@ from handcap.detect.motion import name_from_frames
 from handcap.detect.naming import square_corners
 from handcap.detect.views import name_from_views
 from handcap.multiview import Detections, triangulate_detections
+from handcap.multiview.offsets import shift_detections
+from handcap.multiview.sync import Sync, estimate_sync
 from handcap.patterns.pattern import Pattern
 from handcap.synth.config import SynthConfig
-from handcap.synth.filming import film_take
+from handcap.synth.filming import Clocks, film_take
 
 SEEDS = ((7, 21), (101, 201), (102, 202))  # (take seed, subject seed); the first is the demo's take
 OFF = 2e-4  # the rig calibrated less well: radians of each camera's turn, metres of its move (standard deviations)
 
 
-def scores(arrays: dict, truth, rig: CameraRig, pattern: Pattern) -> dict:
-    """Tags, corners and triangulation of a detections file's arrays against the image truth."""
+def scores(arrays: dict, truth, rig: CameraRig, pattern: Pattern, offsets=None) -> dict:
+    """Tags, corners and triangulation of a detections file's arrays against the image truth (with ``offsets``,
+    cameras not triggered together: triangulated on the first camera's frames, as ``triangulate --sync``)."""
     index = {str(n): k for k, n in enumerate(truth["marker_names"])}
     every = truth["all_xy"]  # (T, C, N, 2), hidden corners too
     names = [str(arrays["marker_names"][m]) for m in arrays["marker"]]
@@ -70,9 +78,13 @@ def scores(arrays: dict, truth, rig: CameraRig, pattern: Pattern) -> dict:
         wrong += place is None or not np.linalg.norm(place - xy, axis=1).max() <= 2.0
     d = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
                    arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    if offsets is not None:
+        d, _ = shift_detections(d, offsets)
     tri = triangulate_detections(d, rig, min_views=3, progress=False)
     columns = [index.get(str(n), -1) for n in tri.names]
     true = np.where(np.array(columns)[None, :, None] >= 0, truth["positions"][:, columns], np.nan)
+    if len(true) < len(tri.positions):  # frames of the other cameras after the first camera's last
+        true = np.concatenate([true, np.full((len(tri.positions) - len(true),) + true.shape[1:], np.nan)])
     error = np.linalg.norm(tri.positions - true, axis=-1) * 1000
     ok = np.isfinite(error)
     return {"tags": found, "visible tags": len(visible), "tags reported": len(read), "tags wrong": wrong,
@@ -107,31 +119,65 @@ def line(what: str, s: dict) -> str:
             f"p95 {s['p95 mm']:.3f} mm")
 
 
-def detected(detector, config, folder):
+def detected(detector, config, folder, clocks=None):
     """Film ``config`` into ``folder`` and detect it: (capture, pattern, run, seconds, truth)."""
-    capture = film_take(config, folder, progress=False)
+    capture = film_take(config, folder, progress=False, clocks=clocks)
     pattern = Pattern.load(Path(folder) / "pattern.toml")
     detector.pattern = pattern
     sources = frame_sources([Path(folder) / "images" / c.name for c in capture.rig])
     start = time.perf_counter()
-    run = detect_capture(detector, sources, pattern.corner_names(), config.rate, progress=False, response="linear")
+    rate = config.rate / (1 if clocks is None else clocks.every)
+    run = detect_capture(detector, sources, pattern.corner_names(), rate, progress=False, response="linear")
     return capture, pattern, run, time.perf_counter() - start, np.load(Path(folder) / "image_truth.npz")
 
 
-def named(run, rig, pattern):
-    """As ``handcap detect`` names the unread squares: from the neighbouring frames, then from the other cameras;
-    returns both namings and the seconds they took."""
+def named(run, rig, pattern, sync=None):
+    """As ``handcap detect`` names the unread squares: from the neighbouring frames, then from the other cameras
+    (``sync``: 'auto' finds the cameras' offsets first, as ``detect --sync auto``, or a Sync gives them); returns
+    both namings and the seconds they took."""
     start = time.perf_counter()
     moved = name_from_frames(run.arrays, run.unread, pattern, progress=False)
-    views = name_from_views(moved.arrays, moved.left, rig, pattern, progress=False)
+    if sync == "auto":
+        a = moved.arrays
+        sync = estimate_sync(Detections(a["camera_names"], a["marker_names"], a["frame"], a["camera"], a["marker"],
+                                        a["xy"], a["score"], a["rate"], int(a["n_frames"])), rig)
+    views = name_from_views(moved.arrays, moved.left, rig, pattern, progress=False, sync=sync)
     return moved, views, time.perf_counter() - start
+
+
+def unsynchronised(detector) -> None:
+    """8 cameras at 20 Hz started one by one (a grasp filmed at 60 Hz, each camera taking every third frame from
+    its own start), named as synchronised, with the offsets ``detect --sync auto`` finds, and with the true ones."""
+    starts = (0, 4, 1, 8, 2, 6, 3, 7)
+    config = SynthConfig(layout="dense-patches", motion="grasp", frames=165, rate=60.0, seed=11, subject_seed=31,
+                         cameras=8, min_views=3)
+    clocks = Clocks(starts, 3)
+    with tempfile.TemporaryDirectory() as folder:
+        capture, pattern, run, seconds, truth = detected(detector, config, folder, clocks)
+        names = tuple(str(n) for n in run.arrays["camera_names"])
+        true = Sync(names, clocks.offsets(), names[0], np.nan, np.nan, 0)
+        results = [named(run, capture.rig, pattern, sync) for sync in (None, "auto", true)]
+        figures = [scores(run.arrays, truth, capture.rig, pattern, true.offsets)]
+        figures += [scores(views.arrays, truth, capture.rig, pattern, true.offsets) for _, views, _ in results]
+    auto = results[1][1]
+    print(f"8 cameras at 20 Hz not triggered together (offsets {', '.join(f'{o:.2f}' for o in true.offsets)} "
+          f"frames), {run.images} images: detection {seconds:.1f} s; taken as synchronised: "
+          f"{results[0][1].summary()} ({'; '.join(results[0][1].warnings) or 'no warning'}); with the offsets found: "
+          f"{auto.summary()}, naming {results[1][2]:.2f} s; with the true offsets: {results[2][1].summary()}")
+    for what, value in zip(("detected", "named as synchronised", "named with the offsets found (--sync auto)",
+                            "named with the true offsets"), figures):
+        print(line(what + " (triangulated with the true offsets)", value))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one take of 13 cameras, and the video")
+    parser.add_argument("--unsynchronised", action="store_true", help="only the cameras not triggered together")
     args = parser.parse_args()
     detector = Detector(load_corner_net(int8=True), load_reader(), refiner=load_refiner(), checker=load_checker())
+    if args.unsynchronised:
+        unsynchronised(detector)
+        return
     totals = {"before": [], "frames": [], "after": [], "rough": []}
     for seed, subject in SEEDS[:1] if args.quick else SEEDS:
         config = SynthConfig(layout="dense-patches", motion="grasp", frames=11, rate=4.0, seed=seed,

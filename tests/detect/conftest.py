@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -63,6 +64,22 @@ class SquareTake:
             xy = xy[::-1] if j % 2 else xy
             unread.append(UnreadSquares(self.blocks[k][1], self.blocks[k][2], xy[None], np.ones((1, 4))))
         return arrays, unread
+
+    def unsynchronised(self, starts, every: int) -> SquareTake:
+        """The take as cameras not triggered together film it: camera c's frame k is this take's frame
+        ``starts[c] + every * k``, at ``rate / every``, so its offset against camera 0 is
+        ``(starts[c] - starts[0]) / every`` frames."""
+        d = self.capture.detections
+        frames = (self.frames - 1 - max(starts)) // every + 1
+        k, rest = np.divmod(d["frame"] - np.asarray(starts)[d["camera"]], every)
+        keep = (rest == 0) & (k >= 0) & (k < frames)
+        row = np.full(len(keep), -1)
+        row[keep] = np.arange(keep.sum())
+        kept = {**d, "frame": k[keep], **{key: d[key][keep] for key in ("camera", "marker", "xy", "score")}}
+        blocks = [(tag, c, (f - starts[c]) // every, xy, list(row[rows])) for tag, c, f, xy, rows in self.blocks
+                  if keep[rows].all()]
+        return SquareTake(SimpleNamespace(detections=kept, rig=self.capture.rig), self.pattern, self.names, blocks,
+                          frames, self.rate / every)
 
 
 @lru_cache(maxsize=4)

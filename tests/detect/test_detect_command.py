@@ -133,6 +133,10 @@ def test_other_bad_input(frames, weights, tmp_path, capsys):
     rig = tmp_path / "rig.toml"
     rig.write_text('[cam_a]\nname = "cam_a"\nsize = [200, 160]\nmatrix = [[100, 0, 100], [0, 100, 80], [0, 0, 1]]\n'
                    'distortions = [0, 0, 0, 0, 0]\nrotation = [0, 0, 0]\ntranslation = [0, 0, 1]\n')
+    both = tmp_path / "both.toml"
+    both.write_text(rig.read_text().replace("cam_a", "cam_0") + "\n"
+                    + rig.read_text().replace("cam_a", "cam_1")
+                    .replace("translation = [0, 0, 1]", "translation = [0.1, 0, 1]"))
     pattern = tmp_path / "pattern.toml"
     session_pattern(("right",), ()).save(pattern)
     cases = [
@@ -144,6 +148,16 @@ def test_other_bad_input(frames, weights, tmp_path, capsys):
           str(tmp_path / "d.npz")], "lacks glyphs"),
         (["detect", str(frames / "cam_0"), "--alphabet", "0123\u00e9", "--out", str(tmp_path / "d.npz")], "knows no"),
         (["detect", str(frames / "cam_0"), "--threshold", "1.5", "--out", str(tmp_path / "d.npz")], "between 0 and 1"),
+        # Offsets time the other cameras' views for the naming: they need the rig and the template, and good offsets.
+        (["detect", str(frames / "cam_0"), "--sync", "auto", "--out", str(tmp_path / "d.npz")], "needs --rig and"),
+        (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
+          "--sync", "auto", "--sync", "cam_1=2", "--out", str(tmp_path / "d.npz")], "give it alone"),
+        (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
+          "--sync", "cam_9=2", "--out", str(tmp_path / "d.npz")], "which the inputs lack"),
+        (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
+          "--sync", "cam_1 2", "--out", str(tmp_path / "d.npz")], "CAMERA=FRAMES"),
+        (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
+          "--no-views", "--sync", "cam_1=2", "--out", str(tmp_path / "d.npz")], "not --no-views"),
         # An input image as the output: refused (outputs are .npz) and left as it was.
         (["detect", str(frames / "cam_0" / "000000.png"), "--out", str(frames / "cam_0" / "000000.png")], ".npz"),
     ]

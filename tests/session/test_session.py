@@ -115,6 +115,8 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
      "stages.calibrate.drop_misfit_mm must be a number"),
     (lambda t: re.sub(r"min_views = (\d)", 'min_views = \\1\nsync = "cam_1 12"', t, count=1),
      'stages.triangulate.sync is "auto" or offsets; an offset is CAMERA=FRAMES'),
+    (lambda t: t.replace("rate = 4.0", 'rate = 4.0\nsync = "cam_1"', 1),
+     'stages.detect.sync is "auto" or offsets; an offset is CAMERA=FRAMES'),
 ])
 def test_bad_session_files(made, tmp_path, capsys, edit, message):
     text = (made / "session.toml").read_text()
@@ -196,3 +198,23 @@ def test_an_edited_layout_file_reruns_the_stages_that_read_it(made, tmp_path):
     finally:
         session_file.unlink()
         (made / "glove.toml").unlink()
+
+
+def test_detect_names_unread_squares_on_the_clocks_triangulate_is_given(made):
+    from handcap.session.runner import stage_settings
+
+    text = (made / "session.toml").read_text()
+    synced = re.sub(r"min_views = (\d)", 'min_views = \\1\nsync = "auto"\nmax_offset_s = 1.5', text, count=1)
+    path = made / "synced.toml"
+    for edit, want in ((synced, {"sync": "auto", "max_offset_s": 1.5}),
+                       (synced.replace("rate = 4.0", 'rate = 4.0\nsync = "cam_1=2"'), {"sync": "cam_1=2"}),
+                       (synced.replace("rate = 4.0", "rate = 4.0\nviews = false"), {}),
+                       (text, {})):
+        path.write_text(edit)
+        try:
+            session = load_session(path)
+        finally:
+            path.unlink()
+        take = next(t for t in session.takes if t.kind == "images")
+        got = stage_settings(session, take, "detect")
+        assert {k: got[k] for k in ("sync", "max_offset_s") if k in got} == want

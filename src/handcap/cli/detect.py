@@ -3,18 +3,23 @@
 from __future__ import annotations
 
 from handcap.cli.common import frames_arg
+from handcap.core.errors import HandcapError
+from handcap.multiview.sync import MAX_OFFSET_S
 from handcap.steps import detect as detect_step
 from handcap.steps import overlay as overlay_step
 
 
 def _cmd_detect(a):
+    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
+        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
     return detect_step.detect(a.inputs, a.out, rig=a.rig, pattern=a.pattern, alphabet=a.alphabet, rate=a.rate,
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
                               track=not a.whole_frames, checker_weights=a.checker_weights,
                               checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise,
                               response=a.response, frames=frames_arg(a.frames), every=a.every,
-                              views=not a.no_views)
+                              views=not a.no_views, sync=None if a.sync is None else "auto" if a.sync == ["auto"]
+                              else a.sync, max_offset_s=a.max_offset)
 
 
 def add_detect(verbs) -> None:
@@ -61,6 +66,14 @@ def add_detect(verbs) -> None:
                    help="with --pattern, leave a white square a camera could not read unnamed (default: it takes the "
                         "tag of the template's square that the camera's neighbouring frames, or with --rig the other "
                         "cameras, place on it to 1.5 px; the file marks such blocks in block_from_views)")
+    p.add_argument("--sync", action="append", metavar="auto|CAM=FRAMES",
+                   help="cameras not triggered together, for naming the squares a camera could not read from the "
+                        "other cameras (with --rig and --pattern): auto finds each camera's offset from the corners "
+                        "the cameras named, or give CAM=FRAMES (repeatable or comma-joined; camera CAM's frame f shows "
+                        "the first camera's frame f + FRAMES, in the frames of the file written, as triangulate "
+                        "--sync counts them). Default: the cameras are synchronised")
+    p.add_argument("--max-offset", type=float, default=MAX_OFFSET_S, metavar="SECONDS",
+                   help="how far --sync auto searches, seconds either way (default %(default)g)")
     p.add_argument("--no-denoise", action="store_true",
                    help="search noisy images as they are (default: an image with more sensor noise than the networks "
                         "learned, about 5 grey levels, is denoised first; a warning says how many)")

@@ -21,17 +21,25 @@ in that image onto where it named them (:func:`_local_fit`; with :data:`MIN_FIT`
 A square that takes a tag gets the template's names for its corners, and the detections file one block row more,
 marked in ``block_from_views``. The squares named so give the corners more views, so the naming runs again
 (:data:`PASSES`). Cameras that were not triggered together disagree by more than the gate: nothing is taken
-where the views do not agree, and a warning says so.
+where the views do not agree, and a warning says so. Given each camera's time offset (a
+:class:`~handcap.multiview.sync.Sync`), each camera's squares are named from corners triangulated at its own
+moments: the other cameras' named corners are put on its frames (:func:`~handcap.multiview.offsets.shift_detections`,
+linearly between their two frames around each moment) and triangulated there (:class:`Clocks`). The affine map above
+mends what the interpolation misses of the hand's motion.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from tqdm import tqdm
 
 from handcap.detect.naming import (Namer, ViewNaming, affine_map, image_index, match_squares, signed_area,
                                    square_corners, turning)
+from handcap.core.errors import HandcapError
 from handcap.multiview.detections import Detections
+from handcap.multiview.offsets import shift_detections
 from handcap.multiview.reconstruct import triangulate_detections
 
 #: Largest reprojection error of a corner triangulated from the named views, pixels, for it to be projected.
@@ -49,8 +57,8 @@ DISAGREE_PX = 2.0
 AGREEING = 0.5
 
 
-def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
-                    progress: bool | None = None) -> ViewNaming:
+def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES, progress: bool | None = None,
+                    sync=None) -> ViewNaming:
     """Name unread white squares where the rig's other cameras place a square of the template (module docstring).
 
     Parameters
@@ -66,11 +74,22 @@ def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
         Rounds of triangulating and naming.
     progress : bool, optional
         Progress bars of the triangulation.
+    sync : Sync, optional
+        Cameras not triggered together (:mod:`handcap.multiview.sync`): each camera's offset (and drift) in frames
+        of the detections, cameras as in ``arrays``. None: the cameras are synchronised.
 
     Returns
     -------
     ViewNaming
+
+    Raises
+    ------
+    HandcapError
+        For a ``sync`` of other cameras than the detections'.
     """
+    if sync is not None and tuple(sync.camera_names) != tuple(str(n) for n in arrays["camera_names"]):
+        raise HandcapError(f"the offsets are of cameras {', '.join(sync.camera_names)}, and the detections' are "
+                           f"{', '.join(str(n) for n in arrays['camera_names'])}")
     arrays = dict(arrays)
     arrays.setdefault("block_from_views", np.zeros(len(arrays["block_text"]), bool))
     tags, corners = square_corners(pattern, arrays["marker_names"])
@@ -78,15 +97,19 @@ def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
     left = [u for u in unread if len(u.xy)]
     named = added = refused = 0
     warnings = []
+    timed = [] if sync is None else np.flatnonzero(np.isfinite(sync.offsets))
+    if sync is not None and not len(timed):
+        raise HandcapError("no camera has an offset: nothing to name the squares from")
+    first = 0 if sync is None else int(timed[0])
     for _ in range(passes):
         if not left or not len(tags) or len(arrays["frame"]) == 0 or len(arrays["camera_names"]) < 2:
             break
-        known, disagree = _known(arrays, rig, progress)
+        known, disagree = _known(arrays, rig, progress, rebased(sync, first))
         if disagree is not None:
             warnings.append(disagree)
             break
         namer = Namer(tags, corners)
-        left = _match_all(arrays, left, known, rig, namer, progress)
+        left = _match_all(arrays, left, Clocks(arrays, rig, sync, (first, known), progress), rig, namer, progress)
         # A refused square stays unread and is refused again in the next pass: counted once, in the last.
         named, added, refused = named + namer.named, added + len(namer.rows["frame"]), namer.refused
         if not namer.named:
@@ -95,11 +118,70 @@ def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
     return ViewNaming(arrays, named, added, total, refused, tuple(warnings), tuple(left))
 
 
-def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
-    """The named corners triangulated where their views agree (T, M, 3), metres (NaN elsewhere), and a warning
-    where the views of most corners disagree (else None)."""
+def rebased(sync, camera: int):
+    """``sync`` (a :class:`~handcap.multiview.sync.Sync`) counted on ``camera``'s frames, or None where it is None.
+
+    Camera j's frame h shows the reference's frame ``h (1 + d_j) + o_j``; on the clock of camera c, whose frame f
+    shows ``f (1 + d_c) + o_c``, that is c's frame ``h + (o_j - o_c) / (1 + d_c) + h (d_j - d_c) / (1 + d_c)``.
+
+    Parameters
+    ----------
+    sync : Sync or None
+    camera : int
+        Index into ``sync.camera_names``.
+    """
+    if sync is None:
+        return None
+    drift = np.zeros(len(sync.offsets)) if sync.drift is None else np.asarray(sync.drift, float)
+    rate = 1.0 + drift[camera]
+    return replace(sync, offsets=(np.asarray(sync.offsets, float) - sync.offsets[camera]) / rate,
+                   drift=None if sync.drift is None else (drift - drift[camera]) / rate,
+                   reference=sync.camera_names[camera])
+
+
+class Clocks:
+    """The known corners on each camera's own frames (T, M, 3): those of ``first`` for all where the cameras
+    are synchronised (``sync`` None), else triangulated again for each camera on its clock (:func:`rebased`); the
+    last camera asked for is kept.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        The detections file's arrays.
+    rig : CameraRig
+    sync : Sync or None
+    first : (int, ndarray (T, M, 3))
+        A camera with an offset, and the known corners on its frames, metres.
+    progress : bool, optional
+    """
+
+    def __init__(self, arrays: dict, rig, sync, first: tuple, progress=None):
+        self.arrays, self.rig, self.sync, self.progress = arrays, rig, sync, progress
+        self.camera, self.known = first
+
+    def __call__(self, camera: int) -> np.ndarray | None:
+        """The known corners on ``camera``'s frames (T, M, 3), metres; None for a camera without an offset.
+
+        Parameters
+        ----------
+        camera : int
+        """
+        if self.sync is None or camera == self.camera:
+            return self.known
+        self.camera = camera
+        self.known = None
+        if np.isfinite(self.sync.offsets[camera]):
+            self.known = _known(self.arrays, self.rig, self.progress, rebased(self.sync, camera))[0]
+        return self.known
+
+
+def _known(arrays: dict, rig, progress, sync=None) -> tuple[np.ndarray, str | None]:
+    """The named corners triangulated where their views agree (T, M, 3), metres (NaN elsewhere), on the frames of
+    ``sync``'s reference, and a warning where the views of most corners disagree (else None)."""
     detections = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
                             arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    if sync is not None:
+        detections, _ = shift_detections(detections, sync.offsets, sync.drift)
     tri = triangulate_detections(detections, rig, min_views=2, threshold_px=2 * DISAGREE_PX, progress=progress)
     seen = np.zeros((detections.n_frames, len(detections.marker_names), len(detections.camera_names)), bool)
     seen[detections.frame, detections.marker, detections.camera] = True
@@ -109,32 +191,37 @@ def _known(arrays: dict, rig, progress) -> tuple[np.ndarray, str | None]:
     if twice and (len(error) < AGREEING * twice or median > DISAGREE_PX):
         return tri.positions, (f"the cameras' views of the named corners disagree ({len(error)} of the {twice} corners "
                                f"two cameras or more named agree to {2 * DISAGREE_PX:g} px, median {median:.1f} px): "
-                               "no unread square was named from the other cameras. Cameras not triggered together? "
-                               "triangulate --sync auto finds their offsets. Or the rig is not the one that filmed "
-                               "the take")
+                               "no unread square was named from the other cameras. "
+                               + ("Are the offsets (--sync) right? " if sync is not None else
+                                  "Cameras not triggered together? detect --sync auto finds their offsets. ")
+                               + "Or the rig is not the one that filmed the take")
     agree = np.isfinite(tri.error_px) & (tri.error_px <= max(AGREE_PX, SPREAD * median))
     return np.where(agree[..., None], tri.positions, np.nan), None
 
 
-def _match_all(arrays: dict, unread, known: np.ndarray, rig, namer: Namer, progress=None) -> list:
+def _match_all(arrays: dict, unread, clocks: Clocks, rig, namer: Namer, progress=None) -> list:
     """Match every image's unread squares to the projections of the known squares; ``namer`` takes the matches.
     Returns the squares still unread."""
     tags, corners = namer.tags, namer.corners
     still = []
     by_image = image_index(arrays)
     signs = turning(arrays)
+    if clocks.sync is not None:  # camera by camera: one triangulation each
+        unread = sorted(unread, key=lambda u: u.camera)
     for u in tqdm(unread, desc="views", unit="image", disable=None if progress is None else not progress,
                   leave=False):
-        if u.frame >= len(known):
+        known = clocks(u.camera)
+        if known is None or u.frame >= len(known):
             still.append(u)
             continue
+        now = known[u.frame]
         camera = rig[str(arrays["camera_names"][u.camera])]
         mine, read = by_image.get((u.camera, u.frame), (np.zeros(0, int), set()))
         take = ~np.isin(tags, list(read))
-        points = known[u.frame][corners[take]]
+        points = now[corners[take]]
         seen = np.isfinite(points).all(axis=(1, 2))
         pixels, _ = camera.project(points[seen])
-        fit = _local_fit(camera, known[u.frame][arrays["marker"][mine]], arrays["xy"][mine])
+        fit = _local_fit(camera, now[arrays["marker"][mine]], arrays["xy"][mine])
         if fit is not None:  # where the rig's small errors put the camera's projections, mended on its named corners
             pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
         facing = signed_area(pixels) * signs.get(u.camera, 1.0) > 0

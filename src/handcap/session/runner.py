@@ -166,7 +166,8 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path, 
 
 def stage_settings(session: Session, take: Take, stage: str) -> dict:
     """A stage's settings for one take: the session's, then the take's own over them; a ``filter_cutoff`` of 0
-    means no filter.
+    means no filter. Cameras started one by one are so for every stage: detect takes triangulate's ``sync`` (and
+    ``max_offset_s``) to name unread squares from the other cameras, unless it has its own or no ``views``.
 
     Parameters
     ----------
@@ -177,6 +178,9 @@ def stage_settings(session: Session, take: Take, stage: str) -> dict:
     settings = {**session.settings.get(stage, {}), **take.settings.get(stage, {})}
     if settings.get("filter_cutoff") == 0:
         del settings["filter_cutoff"]
+    if stage == "detect" and settings.get("views", True) and "sync" not in settings:
+        timing = stage_settings(session, take, "triangulate")
+        settings.update({k: timing[k] for k in ("sync", "max_offset_s") if k in timing})
     return settings
 
 

@@ -38,7 +38,8 @@ mistake naming the key and the file (issue 19).
     [takes.settings.solve]              # this take's own settings over the session's
     filter_cutoff = 0                   # 0: no filter
     [takes.settings.triangulate]
-    sync = "auto"                       # cameras started one by one: find each one's offset (or "cam_2=+12.5, ...")
+    sync = "auto"                       # cameras started one by one: find each one's offset (or "cam_2=+12.5, ...");
+                                        # detect names unread squares with it too, unless it has a sync of its own
 
 Paths are relative to the session file.
 """
@@ -57,7 +58,7 @@ from handcap.multiview.sync import parse_offsets
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
     "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str, "track": bool,
-               "views": bool},
+               "views": bool, "sync": str, "max_offset_s": float},
     "triangulate": {"min_views": int, "threshold_px": float, "units": str, "sync": str, "sync_reference": str,
                     "max_offset_s": float},
     "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,
@@ -156,7 +157,7 @@ def _settings(raw, where: str) -> dict:
                 known = ", ".join(STAGES[stage]) or "none"
                 raise HandcapError(f"{where}.{stage}.{key} is not a setting of {stage} ({known})")
             settings[stage][key] = _typed(value, STAGES[stage][key], f"{where}.{stage}.{key}")
-            if (stage, key) == ("triangulate", "sync") and value != "auto":
+            if key == "sync" and value != "auto":
                 try:
                     parse_offsets(value)
                 except HandcapError as error:

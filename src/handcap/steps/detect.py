@@ -16,6 +16,8 @@ from handcap.detect.motion import name_from_frames
 from handcap.detect.views import name_from_views
 from handcap.detect.sources import FrameSelection, frame_notes, frame_sources, select_frames, short_videos
 from handcap.io import read_rig
+from handcap.multiview.detections import Detections
+from handcap.multiview.sync import MAX_OFFSET_S, check_sync, estimate_sync, offsets_from_names, parse_offsets
 from handcap.steps.step import Step
 
 DEFAULT_RATE = 20.0  # DexterCap's cameras; said in a warning when assumed
@@ -41,7 +43,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
            corner_weights=None, reader_weights=None, refiner_weights=None, refine: bool = True,
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
            checker: bool = True, adapt_steps: int = 0, denoise: bool = True, response: str = "auto",
-           frames: slice | None = None, every: int = 1, views: bool = True) -> Step:
+           frames: slice | None = None, every: int = 1, views: bool = True, sync=None,
+           max_offset_s: float = MAX_OFFSET_S) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -96,6 +99,13 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         With a template: name the white squares a camera could not read where its neighbouring frames
         (:mod:`handcap.detect.motion`) and, with a rig, the other cameras (:mod:`handcap.detect.views`) place a
         square of the template; the file marks them in ``block_from_views``.
+    sync : None, 'auto', str, sequence of str or dict
+        Cameras not triggered together, for the naming from the other cameras (:mod:`handcap.multiview.sync`):
+        ``'auto'`` finds each camera's offset from the corners the cameras named; ``CAM=FRAMES`` items (or a dict)
+        give them (camera c's frame f shows the first camera's frame f + offset; cameras not named 0). None: the
+        cameras are taken as synchronised. Needs ``rig`` and ``pattern``.
+    max_offset_s : float
+        How far ``'auto'`` searches, seconds either way.
     """
     out = Path(out)
     if out.suffix.lower() != ".npz":
@@ -112,6 +122,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                "input folder or video after its camera")
         names = [n for n in cameras.names if n in names]
         sources = sorted(sources, key=lambda s: names.index(s.camera))
+    given = _given_sync(sync, names, rig, template, views)
     pick = FrameSelection(0 if frames is None or frames.start is None else frames.start,
                           None if frames is None else frames.stop, every)
     if pick != FrameSelection():
@@ -220,8 +231,11 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         naming = name_from_frames(found, run.unread, template, progress=progress)
         found, left, by_views = naming.arrays, naming.left, f"; {naming.summary()}"
         if rig is not None:
-            naming = name_from_views(found, left, cameras, template, progress=progress)
-            found, warnings = naming.arrays, warnings + list(naming.warnings)
+            offsets, said = (None, []) if sync is None else _offsets(found, cameras, given, max_offset_s)
+            if offsets is not None:
+                by_views += f"; {offsets.summary()}"
+            naming = name_from_views(found, left, cameras, template, progress=progress, sync=offsets)
+            found, warnings = naming.arrays, warnings + said + list(naming.warnings)
             by_views += f"; {naming.summary()}"
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
@@ -237,6 +251,41 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                               f"{out.name} is input frame {pick.start} + {pick.every} k, at "
                                               f"{rate:g} Hz")
     return Step(lines, tuple(warnings), (str(out),), arrays)
+
+
+def _given_sync(sync, names: list, rig, template, views: bool) -> dict | None:
+    """The offsets ``sync`` gives by camera (None for 'auto' or none), checked before the detection."""
+    if sync is None:
+        return None
+    if rig is None or template is None or not views:
+        raise HandcapError("--sync times the other cameras' views for naming the squares a camera could not read: it "
+                           "needs --rig and --pattern, and not --no-views (triangulate --sync synchronises the corners "
+                           "named)")
+    if sync == "auto":
+        return None
+    given = dict(sync) if isinstance(sync, dict) else parse_offsets(sync)
+    unknown = [n for n in given if n not in names]
+    if unknown:
+        raise HandcapError(f"--sync: an offset for camera {unknown[0]!r}, which the inputs lack (they are "
+                           f"{', '.join(names)})")
+    return given
+
+
+def _offsets(arrays: dict, rig, given: dict | None, max_offset_s: float):
+    """Each camera's offset (a :class:`~handcap.multiview.sync.Sync`) from the named corners ('auto', ``given``
+    None) or as given, and its warnings; None where the search placed no second camera."""
+    detections = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
+                            arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    if len(detections.camera_names) < 2:
+        return None, []
+    if given is None:
+        found = estimate_sync(detections, rig, max_offset_s=max_offset_s)
+        if np.isfinite(found.offsets).sum() < 2:
+            return None, [f"--sync auto placed no camera beside {found.reference}, so no unread square was named "
+                          "from the other cameras: " + "; ".join(found.warnings)]
+    else:
+        found = check_sync(detections, rig, offsets_from_names(detections, given))
+    return found, list(found.warnings)
 
 
 def _nothing_read(detector, source) -> str:
