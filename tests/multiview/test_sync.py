@@ -214,3 +214,49 @@ def test_the_command_synchronises_files_of_one_camera_each(capture, tmp_path, ca
                  "--out", str(tmp_path / "still.c3d")]) == 2
     assert "placed no camera beside cam_0" in capsys.readouterr().err
     assert read_detections(paths[0]).n_frames == FRAMES - START[0]
+
+
+def _circling(step: float, noise: float, frames: int = 16, markers: int = 4, seed: int = 0):
+    """Camera b's detections of ``markers`` finger tips going round (40-70 px radius, ``step`` radians a frame),
+    with ``noise`` px, and each one's true pixels at any moment (b's frames)."""
+    def at(m, t):
+        a = t * step + m
+        return np.stack([300 + (40 + 10 * m) * np.cos(a), 200 + (40 + 10 * m) * np.sin(a)], axis=-1)
+
+    frame, marker = np.tile(np.arange(frames), markers), np.repeat(np.arange(markers), frames)
+    xy = at(marker, frame) + np.random.default_rng(seed).normal(0, noise, (len(frame), 2))
+    return frame, marker, xy, at
+
+
+def test_a_marker_that_curves_between_frames_is_moved_along_its_curve():
+    # Finger tips going round at 20 Hz (a quarter turn in 4 frames): camera b started half a frame late, so the
+    # reference's frames fall halfway between b's.
+    frame, marker, xy, at = _circling(np.pi / 8, 0.0)
+    seen = ~((marker == 0) & (frame == 9))  # b lost marker 0 in its frame 9
+    d = Detections(("a", "b"), ("m0", "m1", "m2", "m3"), frame[seen], np.ones(seen.sum(), int), marker[seen],
+                   xy[seen], np.ones(seen.sum()), 20.0, 16)
+    shifted, _ = shift_detections(d, [0.0, -0.5])  # b's frame f shows the reference's f - 0.5
+    truth = at(shifted.marker, shifted.frame + 0.5)  # the reference's frame g is b's moment g + 0.5
+    error = np.linalg.norm(shifted.xy - truth, axis=1)
+    # Where b lacks a frame around its two (each marker's first and last, and marker 0 around its lost frame), the
+    # straight line, off by the chord's sag, r (1 - cos(pi / 16)) = 0.77-1.35 px; along the spline elsewhere,
+    # within 0.05 px (58 moments: b's pairs of frames, less marker 0's two around its lost frame).
+    first, last = shifted.frame == 0, shifted.frame == 14
+    straight = first | last | ((shifted.marker == 0) & np.isin(shifted.frame, [7, 10]))
+    np.testing.assert_allclose(error[straight], (40 + 10 * shifted.marker[straight]) * (1 - np.cos(np.pi / 16)),
+                               rtol=1e-6)
+    assert len(error) == 58 and straight.sum() == 10 and error[~straight].max() < 0.05
+
+
+def test_tracks_are_curving_where_their_motion_between_frames_is_more_than_their_noise():
+    from handcap.multiview.offsets import curving
+
+    def told(step, noise, frames=16):
+        frame, marker, xy, _ = _circling(step, noise, frames)
+        key = marker * (frames + 1) + frame
+        return curving(xy, key)
+
+    assert told(np.pi / 8, 0.0) and told(np.pi / 8, 0.15)  # 20 Hz, a detector's noise: the spline
+    assert not told(np.pi / 48, 0.5)  # 60 Hz, turning three times slower per frame, half a pixel of noise: the line
+    assert not told(0.0, 0.3)  # still: the line
+    assert not told(np.pi / 8, 0.0, frames=6)  # 8 points to tell from: the line
