@@ -44,7 +44,8 @@ from handcap.detect.sources import frame_sources
 from handcap.detect.motion import name_from_frames
 from handcap.detect.naming import square_corners
 from handcap.detect.views import name_from_views
-from handcap.multiview import Detections, triangulate_detections
+from handcap.multiview import triangulate_detections
+from handcap.multiview.detections import detections_of
 from handcap.multiview.offsets import shift_detections
 from handcap.multiview.sync import Sync, estimate_sync
 from handcap.patterns.pattern import Pattern
@@ -76,8 +77,7 @@ def scores(arrays: dict, truth, rig: CameraRig, pattern: Pattern, offsets=None) 
         corners = squares.get(text)
         place = None if corners is None else every[f, c, corners]
         wrong += place is None or not np.linalg.norm(place - xy, axis=1).max() <= 2.0
-    d = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
-                   arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    d = detections_of(arrays)
     if offsets is not None:
         d, _ = shift_detections(d, offsets)
     tri = triangulate_detections(d, rig, min_views=3, progress=False)
@@ -103,8 +103,7 @@ def rougher(rig: CameraRig, seed: int) -> CameraRig:
 
 def reprojection(arrays: dict, rig: CameraRig) -> float:
     """Median reprojection error of the named corners triangulated from two views or more, pixels."""
-    d = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
-                   arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    d = detections_of(arrays)
     return float(np.nanmedian(triangulate_detections(d, rig, min_views=2, progress=False).error_px))
 
 
@@ -138,9 +137,7 @@ def named(run, rig, pattern, sync=None):
     start = time.perf_counter()
     moved = name_from_frames(run.arrays, run.unread, pattern, progress=False)
     if sync == "auto":
-        a = moved.arrays
-        sync = estimate_sync(Detections(a["camera_names"], a["marker_names"], a["frame"], a["camera"], a["marker"],
-                                        a["xy"], a["score"], a["rate"], int(a["n_frames"])), rig)
+        sync = estimate_sync(detections_of(moved.arrays), rig)
     views = name_from_views(moved.arrays, moved.left, rig, pattern, progress=False, sync=sync)
     return moved, views, time.perf_counter() - start
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from handcap.cli.common import names_arg
+from handcap.cli.common import names_arg, sync_arg
 from handcap.core.errors import HandcapError
 from handcap.multiview.calibration import LOSSES, ORIGINS
 from handcap.steps import calibrate
@@ -23,11 +23,9 @@ def _cmd_calibrate_rig(a):
 
 
 def _sync_arg(a):
-    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
-        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
     if a.max_offset is not None and a.max_offset < 1:
         raise HandcapError(f"--max-offset must be at least one frame, got {a.max_offset}")
-    return None if a.sync is None else "auto" if a.sync == ["auto"] else a.sync
+    return sync_arg(a)
 
 
 def add_calibrate(verbs) -> None:

@@ -27,6 +27,13 @@ def add_hand_model(p, default: str = "openhand") -> None:
                                                      "--hand-model mano; default: $HANDCAP_MANO_DIR)")
 
 
+def sync_arg(a):
+    """``--sync`` as the steps take it: None, 'auto', or the CAM=FRAMES items; 'auto' with offsets is refused."""
+    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
+        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
+    return None if a.sync is None else "auto" if a.sync == ["auto"] else a.sync
+
+
 def frames_arg(text: str | None):
     """``A:B`` (frames, either end optional) -> slice."""
     if text is None:

@@ -2,24 +2,20 @@
 
 from __future__ import annotations
 
-from handcap.cli.common import frames_arg
-from handcap.core.errors import HandcapError
+from handcap.cli.common import frames_arg, sync_arg
 from handcap.multiview.sync import MAX_OFFSET_S
 from handcap.steps import detect as detect_step
 from handcap.steps import overlay as overlay_step
 
 
 def _cmd_detect(a):
-    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
-        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
     return detect_step.detect(a.inputs, a.out, rig=a.rig, pattern=a.pattern, alphabet=a.alphabet, rate=a.rate,
                               corner_weights=a.corner_weights, reader_weights=a.reader_weights,
                               refiner_weights=a.refiner_weights, refine=not a.no_refine, threshold=a.threshold,
                               track=not a.whole_frames, checker_weights=a.checker_weights,
                               checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise,
                               response=a.response, frames=frames_arg(a.frames), every=a.every,
-                              views=not a.no_views, sync=None if a.sync is None else "auto" if a.sync == ["auto"]
-                              else a.sync, max_offset_s=a.max_offset)
+                              views=not a.no_views, sync=sync_arg(a), max_offset_s=a.max_offset)
 
 
 def add_detect(verbs) -> None:

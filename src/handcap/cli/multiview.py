@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from handcap.cli.common import add_units
+from handcap.cli.common import add_units, sync_arg
 from handcap.core.errors import HandcapError
 from handcap.layouts import SHIPPED
 from handcap.multiview import clean
@@ -11,15 +11,13 @@ from handcap.steps import multiview
 
 
 def _cmd_triangulate(a):
-    if a.sync is not None and "auto" in a.sync and a.sync != ["auto"]:
-        raise HandcapError("--sync auto finds every offset: give it alone, or give CAM=FRAMES offsets instead")
+    sync = sync_arg(a)
     if a.sync is None and a.sync_reference is not None:
         raise HandcapError("--sync-reference goes with --sync")
     return multiview.triangulate(a.detections, a.cameras, a.out, min_views=a.min_views, threshold_px=a.threshold_px,
                                  chunk_frames=a.chunk_frames, scheduler=a.scheduler, workers=a.workers, units=a.units,
                                  handedness=not a.no_handedness_repair,
-                                 sync=None if a.sync is None else a.sync[0] if a.sync == ["auto"] else a.sync,
-                                 sync_reference=a.sync_reference, max_offset_s=a.max_offset)
+                                 sync=sync, sync_reference=a.sync_reference, max_offset_s=a.max_offset)
 
 
 def _cmd_clean(a):

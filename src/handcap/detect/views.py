@@ -23,8 +23,8 @@ marked in ``block_from_views``. The squares named so give the corners more views
 (:data:`PASSES`). Cameras that were not triggered together disagree by more than the gate: nothing is taken
 where the views do not agree, and a warning says so. Given each camera's time offset (a
 :class:`~handcap.multiview.sync.Sync`), each camera's squares are named from corners triangulated at its own
-moments: the other cameras' named corners are put on its frames (:func:`~handcap.multiview.offsets.shift_detections`,
-linearly between their two frames around each moment) and triangulated there (:class:`Clocks`). The affine map above
+moments: the other cameras' named corners are put on its frames, between their two frames around each moment
+(:func:`~handcap.multiview.offsets.shift_detections`), and triangulated there (:class:`Clocks`). The affine map above
 mends what the interpolation misses of the hand's motion.
 """
 
@@ -38,7 +38,7 @@ from tqdm import tqdm
 from handcap.detect.naming import (Namer, ViewNaming, affine_map, image_index, match_squares, signed_area,
                                    square_corners, turning)
 from handcap.core.errors import HandcapError
-from handcap.multiview.detections import Detections
+from handcap.multiview.detections import detections_of
 from handcap.multiview.offsets import shift_detections
 from handcap.multiview.reconstruct import triangulate_detections
 
@@ -178,8 +178,7 @@ class Clocks:
 def _known(arrays: dict, rig, progress, sync=None) -> tuple[np.ndarray, str | None]:
     """The named corners triangulated where their views agree (T, M, 3), metres (NaN elsewhere), on the frames of
     ``sync``'s reference, and a warning where the views of most corners disagree (else None)."""
-    detections = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
-                            arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    detections = detections_of(arrays)
     if sync is not None:
         detections, _ = shift_detections(detections, sync.offsets, sync.drift)
     tri = triangulate_detections(detections, rig, min_views=2, threshold_px=2 * DISAGREE_PX, progress=progress)

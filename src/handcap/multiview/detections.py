@@ -180,6 +180,18 @@ class Detections:
         return np.array([rig.index(name) for name in self.camera_names], dtype=np.int64)
 
 
+def detections_of(arrays: dict) -> Detections:
+    """The :class:`Detections` of a detections file's arrays, as a step holds them before writing (``n_frames`` and
+    ``rate`` among them).
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+    """
+    return Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
+                      arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+
+
 def read_detections(path) -> Detections:
     """Read a detections ``.npz`` (File contract above).
 

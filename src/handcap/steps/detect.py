@@ -16,7 +16,7 @@ from handcap.detect.motion import name_from_frames
 from handcap.detect.views import name_from_views
 from handcap.detect.sources import FrameSelection, frame_notes, frame_sources, select_frames, short_videos
 from handcap.io import read_rig
-from handcap.multiview.detections import Detections
+from handcap.multiview.detections import detections_of
 from handcap.multiview.sync import MAX_OFFSET_S, check_sync, estimate_sync, offsets_from_names, parse_offsets
 from handcap.steps.step import Step
 
@@ -274,8 +274,7 @@ def _given_sync(sync, names: list, rig, template, views: bool) -> dict | None:
 def _offsets(arrays: dict, rig, given: dict | None, max_offset_s: float):
     """Each camera's offset (a :class:`~handcap.multiview.sync.Sync`) from the named corners ('auto', ``given``
     None) or as given, and its warnings; None where the search placed no second camera."""
-    detections = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
-                            arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
+    detections = detections_of(arrays)
     if len(detections.camera_names) < 2:
         return None, []
     if given is None:
