@@ -12,7 +12,7 @@ import numpy as np
 
 from handcap.core.cameras import CameraRig
 from handcap.multiview.detections import Detections
-from handcap.multiview.offsets import least_on_grid
+from handcap.multiview.offsets import between, curving, least_on_grid
 
 #: Matched views a pair of cameras needs at an offset to be judged there.
 MIN_MATCHES = 30
@@ -63,6 +63,20 @@ class EpipolarViews:
             self.rotation.append(camera.rotation_matrix)
             self.translation.append(camera.translation)
         self.n_frames = d.n_frames
+        self.curves = [None] * len(self.keys)
+
+    def curving(self, c: int) -> bool:
+        """Whether camera ``c``'s tracks curve between its frames by more than their noise moves them
+        (:func:`~handcap.multiview.offsets.curving`): its views are then interpolated along a spline.
+
+        Parameters
+        ----------
+        c : int
+            Camera.
+        """
+        if self.curves[c] is None:
+            self.curves[c] = curving(self.points[c], self.keys[c])
+        return self.curves[c]
 
     def essential(self, a: int, b: int) -> np.ndarray | None:
         """Essential matrix (3, 3) with x_b^T E x_a = 0 (normalised coordinates); None for cameras at one place.
@@ -123,7 +137,7 @@ class EpipolarViews:
 
     def at_offset(self, a: int, b: int, rows: np.ndarray, shift) -> np.ndarray:
         """b's normalised points (R, 2) ``shift`` frames after a's ``rows``, interpolated between b's frames for a
-        fraction; NaN where b lacks a frame.
+        fraction (along a spline where b's tracks curve: :meth:`curving`); NaN where b lacks a frame.
 
         Parameters
         ----------
@@ -137,15 +151,18 @@ class EpipolarViews:
         shift = np.broadcast_to(np.asarray(shift, dtype=np.float64), rows.shape)
         whole = np.floor(shift).astype(np.int64)
         part = shift - whole
-        out = np.full((len(rows), 2), np.nan)
-        nxt = np.full((len(rows), 2), np.nan)
-        for target, step in ((out, 0), (nxt, 1)):
-            if step and not (part > 1e-9).any():
-                break
-            first_a, first_b = self.matched(a, b, rows, whole + step)
-            target[np.searchsorted(rows, first_a)] = self.points[b][first_b]
         moving = part > 1e-9
-        out[moving] = (1 - part[moving, None]) * out[moving] + part[moving, None] * nxt[moving]
+        spline = bool(moving.any()) and self.curving(b)
+        near = {}
+        for step in (-1, 0, 1, 2) if spline else (0, 1) if moving.any() else (0,):
+            near[step] = np.full((len(rows), 2), np.nan)
+            first_a, first_b = self.matched(a, b, rows, whole + step)
+            near[step][np.searchsorted(rows, first_a)] = self.points[b][first_b]
+        out = near[0]
+        if moving.any():
+            outer = (near[-1][moving], near[2][moving]) if spline else (near[0][moving], near[1][moving])
+            cubic = np.isfinite(outer[0]).all(axis=1) & np.isfinite(outer[1]).all(axis=1) & spline
+            out[moving] = between(outer[0], near[0][moving], near[1][moving], outer[1], part[moving], cubic)
         return out
 
     def median_distance(self, pairs, offsets: np.ndarray, drift=None) -> float:

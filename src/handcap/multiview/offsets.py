@@ -132,10 +132,10 @@ def shift_detections(detections: Detections, offsets, drift=None) -> tuple[Detec
         pair = np.flatnonzero(near[1] >= 0)  # ... in its next frame too
         start, end = moment[pair], moment[near[1][pair]]
         frame = np.floor(start + WHOLE).astype(np.int64) + 1  # the reference frame between the two
-        between = frame < end - WHOLE
-        pair, start, end, frame = pair[between], start[between], end[between], frame[between]
+        inside = frame < end - WHOLE
+        pair, start, end, frame = pair[inside], start[inside], end[inside], frame[inside]
         four = [rows[k] for k in (near[0][pair], pair, near[1][pair], near[2][pair])]
-        xy = _between(d.xy[four[0]], d.xy[four[1]], d.xy[four[2]], d.xy[four[3]], (frame - start) / (end - start),
+        xy = between(d.xy[four[0]], d.xy[four[1]], d.xy[four[2]], d.xy[four[3]], (frame - start) / (end - start),
                       (near[0][pair] >= 0) & (near[2][pair] >= 0) & curving(d.xy[rows], key))
         columns = (np.concatenate([np.rint(moment[on]).astype(np.int64), frame]), np.full(on.sum() + len(frame), c),
                    np.concatenate([d.marker[rows[on]], d.marker[four[1]]]), np.concatenate([d.xy[rows[on]], xy]),
@@ -196,12 +196,22 @@ def curving(xy: np.ndarray, key: np.ndarray) -> bool:
     return bool(np.median(line) > CURVING * np.median(cubic))
 
 
-def _between(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, p3: np.ndarray, t: np.ndarray,
-             cubic: np.ndarray) -> np.ndarray:
-    """Pixels (N, 2) a share ``t`` (N,) of the way from a camera's frame ``p1`` to its next ``p2``: the Catmull-Rom
+def between(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, p3: np.ndarray, t: np.ndarray,
+            cubic: np.ndarray) -> np.ndarray:
+    """Points (N, 2) a share ``t`` of the way from a camera's frame ``p1`` to its next ``p2``: the Catmull-Rom
     spline through the frames before and after too (``p0``, ``p3``) where ``cubic``, else the straight line. A
     moving finger curves between frames: at 20 Hz the straight line puts it off by more than the detector's
-    precision."""
+    precision.
+
+    Parameters
+    ----------
+    p0, p1, p2, p3 : ndarray (N, 2)
+        A track's points in four frames in a row (``p0`` and ``p3`` may be NaN where not ``cubic``).
+    t : ndarray (N,)
+        Shares of the way from ``p1`` to ``p2``, 0 to 1.
+    cubic : ndarray (N,) bool
+        Along the spline; else along the straight line.
+    """
     t = t[:, None]
     line = (1 - t) * p1 + t * p2
     spline = 0.5 * (2 * p1 + (p2 - p0) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t ** 2
