@@ -155,6 +155,8 @@ def test_other_bad_input(frames, weights, tmp_path, capsys):
         (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
           "--sync", "cam_9=2", "--out", str(tmp_path / "d.npz")], "which the inputs lack"),
         (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
+          "--sync", "auto", "--max-offset", "0", "--out", str(tmp_path / "d.npz")], "--max-offset 0"),
+        (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
           "--sync", "cam_1 2", "--out", str(tmp_path / "d.npz")], "CAMERA=FRAMES"),
         (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),
           "--no-views", "--sync", "cam_1=2", "--out", str(tmp_path / "d.npz")], "not --no-views"),

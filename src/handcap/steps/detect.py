@@ -122,7 +122,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                "input folder or video after its camera")
         names = [n for n in cameras.names if n in names]
         sources = sorted(sources, key=lambda s: names.index(s.camera))
-    given = _given_sync(sync, names, rig, template, views)
+    given = _given_sync(sync, names, rig, template, views, max_offset_s)
     pick = FrameSelection(0 if frames is None or frames.start is None else frames.start,
                           None if frames is None else frames.stop, every)
     if pick != FrameSelection():
@@ -253,7 +253,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     return Step(lines, tuple(warnings), (str(out),), arrays)
 
 
-def _given_sync(sync, names: list, rig, template, views: bool) -> dict | None:
+def _given_sync(sync, names: list, rig, template, views: bool, max_offset_s: float) -> dict | None:
     """The offsets ``sync`` gives by camera (None for 'auto' or none), checked before the detection."""
     if sync is None:
         return None
@@ -262,6 +262,9 @@ def _given_sync(sync, names: list, rig, template, views: bool) -> dict | None:
                            "needs --rig and --pattern, and not --no-views (triangulate --sync synchronises the corners "
                            "named)")
     if sync == "auto":
+        if not (np.isfinite(max_offset_s) and max_offset_s > 0):
+            raise HandcapError(f"--max-offset {max_offset_s:g}: give how far --sync auto searches, seconds (more "
+                               "than 0)")
         return None
     given = dict(sync) if isinstance(sync, dict) else parse_offsets(sync)
     unknown = [n for n in given if n not in names]
