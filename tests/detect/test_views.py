@@ -10,7 +10,7 @@ import pytest
 from handcap import HandcapError
 from handcap.detect.naming import GATE_PX
 from handcap.detect.views import name_from_views, rebased
-from handcap.multiview import Detections
+from handcap.multiview.detections import detections_of
 from handcap.multiview.sync import Sync, estimate_sync
 
 CAMERA = 0  # the camera whose squares are left unread
@@ -154,9 +154,7 @@ def test_cameras_not_triggered_together_name_on_their_own_clocks(square_take):
         assert c == CAMERA and (str(tag), int(f)) in want
         np.testing.assert_allclose(xy, want[(str(tag), int(f))], atol=1e-4)
     # The offsets found from the named corners name the same squares.
-    detections = Detections(arrays["camera_names"], arrays["marker_names"], arrays["frame"], arrays["camera"],
-                            arrays["marker"], arrays["xy"], arrays["score"], arrays["rate"], int(arrays["n_frames"]))
-    found = estimate_sync(detections, rig)
+    found = estimate_sync(detections_of(arrays), rig)
     np.testing.assert_allclose(found.offsets, truth, atol=0.05)
     again = name_from_views(arrays, unread, rig, pattern, progress=False, sync=found)
     assert abs(again.squares - given.squares) <= 2
