@@ -117,6 +117,8 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
      'stages.triangulate.sync is "auto" or offsets; an offset is CAMERA=FRAMES'),
     (lambda t: t.replace("rate = 4.0", 'rate = 4.0\nsync = "cam_1"', 1),
      'stages.detect.sync is "auto" or offsets; an offset is CAMERA=FRAMES'),
+    (lambda t: t.replace('response = "linear"', 'response = "gamma"', 1),
+     "stages.detect.response is one of auto, linear, srgb, got 'gamma'"),
 ])
 def test_bad_session_files(made, tmp_path, capsys, edit, message):
     text = (made / "session.toml").read_text()

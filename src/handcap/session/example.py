@@ -45,6 +45,7 @@ leave_one_out = false
 IMAGE_STAGES = '''
 [stages.detect]
 rate = 4.0                   # frames per second of the image folders (a video says its own)
+response = "linear"          # rendered: grey levels linear in the light; "auto" (the default) chooses per camera
 
 [stages.triangulate]
 min_views = 2                # cameras that must agree on a corner

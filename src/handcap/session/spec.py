@@ -52,13 +52,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from handcap.core.errors import HandcapError
+from handcap.detect.response import RESPONSES
 from handcap.layouts.file import SHIPPED
 from handcap.multiview.sync import parse_offsets
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
     "detect": {"rate": float, "refine": bool, "threshold": float, "alphabet": str, "track": bool,
-               "views": bool, "sync": str, "max_offset_s": float},
+               "views": bool, "sync": str, "max_offset_s": float, "response": str},
     "triangulate": {"min_views": int, "threshold_px": float, "units": str, "sync": str, "sync_reference": str,
                     "max_offset_s": float},
     "clean": {"window": int, "z": float, "max_linear_frames": int, "max_rigid_frames": int,
@@ -162,6 +163,8 @@ def _settings(raw, where: str) -> dict:
                     parse_offsets(value)
                 except HandcapError as error:
                     raise HandcapError(f"{where}.{stage}.sync is \"auto\" or offsets; {error}") from None
+            if key == "response" and value not in RESPONSES:
+                raise HandcapError(f"{where}.{stage}.response is one of {', '.join(RESPONSES)}, got {value!r}")
     return settings
 
 
