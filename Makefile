@@ -77,6 +77,8 @@ detect-weights: $(STAMP)
 	$(BIN)/python tools/corner_ranges.py --scenes 20 --seed 5
 	$(BIN)/python -m handcap.detect.train --what refiner --scenes 500 --test-scenes 40 --steps 4000 --pages 0.3 \
 		--threads 2 --seed 1 --init src/handcap/detect/weights/refiner.npz
+	# The refiner's activation ranges for its 8-bit twin, on the crops at the corner network's candidates (~1 min).
+	$(BIN)/python tools/corner_ranges.py --what refiner --scenes 20 --seed 5
 	$(BIN)/python -m handcap.detect.train --what reader --scenes 600 --test-scenes 40 --steps 4000 --threads 1 \
 		--seed 0
 	# ... then 2000 more steps for the reader on 600 new scenes (seed 1), from the weights just made (~15 min).

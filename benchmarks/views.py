@@ -171,7 +171,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="one take of 13 cameras, and the video")
     parser.add_argument("--unsynchronised", action="store_true", help="only the cameras not triggered together")
     args = parser.parse_args()
-    detector = Detector(load_corner_net(int8=True), load_reader(), refiner=load_refiner(), checker=load_checker())
+    detector = Detector(load_corner_net(int8=True), load_reader(), refiner=load_refiner(int8=True),
+                        checker=load_checker())
     if args.unsynchronised:
         unsynchronised(detector)
         return

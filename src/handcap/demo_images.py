@@ -89,7 +89,7 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         summary[f"{key}_render_seconds"] = round(time.perf_counter() - start, 1)
         pattern = Pattern.load(folder / "pattern.toml")
         if detector is None:
-            detector = Detector(load_corner_net(int8=True), load_reader(), pattern, refiner=load_refiner(),
+            detector = Detector(load_corner_net(int8=True), load_reader(), pattern, refiner=load_refiner(int8=True),
                                 checker=load_checker())
         detector.pattern = pattern
         sources = frame_sources([folder / "images" / c.name for c in capture.rig])

@@ -1,5 +1,5 @@
-"""The corner network's 8-bit twin: the same corners as the float network on rendered scenes, ranges saved with the
-weights, and the float network wherever the twin cannot be built."""
+"""The corner network's and the refiner's 8-bit twins: the same corners as the float networks on rendered scenes,
+ranges saved with the weights, and the float network wherever the twin cannot be built."""
 
 from __future__ import annotations
 
@@ -14,9 +14,11 @@ from scipy.spatial import cKDTree
 from handcap import HandcapError
 from handcap.detect.corners import CornerNet, detect_corners
 from handcap.detect import int8
-from handcap.detect.int8 import ENGINE, Int8CornerNet, activation_ranges, int8_corner_net
-from handcap.detect.networks import load_corner_net, net_info, save_net
-from handcap.detect.train import train_corners
+from handcap.detect.int8 import (ENGINE, Int8CornerNet, Int8Refiner, activation_ranges, int8_corner_net, int8_refiner,
+                                 refiner_ranges)
+from handcap.detect.networks import load_corner_net, load_refiner, net_info, save_net
+from handcap.detect.refine import CornerRefiner, locate_corners
+from handcap.detect.train import train_corners, train_refiner
 
 ROOT = Path(__file__).resolve().parents[2]
 needs_engine = pytest.mark.skipif(ENGINE not in torch.backends.quantized.supported_engines,
@@ -73,9 +75,7 @@ def test_ranges_of_another_network_are_refused():
 @needs_engine
 def test_the_ranges_command_keeps_the_weights_and_their_notes(tmp_path, capsys):
     pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
-    spec = importlib.util.spec_from_file_location("corner_ranges", ROOT / "tools" / "corner_ranges.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = _tool()
     out = tmp_path / "corners.npz"
     assert tool.main(["--weights", str(tmp_path / "none.npz"), "--out", str(out)]) == 2
     assert "no CornerNet weights there" in capsys.readouterr().err and not out.exists()
@@ -98,3 +98,78 @@ def test_training_drops_the_ranges_of_the_old_weights(scenes):
     assert net.ranges is not None  # the shipped weights carry them
     trained = train_corners(scenes[:1], steps=2, batch=4, net=net)
     assert trained.ranges is None and int8_corner_net(trained) is trained
+
+
+@needs_engine
+def test_the_shipped_refiners_twin_places_the_float_refiners_corners(scenes):
+    corner_net, float_refiner, twin = load_corner_net(int8=True), load_refiner(), load_refiner(int8=True)
+    assert isinstance(twin, Int8Refiner)
+    gaps, changes = [], []
+    for scene in scenes:
+        xy, score = locate_corners(corner_net, float_refiner, scene.image)
+        xy8, score8 = locate_corners(corner_net, twin, scene.image)
+        assert abs(len(xy8) - len(xy)) <= 0.02 * len(xy) + 2, (len(xy), len(xy8))
+        gap, at = cKDTree(xy8).query(xy)
+        gaps.append(gap)
+        changes.append(np.abs(score8[at] - score)[gap < 0.25])
+    gap, change = np.concatenate(gaps), np.concatenate(changes)
+    # The same corners within a few hundredths of a pixel (the refined corners' own error is ~0.15 px median).
+    assert (gap < 0.25).mean() > 0.97 and np.median(gap) < 0.03, np.percentile(gap, [50, 97])
+    assert np.median(change) < 0.02, np.percentile(change, [50, 100])
+
+
+@needs_engine
+def test_refiner_ranges_are_measured_on_its_crops_saved_and_loaded(scenes, tmp_path):
+    net = load_refiner()
+    ranges = refiner_ranges(net, load_corner_net(int8=True), [s.image for s in scenes[:1]])
+    assert ranges.shape == (5, 2)  # the input crops and the four convolutions (the dense head stays in floats)
+    assert ranges[0, 0] < 0 < ranges[0, 1] and (ranges[1:, 0] == 0).all() and (ranges[1:, 1] > 0).all()
+    net.ranges = ranges
+    save_net(net, tmp_path / "r.npz", {"source": "a test"})
+    again = load_refiner(tmp_path / "r.npz")
+    np.testing.assert_array_equal(again.ranges, ranges)
+    assert isinstance(load_refiner(tmp_path / "r.npz", int8=True), Int8Refiner)
+    with pytest.raises(HandcapError, match="no candidate"):
+        refiner_ranges(net, load_corner_net(), [np.full((64, 64), 128, np.uint8)])
+
+
+def test_a_refiner_without_ranges_or_engine_is_kept_and_wrong_ranges_are_refused(monkeypatch):
+    net = CornerRefiner()
+    assert net.ranges is None and int8_refiner(net) is net
+    net.ranges = np.array([[0.0, 1.0]] * 4)  # one short
+    if ENGINE in torch.backends.quantized.supported_engines:
+        with pytest.raises(HandcapError, match="corner refiner: .* activation ranges for 5 activations"):
+            int8_refiner(net)
+    monkeypatch.setattr(int8, "ENGINE", "an engine this PyTorch lacks")
+    assert int8_refiner(net) is net
+
+
+@needs_engine
+def test_the_ranges_command_measures_the_refiner_and_keeps_its_weights(tmp_path, capsys):
+    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
+    out = tmp_path / "refiner.npz"
+    code = _tool().main(["--what", "refiner", "--scenes", "1", "--out", str(out)])
+    printed = capsys.readouterr()
+    if code == 2 and "OpenGL" in printed.err:
+        pytest.skip(f"no headless OpenGL here: {printed.err}")
+    assert code == 0 and f"{out}: 5 activation ranges from 1 scenes" in printed.out
+    shipped, made = load_refiner(), load_refiner(out)
+    for a, b in zip(shipped.state_dict().values(), made.state_dict().values()):
+        assert torch.equal(a, b)
+    assert "--what refiner" in net_info(out)["int8"]
+    assert net_info(out)["source"] == net_info(ROOT / "src/handcap/detect/weights/refiner.npz")["source"]
+
+
+def test_training_drops_the_refiners_old_ranges(scenes):
+    net = load_refiner()
+    assert net.ranges is not None  # the shipped weights carry them
+    trained = train_refiner(scenes[:1], load_corner_net(), steps=2, batch=8, net=net)
+    assert trained.ranges is None and int8_refiner(trained) is trained
+
+
+def _tool():
+    """tools/corner_ranges.py as a module."""
+    spec = importlib.util.spec_from_file_location("corner_ranges", ROOT / "tools" / "corner_ranges.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool

@@ -18,7 +18,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.detect.checker import BlockChecker
 from handcap.detect.corners import CornerNet
-from handcap.detect.int8 import int8_corner_net
+from handcap.detect.int8 import int8_corner_net, int8_refiner
 from handcap.detect.reader import BlockReader
 from handcap.detect.refine import CornerRefiner
 
@@ -147,18 +147,22 @@ def load_reader(path=None) -> BlockReader:
     return load_net(WEIGHTS / "reader.npz" if path is None else path, "BlockReader")
 
 
-def load_refiner(path=None) -> CornerRefiner:
+def load_refiner(path=None, *, int8: bool = False):
     """The corner refiner saved at ``path`` (default: the shipped weights).
 
     Parameters
     ----------
     path : str, Path or None
+    int8 : bool
+        Its twin with the convolutions in 8-bit integers, for inference (:func:`handcap.detect.int8.int8_refiner`),
+        where its weights carry activation ranges (the shipped ones do) and PyTorch can run it; else the refiner.
 
     Returns
     -------
-    CornerRefiner
+    CornerRefiner or Int8Refiner
     """
-    return load_net(WEIGHTS / "refiner.npz" if path is None else path, "CornerRefiner")
+    net = load_net(WEIGHTS / "refiner.npz" if path is None else path, "CornerRefiner")
+    return int8_refiner(net) if int8 else net
 
 
 def load_checker(path=None) -> BlockChecker | None:

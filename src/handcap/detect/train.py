@@ -162,6 +162,7 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
     Returns
     -------
     CornerRefiner
+        With no activation ranges: those of ``net`` held for its old weights (tools/corner_ranges.py).
     """
     negatives, hidden = zip(*[candidate_negatives(detect_corners(corner_net, s.image, threshold=0.05)[0], s)
                               for s in scenes])
@@ -172,8 +173,10 @@ def train_refiner(scenes, corner_net: CornerNet, *, steps: int = 2000, batch: in
         return refiner_loss(model(torch.from_numpy(crops)[:, None]), torch.from_numpy(is_corner),
                             torch.from_numpy(offset))
 
-    return _fit(lambda: net or CornerRefiner(), loss, scenes, steps=steps, seed=seed, lr=lr, label="refiner",
-                progress=progress)
+    trained = _fit(lambda: net or CornerRefiner(), loss, scenes, steps=steps, seed=seed, lr=lr, label="refiner",
+                   progress=progress)
+    trained.ranges = None
+    return trained
 
 
 def train_reader(scenes, *, steps: int = 2000, batch: int = 128, seed: int = 0, lr: float = 2e-3,
@@ -343,8 +346,8 @@ def _train_checker(a, out: Path) -> None:
     """Fit the block checker on the vote's blocks in new scenes, as the networks in ``out`` (else the shipped
     ones) read them, in three folds of the scenes (:func:`~handcap.detect.checker.train_checker`)."""
     corner_net, refiner, reader = (load(out / name if (out / name).is_file() else None) for load, name in (
-        (lambda path: load_corner_net(path, int8=True), "corners.npz"), (load_refiner, "refiner.npz"),
-        (load_reader, "reader.npz")))  # as handcap detect runs them
+        (lambda path: load_corner_net(path, int8=True), "corners.npz"),
+        (lambda path: load_refiner(path, int8=True), "refiner.npz"), (load_reader, "reader.npz")))  # as detect runs
     if a.scenes < 3:
         raise HandcapError(f"--scenes {a.scenes}: the checker needs 3 scenes or more (three folds)")
     fonts = [None] + [f for f in FONTS if Path(f).is_file()][:-1]  # the reader's training fonts

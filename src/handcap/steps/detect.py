@@ -140,9 +140,10 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                            "vote over its patches corrects the readings")
     if threshold is not None and not 0.0 < threshold < 1.0:
         raise HandcapError(f"--threshold {threshold}: give a probability between 0 and 1")
-    # The corner network's 8-bit twin where its weights carry activation ranges: the same corners, faster.
+    # The corner network's and the refiner's 8-bit twins where their weights carry activation ranges: the same
+    # corners, faster.
     detector = Detector(load_corner_net(corner_weights, int8=True), load_reader(reader_weights), template, alphabet,
-                        threshold, load_refiner(refiner_weights) if refine else None,
+                        threshold, load_refiner(refiner_weights, int8=True) if refine else None,
                         checker=load_checker(checker_weights) if checker else None, denoise=denoise)
     warnings = frame_notes(sources) + lookalike_warning(detector.alphabet)
     if corner_weights is None or reader_weights is None or (refine and refiner_weights is None):

@@ -176,7 +176,7 @@ def _check(printed: Pattern, whole: Pattern, font, font_name: str) -> tuple[str,
 
     maker = PageMaker(0, pattern=printed, font=font, look=PageLook(square_px=(24.0, 32.0), tilt_deg=(0.0, 20.0),
                                                                    curl=(0.0, 0.5), occluders=(0, 0), glint=0.0))
-    detector = Detector(load_corner_net(int8=True), load_reader(), whole, refiner=load_refiner(),
+    detector = Detector(load_corner_net(int8=True), load_reader(), whole, refiner=load_refiner(int8=True),
                         checker=load_checker())
     score = evaluate_detector(detector, [maker.scene() for _ in range(CHECK_PHOTOS)])
     right = score.right / max(score.blocks, 1)
