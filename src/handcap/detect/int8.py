@@ -17,11 +17,12 @@ builds), :func:`int8_corner_net` gives the float network back unchanged.
 The corner refiner (:mod:`handcap.detect.refine`) has an integer twin too (:func:`int8_refiner`): on a hand's
 region it is most of the detector's time, a few thousand 17 x 17 crops (each candidate in its eight views). Its
 convolutions run in integers and its two dense layers, which give the sub-pixel offset, in floats, from the
-ranges :func:`refiner_ranges` measures on the crops the detector gives it. Measured (2026-11-30, the shipped
-networks, 2 threads) on the 20 held-out scenes of ``benchmarks/detect.py``: recall 92.5 % both, median error
-0.153 against 0.152 px, RMS 0.329 against 0.327 px; the refiner's time on the benchmark's hand region 0.093
-against 0.13-0.21 s. With the dense layers in integers too it was no faster and placed corners worse (median 0.156
-px, RMS 0.334 px); with the first convolution in floats, slower.
+ranges :func:`refiner_ranges` measures on the crops the detector gives it. Measured with ``benchmarks/detect.py``
+(2026-11-30, the shipped networks and ranges, 2 threads): on its 20 held-out scenes recall 92.5 % both, median
+error 0.154 against 0.152 px, RMS 0.333 against 0.327 px; the refined corners of its hand region in 0.125 s
+against 0.191 s, the whole detector there in a median of 0.237 s. Tried while building this, with ranges from
+10 hand scenes: the dense layers in integers too were no faster and placed corners worse (median 0.156 px, RMS
+0.334 px, against 0.153 and 0.329 px with them in floats); the first convolution in floats was slower.
 """
 
 from __future__ import annotations
