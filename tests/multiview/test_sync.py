@@ -13,8 +13,10 @@ from handcap.cli import main
 from handcap.io.camera_formats import write_rig
 from handcap.multiview import Detections, read_detections, triangulate_detections, write_detections
 from handcap.multiview.epipolar import EpipolarViews
-from handcap.multiview.sync import (check_sync, estimate_sync, offsets_from_names, parse_offsets,
+from handcap.io import read_markers
+from handcap.multiview.sync import (Sync, check_sync, estimate_sync, offsets_from_names, parse_offsets,
                                     shift_detections)
+from handcap.steps.detect import clock_arrays
 from handcap.synth.config import SynthConfig
 from handcap.synth.scene import synthesize
 
@@ -214,6 +216,48 @@ def test_the_command_synchronises_files_of_one_camera_each(capture, tmp_path, ca
                  "--out", str(tmp_path / "still.c3d")]) == 2
     assert "placed no camera beside cam_0" in capsys.readouterr().err
     assert read_detections(paths[0]).n_frames == FRAMES - START[0]
+
+
+def test_offsets_that_detect_stored_are_taken_by_triangulate_without_sync(capture, tmp_path, capsys):
+    cameras = _cameras(capture, START, PHASE)
+    truth = START + PHASE / UP
+    rig = tmp_path / "cameras.toml"
+    write_rig(capture.rig, rig)
+
+    def written(name, offsets, reference="cam_0"):
+        path = tmp_path / f"{name}.npz"
+        write_detections(cameras, path)
+        with np.load(path) as data:
+            arrays = dict(data)
+        sync = Sync(cameras.camera_names, np.asarray(offsets, float), reference, np.nan, np.nan, 0)
+        np.savez(path, **arrays, **clock_arrays(sync))
+        return path
+
+    args = ["--cameras", str(rig), "--min-views", "2"]
+    stored = written("stored", truth)
+    before = stored.read_bytes()
+    assert main(["triangulate", str(stored), *args, "--out", str(tmp_path / "stored.c3d")]) == 0
+    out = capsys.readouterr().out
+    assert "offsets as detect --sync stored them" in out and "cam_1 +7.25" in out
+    assert np.allclose(np.load(tmp_path / "stored.triangulation.npz")["sync_offsets"], truth)
+    assert _error_mm(capture, read_markers(tmp_path / "stored.c3d")) < 1.0
+    assert stored.read_bytes() == before
+    # the same file taken as it is, without the stored offsets: the views disagree (the check says so)
+    plain = tmp_path / "plain.npz"
+    write_detections(cameras, plain)
+    assert main(["triangulate", str(plain), *args, "--out", str(tmp_path / "plain.c3d")]) == 0
+    assert "seem not synchronised" in capsys.readouterr().err
+    assert _error_mm(capture, read_markers(tmp_path / "plain.c3d")) > 3.0
+    # a camera detect could not place: left out, with a warning; --sync overrides what is stored
+    lacking = written("lacking", np.r_[truth[:5], np.nan])
+    assert main(["triangulate", str(lacking), *args, "--out", str(tmp_path / "lacking.c3d")]) == 0
+    assert "no stored offset for camera cam_5" in capsys.readouterr().err
+    assert main(["triangulate", str(lacking), *args, "--sync", "auto", "--out", str(tmp_path / "auto.c3d")]) == 0
+    assert np.abs(np.load(tmp_path / "auto.triangulation.npz")["sync_offsets"] - truth).max() < 0.05
+    # two files whose offsets count from different cameras cannot be joined
+    other = written("other", truth - truth[3], reference="cam_3")
+    assert main(["triangulate", str(stored), str(other), *args, "--out", str(tmp_path / "both.c3d")]) == 2
+    assert "count from different cameras (cam_0, cam_3)" in capsys.readouterr().err
 
 
 def _circling(step: float, noise: float, frames: int = 16, markers: int = 4, seed: int = 0):

@@ -103,7 +103,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         Cameras not triggered together, for the naming from the other cameras (:mod:`handcap.multiview.sync`):
         ``'auto'`` finds each camera's offset from the corners the cameras named; ``CAM=FRAMES`` items (or a dict)
         give them (camera c's frame f shows the first camera's frame f + offset; cameras not named 0). None: the
-        cameras are taken as synchronised. Needs ``rig`` and ``pattern``.
+        cameras are taken as synchronised. Needs ``rig`` and ``pattern``. The offsets used are stored in the file
+        (``sync_cameras``, ``sync_offsets`` in frames, ``sync_drift``, ``sync_reference``), and ``triangulate``
+        takes them.
     max_offset_s : float
         How far ``'auto'`` searches, seconds either way.
     """
@@ -227,7 +229,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         "patches' template (--pattern; another generator's, such as DexterCap's JSON, through "
                         "handcap pattern --import) the vote over them reads more"
                         + ("" if adapt_steps else "; so may a reader adapted to this take (--adapt-steps 200)"))
-    found, by_views = run.arrays, ""
+    found, by_views, clocks = run.arrays, "", {}  # clocks: the offsets found or given, for triangulate
     if views and template is not None and len(found["frame"]):
         naming = name_from_frames(found, run.unread, template, progress=progress)
         found, left, by_views = naming.arrays, naming.left, f"; {naming.summary()}"
@@ -235,13 +237,14 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             offsets, said = (None, []) if sync is None else _offsets(found, cameras, given, max_offset_s)
             if offsets is not None:
                 by_views += f"; {offsets.summary()}"
+                clocks = clock_arrays(offsets)
             naming = name_from_views(found, left, cameras, template, progress=progress, sync=offsets)
             found, warnings = naming.arrays, warnings + said + list(naming.warnings)
             by_views += f"; {naming.summary()}"
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
                                                   "frame_step": np.array(pick.every)}
-    arrays = {**found, **pitch, **picked, **warnings_entry(warnings)}
+    arrays = {**found, **pitch, **picked, **clocks, **warnings_entry(warnings)}
     save_npz(out, arrays)
     line = (f"{out}: {images} images from {len(names)} camera(s): {len(arrays['frame'])} named corners, "
             f"{len(arrays['block_text'])} read tags" + (f" ({corrected} corrected by the vote)" if template else "")
@@ -252,6 +255,26 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                                               f"{out.name} is input frame {pick.start} + {pick.every} k, at "
                                               f"{rate:g} Hz")
     return Step(lines, tuple(warnings), (str(out),), arrays)
+
+
+def clock_arrays(sync) -> dict:
+    """The entries of a detections file that keep the cameras' offsets, for ``triangulate``.
+
+    Parameters
+    ----------
+    sync : Sync
+        :func:`~handcap.multiview.sync.estimate_sync`'s or :func:`~handcap.multiview.sync.check_sync`'s.
+
+    Returns
+    -------
+    dict
+        ``sync_cameras`` (C,) str, ``sync_offsets`` (C,) frames (NaN: none found), ``sync_drift`` (C,) frames per
+        frame, ``sync_reference`` (the camera they count from).
+    """
+    offsets = np.asarray(sync.offsets, dtype=np.float64)
+    drift = np.zeros(len(offsets)) if sync.drift is None else np.asarray(sync.drift, dtype=np.float64)
+    return {"sync_cameras": np.array(sync.camera_names), "sync_offsets": offsets, "sync_drift": drift,
+            "sync_reference": np.array(sync.reference)}
 
 
 def _given_sync(sync, names: list, rig, template, views: bool, max_offset_s: float) -> dict | None:

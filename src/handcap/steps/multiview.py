@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -55,8 +56,9 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     sync : None, 'auto', str or dict
         Cameras not triggered together (:mod:`handcap.multiview.sync`): ``'auto'`` finds each camera's offset from
         the detections; ``'CAM=FRAMES, ...'`` or ``{camera: frames}`` gives them (camera c's frame f shows the
-        reference's frame f + offset; cameras not named 0). None: the cameras are taken as synchronised, and a
-        quick check warns when they seem not to be.
+        reference's frame f + offset; cameras not named 0). None: the offsets ``detect --sync`` stored in the
+        detections files where they hold some; else the cameras are taken as synchronised, and a quick check warns
+        when they seem not to be.
     sync_reference : str or None
         The camera whose frames the output counts (default: the detections' first camera).
     max_offset_s : float
@@ -66,7 +68,9 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
     check_not_input(out, cameras, *detections)
     check_not_input(quality_path(out), cameras, *detections)
     given = None if sync in (None, "auto") else dict(sync) if isinstance(sync, dict) else parse_offsets(sync)
-    merged = merge_detections([read_detections(path) for path in detections], same_length=sync is None)
+    files = [read_detections(path) for path in detections]
+    stored = _stored_clocks(detections) if sync is None else None
+    merged = merge_detections(files, same_length=sync is None and stored is None)
     rig = read_rig(cameras, units=units)
     start = time.perf_counter()
     lines, sync_warnings, synced = [], [], None
@@ -81,11 +85,13 @@ def triangulate(detections, cameras, out, *, min_views: int = 3, threshold_px: f
             if np.isfinite(found.offsets).sum() < 2:
                 raise HandcapError(f"--sync auto placed no camera beside {found.reference}: "
                                    + "; ".join(found.warnings))
+        elif stored is not None:  # detect --sync found or was given them: the corners are at each camera's moments
+            found = _stored_sync(merged, rig, stored, sync_reference)
         else:
             offsets = None if given is None else offsets_from_names(merged, given, sync_reference)
             found = check_sync(merged, rig, offsets, reference=sync_reference)
         sync_warnings = list(found.warnings)
-        if sync is not None:
+        if sync is not None or stored is not None:
             merged, lost = shift_detections(merged, found.offsets, found.drift)
             synced = found
             lines.append(f"{found.summary()}; {lost} of the detections fall outside {found.reference}'s frames or "
@@ -145,3 +151,48 @@ def clean(path, out, *, layout: str | None = None, radius: float | None = None, 
     write_markers(cleaned, out)
     line = q.summary(f"{out}: {report.summary()}", q.marker_figures(cleaned, hand=hand), cleaned.warnings)
     return Step((line,), cleaned.warnings, (str(out),), report)
+
+
+def _stored_clocks(paths) -> tuple[dict, str] | None:
+    """The offsets ``detect --sync`` stored in detections files: ({camera: (offset, drift)} in frames, their
+    reference camera), or None where no file holds them. Files whose offsets count from different cameras cannot
+    be joined: refused."""
+    clocks, references = {}, set()
+    for path in paths:
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if "sync_offsets" not in data.files:
+                    continue
+                names, offsets, drift = (np.asarray(data[k]).reshape(-1) for k in ("sync_cameras", "sync_offsets",
+                                                                                    "sync_drift"))
+                references.add(str(data["sync_reference"]))
+        except (OSError, ValueError, KeyError) as err:
+            raise HandcapError(f"{path}: its stored camera offsets cannot be read ({err})") from None
+        if not len(names) == len(offsets) == len(drift):
+            raise HandcapError(f"{path}: {len(names)} cameras but {len(offsets)} stored offsets")
+        clocks.update({str(n): (float(o), float(d)) for n, o, d in zip(names, offsets, drift)})
+    if len(references) > 1:
+        raise HandcapError(f"the detections files carry camera offsets that count from different cameras "
+                           f"({', '.join(sorted(references))}); give the offsets with --sync, or find them again with "
+                           f"--sync auto")
+    return (clocks, references.pop()) if clocks else None
+
+
+def _stored_sync(merged, rig, stored: tuple, reference: str | None):
+    """A :class:`~handcap.multiview.sync.Sync` of the stored offsets, counted from ``reference`` (default: the
+    stored reference); cameras they lack get none, and their detections are left out."""
+    clocks, reference = stored[0], reference or stored[1]
+    names = list(merged.camera_names)
+    if reference not in names:
+        raise HandcapError(f"the reference camera {reference!r} of the offsets stored with the detections is not in "
+                           f"them ({', '.join(names)}); give the offsets with --sync, or find them with --sync auto")
+    offsets, drift = (np.array([clocks.get(n, (np.nan, 0.0))[k] for n in names]) for k in (0, 1))
+    ref = names.index(reference)
+    if not np.isfinite(offsets[ref]):
+        raise HandcapError(f"the offsets stored with the detections do not place {reference}; give another reference "
+                           f"with --sync auto --sync-reference")
+    found = check_sync(merged, rig, np.nan_to_num(offsets - offsets[ref]), reference=reference)
+    lacking = [n for n, o in zip(names, offsets) if not np.isfinite(o)]
+    warnings = [f"no stored offset for camera {', '.join(lacking)}: its detections are left out"] if lacking else []
+    return replace(found, offsets=offsets - offsets[ref], drift=drift - drift[ref],
+                   warnings=(*found.warnings, *warnings), notes=("offsets as detect --sync stored them",))
