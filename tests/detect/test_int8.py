@@ -73,24 +73,26 @@ def test_ranges_of_another_network_are_refused():
 
 
 @needs_engine
-def test_the_ranges_command_keeps_the_weights_and_their_notes(tmp_path, capsys):
+@pytest.mark.parametrize("what, load, kind, count", [("corners", load_corner_net, "CornerNet", 10),
+                                                     ("refiner", load_refiner, "CornerRefiner", 5)])
+def test_the_ranges_command_keeps_the_weights_and_their_notes(tmp_path, capsys, what, load, kind, count):
     pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
     tool = _tool()
-    out = tmp_path / "corners.npz"
-    assert tool.main(["--weights", str(tmp_path / "none.npz"), "--out", str(out)]) == 2
-    assert "no CornerNet weights there" in capsys.readouterr().err and not out.exists()
-    code = tool.main(["--scenes", "1", "--out", str(out)])
+    out = tmp_path / f"{what}.npz"
+    assert tool.main(["--what", what, "--weights", str(tmp_path / "none.npz"), "--out", str(out)]) == 2
+    assert f"no {kind} weights there" in capsys.readouterr().err and not out.exists()
+    code = tool.main(["--what", what, "--scenes", "1", "--out", str(out)])
     printed = capsys.readouterr()
     if code == 2 and "OpenGL" in printed.err:
         pytest.skip(f"no headless OpenGL here: {printed.err}")
-    assert code == 0 and f"{out}: 10 activation ranges from 1 scenes" in printed.out
-    shipped, made = load_corner_net(), load_corner_net(out)
+    assert code == 0 and f"{out}: {count} activation ranges from 1 scenes" in printed.out
+    shipped, made = load(), load(out)  # the ranges only: the weights as they were
     for a, b in zip(shipped.state_dict().values(), made.state_dict().values()):
         assert torch.equal(a, b)
-    assert made.ranges.shape == shipped.ranges.shape
+    assert made.ranges.shape == shipped.ranges.shape == (count, 2)
     info = net_info(out)
-    assert info["source"] == net_info(ROOT / "src/handcap/detect/weights/corners.npz")["source"]
-    assert "1 rendered scenes" in info["int8"]
+    assert info["source"] == net_info(ROOT / f"src/handcap/detect/weights/{what}.npz")["source"]
+    assert f"1 rendered scenes (seed 5, pages 0.3): tools/corner_ranges.py --what {what}" in info["int8"]
 
 
 def test_training_drops_the_ranges_of_the_old_weights(scenes):
@@ -142,22 +144,6 @@ def test_a_refiner_without_ranges_or_engine_is_kept_and_wrong_ranges_are_refused
             int8_refiner(net)
     monkeypatch.setattr(int8, "ENGINE", "an engine this PyTorch lacks")
     assert int8_refiner(net) is net
-
-
-@needs_engine
-def test_the_ranges_command_measures_the_refiner_and_keeps_its_weights(tmp_path, capsys):
-    pytest.importorskip("moderngl", reason="rendered scenes need moderngl (extra 'images')")
-    out = tmp_path / "refiner.npz"
-    code = _tool().main(["--what", "refiner", "--scenes", "1", "--out", str(out)])
-    printed = capsys.readouterr()
-    if code == 2 and "OpenGL" in printed.err:
-        pytest.skip(f"no headless OpenGL here: {printed.err}")
-    assert code == 0 and f"{out}: 5 activation ranges from 1 scenes" in printed.out
-    shipped, made = load_refiner(), load_refiner(out)
-    for a, b in zip(shipped.state_dict().values(), made.state_dict().values()):
-        assert torch.equal(a, b)
-    assert "--what refiner" in net_info(out)["int8"]
-    assert net_info(out)["source"] == net_info(ROOT / "src/handcap/detect/weights/refiner.npz")["source"]
 
 
 def test_training_drops_the_refiners_old_ranges(scenes):
