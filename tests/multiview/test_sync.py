@@ -258,6 +258,13 @@ def test_offsets_that_detect_stored_are_taken_by_triangulate_without_sync(captur
     other = written("other", truth - truth[3], reference="cam_3")
     assert main(["triangulate", str(stored), str(other), *args, "--out", str(tmp_path / "both.c3d")]) == 2
     assert "count from different cameras (cam_0, cam_3)" in capsys.readouterr().err
+    # stored offsets that are no numbers, or one short: one line
+    for name, bad in (("words", {"sync_offsets": np.array(["a"] * 6)}), ("short", {"sync_drift": np.zeros(5)})):
+        with np.load(stored) as data:
+            np.savez(tmp_path / f"{name}.npz", **{**dict(data), **bad})
+        assert main(["triangulate", str(tmp_path / f"{name}.npz"), *args, "--out", str(tmp_path / "bad.c3d")]) == 2
+        err = capsys.readouterr().err
+        assert "stored" in err and len(err.strip().splitlines()) == 1, err
 
 
 def _circling(step: float, noise: float, frames: int = 16, markers: int = 4, seed: int = 0):

@@ -163,14 +163,16 @@ def _stored_clocks(paths) -> tuple[dict, str] | None:
             with np.load(path, allow_pickle=False) as data:
                 if "sync_offsets" not in data.files:
                     continue
-                names, offsets, drift = (np.asarray(data[k]).reshape(-1) for k in ("sync_cameras", "sync_offsets",
-                                                                                    "sync_drift"))
+                names = [str(n) for n in np.asarray(data["sync_cameras"]).reshape(-1)]
+                offsets, drift = (np.asarray(data[k], dtype=np.float64).reshape(-1)
+                                  for k in ("sync_offsets", "sync_drift"))
                 references.add(str(data["sync_reference"]))
-        except (OSError, ValueError, KeyError) as err:
+        except (OSError, ValueError, TypeError, KeyError) as err:
             raise HandcapError(f"{path}: its stored camera offsets cannot be read ({err})") from None
         if not len(names) == len(offsets) == len(drift):
-            raise HandcapError(f"{path}: {len(names)} cameras but {len(offsets)} stored offsets")
-        clocks.update({str(n): (float(o), float(d)) for n, o, d in zip(names, offsets, drift)})
+            raise HandcapError(f"{path}: {len(names)} cameras but {len(offsets)} stored offsets and {len(drift)} "
+                               f"drifts")
+        clocks.update({n: (float(o), float(d)) for n, o, d in zip(names, offsets, drift)})
     if len(references) > 1:
         raise HandcapError(f"the detections files carry camera offsets that count from different cameras "
                            f"({', '.join(sorted(references))}); give the offsets with --sync, or find them again with "
