@@ -43,6 +43,7 @@ from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
 from handcap.detect.motion import name_from_frames
 from handcap.detect.naming import square_corners
+from handcap.detect.seek import searched_frames, seek_from_views
 from handcap.detect.views import name_from_views
 from handcap.multiview import triangulate_detections
 from handcap.multiview.detections import detections_of
@@ -119,7 +120,8 @@ def line(what: str, s: dict) -> str:
 
 
 def detected(detector, config, folder, clocks=None):
-    """Film ``config`` into ``folder`` and detect it: (capture, pattern, run, seconds, truth)."""
+    """Film ``config`` into ``folder`` and detect it: (capture, pattern, run, seconds, truth, frames), ``frames``
+    the images as searched (for :func:`~handcap.detect.seek.seek_from_views`)."""
     capture = film_take(config, folder, progress=False, clocks=clocks)
     pattern = Pattern.load(Path(folder) / "pattern.toml")
     detector.pattern = pattern
@@ -127,19 +129,26 @@ def detected(detector, config, folder, clocks=None):
     start = time.perf_counter()
     rate = config.rate / (1 if clocks is None else clocks.every)
     run = detect_capture(detector, sources, pattern.corner_names(), rate, progress=False, response="linear")
-    return capture, pattern, run, time.perf_counter() - start, np.load(Path(folder) / "image_truth.npz")
+    return (capture, pattern, run, time.perf_counter() - start, np.load(Path(folder) / "image_truth.npz"),
+            searched_frames(detector, sources, run.responses))
 
 
-def named(run, rig, pattern, sync=None):
+def named(run, rig, pattern, sync=None, frames=None, refiner=None):
     """As ``handcap detect`` names the unread squares: from the neighbouring frames, then from the other cameras
-    (``sync``: 'auto' finds the cameras' offsets first, as ``detect --sync auto``, or a Sync gives them); returns
-    both namings and the seconds they took."""
+    (``sync``: 'auto' finds the cameras' offsets first, as ``detect --sync auto``, or a Sync gives them), then
+    (given ``frames`` and ``refiner``) by the second look where the other cameras place squares; returns the three
+    namings (the last None without ``frames``) and the seconds they took, the second look's apart."""
     start = time.perf_counter()
     moved = name_from_frames(run.arrays, run.unread, pattern, progress=False)
     if sync == "auto":
         sync = estimate_sync(detections_of(moved.arrays), rig)
     views = name_from_views(moved.arrays, moved.left, rig, pattern, progress=False, sync=sync)
-    return moved, views, time.perf_counter() - start
+    seconds = time.perf_counter() - start
+    if frames is None:
+        return moved, views, None, (seconds, 0.0)
+    start = time.perf_counter()
+    sought = seek_from_views(views.arrays, rig, pattern, refiner, frames, sync=sync, progress=False)
+    return moved, views, sought, (seconds, time.perf_counter() - start)
 
 
 def unsynchronised(detector) -> None:
@@ -150,19 +159,22 @@ def unsynchronised(detector) -> None:
                          cameras=8, min_views=3)
     clocks = Clocks(starts, 3)
     with tempfile.TemporaryDirectory() as folder:
-        capture, pattern, run, seconds, truth = detected(detector, config, folder, clocks)
+        capture, pattern, run, seconds, truth, frames = detected(detector, config, folder, clocks)
         names = tuple(str(n) for n in run.arrays["camera_names"])
         true = Sync(names, clocks.offsets(), names[0], np.nan, np.nan, 0)
-        results = [named(run, capture.rig, pattern, sync) for sync in (None, "auto", true)]
+        results = [named(run, capture.rig, pattern, sync, frames, detector.refiner) for sync in (None, "auto", true)]
         figures = [scores(run.arrays, truth, capture.rig, pattern, true.offsets)]
-        figures += [scores(views.arrays, truth, capture.rig, pattern, true.offsets) for _, views, _ in results]
-    auto = results[1][1]
+        for _, views, sought, _ in results:
+            figures += [scores(a.arrays, truth, capture.rig, pattern, true.offsets) for a in (views, sought)]
+    auto = results[1]
     print(f"8 cameras at 20 Hz not triggered together (offsets {', '.join(f'{o:.2f}' for o in true.offsets)} "
           f"frames), {run.images} images: detection {seconds:.1f} s; taken as synchronised: "
-          f"{results[0][1].summary()} ({'; '.join(results[0][1].warnings) or 'no warning'}); with the offsets found: "
-          f"{auto.summary()}, naming {results[1][2]:.2f} s; with the true offsets: {results[2][1].summary()}")
-    for what, value in zip(("detected", "named as synchronised", "named with the offsets found (--sync auto)",
-                            "named with the true offsets"), figures):
+          f"{results[0][1].summary()} ({'; '.join(results[0][1].warnings) or 'no warning'}); {results[0][2].summary()}"
+          f"; with the offsets found: {auto[1].summary()}, {auto[2].summary()}, naming {auto[3][0]:.2f} s, second "
+          f"look {auto[3][1]:.2f} s; with the true offsets: {results[2][1].summary()}, {results[2][2].summary()}")
+    for what, value in zip(("detected", "named as synchronised", "and a second look", "named with the offsets found "
+                            "(--sync auto)", "and a second look", "named with the true offsets", "and a second look"),
+                           figures):
         print(line(what + " (triangulated with the true offsets)", value))
 
 
@@ -176,48 +188,49 @@ def main() -> None:
     if args.unsynchronised:
         unsynchronised(detector)
         return
-    totals = {"before": [], "frames": [], "after": [], "rough": []}
+    rows = ("detected", "named from the neighbouring frames too", "and from the other cameras",
+            "and a second look where the other cameras place squares", "the same with a rig calibrated less well")
+    totals = {what: [] for what in rows}
     for seed, subject in SEEDS[:1] if args.quick else SEEDS:
         config = SynthConfig(layout="dense-patches", motion="grasp", frames=11, rate=4.0, seed=seed,
                              subject_seed=subject, cameras=13, min_views=3)
         with tempfile.TemporaryDirectory() as folder:
-            capture, pattern, run, seconds, truth = detected(detector, config, folder)
-            moved, views, naming = named(run, capture.rig, pattern)
+            capture, pattern, run, seconds, truth, frames = detected(detector, config, folder)
+            moved, views, sought, naming = named(run, capture.rig, pattern, None, frames, detector.refiner)
             rough = rougher(capture.rig, seed)
-            _, roughly, _ = named(run, rough, pattern)
+            _, roughly, rough_sought, _ = named(run, rough, pattern, None, frames, detector.refiner)
             off = (reprojection(run.arrays, capture.rig), reprojection(run.arrays, rough))
             figures = [scores(a, truth, capture.rig, pattern) for a in (run.arrays, moved.arrays, views.arrays,
-                                                                        roughly.arrays)]
+                                                                        sought.arrays, rough_sought.arrays)]
         for key, value in zip(totals, figures):
             totals[key].append(value)
         print(f"take seed {seed} (subject {subject}), 13 cameras at 4 Hz, {run.images} images: detection "
               f"{seconds:.1f} s ({seconds / run.images:.2f} s/image); {moved.summary()}; {views.summary()}, "
-              f"{views.refused} refused; naming {naming:.2f} s"
-              + (f"; warnings: {'; '.join(views.warnings)}" if views.warnings else ""))
-        print(line("detected", figures[0]))
-        print(line("named from the neighbouring frames too", figures[1]))
-        print(line("and from the other cameras", figures[2]))
+              f"{views.refused} refused; {sought.summary()}, {sought.refused} refused; naming {naming[0]:.2f} s, "
+              f"second look {naming[1]:.2f} s" + (f"; warnings: {'; '.join(views.warnings)}" if views.warnings else ""))
+        for what, value in zip(rows[:-1], figures):
+            print(line(what, value))
         print(line(f"the same with a rig calibrated less well (median reprojection {off[1]:.2f} px, against "
-                   f"{off[0]:.2f} px; {roughly.squares} squares named from the other cameras)", figures[3]))
-    if len(totals["before"]) > 1:
+                   f"{off[0]:.2f} px; {roughly.squares} squares named from the other cameras, {rough_sought.squares} "
+                   "by the second look)", figures[-1]))
+    if len(SEEDS[:1] if args.quick else SEEDS) > 1:
         print("all takes of 13 cameras:")
-        for key, what in zip(totals, ("detected", "named from the neighbouring frames too",
-                                      "and from the other cameras", "the same with the rigs calibrated less well")):
-            summed = {k: sum(s[k] for s in totals[key]) for k in totals[key][0]}
-            summed["median mm"] = float(np.median([s["median mm"] for s in totals[key]]))
-            summed["p95 mm"] = float(np.median([s["p95 mm"] for s in totals[key]]))
+        for what, each in totals.items():
+            summed = {k: sum(s[k] for s in each) for k in each[0]}
+            summed["median mm"] = float(np.median([s["median mm"] for s in each]))
+            summed["p95 mm"] = float(np.median([s["p95 mm"] for s in each]))
             print(line(what + " (median of the takes' mm)", summed))
     # A video: 3 cameras at 20 Hz, so few that they share few corners, and frames close enough in time.
     config = SynthConfig(layout="dense-patches", motion="grasp", frames=51, rate=20.0, seed=5, subject_seed=21,
                          cameras=3, min_views=2)
     with tempfile.TemporaryDirectory() as folder:
-        capture, pattern, run, seconds, truth = detected(detector, config, folder)
-        moved, views, naming = named(run, capture.rig, pattern)
-        figures = [scores(a, truth, capture.rig, pattern) for a in (run.arrays, moved.arrays, views.arrays)]
+        capture, pattern, run, seconds, truth, frames = detected(detector, config, folder)
+        moved, views, sought, naming = named(run, capture.rig, pattern, None, frames, detector.refiner)
+        figures = [scores(a, truth, capture.rig, pattern) for a in (run.arrays, moved.arrays, views.arrays,
+                                                                    sought.arrays)]
     print(f"video, 3 cameras at 20 Hz, {run.images} images: detection {seconds:.1f} s; {moved.summary()}; "
-          f"{views.summary()}; naming {naming:.2f} s")
-    for what, value in zip(("detected", "named from the neighbouring frames too", "and from the other cameras"),
-                           figures):
+          f"{views.summary()}; {sought.summary()}; naming {naming[0]:.2f} s, second look {naming[1]:.2f} s")
+    for what, value in zip(rows[:-1], figures):
         print(line(what, value))
 
 

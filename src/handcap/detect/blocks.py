@@ -26,6 +26,8 @@ from handcap.detect.corners import grey_levels
 NEIGHBOURS = 12
 #: The fourth corner must lie within this fraction of the shorter side from where the parallelogram puts it.
 CLOSE = 0.5
+#: Shortest side of a white square, pixels.
+MIN_SIDE = 3.0
 #: Inner angles (DexterCap: 36-144 degrees; on rendered hands the wider gate reads 1-2 % more tags, none wrong).
 MIN_ANGLE, MAX_ANGLE = np.deg2rad(25.0), np.deg2rad(155.0)
 MAX_SIDE_RATIO = 4.0
@@ -47,7 +49,7 @@ STRIP = (0.06, 0.18)
 HALVES = ((0.12, 0.45), (0.55, 0.88))
 
 
-def candidate_quads(xy: np.ndarray, min_side: float = 3.0, score: np.ndarray | None = None) -> np.ndarray:
+def candidate_quads(xy: np.ndarray, min_side: float = MIN_SIDE, score: np.ndarray | None = None) -> np.ndarray:
     """Quadrilaterals of detected corners that pass the geometric gates and hold no other strong corner.
 
     Parameters

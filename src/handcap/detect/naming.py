@@ -67,6 +67,8 @@ class ViewNaming:
         The squares still unread.
     source : str
         What named them, for the summary.
+    what : str
+        What ``unread`` counts, for the summary.
     """
 
     arrays: dict
@@ -77,11 +79,11 @@ class ViewNaming:
     warnings: tuple = ()
     left: tuple = ()
     source: str = "the other cameras"
+    what: str = "unread white squares"
 
     def summary(self) -> str:
         """One line: the squares named and the corners added."""
-        return (f"named from {self.source}: {self.squares} of {self.unread} unread white squares, "
-                f"{self.corners} corners")
+        return f"named from {self.source}: {self.squares} of {self.unread} {self.what}, {self.corners} corners"
 
 
 def square_corners(pattern, marker_names) -> tuple[np.ndarray, np.ndarray]:

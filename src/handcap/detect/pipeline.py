@@ -225,13 +225,31 @@ class Detector:
         if region is not None:
             x0, y0, x1, y1 = region_box(region, image.shape)
             image, origin = np.ascontiguousarray(image[y0:y1, x0:x1]), np.array([x0, y0], float)
-        noise = noise_sigma(image)
-        if self.denoise and noise > NOISE_LEARNED:
-            image = denoised(image, noise)
+        image, noise = self.searched(image)
         found = self._detect(image, levels)
         if self.pyramid:
             found = self._coarser(image, levels, found)
         return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin, noise=noise)
+
+    def searched(self, image: np.ndarray) -> tuple[np.ndarray, float]:
+        """``image`` as the detector searches it, and its sensor noise.
+
+        Parameters
+        ----------
+        image : ndarray (H, W) uint8
+
+        Returns
+        -------
+        image : ndarray (H, W) uint8
+            Denoised where its noise is over :data:`~handcap.detect.noise.NOISE_LEARNED` (unless the detector was
+            told not to), else ``image`` itself.
+        noise : float
+            :func:`~handcap.detect.noise.noise_sigma`, grey levels.
+        """
+        noise = noise_sigma(image)
+        if self.denoise and noise > NOISE_LEARNED:
+            image = denoised(image, noise)
+        return image, noise
 
     def _coarser(self, image: np.ndarray, levels: np.ndarray, found: ImageDetections) -> ImageDetections:
         """``found`` in ``image``, or what a halved level of it reads where that holds more tags (module

@@ -272,6 +272,32 @@ def turned_crops(crops: np.ndarray, which) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate(seen))
 
 
+def refiner_views(net: CornerRefiner, image: np.ndarray, centres: np.ndarray, views: int = 8,
+                  batch: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """What the refiner says of the crops at integer pixels, averaged over their turns and mirrors.
+
+    Parameters
+    ----------
+    net : CornerRefiner
+    image : ndarray (H, W)
+    centres : ndarray (N, 2) int
+        The crops' centres, pixels ``(x, y)``.
+    views : int
+        How many of the eight turns and mirrors (1 to 8).
+    batch : int
+        Crops per network call.
+
+    Returns
+    -------
+    logit : ndarray (N,)
+        The corner's logit (``expit`` of it: the probability of a printed corner).
+    offset : ndarray (N, 2)
+        The corner's offset from each centre, pixels.
+    """
+    logit, offset = _views(net, image, np.asarray(centres, dtype=np.int64).reshape(-1, 2), range(views), batch)
+    return logit / views, offset / views
+
+
 def _views(net: CornerRefiner, image: np.ndarray, centres: np.ndarray, which: range, batch: int):
     """The refiner on crops at integer ``centres`` (N, 2), seen in the turns and mirrors ``which`` (of 0-7).
 

@@ -16,7 +16,7 @@ template whose four corners are known is projected into the camera, and an unrea
 
 A rig calibrated to half a pixel puts every projection that far off, mostly the same way over the hand: so each
 image's projections are first mapped by the affine map that takes the projections of the corners the camera named
-in that image onto where it named them (:func:`_local_fit`; with :data:`MIN_FIT` of them or more).
+in that image onto where it named them (:func:`local_fit`; with :data:`MIN_FIT` of them or more).
 
 A square that takes a tag gets the template's names for its corners, and the detections file one block row more,
 marked in ``block_from_views``. The squares named so give the corners more views, so the naming runs again
@@ -47,7 +47,7 @@ AGREE_PX = 1.0
 #: A corner counts as placed where its reprojection error is within this many times the take's median too (a rig
 #: calibrated less well than :data:`AGREE_PX` puts every corner farther).
 SPREAD = 2.5
-#: Least named corners of an image with which its projections are mended (:func:`_local_fit`).
+#: Least named corners of an image with which its projections are mended (:func:`local_fit`).
 MIN_FIT = 8
 #: Rounds of triangulating and naming.
 PASSES = 2
@@ -97,25 +97,53 @@ def name_from_views(arrays: dict, unread, rig, pattern, *, passes: int = PASSES,
     left = [u for u in unread if len(u.xy)]
     named = added = refused = 0
     warnings = []
-    timed = [] if sync is None else np.flatnonzero(np.isfinite(sync.offsets))
-    if sync is not None and not len(timed):
-        raise HandcapError("no camera has an offset: nothing to name the squares from")
-    first = 0 if sync is None else int(timed[0])
     for _ in range(passes):
         if not left or not len(tags) or len(arrays["frame"]) == 0 or len(arrays["camera_names"]) < 2:
             break
-        known, disagree = _known(arrays, rig, progress, rebased(sync, first))
+        clocks, disagree = known_corners(arrays, rig, sync, progress)
         if disagree is not None:
             warnings.append(disagree)
             break
         namer = Namer(tags, corners)
-        left = _match_all(arrays, left, Clocks(arrays, rig, sync, (first, known), progress), rig, namer, progress)
+        left = _match_all(arrays, left, clocks, rig, namer, progress)
         # A refused square stays unread and is refused again in the next pass: counted once, in the last.
         named, added, refused = named + namer.named, added + len(namer.rows["frame"]), namer.refused
         if not namer.named:
             break
         arrays = namer.appended(arrays)
     return ViewNaming(arrays, named, added, total, refused, tuple(warnings), tuple(left))
+
+
+def known_corners(arrays: dict, rig, sync=None, progress: bool | None = None) -> tuple[Clocks, str | None]:
+    """The corners the cameras named, triangulated where their views agree, on each camera's frames.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        A detections file's arrays, cameras named as in ``rig``.
+    rig : CameraRig
+    sync : Sync, optional
+        The cameras' offsets (:func:`name_from_views`); None: synchronised.
+    progress : bool, optional
+
+    Returns
+    -------
+    clocks : Clocks
+        Camera index -> its frames' known corners (T, M, 3), metres, NaN where unknown.
+    warning : str or None
+        Where the views of most named corners disagree (nothing should be named from them), why.
+
+    Raises
+    ------
+    HandcapError
+        Where ``sync`` gives no camera an offset.
+    """
+    timed = [] if sync is None else np.flatnonzero(np.isfinite(sync.offsets))
+    if sync is not None and not len(timed):
+        raise HandcapError("no camera has an offset: nothing to name the squares from")
+    first = 0 if sync is None else int(timed[0])
+    known, disagree = _known(arrays, rig, progress, rebased(sync, first))
+    return Clocks(arrays, rig, sync, (first, known), progress), disagree
 
 
 def rebased(sync, camera: int):
@@ -220,7 +248,7 @@ def _match_all(arrays: dict, unread, clocks: Clocks, rig, namer: Namer, progress
         points = now[corners[take]]
         seen = np.isfinite(points).all(axis=(1, 2))
         pixels, _ = camera.project(points[seen])
-        fit = _local_fit(camera, now[arrays["marker"][mine]], arrays["xy"][mine])
+        fit = local_fit(camera, now[arrays["marker"][mine]], arrays["xy"][mine])
         if fit is not None:  # where the rig's small errors put the camera's projections, mended on its named corners
             pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
         facing = signed_area(pixels) * signs.get(u.camera, 1.0) > 0
@@ -232,10 +260,24 @@ def _match_all(arrays: dict, unread, clocks: Clocks, rig, namer: Namer, progress
     return still
 
 
-def _local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray | None:
-    """The affine map (3, 2) that takes the camera's projections of ``points`` (N, 3, metres; NaN where unknown) to
-    where it named them (``detected`` (N, 2), pixels), fitted again without the points over three times the median
-    distance from it; None with fewer than :data:`MIN_FIT` points."""
+def local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray | None:
+    """The affine map that takes the camera's projections of points to where it named them.
+
+    Fitted again without the points over three times the median distance from it.
+
+    Parameters
+    ----------
+    camera : Camera
+    points : ndarray (N, 3)
+        Metres; NaN where unknown.
+    detected : ndarray (N, 2)
+        Where the camera named them, pixels.
+
+    Returns
+    -------
+    ndarray (3, 2) or None
+        Pixels as rows ``(x, y, 1)`` times it; None with fewer than :data:`MIN_FIT` points.
+    """
     pixels, _ = camera.project(points)
     ok = np.isfinite(pixels).all(axis=1)
     fit = affine_map(pixels[ok], detected[ok], MIN_FIT, rounds=2)

@@ -98,7 +98,8 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     views : bool
         With a template: name the white squares a camera could not read where its neighbouring frames
         (:mod:`handcap.detect.motion`) and, with a rig, the other cameras (:mod:`handcap.detect.views`) place a
-        square of the template; the file marks them in ``block_from_views``.
+        square of the template, and (with the refiner) look again at the squares the other cameras place where a
+        camera found none (:mod:`handcap.detect.seek`); the file marks them in ``block_from_views``.
     sync : None, 'auto', str, sequence of str or dict
         Cameras not triggered together, for the naming from the other cameras (:mod:`handcap.multiview.sync`):
         ``'auto'`` finds each camera's offset from the corners the cameras named; ``CAM=FRAMES`` items (or a dict)
@@ -241,6 +242,13 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             naming = name_from_views(found, left, cameras, template, progress=progress, sync=offsets)
             found, warnings = naming.arrays, warnings + said + list(naming.warnings)
             by_views += f"; {naming.summary()}"
+            if detector.refiner is not None and not naming.warnings:
+                from handcap.detect.seek import searched_frames, seek_from_views  # loads torch
+
+                naming = seek_from_views(found, cameras, template, detector.refiner,
+                                         searched_frames(detector, sources, run.responses), sync=offsets,
+                                         progress=progress)
+                found, by_views = naming.arrays, by_views + f"; {naming.summary()}"
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
                                                   "frame_step": np.array(pick.every)}
