@@ -43,7 +43,7 @@ from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
 from handcap.detect.motion import name_from_frames
 from handcap.detect.naming import square_corners
-from handcap.detect.seek import searched_frames, seek_from_views
+from handcap.detect.seek import searched_frames, second_look
 from handcap.detect.views import name_from_views
 from handcap.multiview import triangulate_detections
 from handcap.multiview.detections import detections_of
@@ -121,7 +121,7 @@ def line(what: str, s: dict) -> str:
 
 def detected(detector, config, folder, clocks=None):
     """Film ``config`` into ``folder`` and detect it: (capture, pattern, run, seconds, truth, frames), ``frames``
-    the images as searched (for :func:`~handcap.detect.seek.seek_from_views`)."""
+    the images as searched (for :func:`~handcap.detect.seek.second_look`)."""
     capture = film_take(config, folder, progress=False, clocks=clocks)
     pattern = Pattern.load(Path(folder) / "pattern.toml")
     detector.pattern = pattern
@@ -136,7 +136,8 @@ def detected(detector, config, folder, clocks=None):
 def named(run, rig, pattern, sync=None, frames=None, refiner=None):
     """As ``handcap detect`` names the unread squares: from the neighbouring frames, then from the other cameras
     (``sync``: 'auto' finds the cameras' offsets first, as ``detect --sync auto``, or a Sync gives them), then
-    (given ``frames`` and ``refiner``) by the second look where the other cameras place squares; returns the three
+    (given ``frames`` and ``refiner``) by the second look where the other cameras or the neighbouring frames place
+    squares; returns the three
     namings (the last None without ``frames``) and the seconds they took, the second look's apart."""
     start = time.perf_counter()
     moved = name_from_frames(run.arrays, run.unread, pattern, progress=False)
@@ -147,7 +148,7 @@ def named(run, rig, pattern, sync=None, frames=None, refiner=None):
     if frames is None:
         return moved, views, None, (seconds, 0.0)
     start = time.perf_counter()
-    sought = seek_from_views(views.arrays, rig, pattern, refiner, frames, sync=sync, progress=False)
+    sought = second_look(views.arrays, pattern, refiner, frames, rig=rig, sync=sync, progress=False)
     return moved, views, sought, (seconds, time.perf_counter() - start)
 
 
@@ -189,7 +190,8 @@ def main() -> None:
         unsynchronised(detector)
         return
     rows = ("detected", "named from the neighbouring frames too", "and from the other cameras",
-            "and a second look where the other cameras place squares", "the same with a rig calibrated less well")
+            "and a second look where the other cameras or the neighbouring frames place squares",
+            "the same with a rig calibrated less well")
     totals = {what: [] for what in rows}
     for seed, subject in SEEDS[:1] if args.quick else SEEDS:
         config = SynthConfig(layout="dense-patches", motion="grasp", frames=11, rate=4.0, seed=seed,

@@ -39,7 +39,7 @@ from handcap.detect.networks import load_checker, load_corner_net, load_reader, 
 from handcap.detect.pipeline import Detector
 from handcap.detect.sources import frame_sources
 from handcap.detect.motion import name_from_frames
-from handcap.detect.seek import searched_frames, seek_from_views
+from handcap.detect.seek import searched_frames, second_look
 from handcap.detect.views import name_from_views
 from handcap.io import write_hand_motion, write_markers
 from handcap.layouts import load_layout
@@ -103,9 +103,9 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         moved = name_from_frames(run.arrays, run.unread, pattern, progress=progress)
         naming = name_from_views(moved.arrays, moved.left, capture.rig, pattern, progress=progress)
         warnings += list(naming.warnings)
-        # ... and a second look where the other cameras place squares the camera found none of (handcap.detect.seek).
-        sought = seek_from_views(naming.arrays, capture.rig, pattern, detector.refiner,
-                                 searched_frames(detector, sources, run.responses), progress=progress)
+        # ... and a second look where the other cameras or the neighbouring frames place squares (handcap.detect.seek).
+        sought = second_look(naming.arrays, pattern, detector.refiner,
+                             searched_frames(detector, sources, run.responses), rig=capture.rig, progress=progress)
         seconds = time.perf_counter() - start
         save_npz(folder / "detections.npz", sought.arrays | {"pitch": np.array(pattern.pitch)})
         # To look at: the detections drawn over one camera's frames (handcap overlay draws any camera's).

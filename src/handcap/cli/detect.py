@@ -61,9 +61,9 @@ def add_detect(verbs) -> None:
     p.add_argument("--no-views", action="store_true",
                    help="with --pattern, leave a white square a camera could not read unnamed (default: it takes the "
                         "tag of the template's square that the camera's neighbouring frames, or with --rig the other "
-                        "cameras, place on it to 1.5 px; with --rig, the refiner also looks again where the other "
-                        "cameras place squares the camera found none of; the file marks such blocks in "
-                        "block_from_views)")
+                        "cameras, place on it to 1.5 px; the refiner also looks again where the neighbouring frames, "
+                        "or with --rig the other cameras, place squares the camera found none of; the file marks "
+                        "such blocks in block_from_views)")
     p.add_argument("--sync", action="append", metavar="auto|CAM=FRAMES",
                    help="cameras not triggered together, for naming the squares a camera could not read from the "
                         "other cameras (with --rig and --pattern): auto finds each camera's offset from the corners "

@@ -64,10 +64,10 @@ def name_from_frames(arrays: dict, unread, pattern, *, progress: bool | None = N
         for u in tqdm([u for u in unread if len(u.xy)], desc="frames", unit="image", leave=False,
                       disable=None if progress is None else not progress):
             mine, read = by_image.get((u.camera, u.frame), empty)
-            here = _pixels(arrays, mine, len(arrays["marker_names"]))
+            here = named_pixels(arrays, mine, len(arrays["marker_names"]))
             found = {}
             for other in (u.frame - 1, u.frame + 1):
-                there = _pixels(arrays, by_image.get((u.camera, other), empty)[0], len(arrays["marker_names"]))
+                there = named_pixels(arrays, by_image.get((u.camera, other), empty)[0], len(arrays["marker_names"]))
                 for k, (square, order) in _matches(u, here, there, corners, ~np.isin(tags, list(read)),
                                                    signs.get(u.camera, 1.0)).items():
                     if found.get(k, (square,))[0] != square:
@@ -84,8 +84,23 @@ def name_from_frames(arrays: dict, unread, pattern, *, progress: bool | None = N
                       source="the neighbouring frames")
 
 
-def _pixels(arrays: dict, rows: np.ndarray, markers: int) -> np.ndarray:
-    """The image's named corners by marker (markers, 2), pixels; NaN where it names none."""
+def named_pixels(arrays: dict, rows: np.ndarray, markers: int) -> np.ndarray:
+    """An image's named corners by marker.
+
+    Parameters
+    ----------
+    arrays : dict of str to ndarray
+        A detections file's arrays.
+    rows : ndarray (N,) int
+        The rows of the image's named corners.
+    markers : int
+        How many markers the file names.
+
+    Returns
+    -------
+    ndarray (markers, 2)
+        Pixels; NaN where the image names none.
+    """
     out = np.full((markers, 2), np.nan)
     out[arrays["marker"][rows]] = arrays["xy"][rows]
     return out

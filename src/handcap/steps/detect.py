@@ -98,8 +98,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     views : bool
         With a template: name the white squares a camera could not read where its neighbouring frames
         (:mod:`handcap.detect.motion`) and, with a rig, the other cameras (:mod:`handcap.detect.views`) place a
-        square of the template, and (with the refiner) look again at the squares the other cameras place where a
-        camera found none (:mod:`handcap.detect.seek`); the file marks them in ``block_from_views``.
+        square of the template, and (with the refiner) look again where the other cameras or the neighbouring
+        frames place squares an image found none of (:mod:`handcap.detect.seek`); the file marks them in
+        ``block_from_views``.
     sync : None, 'auto', str, sequence of str or dict
         Cameras not triggered together, for the naming from the other cameras (:mod:`handcap.multiview.sync`):
         ``'auto'`` finds each camera's offset from the corners the cameras named; ``CAM=FRAMES`` items (or a dict)
@@ -233,7 +234,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
     found, by_views, clocks = run.arrays, "", {}  # clocks: the offsets found or given, for triangulate
     if views and template is not None and len(found["frame"]):
         naming = name_from_frames(found, run.unread, template, progress=progress)
-        found, left, by_views = naming.arrays, naming.left, f"; {naming.summary()}"
+        found, left, by_views, offsets = naming.arrays, naming.left, f"; {naming.summary()}", None
         if rig is not None:
             offsets, said = (None, []) if sync is None else _offsets(found, cameras, given, max_offset_s)
             if offsets is not None:
@@ -242,13 +243,12 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             naming = name_from_views(found, left, cameras, template, progress=progress, sync=offsets)
             found, warnings = naming.arrays, warnings + said + list(naming.warnings)
             by_views += f"; {naming.summary()}"
-            if detector.refiner is not None and not naming.warnings:
-                from handcap.detect.seek import searched_frames, seek_from_views  # loads torch
+        if detector.refiner is not None:
+            from handcap.detect.seek import searched_frames, second_look  # loads torch
 
-                naming = seek_from_views(found, cameras, template, detector.refiner,
-                                         searched_frames(detector, sources, run.responses), sync=offsets,
-                                         progress=progress)
-                found, by_views = naming.arrays, by_views + f"; {naming.summary()}"
+            naming = second_look(found, template, detector.refiner, searched_frames(detector, sources, run.responses),
+                                 rig=cameras if rig is not None else None, sync=offsets, progress=progress)
+            found, by_views = naming.arrays, by_views + f"; {naming.summary()}"
     pitch = {} if template is None else {"pitch": np.array(float(template.pitch))}  # a ruler for triangulate
     picked = {} if pick == FrameSelection() else {"first_frame": np.array(pick.start),
                                                   "frame_step": np.array(pick.every)}
