@@ -118,15 +118,41 @@ def _matches(u, here: np.ndarray, there: np.ndarray, corners: np.ndarray, allowe
     squares = np.concatenate([there[corners[whole]], np.ones((len(whole), 4, 1))], axis=-1)  # (S, 4, 3)
     out = {}
     for k, quad in enumerate(u.xy):
-        side = float(np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).max())
-        near = common[tree.query_ball_point(quad.mean(axis=0), RADIUS * side)]
-        if len(near) < MIN_FIT:
-            continue
-        fit, distance = affine_map(there[near], here[near], MIN_FIT)
-        if distance > FIT_PX:
+        fit = local_motion(tree, common, quad, there, here)
+        if fit is None:
             continue
         match = match_squares(quad[None], squares @ fit, sign)
         if 0 in match:
             square, order = match[0]
             out[k] = (int(whole[square]), order)
     return out
+
+
+def local_motion(tree: cKDTree, common: np.ndarray, quad: np.ndarray, there: np.ndarray,
+                 here: np.ndarray) -> np.ndarray | None:
+    """The local motion around a square from another frame to this one (module docstring).
+
+    Parameters
+    ----------
+    tree : cKDTree
+        Over the pixels of the corners ``common`` in the frame ``quad`` lies in.
+    common : ndarray (K,) int
+        The markers both frames name.
+    quad : ndarray (4, 2)
+        The square, pixels.
+    there, here : ndarray (M, 2)
+        Each frame's named corners by marker, pixels (NaN where it names none).
+
+    Returns
+    -------
+    ndarray (3, 2) or None
+        The affine map from ``there`` to ``here`` (pixels as rows ``(x, y, 1)`` times it), fitted on the corners
+        within :data:`RADIUS` times the square's longest side; None with fewer than :data:`MIN_FIT` of them or where it
+        fits them worse than :data:`FIT_PX` median.
+    """
+    side = float(np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).max())
+    near = common[tree.query_ball_point(quad.mean(axis=0), RADIUS * side)]
+    if len(near) < MIN_FIT:
+        return None
+    fit, distance = affine_map(there[near], here[near], MIN_FIT)
+    return fit if distance <= FIT_PX else None

@@ -9,9 +9,8 @@ same camera a frame before or after, name it. So each image is looked at again w
   every square of the template whose four corners are known is projected into the camera, mended by the affine map
   of the camera's own named corners (:func:`~handcap.detect.views.local_fit`);
 - from the neighbouring frames: every square the camera named whole in the frame before or after, mapped by the
-  local motion of the corners named in both frames near it (the affine map of :mod:`~handcap.detect.motion`, within
-  its :data:`~handcap.detect.motion.RADIUS` and :data:`~handcap.detect.motion.FIT_PX`); where both frames place a
-  square, they must agree to :data:`~handcap.detect.naming.GATE_PX`.
+  local motion of the corners named in both frames near it (:func:`~handcap.detect.motion.local_motion`); both
+  frames must place it, and agree to :data:`~handcap.detect.naming.GATE_PX` (it is looked for at their mean).
 
 The corner refiner (:mod:`~handcap.detect.refine`, all eight turns and mirrors) looks at the four expected corners
 in the image as the detector searched it, and the square takes its tag where
@@ -39,10 +38,9 @@ from scipy.special import expit
 from tqdm import tqdm
 
 from handcap.detect.blocks import MIN_SIDE, white_blocks
-from handcap.detect.motion import FIT_PX, MIN_FIT, named_pixels
-from handcap.detect.motion import RADIUS as RADIUS_MOTION
-from handcap.detect.naming import (GATE_PX, Namer, UnreadSquares, ViewNaming, affine_map, image_index, signed_area,
-                                   square_corners, turning)
+from handcap.detect.motion import MIN_FIT, local_motion, named_pixels
+from handcap.detect.naming import (GATE_PX, Namer, UnreadSquares, ViewNaming, image_index, signed_area, square_corners,
+                                   turning)
 from handcap.detect.response import linear_light
 from handcap.detect.refine import BORDER, RADIUS, REFINED_THRESHOLD, refiner_views
 from handcap.detect.views import known_corners, local_fit
@@ -92,7 +90,7 @@ def second_look(arrays: dict, pattern, refiner, frames, *, rig=None, sync=None,
     if rig is not None and len(arrays["camera_names"]) >= 2:
         clocks, disagree = known_corners(arrays, rig, sync, progress)
         clocks = None if disagree is not None else clocks  # name_from_views said so already
-    namer, looked, by_views = Namer(tags, corners), 0, 0
+    namer, looked, by_views = Namer(tags, corners), 0, 0  # by_views: squares named where the other cameras place them
     by_image, signs = image_index(arrays), turning(arrays)
     n_markers = len(arrays["marker_names"])
     for c in tqdm(range(len(arrays["camera_names"])), desc="second look", unit="camera", leave=False,
@@ -102,23 +100,23 @@ def second_look(arrays: dict, pattern, refiner, frames, *, rig=None, sync=None,
         for f, image in frames(c):
             mine, read = by_image.get((c, f), EMPTY)
             allowed = ~np.isin(tags, list(read))
-            expected = [] if known is None or f >= len(known) else [_projected(camera, known[f], arrays, mine,
-                                                                                allowed, corners)]
-            here = named_pixels(arrays, mine, n_markers)
-            expected.append(_moved(here, [named_pixels(arrays, by_image.get((c, o), EMPTY)[0], n_markers)
-                                          for o in (f - 1, f + 1)], corners, allowed))
-            done = set()
-            for k, (squares, pixels) in enumerate(expected):  # the other cameras' first
-                keep = _plausible(pixels, image.shape, signs.get(c, 1.0)) & ~np.isin(squares, list(done))
-                squares, pixels = squares[keep], pixels[keep]
+            views = None if known is None or f >= len(known) else _projected(camera, known[f], arrays, mine,
+                                                                            allowed, corners)
+            moved = _moved(named_pixels(arrays, mine, n_markers),
+                           [named_pixels(arrays, by_image.get((c, o), EMPTY)[0], n_markers) for o in (f - 1, f + 1)],
+                           corners, allowed)
+            done = np.zeros(0, np.int64)
+            looks = ((True, *views), (False, *moved)) if views is not None else ((False, *moved),)
+            for from_views, squares, pixels in looks:  # the other cameras' first
+                keep = _plausible(pixels, image.shape, signs.get(c, 1.0)) & ~np.isin(squares, done)
+                squares, pixels, done = squares[keep], pixels[keep], np.r_[done, squares]
                 looked += len(squares)
                 found, placed, score = _found(refiner, image, pixels)
                 if found.any():
                     before = namer.named
                     u = UnreadSquares(c, f, placed[found], score[found])
                     namer.take(u, {j: (s, np.arange(4)) for j, s in enumerate(squares[found])}, arrays, mine)
-                    by_views += (namer.named - before) if k == 0 and len(expected) == 2 else 0
-                done |= set(squares.tolist())
+                    by_views += (namer.named - before) if from_views else 0
     named = namer.appended(arrays) if namer.named else arrays
     what = f"squares looked for ({by_views} of those named placed by the other cameras)"
     return ViewNaming(named, namer.named, len(namer.rows["frame"]), looked, namer.refused, source=source, what=what)
@@ -167,7 +165,7 @@ def _projected(camera, now: np.ndarray, arrays: dict, mine: np.ndarray, allowed:
 def _moved(here: np.ndarray, others: list, corners: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The ``allowed`` squares the camera named whole in a neighbouring frame (``others``: each frame's named corners
     by marker (M, 2), NaN where none), mapped into this frame by the local motion of the corners both frames name
-    (``here``); where both neighbours place a square, only if they agree to the gate. Indices (S,), corners
+    (``here``), where both neighbours place it and agree to the gate: at their mean. Indices (S,), corners
     (S, 4, 2), pixels."""
     placed = [{}, {}]
     named_here = np.isfinite(here).all(axis=1)
@@ -179,14 +177,9 @@ def _moved(here: np.ndarray, others: list, corners: np.ndarray, allowed: np.ndar
             continue
         tree = cKDTree(there[common])
         for s in whole:
-            quad = there[corners[s]]
-            side = float(np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).max())
-            near = common[tree.query_ball_point(quad.mean(axis=0), RADIUS_MOTION * side)]
-            if len(near) < MIN_FIT:
-                continue
-            fit, distance = affine_map(there[near], here[near], MIN_FIT)
-            if distance <= FIT_PX:
-                guess[int(s)] = np.c_[quad, np.ones(4)] @ fit
+            fit = local_motion(tree, common, there[corners[s]], there, here)
+            if fit is not None:
+                guess[int(s)] = np.c_[there[corners[s]], np.ones(4)] @ fit
     before, after = placed
     agreed = {s: (before[s] + after[s]) / 2 for s in set(before) & set(after)
               if np.linalg.norm(before[s] - after[s], axis=1).max() <= GATE_PX}
