@@ -202,3 +202,20 @@ def test_without_a_rig_the_neighbouring_frames_are_looked_at(take):
         yield from ((t, blank if t == 1 else image) for t in range(3))
 
     assert second_look(three, take.pattern, take.refiner, other, progress=False).squares == 0
+
+
+def test_images_with_nothing_to_look_for_are_not_read_again(take):
+    from handcap.detect.seek import second_look  # loads torch
+
+    # One frame and no rig (a single photo of each camera): no neighbouring frames, no other cameras' squares.
+    a = take.arrays
+    rows, blocks = a["frame"] == 0, a["block_frame"] == 0
+    one = {**a, **{k: a[k][rows] for k in ("frame", "camera", "marker", "xy", "score")},
+           **{k: a[k][blocks] for k in ("block_text", "block_frame", "block_camera", "block_xy", "block_score",
+                                        "block_from_views")}}
+
+    def unread(c):
+        raise AssertionError(f"camera {c}'s images read again")
+
+    sought = second_look(one, take.pattern, take.refiner, unread, progress=False)
+    assert sought.squares == sought.unread == 0

@@ -97,6 +97,9 @@ def second_look(arrays: dict, pattern, refiner, frames, *, rig=None, sync=None,
                   disable=None if progress is None else not progress):
         known = None if clocks is None else clocks(c)
         camera = None if known is None else rig[str(arrays["camera_names"][c])]
+        if known is None and not any((c, f - 1) in by_image and (c, f + 1) in by_image for (k, f) in by_image
+                                     if k == c):
+            continue  # nothing to look for: its images are not read again (a single photo, say)
         for f, image in frames(c):
             mine, read = by_image.get((c, f), EMPTY)
             allowed = ~np.isin(tags, list(read))
