@@ -7,7 +7,7 @@ same camera a frame before or after, name it. So each image is looked at again w
 
 - from the other cameras (with a rig): the named corners triangulated (:func:`~handcap.detect.views.known_corners`),
   every square of the template whose four corners are known is projected into the camera, mended by the affine map
-  of the camera's own named corners (:func:`~handcap.detect.views.local_fit`);
+  of the camera's own named corners (:func:`~handcap.detect.views.projected_squares`);
 - from the neighbouring frames: every square the camera named whole in the frame before or after, mapped by the
   local motion of the corners named in both frames near it (:func:`~handcap.detect.motion.local_motion`); both
   frames must place it, and agree to :data:`~handcap.detect.naming.GATE_PX` (it is looked for at their mean).
@@ -43,7 +43,7 @@ from handcap.detect.naming import (GATE_PX, Namer, UnreadSquares, ViewNaming, im
                                    turning)
 from handcap.detect.response import linear_light
 from handcap.detect.refine import BORDER, RADIUS, REFINED_THRESHOLD, refiner_views
-from handcap.detect.views import known_corners, local_fit
+from handcap.detect.views import known_corners, projected_squares
 
 #: Farthest the refiner may place a corner from where it was expected, pixels.
 SEEK_PX = 1.0
@@ -103,8 +103,8 @@ def second_look(arrays: dict, pattern, refiner, frames, *, rig=None, sync=None,
         for f, image in frames(c):
             mine, read = by_image.get((c, f), EMPTY)
             allowed = ~np.isin(tags, list(read))
-            views = None if known is None or f >= len(known) else _projected(camera, known[f], arrays, mine,
-                                                                            allowed, corners)
+            views = None if known is None or f >= len(known) else projected_squares(camera, known[f], arrays,
+                                                                                   mine, allowed, corners)
             moved = _moved(named_pixels(arrays, mine, n_markers),
                            [named_pixels(arrays, by_image.get((c, o), EMPTY)[0], n_markers) for o in (f - 1, f + 1)],
                            corners, allowed)
@@ -146,23 +146,6 @@ def searched_frames(detector, sources, responses):
             yield t, detector.searched(linear_light(image) if responses[c] == "srgb" else image)[0]
 
     return frames
-
-
-def _projected(camera, now: np.ndarray, arrays: dict, mine: np.ndarray, allowed: np.ndarray,
-               corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The ``allowed`` template squares whose four corners the other cameras place (``now`` (M, 3), metres): their
-    indices (S,) and their corners projected into the camera (S, 4, 2), pixels, in reading order."""
-    take = np.flatnonzero(allowed)
-    points = now[corners[take]]
-    seen = np.isfinite(points).all(axis=(1, 2))
-    take, points = take[seen], points[seen]
-    if not len(take):
-        return take, np.zeros((0, 4, 2))
-    pixels, _ = camera.project(points)
-    fit = local_fit(camera, now[arrays["marker"][mine]], arrays["xy"][mine])
-    if fit is not None:
-        pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
-    return take, pixels
 
 
 def _moved(here: np.ndarray, others: list, corners: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

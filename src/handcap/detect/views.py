@@ -244,20 +244,55 @@ def _match_all(arrays: dict, unread, clocks: Clocks, rig, namer: Namer, progress
         now = known[u.frame]
         camera = rig[str(arrays["camera_names"][u.camera])]
         mine, read = by_image.get((u.camera, u.frame), (np.zeros(0, int), set()))
-        take = ~np.isin(tags, list(read))
-        points = now[corners[take]]
-        seen = np.isfinite(points).all(axis=(1, 2))
-        pixels, _ = camera.project(points[seen])
-        fit = local_fit(camera, now[arrays["marker"][mine]], arrays["xy"][mine])
-        if fit is not None:  # where the rig's small errors put the camera's projections, mended on its named corners
-            pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
+        square_ids, pixels = projected_squares(camera, now, arrays, mine, ~np.isin(tags, list(read)), corners)
         facing = signed_area(pixels) * signs.get(u.camera, 1.0) > 0
         match = match_squares(u.xy, pixels[facing], signs.get(u.camera, 1.0))
-        square_ids = np.flatnonzero(take)[seen][facing]
+        square_ids = square_ids[facing]
         left = namer.take(u, {k: (square_ids[s], order) for k, (s, order) in match.items()}, arrays, mine)
         if left is not None:
             still.append(left)
     return still
+
+
+def projected_squares(camera, now: np.ndarray, arrays: dict, mine: np.ndarray, allowed: np.ndarray,
+                      corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the ``allowed`` squares whose four corners are known lie in a camera's image.
+
+    Projected, then mended by the affine map of the camera's own named corners (:func:`local_fit`): where the rig's
+    small errors put the projections.
+
+    Parameters
+    ----------
+    camera : Camera
+    now : ndarray (M, 3)
+        The known corners at the image's moment, metres; NaN where unknown.
+    arrays : dict of str to ndarray
+        The detections file's arrays.
+    mine : ndarray (N,) int
+        The rows of the image's named corners.
+    allowed : ndarray (S,) bool
+        Which of the template's squares to place.
+    corners : ndarray (S, 4) int
+        The squares' markers in reading order (:func:`~handcap.detect.naming.square_corners`).
+
+    Returns
+    -------
+    squares : ndarray (S',) int
+        The squares placed (indices into ``corners``).
+    pixels : ndarray (S', 4, 2)
+        Their corners, pixels, in reading order.
+    """
+    take = np.flatnonzero(allowed)
+    points = now[corners[take]]
+    seen = np.isfinite(points).all(axis=(1, 2))
+    take, points = take[seen], points[seen]
+    if not len(take):
+        return take, np.zeros((0, 4, 2))
+    pixels, _ = camera.project(points)
+    fit = local_fit(camera, now[arrays["marker"][mine]], arrays["xy"][mine])
+    if fit is not None:
+        pixels = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], axis=-1) @ fit
+    return take, pixels
 
 
 def local_fit(camera, points: np.ndarray, detected: np.ndarray) -> np.ndarray | None:
