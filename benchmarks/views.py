@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/views.py            # four rendered takes, about 8 minutes on 2 cores
     .venv/bin/python benchmarks/views.py --quick    # two
     .venv/bin/python benchmarks/views.py --unsynchronised   # cameras not triggered together, about 4 minutes
+    .venv/bin/python benchmarks/views.py --quick --workers 2   # and each take detected again, 2 cameras at once
 
 Three takes are ``handcap demo --images``'s kind: one subject in the ``dense-patches`` layout, 13 cameras at 4 Hz,
 rendered by ``handcap synth`` (images the networks never saw), a grasp of 11 frames. The fourth is a video: 3
@@ -20,6 +21,8 @@ then from the other cameras. Against the image truth it prints, without and with
 5. the same naming with a rig calibrated less well: every camera turned by 0.2 mrad and moved by 0.2 mm (standard
    deviations, each axis), so that the named corners reproject about 0.8 px from where they were found (a good
    calibration of a real rig: 0.3-0.5 px).
+6. with ``--workers N``, each take of 13 cameras detected again with N cameras at once (``detect --workers N``), its
+   time against the detection in one process and whether the detections agree.
 
 ``--unsynchronised``: a grasp filmed by 8 cameras at 20 Hz, each started at its own third of a frame
 (:class:`~handcap.synth.filming.Clocks`), named as synchronised, with the offsets ``detect --sync auto`` finds, and
@@ -133,6 +136,23 @@ def detected(detector, config, folder, clocks=None):
             searched_frames(detector, sources, run.responses))
 
 
+def in_processes(detector, capture, pattern, run, folder, rate: float, workers: int, seconds: float) -> str:
+    """The take in ``folder`` detected again with ``workers`` cameras at once: its time against ``seconds`` (in one
+    process) and whether it names the same corners at the same pixels (to float rounding) as ``run``; "" for 1."""
+    if workers <= 1:
+        return ""
+    sources = frame_sources([Path(folder) / "images" / c.name for c in capture.rig])
+    start = time.perf_counter()
+    apart = detect_capture(detector, sources, pattern.corner_names(), rate, progress=False, response="linear",
+                           workers=workers)
+    took = time.perf_counter() - start
+    a, b = run.arrays, apart.arrays
+    same = all(np.allclose(a[k], b[k], rtol=0, atol=1e-6) if a[k].dtype.kind == "f" else np.array_equal(a[k], b[k])
+               for k in a)
+    return (f"; detected again with {workers} cameras at once (processes): {took:.1f} s, {seconds / took:.2f}x the "
+            f"one process's speed, the same detections: {same}")
+
+
 def named(run, rig, pattern, sync=None, frames=None, refiner=None):
     """As ``handcap detect`` names the unread squares: from the neighbouring frames, then from the other cameras
     (``sync``: 'auto' finds the cameras' offsets first, as ``detect --sync auto``, or a Sync gives them), then
@@ -183,6 +203,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one take of 13 cameras, and the video")
     parser.add_argument("--unsynchronised", action="store_true", help="only the cameras not triggered together")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="detect each take of 13 cameras again with this many cameras at once, and time both")
     args = parser.parse_args()
     detector = Detector(load_corner_net(int8=True), load_reader(), refiner=load_refiner(int8=True),
                         checker=load_checker())
@@ -198,6 +220,7 @@ def main() -> None:
                              subject_seed=subject, cameras=13, min_views=3)
         with tempfile.TemporaryDirectory() as folder:
             capture, pattern, run, seconds, truth, frames = detected(detector, config, folder)
+            apart = in_processes(detector, capture, pattern, run, folder, config.rate, args.workers, seconds)
             moved, views, sought, naming = named(run, capture.rig, pattern, None, frames, detector.refiner)
             rough = rougher(capture.rig, seed)
             _, roughly, rough_sought, _ = named(run, rough, pattern, None, frames, detector.refiner)
@@ -209,7 +232,8 @@ def main() -> None:
         print(f"take seed {seed} (subject {subject}), 13 cameras at 4 Hz, {run.images} images: detection "
               f"{seconds:.1f} s ({seconds / run.images:.2f} s/image); {moved.summary()}; {views.summary()}, "
               f"{views.refused} refused; {sought.summary()}, {sought.refused} refused; naming {naming[0]:.2f} s, "
-              f"second look {naming[1]:.2f} s" + (f"; warnings: {'; '.join(views.warnings)}" if views.warnings else ""))
+              f"second look {naming[1]:.2f} s" + (f"; warnings: {'; '.join(views.warnings)}" if views.warnings else "")
+              + apart)
         for what, value in zip(rows[:-1], figures):
             print(line(what, value))
         print(line(f"the same with a rig calibrated less well (median reprojection {off[1]:.2f} px, against "

@@ -227,3 +227,42 @@ def test_a_miss_the_whole_frame_does_not_confirm_makes_no_wait(tmp_path):
     assert searched[12] == ["region"]
     assert run.regions == sum(v == ["region"] for v in searched.values())
     assert len(run.arrays["block_text"]) == 12 * 10 + 5
+
+
+def _same_detections(a, b):
+    """Two detections files' arrays alike: ids and texts exactly, pixels to float rounding (threads sum apart)."""
+    assert a.keys() == b.keys()
+    for key in a:
+        if a[key].dtype.kind == "f":
+            np.testing.assert_allclose(a[key], b[key], atol=1e-6, err_msg=key)
+        else:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_cameras_in_processes_or_on_dask_give_the_same_detections(scenes, detector, tmp_path):
+    # Two cameras, each its own drifting and jumping scene; the tracker's state is a camera's own, so detecting
+    # them one per process (or on a Dask cluster) gives the rows of one camera after the other, as in one process.
+    sources = frame_sources([_film(scenes[0], tmp_path / "cam_0"), _film(scenes[1], tmp_path / "cam_1")])
+    names = detector.pattern.corner_names()
+    serial = detect_capture(detector, sources, names, 30.0, progress=False, response="linear")
+    apart = detect_capture(detector, sources, names, 30.0, progress=False, response="linear", workers=2)
+    assert np.bincount(serial.arrays["camera"]).min() > 100 and serial.regions == 4
+    _same_detections(serial.arrays, apart.arrays)
+    assert (apart.regions, apart.frames, apart.responses, apart.images) == (serial.regions, serial.frames,
+                                                                           serial.responses, serial.images)
+    assert [(u.camera, u.frame) for u in apart.unread] == [(u.camera, u.frame) for u in serial.unread]
+    distributed = pytest.importorskip("distributed")
+    with (distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                   dashboard_address=None) as cluster,
+          distributed.Client(cluster, set_as_default=False) as client):
+        on_dask = detect_capture(detector, sources, names, 30.0, progress=False, response="linear", scheduler=client)
+    _same_detections(serial.arrays, on_dask.arrays)
+
+
+def test_a_bad_frame_in_a_worker_is_the_same_one_line_error(scenes, detector, tmp_path):
+    sources = frame_sources([_film(scenes[0], tmp_path / "cam_0"), _film(scenes[1], tmp_path / "cam_1")])
+    (h0, w0), (h1, w1) = scenes[0].image.shape, scenes[1].image.shape
+    sizes = [(w0 + 680, h0 + 560), (w1 + 680, h1 + 561)]  # camera 1 was calibrated a pixel taller
+    with pytest.raises(HandcapError, match=r"^cam_1 frame 0: the image is \d+x\d+ px but the rig calibrated"):
+        detect_capture(detector, sources, detector.pattern.corner_names(), 30.0, progress=False, sizes=sizes,
+                       response="linear", workers=2)

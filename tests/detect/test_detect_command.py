@@ -148,6 +148,9 @@ def test_other_bad_input(frames, weights, tmp_path, capsys):
           str(tmp_path / "d.npz")], "lacks glyphs"),
         (["detect", str(frames / "cam_0"), "--alphabet", "0123\u00e9", "--out", str(tmp_path / "d.npz")], "knows no"),
         (["detect", str(frames / "cam_0"), "--threshold", "1.5", "--out", str(tmp_path / "d.npz")], "between 0 and 1"),
+        (["detect", str(frames / "cam_0"), "--workers", "0", "--out", str(tmp_path / "d.npz")], "--workers 0: give"),
+        (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--scheduler", "tcp://127.0.0.1:9", "--out",
+          str(tmp_path / "d.npz")], "cannot reach the Dask scheduler"),
         # Offsets time the other cameras' views for the naming: they need the rig and the template, and good offsets.
         (["detect", str(frames / "cam_0"), "--sync", "auto", "--out", str(tmp_path / "d.npz")], "needs --rig and"),
         (["detect", str(frames / "cam_0"), str(frames / "cam_1"), "--rig", str(both), "--pattern", str(pattern),

@@ -159,3 +159,20 @@ def _tool():
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
     return tool
+
+
+def test_the_twins_pickle_as_their_float_networks(scenes):
+    # PyTorch's converted layers do not pickle; the twins are rebuilt from their float networks, so a detector
+    # travels to worker processes (handcap detect --workers) and finds the same corners there.
+    import pickle
+
+    if not int8.available():
+        pytest.skip("this PyTorch has no oneDNN engine: no integer twins")
+    net, refiner = load_corner_net(int8=True), load_refiner(int8=True)
+    again, refiner_again = pickle.loads(pickle.dumps((net, refiner)))
+    assert type(again) is Int8CornerNet and type(refiner_again) is Int8Refiner
+    xy, score = locate_corners(net, refiner, scenes[0].image)
+    xy_again, score_again = locate_corners(again, refiner_again, scenes[0].image)
+    assert len(xy) > 100
+    np.testing.assert_array_equal(xy, xy_again)
+    np.testing.assert_array_equal(score, score_again)

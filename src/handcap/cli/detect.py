@@ -15,7 +15,8 @@ def _cmd_detect(a):
                               track=not a.whole_frames, checker_weights=a.checker_weights,
                               checker=not a.no_checker, adapt_steps=a.adapt_steps, denoise=not a.no_denoise,
                               response=a.response, frames=frames_arg(a.frames), every=a.every,
-                              views=not a.no_views, sync=sync_arg(a), max_offset_s=a.max_offset)
+                              views=not a.no_views, sync=sync_arg(a), max_offset_s=a.max_offset,
+                              workers=a.workers, scheduler=a.scheduler)
 
 
 def add_detect(verbs) -> None:
@@ -72,6 +73,12 @@ def add_detect(verbs) -> None:
                         "--sync counts them). Default: the cameras are synchronised")
     p.add_argument("--max-offset", type=float, default=MAX_OFFSET_S, metavar="SECONDS",
                    help="how far --sync auto searches, seconds either way (default %(default)g)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="cameras detected at once, each in a process of its own with a share of the cores (default 1: "
+                        "one camera after another; on two cores that is as fast, README)")
+    p.add_argument("--scheduler", metavar="ADDR",
+                   help="a Dask scheduler (tcp://HOST:8786) to detect the cameras on, one camera per task; its workers "
+                        "need handcap and the inputs at the same paths")
     p.add_argument("--no-denoise", action="store_true",
                    help="search noisy images as they are (default: an image with more sensor noise than the networks "
                         "learned, about 5 grey levels, is denoised first; a warning says how many)")

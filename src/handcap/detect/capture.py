@@ -35,7 +35,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from handcap.core.errors import HandcapError
@@ -43,6 +45,7 @@ from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
 from handcap.detect.response import ResponseChoice
 from handcap.detect.naming import UnreadSquares
+from handcap.parallel import map_chunks
 
 #: A camera's frame is searched whole at least once in this many frames.
 FULL_EVERY = 10
@@ -230,7 +233,7 @@ class Tracker:
 
 def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
                    progress: bool | None = None, track: bool = True, sizes=None,
-                   response="auto") -> CaptureDetections:
+                   response="auto", workers: int = 1, scheduler=None) -> CaptureDetections:
     """Run ``detector`` on every frame of ``sources`` (one per camera, in the rig's order).
 
     Parameters
@@ -244,7 +247,7 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     rate : float
         Frames per second.
     progress : bool, optional
-        Progress bar over the images (default: on a terminal).
+        Progress bar over the images (over the cameras when they run in parallel; default: on a terminal).
     track : bool
         Search a frame around the previous frame's patches where that is safe (see the module docstring);
         without, every frame is searched whole.
@@ -255,6 +258,14 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         The cameras' response to light (or each source's): chosen for each camera on its first frames
         (``auto``), linear as recorded, or display-encoded, decoded to linear light first
         (:mod:`~handcap.detect.response`).
+    workers : int
+        Cameras detected at once, each in a local process of its own with this process's torch threads shared
+        out among them (:func:`handcap.parallel.map_chunks`; the detector and the sources travel to them, so both
+        must pickle); 1 (the default): one camera after another in this process. The cameras are independent, so
+        the arrays are the same either way.
+    scheduler : None, str or distributed.Client
+        A Dask scheduler to run the cameras on instead (its workers need handcap and the input files at the same
+        paths); ``workers`` is then ignored.
 
     Returns
     -------
@@ -265,48 +276,82 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     HandcapError
         A frame whose size is not its camera's.
     """
-    out = _Rows(marker_names, keep_unread=getattr(detector, "pattern", None) is not None)  # a template names them
-    regions, responses, looked = 0, [], []
+    keep = getattr(detector, "pattern", None) is not None  # a template names the unread squares
     given = [response] * len(sources) if isinstance(response, str) else list(response)
-    hidden = None if progress is None else not progress
-    with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image", disable=hidden,
-              leave=False) as bar:
-        for c, source in enumerate(sources):
-            tracker, choice, pending = None, ResponseChoice(given[c]), []
-            for t, image in source.frames():
-                if sizes is not None:
-                    check_size(source, t, image.shape, sizes[c])
-                if tracker is None or tracker.shape != image.shape[:2]:
-                    tracker = Tracker(image.shape)
-                if choice.response is None:  # still choosing the camera's response: the whole frame, both ways
-                    both = choice.look(detector, image)
-                    tracker.update(both[choice.leaning() == "srgb"], whole=True)
-                    pending.append((t, both))
-                    if choice.response is not None:  # chosen: the frames looked at, read the way chosen
-                        out.add_all(pending, c, choice.response)
-                        pending = []
-                    bar.update()
-                    continue
-                image = choice.prepared(image)
-                region = tracker.region() if track else None
-                found = detector.image(image, region) if region is not None else None
-                missed = found is not None and tracker.missed(found, region)
-                if found is None or missed:
-                    partial, found, region = found, detector.image(image), None
-                    # Only a miss the whole frame confirms, a tag it reads that the region did not, makes the
-                    # camera wait before it tries a region again; on a rendered grasp take 14 of 15 were not.
-                    missed = missed and bool(set(found.block_text.tolist()) - set(partial.block_text.tolist()))
-                regions += region is not None
-                tracker.update(found, whole=region is None, missed=missed)
-                out.add(found, t, c)
-                bar.update()
-            out.add_all(pending, c, choice.leaning())  # a camera with fewer frames than the choice looks at
-            responses.append(choice.leaning())
-            looked.append(tuple(int(n) for n in choice.tags))
+    jobs = [(source, c, None if sizes is None else sizes[c], given[c]) for c, source in enumerate(sources)]
+    workers = min(int(workers), len(sources))
+    if scheduler is None and workers <= 1:
+        out, cameras = _Rows(marker_names, keep_unread=keep), []
+        with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image",
+                  disable=None if progress is None else not progress, leave=False) as bar:
+            for source, c, size, chosen in jobs:
+                cameras.append(_detect_camera(detector, source, c, out, size, chosen, track, bar))
+    else:
+        threads = max(1, torch.get_num_threads() // max(workers, 1))
+        chunks = [(detector, list(marker_names), keep, track, threads, *job) for job in jobs]
+        done = map_chunks(_camera_chunk, chunks, scheduler=scheduler, workers=workers, progress=progress,
+                          desc="detect (cameras)")
+        out, cameras = _Rows(marker_names, keep_unread=keep), []
+        for rows, camera in done:  # in the cameras' order, so the rows are those of one camera after another
+            out.extend(rows)
+            cameras.append(camera)
+    regions = sum(camera[0] for camera in cameras)
     return CaptureDetections(out.arrays(sources, rate), out.images, out.empty, out.corrected, regions, out.sure,
                              out.disowned, out.read, tuple(out.frames.get(c, 0) for c in range(len(sources))),
-                             out.noisy, out.noise, tuple(responses), tuple(looked), out.twice, out.twice_images,
-                             out.unread)
+                             out.noisy, out.noise, tuple(camera[1] for camera in cameras),
+                             tuple(camera[2] for camera in cameras), out.twice, out.twice_images, out.unread)
+
+
+def _camera_chunk(chunk) -> tuple:
+    """One camera in a worker process: its rows (a :class:`_Rows` of its own) and :func:`_detect_camera`'s tuple."""
+    detector, marker_names, keep, track, threads, source, c, size, response = chunk
+    before = torch.get_num_threads(), cv2.getNumThreads()
+    torch.set_num_threads(threads)
+    cv2.setNumThreads(threads)
+    try:
+        rows = _Rows(marker_names, keep_unread=keep)
+        return rows, _detect_camera(detector, source, c, rows, size, response, track, None)
+    finally:
+        torch.set_num_threads(before[0])
+        cv2.setNumThreads(before[1])
+
+
+def _detect_camera(detector: Detector, source, c: int, out: "_Rows", size, response: str, track: bool,
+                   bar) -> tuple:
+    """Every frame of camera ``c`` into ``out``; (images searched in a region, its response, its tags read in the
+    frames the response was chosen on (as recorded, decoded))."""
+    tracker, choice, pending, regions = None, ResponseChoice(response), [], 0
+    for t, image in source.frames():
+        if size is not None:
+            check_size(source, t, image.shape, size)
+        if tracker is None or tracker.shape != image.shape[:2]:
+            tracker = Tracker(image.shape)
+        if choice.response is None:  # still choosing the camera's response: the whole frame, both ways
+            both = choice.look(detector, image)
+            tracker.update(both[choice.leaning() == "srgb"], whole=True)
+            pending.append((t, both))
+            if choice.response is not None:  # chosen: the frames looked at, read the way chosen
+                out.add_all(pending, c, choice.response)
+                pending = []
+            if bar is not None:
+                bar.update()
+            continue
+        image = choice.prepared(image)
+        region = tracker.region() if track else None
+        found = detector.image(image, region) if region is not None else None
+        missed = found is not None and tracker.missed(found, region)
+        if found is None or missed:
+            partial, found, region = found, detector.image(image), None
+            # Only a miss the whole frame confirms, a tag it reads that the region did not, makes the
+            # camera wait before it tries a region again; on a rendered grasp take 14 of 15 were not.
+            missed = missed and bool(set(found.block_text.tolist()) - set(partial.block_text.tolist()))
+        regions += region is not None
+        tracker.update(found, whole=region is None, missed=missed)
+        out.add(found, t, c)
+        if bar is not None:
+            bar.update()
+    out.add_all(pending, c, choice.leaning())  # a camera with fewer frames than the choice looks at
+    return regions, choice.leaning(), tuple(int(n) for n in choice.tags)
 
 
 class _Rows:
@@ -349,6 +394,18 @@ class _Rows:
         if self.keep_unread and len(found.unread):
             self.unread.append(UnreadSquares(camera, t, found.corners[found.unread].astype(np.float32),
                                              found.corner_score[found.unread].astype(np.float32)))
+
+    def extend(self, other: "_Rows") -> None:
+        """Take in ``other``'s frames after this one's (another camera's, detected apart)."""
+        for mine, theirs in ((self.rows, other.rows), (self.blocks, other.blocks)):
+            for key in mine:
+                mine[key] += theirs[key]
+        for key in ("images", "empty", "corrected", "sure", "disowned", "read", "noisy", "twice", "twice_images"):
+            setattr(self, key, getattr(self, key) + getattr(other, key))
+        self.noise = max(self.noise, other.noise)
+        for camera, count in other.frames.items():
+            self.frames[camera] = self.frames.get(camera, 0) + count
+        self.unread += other.unread
 
     def arrays(self, sources, rate: float) -> dict:
         """The detections file's arrays (the module docstring), in the order the frames were added."""

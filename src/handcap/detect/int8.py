@@ -69,6 +69,12 @@ class Int8CornerNet(nn.Module):
         self.head = copy.deepcopy(net.head)
         for block in (self.stem, self.down, *self.body):
             tq.fuse_modules(block, ["0", "1"], inplace=True)
+        self.__dict__["float_net"] = net  # not a submodule: what it is pickled as
+
+    def __reduce__(self):
+        """Pickled as its float network, and built again from it (PyTorch's converted layers do not pickle), so a
+        :class:`~handcap.detect.pipeline.Detector` travels to worker processes."""
+        return int8_corner_net, (self.float_net,)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         """As :meth:`CornerNet.forward`: (B, 1, H, W) normalised grey levels -> (B, 3, H / 2, W / 2)."""
@@ -110,6 +116,11 @@ class Int8Refiner(nn.Module):
         self.head = copy.deepcopy(net.head)
         self.head.qconfig = None  # floats: the offsets' last fractions of a pixel
         tq.fuse_modules(self.features, [[str(k), str(k + 1)] for k in range(0, len(self.features), 2)], inplace=True)
+        self.__dict__["float_net"] = net  # not a submodule: what it is pickled as
+
+    def __reduce__(self):
+        """Pickled as its float network, and built again from it (as :meth:`Int8CornerNet.__reduce__`)."""
+        return int8_refiner, (self.float_net,)
 
     def forward(self, crops: torch.Tensor) -> torch.Tensor:
         """As :meth:`CornerRefiner.forward`: (N, 1, 17, 17) normalised crops -> (N, 3)."""

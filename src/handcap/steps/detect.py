@@ -44,7 +44,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
            threshold: float | None = None, progress: bool | None = None, track: bool = True, checker_weights=None,
            checker: bool = True, adapt_steps: int = 0, denoise: bool = True, response: str = "auto",
            frames: slice | None = None, every: int = 1, views: bool = True, sync=None,
-           max_offset_s: float = MAX_OFFSET_S) -> Step:
+           max_offset_s: float = MAX_OFFSET_S, workers: int = 1, scheduler=None) -> Step:
     """Detect coded patches in images or videos and write the 2D detections ``.npz``.
 
     Parameters
@@ -110,8 +110,16 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
         takes them.
     max_offset_s : float
         How far ``'auto'`` searches, seconds either way.
+    workers : int
+        Cameras detected at once, each in a local process of its own (:func:`handcap.detect.capture.detect_capture`;
+        the same detections). 1 (the default): one camera after another, as fast on two cores (README).
+    scheduler : None, str or distributed.Client
+        A Dask scheduler to detect the cameras on instead (``tcp://HOST:PORT``); its workers need handcap and the
+        inputs at the same paths.
     """
     out = Path(out)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise HandcapError(f"--workers {workers}: give how many cameras to detect at once, 1 or more")
     if out.suffix.lower() != ".npz":
         raise HandcapError(f"{out}: detections are written as .npz; name it NAME.npz")
     sources = frame_sources(inputs)
@@ -169,8 +177,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
 
     marker_names = template.corner_names() if template is not None else []
     sizes = None if rig is None else [cameras[s.camera].size for s in sources]
+    parallel = {"workers": workers, "scheduler": scheduler}
     run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes,
-                         response=response)
+                         response=response, **parallel)
     images, corrected = run.images, run.corrected
     decoded = [s.camera for s, r in zip(sources, run.responses) if r == "srgb"]
     if decoded:
@@ -216,7 +225,7 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
             detector.adapted = adapt_reader(detector.reader, views, steps=adapt_steps, progress=progress)
             detector.confused = views.confused
             run = detect_capture(detector, sources, marker_names, rate, progress=progress, track=track, sizes=sizes,
-                                 response=run.responses)
+                                 response=run.responses, **parallel)
             adapted = (f"; the reader adapted to this take ({len(views.blocks)} sure readings in {len(views.images)} "
                        f"images, {adapt_steps} steps) vouched for {len(run.arrays['block_text']) - kept} more"
                        + (f" (none with {views.confused}, glyphs it confuses here)" if views.confused else ""))
