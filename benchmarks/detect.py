@@ -344,7 +344,7 @@ def main() -> None:
           + " (target: >= 99.9 % of its tags read)")
     # A phone close to the patches: squares larger than the networks learned (9-40 px), read at halved levels of
     # the image (handcap.detect.pipeline), against one search at the image's own size.
-    for side in (60.0, 110.0):
+    for side in (60.0, 110.0, 200.0):
         width = int(min(4000, 40 * side))
         close = PageMaker(args.seed + 5, font=font, look=PageLook(square_px=(side, side), tilt_deg=(0.0, 30.0),
                                                                   curl=(0.0, 0.5), occluders=(0, 0),
@@ -357,8 +357,10 @@ def main() -> None:
                                                         pyramid=pyramid, checker=checker), photos)
             timed[pyramid] = (timed[pyramid], (time.perf_counter() - start) / len(photos))
         (score, seconds), (single, single_s) = timed[True], timed[False]
+        off = score.named_px
         print(f"sheet photographed close ({'Noto Sans Mono Bold' if font else 'default font'}, {side:g} px squares, "
-              f"{photos[0].image.shape[1]} x {photos[0].image.shape[0]} px): halved levels {score.summary()} "
+              f"{photos[0].image.shape[1]} x {photos[0].image.shape[0]} px): halved levels {score.summary()}, named "
+              f"corners' error median {np.median(off):.3f} px, RMS {np.sqrt(np.mean(off ** 2)):.3f} px "
               f"({seconds:.2f} s/image); one level: tags {100 * single.right / max(single.blocks, 1):.1f} % read "
               f"right, {single.wrong} wrong ({single_s:.2f} s/image)")
 
