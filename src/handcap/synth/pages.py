@@ -152,14 +152,12 @@ class PagePhotographer:
         if rng.random() < look.glint:
             picture += _glint((w, h), side, rng)
         image = camera_effects(picture.astype(np.float32), self.style, rng)
-        # Truth: sheet corner -> homography -> undo the curl (q + curl(q) = p, by fixed-point steps).
+        # Truth: sheet corner -> homography -> undo the curl (the pixel q with q + curl(q) = p).
         pts = np.c_[(self.corners + 0.5) * k - 0.5, np.ones(len(self.corners))] @ homography.T
         front = pts[:, 2] > 1e-9
         p = pts[:, :2] / np.where(front, pts[:, 2], 1.0)[:, None]
-        q = p.copy()
-        for _ in range(8):
-            q = p - _sample(curl, q)
-        inside = front & (q >= 3).all(axis=1) & (q[:, 0] <= w - 4) & (q[:, 1] <= h - 4)
+        q, unbent = unbent_points(curl, p)
+        inside = front & unbent & (q >= 3).all(axis=1) & (q[:, 0] <= w - 4) & (q[:, 1] <= h - 4)
         hidden = ndimage.maximum_filter(covered, size=3) > 0.5
         visible = inside.copy()
         at = np.round(q[inside]).astype(int)
@@ -191,6 +189,54 @@ def _curl_field(size, amplitude: float, rng) -> np.ndarray:
     coarse = rng.normal(0, amplitude / 2, (2, 3, 3)).astype(np.float32)
     coarse -= coarse.mean(axis=(1, 2), keepdims=True)
     return np.stack([cv2.resize(c, (w, h), interpolation=cv2.INTER_CUBIC) for c in coarse])
+
+
+def unbent_points(curl: np.ndarray, p: np.ndarray, *, steps: int = 20, tol: float = 1e-3,
+                  least_det: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels ``q`` that a curl field brings to ``p``: ``q + curl(q) = p``, by Newton's method.
+
+    The photograph at pixel ``q`` shows the sheet where ``q + curl(q)`` lies, so a sheet point that projects to ``p``
+    is seen at ``q``. (Plain fixed-point steps ``q = p - curl(q)`` converge only where the field bends by less than a
+    pixel per pixel; in one photograph of ten of the default look it bends more somewhere, and 0.2 % of the visible
+    corners were placed up to 4 px off, on small images with large squares up to 60 px.)
+
+    Parameters
+    ----------
+    curl : ndarray (2, H, W)
+        Displacement (x, y) of each pixel, pixels (sampled bilinearly, clamped at the border).
+    p : ndarray (N, 2)
+        Points, pixels.
+    steps : int
+        Newton steps.
+    tol : float
+        Largest residual ``|q + curl(q) - p|`` of a solution, pixels.
+    least_det : float
+        Least determinant of the map's Jacobian at a solution: where the field folds the paper over (0 or below) the
+        point may show twice, or not at all.
+
+    Returns
+    -------
+    q : ndarray (N, 2)
+        Pixels.
+    ok : ndarray (N,) bool
+        Solved to ``tol`` where the map is one to one (``least_det``).
+    """
+    grads = [np.gradient(component) for component in curl]  # each (d/dy, d/dx)
+    slopes = np.stack([grads[0][1], grads[0][0], grads[1][1], grads[1][0]])  # dcx/dx, dcx/dy, dcy/dx, dcy/dy
+    q = p - _sample(curl, p)
+    for _ in range(steps):
+        r = q + _sample(curl, q) - p
+        a, b, c, d = (1.0 + _sample(slopes[:1], q)[:, 0], _sample(slopes[1:2], q)[:, 0],
+                      _sample(slopes[2:3], q)[:, 0], 1.0 + _sample(slopes[3:], q)[:, 0])
+        det = a * d - b * c
+        safe = np.abs(det) > 1e-6
+        det = np.where(safe, det, 1.0)
+        step = np.stack([d * r[:, 0] - b * r[:, 1], a * r[:, 1] - c * r[:, 0]], axis=1) / det[:, None]
+        q = q - np.where(safe[:, None], step, r)
+    r = np.linalg.norm(q + _sample(curl, q) - p, axis=1)
+    a, b, c, d = (1.0 + _sample(slopes[:1], q)[:, 0], _sample(slopes[1:2], q)[:, 0], _sample(slopes[2:3], q)[:, 0],
+                  1.0 + _sample(slopes[3:], q)[:, 0])
+    return q, (r <= tol) & (a * d - b * c >= least_det)
 
 
 def _sample(field: np.ndarray, points: np.ndarray) -> np.ndarray:
