@@ -12,7 +12,7 @@ import pytest
 from handcap.detect import pipeline
 from handcap.detect.evaluation import evaluate_detector
 from handcap.detect.networks import load_corner_net, load_reader, load_refiner
-from handcap.detect.pipeline import LARGE_SQUARE, Detector, ImageDetections, _too_large, look_again
+from handcap.detect.pipeline import HALVABLE, LARGE_SQUARE, Detector, ImageDetections, _halvable, _too_large, look_again
 from handcap.detect.scenes import PageMaker
 from handcap.patterns import session_pattern
 from handcap.synth.pages import PageLook
@@ -132,3 +132,20 @@ def test_look_again_places_points_near_corners_and_leaves_the_others(networks, c
     back = np.linalg.norm(xy[:len(near)][moved[:len(near)]] - truth[moved[:len(near)]], axis=1)
     assert np.median(back) < 0.15 and np.percentile(back, 90) < 0.4
     np.testing.assert_array_equal(xy[len(near):], np.vstack([near, inside])[len(near):])
+
+
+def test_a_blurred_photograph_is_read_at_half_its_size_too(networks):
+    # Squares of 20-30 px out of focus by 2 px (more than the networks learned): halved, the blur is 1 px and the
+    # squares 10-15 px, and clearly more tags are read there.
+    maker = PageMaker(41, look=PageLook(square_px=(20.0, 30.0), tilt_deg=(0.0, 30.0), occluders=(0, 1),
+                                        size=(800, 600)))
+    photos = [replace(p, image=cv2.GaussianBlur(p.image, (0, 0), 2.0)) for p in (maker.scene() for _ in range(4))]
+    single = evaluate_detector(Detector(**networks, pattern=session_pattern(), pyramid=False), photos)
+    halved = evaluate_detector(Detector(**networks, pattern=session_pattern()), photos)
+    assert halved.blocks > 100 and halved.wrong == 0
+    assert halved.right > 1.2 * single.right and halved.right >= 0.8 * halved.blocks, (single.right, halved.right)
+
+
+def test_a_level_of_learned_squares_gives_way_only_to_clearly_more_tags():
+    assert _halvable(_blocks(HALVABLE, 3)) and not _halvable(_blocks(HALVABLE - 1.0, 3))
+    assert not _halvable(_blocks(HALVABLE, 0))

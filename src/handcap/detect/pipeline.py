@@ -21,8 +21,10 @@ one corner of its foreshortened block 2.1 px off); frames whose squares are smal
 searched once, as before (the benchmark's hand scenes give the same figures). A halved level places its
 corners to a fraction of its own pixels, which are two, four or eight of the image's: so on the way back each
 corner is placed again by the refiner in every finer level whose squares are at most :data:`FINER_SIDE`
-(:func:`~handcap.detect.refine.look_again`), and the corners of 150-250 px squares are named within 0.08-0.12 px
-(median) of the truth instead of 0.25-0.32 px.
+(:func:`look_again`), and the corners of 150-250 px squares are named within 0.08-0.12 px (median) of the truth
+instead of 0.25-0.32 px. An image whose blocks are :data:`HALVABLE` px or more is searched halved as well, where
+a blur beyond what the networks learned is halved too; there a level of squares they learned gives way only to
+one reading :data:`CLEARLY_MORE` times its tags (sheets of 20-30 px squares blurred by 2 px: 67 -> 93 % read).
 """
 
 from __future__ import annotations
@@ -55,6 +57,11 @@ MIN_REGION = 32
 LARGE_SQUARE = 28.0
 #: Shorter side of the smallest image level searched, pixels.
 COARSEST = 128
+#: Median side of the read blocks from which an image is searched halved as well, pixels: halved, such squares are
+#: 9 px or more, the least the networks learned. A blurred image reads more there (its blur is halved too).
+HALVABLE = 18.0
+#: How many times the tags of a level whose squares the networks learned a halved level must read to replace it.
+CLEARLY_MORE = 1.2
 #: A halved level's corners are placed again by the refiner in each finer level whose squares are at most this wide,
 #: pixels: twice the largest the networks learned (40 px). Measured (2026-11-30) on close photographs of sheets in the
 #: held-out font (three per size, two seeds), median error of the named corners without and with it: 60 px squares
@@ -267,17 +274,18 @@ class Detector:
         """``found`` in ``image``, or what a halved level of it reads where that holds more tags (module
         docstring), in ``image``'s pixels."""
         best, current, pyramid, chosen = found, found, [image], 0
-        while _too_large(current) and min(pyramid[-1].shape[:2]) >= 2 * COARSEST:
+        while (_too_large(current) or _halvable(current)) and min(pyramid[-1].shape[:2]) >= 2 * COARSEST:
             h, w = pyramid[-1].shape[:2]
             pyramid.append(cv2.resize(pyramid[-1], (w // 2, h // 2), interpolation=cv2.INTER_AREA))
             current = self._detect(pyramid[-1], levels)
-            if len(current.block_text) > len(best.block_text):
+            # A level of squares the networks learned gives way only to one that reads clearly more.
+            if len(current.block_text) > len(best.block_text) * (1.0 if _too_large(best) else CLEARLY_MORE):
                 best, chosen = current, len(pyramid) - 1
         return self._finer(best, pyramid[:chosen + 1]) if chosen else found
 
     def _finer(self, found: ImageDetections, pyramid: list) -> ImageDetections:
         """``found`` in the last (coarsest) image of ``pyramid`` brought to the first one's pixels, level by level,
-        its corners placed again by the refiner in each finer level (:func:`~handcap.detect.refine.look_again`):
+        its corners placed again by the refiner in each finer level (:func:`look_again`):
         a halved level places them to a fraction of its own, larger, pixels."""
         xy = found.corners
         # The blocks' corners are the corners' own positions: each is found again by where it lies.
@@ -434,6 +442,15 @@ def look_again(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *,
         score[inside] = expit(logit)
     moved = (score >= min_score) & (np.linalg.norm(placed - xy, axis=1) <= MAX_SHIFT)
     return np.where(moved[:, None], placed, xy), moved
+
+
+def _halvable(found: ImageDetections) -> bool:
+    """Whether an image level's blocks are large enough to be read halved too: their sides' median is
+    :data:`HALVABLE` or more. A blurred image reads more at half its size, where the blur is half as wide."""
+    if len(found.block_xy) == 0:
+        return False
+    sides = np.linalg.norm(found.block_xy - np.roll(found.block_xy, -1, axis=1), axis=2).mean(axis=1)
+    return bool(np.median(sides) >= HALVABLE)
 
 
 def _too_large(found: ImageDetections) -> bool:
