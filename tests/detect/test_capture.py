@@ -262,7 +262,7 @@ def test_cameras_in_processes_or_on_dask_give_the_same_detections(scenes, detect
 def test_a_bad_frame_in_a_worker_is_the_same_one_line_error(scenes, detector, tmp_path):
     sources = frame_sources([_film(scenes[0], tmp_path / "cam_0"), _film(scenes[1], tmp_path / "cam_1")])
     (h0, w0), (h1, w1) = scenes[0].image.shape, scenes[1].image.shape
-    sizes = [(w0 + 680, h0 + 560), (w1 + 680, h1 + 561)]  # camera 1 was calibrated a pixel taller
-    with pytest.raises(HandcapError, match=r"^cam_1 frame 0: the image is \d+x\d+ px but the rig calibrated"):
+    sizes = [(w0 + 680, h0 + 561), (w1 + 680, h1 + 561)]  # both cameras were calibrated a pixel taller
+    with pytest.raises(HandcapError, match=r"^cam_0 frame 0: the image is \d+x\d+ px but the rig calibrated"):
         detect_capture(detector, sources, detector.pattern.corner_names(), 30.0, progress=False, sizes=sizes,
                        response="linear", workers=2)

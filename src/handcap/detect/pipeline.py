@@ -290,7 +290,7 @@ class Detector:
         xy = found.corners
         # The blocks' corners are the corners' own positions: each is found again by where it lies.
         index = cKDTree(xy).query(found.block_xy.reshape(-1, 2))[1] if len(found.block_xy) else np.zeros(0, int)
-        side = float(np.median(np.linalg.norm(found.block_xy - np.roll(found.block_xy, -1, axis=1), axis=2)))
+        side = _block_side(found)
         for finer, coarser in zip(pyramid[-2::-1], pyramid[:0:-1]):
             scale = np.array([finer.shape[1] / coarser.shape[1], finer.shape[0] / coarser.shape[0]])
             xy, side = (xy + 0.5) * scale - 0.5, side * scale.mean()
@@ -444,13 +444,17 @@ def look_again(net: CornerRefiner, image: np.ndarray, xy: np.ndarray, *,
     return np.where(moved[:, None], placed, xy), moved
 
 
+def _block_side(found: ImageDetections) -> float:
+    """The median side of an image level's blocks (each block's four sides averaged), pixels; NaN without one."""
+    if len(found.block_xy) == 0:
+        return float("nan")
+    return float(np.median(np.linalg.norm(found.block_xy - np.roll(found.block_xy, -1, axis=1), axis=2).mean(axis=1)))
+
+
 def _halvable(found: ImageDetections) -> bool:
     """Whether an image level's blocks are large enough to be read halved too: their sides' median is
     :data:`HALVABLE` or more. A blurred image reads more at half its size, where the blur is half as wide."""
-    if len(found.block_xy) == 0:
-        return False
-    sides = np.linalg.norm(found.block_xy - np.roll(found.block_xy, -1, axis=1), axis=2).mean(axis=1)
-    return bool(np.median(sides) >= HALVABLE)
+    return _block_side(found) >= HALVABLE
 
 
 def _too_large(found: ImageDetections) -> bool:
@@ -460,7 +464,5 @@ def _too_large(found: ImageDetections) -> bool:
     own size (rendered sheets with squares of 320-480 px: none at the image's size, and 41 -> 74 % of the tags
     read with the halved levels searched, none wrong). An image of nothing costs about the same (its flat tiles are
     skipped at every level: 0.06-0.07 s for a grey 5 MP frame either way)."""
-    if len(found.block_xy) == 0:
-        return True
-    sides = np.linalg.norm(found.block_xy - np.roll(found.block_xy, -1, axis=1), axis=2).mean(axis=1)
-    return bool(np.median(sides) > LARGE_SQUARE)
+    side = _block_side(found)
+    return bool(np.isnan(side) or side > LARGE_SQUARE)
