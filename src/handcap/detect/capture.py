@@ -45,6 +45,7 @@ from handcap.detect.noise import NOISE_LEARNED
 from handcap.detect.pipeline import Detector, ImageDetections, region_box
 from handcap.detect.response import ResponseChoice
 from handcap.detect.naming import UnreadSquares
+from handcap.detect.sharpness import BLUR_LEARNED
 from handcap.parallel import map_chunks
 
 #: A camera's frame is searched whole at least once in this many frames.
@@ -99,6 +100,11 @@ class CaptureDetections:
     unread : list of UnreadSquares
         Each image's white squares without a tag, for :func:`~handcap.detect.views.name_from_views` and
         :func:`~handcap.detect.motion.name_from_frames` (kept only where the detector has a template).
+    blurred : tuple of int
+        Each camera's images whose printed edges are blurred beyond what the networks learned
+        (:data:`~handcap.detect.sharpness.BLUR_LEARNED`), in the order of the sources.
+    blur : float
+        The most edge blur of an image (:func:`~handcap.detect.sharpness.edge_blur`), pixels (0 where none read).
     """
 
     arrays: dict
@@ -117,6 +123,8 @@ class CaptureDetections:
     twice: int = 0
     twice_images: int = 0
     unread: list = field(default_factory=list)
+    blurred: tuple = ()
+    blur: float = 0.0
 
 
 class Tracker:
@@ -299,7 +307,8 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     return CaptureDetections(out.arrays(sources, rate), out.images, out.empty, out.corrected, regions, out.sure,
                              out.disowned, out.read, tuple(out.frames.get(c, 0) for c in range(len(sources))),
                              out.noisy, out.noise, tuple(camera[1] for camera in cameras),
-                             tuple(camera[2] for camera in cameras), out.twice, out.twice_images, out.unread)
+                             tuple(camera[2] for camera in cameras), out.twice, out.twice_images, out.unread,
+                             tuple(out.blurred.get(c, 0) for c in range(len(sources))), out.blur)
 
 
 def _camera_chunk(chunk) -> tuple:
@@ -365,6 +374,7 @@ class _Rows:
         self.images = self.empty = self.corrected = self.sure = self.disowned = self.read = self.noisy = 0
         self.twice = self.twice_images = 0
         self.noise, self.frames, self.unread, self.keep_unread = 0.0, {}, [], keep_unread
+        self.blurred, self.blur = {}, 0.0
 
     def add_all(self, pending, camera: int, response: str) -> None:
         """Frames searched both ways, ``pending`` [(frame, (as recorded, decoded))], read as ``response``."""
@@ -376,6 +386,8 @@ class _Rows:
         self.images += 1
         self.frames[camera] = self.frames.get(camera, 0) + 1
         self.noisy, self.noise = self.noisy + (found.noise > NOISE_LEARNED), max(self.noise, found.noise)
+        if found.blur > BLUR_LEARNED:  # NaN (no block read) is not
+            self.blurred[camera], self.blur = self.blurred.get(camera, 0) + 1, max(self.blur, found.blur)
         self.empty += len(found.corners) == 0
         self.corrected, self.sure = self.corrected + found.corrected, self.sure + found.sure
         self.disowned, self.read = self.disowned + found.disowned, self.read + found.read
@@ -402,9 +414,10 @@ class _Rows:
                 mine[key] += theirs[key]
         for key in ("images", "empty", "corrected", "sure", "disowned", "read", "noisy", "twice", "twice_images"):
             setattr(self, key, getattr(self, key) + getattr(other, key))
-        self.noise = max(self.noise, other.noise)
-        for camera, count in other.frames.items():
-            self.frames[camera] = self.frames.get(camera, 0) + count
+        self.noise, self.blur = max(self.noise, other.noise), max(self.blur, other.blur)
+        for mine, theirs in ((self.frames, other.frames), (self.blurred, other.blurred)):
+            for camera, count in theirs.items():
+                mine[camera] = mine.get(camera, 0) + count
         self.unread += other.unread
 
     def arrays(self, sources, rate: float) -> dict:

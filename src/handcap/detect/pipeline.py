@@ -49,6 +49,7 @@ from handcap.detect.checker import BlockChecker, block_features
 from handcap.detect.checks import unconfirmed, uncrossed
 from handcap.detect.voting import name_corners, vote
 from handcap.detect.noise import NOISE_LEARNED, denoised, noise_sigma
+from handcap.detect.sharpness import edge_blur
 
 #: Least side of a region searched, pixels: the corner network's tiles need 8, the refiner's crops 17.
 MIN_REGION = 32
@@ -63,11 +64,8 @@ HALVABLE = 18.0
 #: How many times the tags of a level whose squares the networks learned a halved level must read to replace it.
 CLEARLY_MORE = 1.2
 #: A halved level's corners are placed again by the refiner in each finer level whose squares are at most this wide,
-#: pixels: twice the largest the networks learned (40 px). Measured (2026-11-30) on close photographs of sheets in the
-#: held-out font (three per size, two seeds), median error of the named corners without and with it: 60 px squares
-#: 0.069 -> 0.076 and 0.089 -> 0.083 px, 90-110 px 0.145-0.188 -> 0.068-0.095 px, 150-250 px 0.247-0.324 ->
-#: 0.083-0.116 px; every finer level (no bound) placed 110 and 200 px squares' corners at 0.077 and 0.106 px, and
-#: 40 px left 250 px squares at 0.247 px.
+#: pixels: twice the largest the networks learned (40 px; no bound, or 40 px, placed them worse: README, "Photographs
+#: taken close").
 FINER_SIDE = 80.0
 #: Least confidence of a reading trusted alone when a glyph of it has a look-alike in the printed alphabet
 #: (:data:`~handcap.patterns.alphabet.LOOKALIKES`; the reader's own gate otherwise). On 200 rendered scenes in a font
@@ -149,6 +147,8 @@ class ImageDetections:
     unread : ndarray (U, 4) int
         White squares given no tag (indices into ``corners``, in the order the corners go round): the other
         cameras of a rig may name them (:mod:`~handcap.detect.views`).
+    blur : float
+        The white squares' edge blur (:func:`~handcap.detect.sharpness.edge_blur`), pixels; NaN without one.
     """
 
     corners: np.ndarray
@@ -164,6 +164,7 @@ class ImageDetections:
     noise: float = 0.0
     twice: int = 0
     unread: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
+    blur: float = float("nan")
 
 
 class Detector:
@@ -248,7 +249,8 @@ class Detector:
         found = self._detect(image, levels)
         if self.pyramid:
             found = self._coarser(image, levels, found)
-        return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin, noise=noise)
+        return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin, noise=noise,
+                       blur=edge_blur(image, np.concatenate([found.block_xy, found.corners[found.unread]])))
 
     def searched(self, image: np.ndarray) -> tuple[np.ndarray, float]:
         """``image`` as the detector searches it, and its sensor noise.

@@ -11,6 +11,7 @@ from handcap.core.files import check_output, save_npz, warnings_entry
 from handcap.patterns.alphabet import lookalike_warning
 from handcap.patterns.pattern import Pattern
 from handcap.detect.noise import NOISE_LEARNED
+from handcap.detect.sharpness import BLUR_LEARNED
 from handcap.detect.response import NEAR, ResponseChoice, linear_light
 from handcap.detect.motion import name_from_frames
 from handcap.detect.views import name_from_views
@@ -197,6 +198,12 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         f"(up to {run.noise:.1f} grey levels, against {NOISE_LEARNED:g}): "
                         + ("they were denoised first (non-local means); " if denoise else "not denoised "
                            "(--no-denoise); ") + "fewer corners are found in them. More light, or less gain, helps")
+    if sum(run.blurred):
+        cameras = [s.camera for s, n in zip(sources, run.blurred) if n]
+        warnings.append(f"{sum(run.blurred)} of {images} images ({_listed(cameras)}) show the printed edges blurred by "
+                        f"up to {run.blur:.1f} px (sigma), more than the detector's networks learned (about "
+                        f"{BLUR_LEARNED:g} px): fewer corners and tags are read in them. Focus the camera (or stop "
+                        "the lens down), or shorten the exposure if it is motion blur")
     if run.twice >= MIN_SURE and run.twice > TWICE_SHARE * run.sure:
         warnings.append(f"{run.twice} of the {run.sure} tags the reader was sure of were read at another white square "
                         f"of the same image too ({run.twice_images} images): patches printed twice (two copies of a "
