@@ -104,7 +104,7 @@ class CaptureDetections:
         Each camera's images whose printed edges are blurred beyond what the networks learned
         (:data:`~handcap.detect.sharpness.BLUR_LEARNED`), in the order of the sources.
     blur : float
-        The most edge blur of an image (:func:`~handcap.detect.sharpness.edge_blur`), pixels (0 where none read).
+        The most edge blur of those images (:func:`~handcap.detect.sharpness.edge_blur`), pixels; 0 without one.
     """
 
     arrays: dict
