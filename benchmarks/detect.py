@@ -19,6 +19,8 @@ handcap's own page printed flat and photographed square-on,
 against the targets (tags read right >= 99.5 %, corners with a wrong id <= 0.1 %,
 a page's tags read >= 99.9 %). The detector checks the blocks the vote keeps with the shipped block
 checker (:mod:`handcap.detect.checker`); the hand scenes are scored with the hand-set checks too.
+Out of focus: the held-out font's sheets and the hand scenes blurred by 1.5-2 px (more than the networks learned),
+read as ``detect`` reads them (halved too where the squares allow), and how many images the edge blur names.
 The occluder line (recall >= 90 % with 30 % of a patch behind occluders): the refined recall of each
 patch's visible corners, binned by the share of its corners in the image that the truth calls hidden,
 on the hand scenes (hidden by the hand itself, its fingers or the skin turning away) and on sheets
@@ -235,6 +237,7 @@ def main() -> None:
     print(f"the corners it names on the hand scenes (what detect writes): median {np.median(off):.3f} px, RMS "
           f"{np.sqrt(np.mean(off ** 2)):.3f} px, of {len(off)} named right (targets: median <= 0.15, RMS <= 0.3)")
     print_response(hand_detector, hands, pattern)
+    print_defocus(hand_detector, hands)
     if checker is not None:
         ruled = evaluate_detector(Detector(fast, reader, pattern, refiner=fast_refiner), hands)
         print("the same hand scenes with the hand-set checks instead of the block checker: " + ruled.summary())
@@ -396,6 +399,8 @@ def print_conditions(detector, pages, rng) -> None:
     conditions = {
         "sensor noise 8 grey levels": noisy(8.0), "sensor noise 14": noisy(14.0),
         "motion blur 5 px": lambda im: cv2.filter2D(im, -1, streak),
+        "out of focus by 1.5 px": lambda im: cv2.GaussianBlur(im, (0, 0), 1.5),
+        "out of focus by 2 px": lambda im: cv2.GaussianBlur(im, (0, 0), 2.0),
         "JPEG quality 20": lambda im: cv2.imdecode(cv2.imencode(".jpg", im, [cv2.IMWRITE_JPEG_QUALITY, 20])[1], 0),
         "light falling to a fifth across the frame": lambda im: np.clip(
             np.rint(im * np.linspace(1.0, 0.2, im.shape[1])[None]), 0, 255).astype(np.uint8),
@@ -418,6 +423,32 @@ def print_conditions(detector, pages, rng) -> None:
             parts.append(f"the same not denoised {100 * raw.right / max(raw.blocks, 1):.1f} % / {raw.wrong} wrong")
     print(f"the same sheets under other cameras' conditions, tags read right / wrong (of {plain.blocks} visible): "
           + "; ".join(parts))
+
+
+def print_defocus(detector, hands, sigma: float = 1.5) -> None:
+    """The hand scenes out of focus by ``sigma`` px: tags read right and wrong, with the halved level searched where
+    their squares allow (as ``detect`` does) and at their own size only; and how many images, sharp and blurred, the
+    edge blur (:func:`handcap.detect.sharpness.edge_blur`) calls blurred beyond what the networks learned."""
+    from dataclasses import replace
+
+    import cv2
+    import numpy as np
+
+    from handcap.detect.evaluation import evaluate_detector
+    from handcap.detect.sharpness import BLUR_LEARNED
+
+    soft = [replace(h, image=cv2.GaussianBlur(h.image, (0, 0), sigma)) for h in hands]
+    score = evaluate_detector(detector, soft)
+    detector.pyramid = False
+    single = evaluate_detector(detector, soft)
+    detector.pyramid = True
+    sharp_blur, soft_blur = ([detector.image(h.image).blur for h in scenes] for scenes in (hands, soft))
+    right, alone = (100 * s.right / max(s.blocks, 1) for s in (score, single))
+    print(f"the hand scenes out of focus by {sigma:g} px: tags {right:.1f} % read right, {score.wrong} of {score.read} "
+          f"wrong (at their own size only {alone:.1f} %, {single.wrong} wrong); images named blurred (edge blur over "
+          f"{BLUR_LEARNED:g} px): {np.sum(np.array(soft_blur) > BLUR_LEARNED)} of {len(soft)}, median edge blur "
+          f"{np.nanmedian(soft_blur):.2f} px (as rendered: {np.sum(np.array(sharp_blur) > BLUR_LEARNED)} of "
+          f"{len(hands)}, {np.nanmedian(sharp_blur):.2f} px)")
 
 
 def encoded_srgb(image):
