@@ -288,8 +288,8 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
     given = [response] * len(sources) if isinstance(response, str) else list(response)
     jobs = [(source, c, None if sizes is None else sizes[c], given[c]) for c, source in enumerate(sources)]
     workers = min(int(workers), len(sources))
+    out, cameras = _Rows(marker_names, keep_unread=keep), []
     if scheduler is None and workers <= 1:
-        out, cameras = _Rows(marker_names, keep_unread=keep), []
         with tqdm(total=sum(s.count() for s in sources), desc="detect", unit="image",
                   disable=None if progress is None else not progress, leave=False) as bar:
             for source, c, size, chosen in jobs:
@@ -299,7 +299,6 @@ def detect_capture(detector: Detector, sources, marker_names, rate: float, *,
         chunks = [(detector, list(marker_names), keep, track, threads, *job) for job in jobs]
         done = map_chunks(_camera_chunk, chunks, scheduler=scheduler, workers=workers, progress=progress,
                           desc="detect (cameras)")
-        out, cameras = _Rows(marker_names, keep_unread=keep), []
         for rows, camera in done:  # in the cameras' order, so the rows are those of one camera after another
             out.extend(rows)
             cameras.append(camera)
