@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from handcap.cli import main
-from handcap.detect.sharpness import BLUR_LEARNED, edge_blur
+from handcap.core.camera_rig import CameraRig
+from handcap.core.cameras import Camera
+from handcap.detect.sharpness import BLUR_LEARNED, edge_blur, image_blur
 from handcap.patterns import session_pattern
 
 
@@ -48,6 +50,31 @@ def test_no_square_or_no_contrast_gives_nan():
     assert np.isnan(edge_blur(np.full_like(image, 128), quads))
 
 
+def test_an_unread_square_far_from_the_corners_scale_is_not_measured():
+    sharp, quads = _board(0.0)
+    # A bright soft-edged object (a held cylinder) beside the board, found as one unread "white square" of 120 px.
+    image = sharp.astype(np.float32)
+    blob = np.zeros_like(image)
+    cv2.rectangle(blob, (260, 20), (380, 140), 1.0, -1)
+    blob = cv2.GaussianBlur(blob, (0, 0), 6.0)
+    image = np.clip(image * (1 - blob) + 230 * blob, 0, 255).astype(np.uint8)
+    outline = np.array([[[260.0, 20.0], [380.0, 20.0], [380.0, 140.0], [260.0, 140.0]]])
+    corners = np.unique(np.round(quads.reshape(-1, 2), 6), axis=0)
+    alone = edge_blur(image, outline)
+    assert alone > 4.0  # what the object alone would call the image
+    # Unread, with the board's squares read or unread: the object is 5 times the corners' spacing, left out.
+    with_board = image_blur(image, quads[:3], outline, np.r_[corners, outline[0]])
+    assert with_board == pytest.approx(edge_blur(image, quads[:3]))
+    assert image_blur(image, np.zeros((0, 4, 2)), np.r_[quads[:3], outline], np.r_[corners, outline[0]]) \
+        == pytest.approx(edge_blur(image, quads[:3]))
+    # The board's own squares unread and blurred by 2 px: measured as before (they are of the corners' scale).
+    soft, _ = _board(2.0)
+    assert image_blur(soft, np.zeros((0, 4, 2)), quads, corners) == pytest.approx(edge_blur(soft, quads))
+    assert image_blur(soft, np.zeros((0, 4, 2)), quads, corners) > BLUR_LEARNED
+    # Alone in an image (its four corners the only ones), a square is its own scale.
+    assert image_blur(image, np.zeros((0, 4, 2)), outline, outline[0]) == pytest.approx(alone)
+
+
 def test_rendered_hands_are_within_what_the_networks_learned_and_blurred_ones_are_not(scenes):
     for scene in scenes:
         assert edge_blur(scene.image, scene.blocks) < BLUR_LEARNED
@@ -64,7 +91,8 @@ def test_a_blurred_camera_is_named_in_a_stored_warning(tmp_path, capsys):
     for cam in ("sharp", "soft"):
         (tmp_path / cam).mkdir()
         for t in range(2):
-            image = maker.scene().image
+            image = maker.scene().image  # its size drawn per photograph: each padded to the rig's 480 x 360 below
+            image = cv2.copyMakeBorder(image, 0, 360 - image.shape[0], 0, 480 - image.shape[1], cv2.BORDER_REPLICATE)
             cv2.imwrite(str(tmp_path / cam / f"{t:06d}.png"), image if cam == "sharp"
                         else cv2.GaussianBlur(image, (0, 0), 2.0))
     pattern = tmp_path / "pattern.toml"
@@ -75,3 +103,11 @@ def test_a_blurred_camera_is_named_in_a_stored_warning(tmp_path, capsys):
     said = [w for w in np.load(out)["warnings"] if "blurred" in w]
     assert len(said) == 1 and said[0].startswith("2 of 4 images (camera soft)"), said
     assert said[0] in capsys.readouterr().err
+    # With a rig too: the warning once named its cameras in the variable that held the rig, so the naming from the
+    # other cameras that follows it failed ("need a CameraRig, got list").
+    camera = Camera("sharp", (480, 360), [[500.0, 0, 239.5], [0, 500.0, 179.5], [0, 0, 1]])
+    CameraRig([camera, Camera("soft", (480, 360), camera.matrix, translation=(0.1, 0.0, 0.0))]).save(
+        tmp_path / "rig.toml")
+    assert main(["detect", str(tmp_path / "sharp"), str(tmp_path / "soft"), "--pattern", str(pattern),
+                 "--rig", str(tmp_path / "rig.toml"), "--out", str(tmp_path / "rig.npz"), "--rate", "30"]) == 0
+    assert [w for w in np.load(tmp_path / "rig.npz")["warnings"] if "blurred" in w] == said

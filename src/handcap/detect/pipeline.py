@@ -49,7 +49,7 @@ from handcap.detect.checker import BlockChecker, block_features
 from handcap.detect.checks import unconfirmed, uncrossed
 from handcap.detect.voting import name_corners, vote
 from handcap.detect.noise import NOISE_LEARNED, denoised, noise_sigma
-from handcap.detect.sharpness import edge_blur
+from handcap.detect.sharpness import image_blur
 
 #: Least side of a region searched, pixels: the corner network's tiles need 8, the refiner's crops 17.
 MIN_REGION = 32
@@ -148,7 +148,7 @@ class ImageDetections:
         White squares given no tag (indices into ``corners``, in the order the corners go round): the other
         cameras of a rig may name them (:mod:`~handcap.detect.views`).
     blur : float
-        The white squares' edge blur (:func:`~handcap.detect.sharpness.edge_blur`), pixels; NaN without one.
+        The white squares' edge blur (:func:`~handcap.detect.sharpness.image_blur`), pixels; NaN without one.
     """
 
     corners: np.ndarray
@@ -250,7 +250,7 @@ class Detector:
         if self.pyramid:
             found = self._coarser(image, levels, found)
         return replace(found, corners=found.corners + origin, block_xy=found.block_xy + origin, noise=noise,
-                       blur=edge_blur(image, np.concatenate([found.block_xy, found.corners[found.unread]])))
+                       blur=image_blur(image, found.block_xy, found.corners[found.unread], found.corners))
 
     def searched(self, image: np.ndarray) -> tuple[np.ndarray, float]:
         """``image`` as the detector searches it, and its sensor noise.

@@ -18,10 +18,15 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 #: Edge blur above which an image is blurred beyond what the networks learned, pixels (sigma): above every rendered
 #: image measured as the networks learned them (at most 1.37 px; module docstring).
 BLUR_LEARNED = 1.5
+#: An unread white square is measured only if its mean side is within this factor of the spacing of the image's
+#: corners (the median distance from each to its nearest): a bright object's outline can pass the white-square test
+#: as one large "square" whose soft edges would name a sharp camera blurred.
+SCALE_SPREAD = 3.0
 #: Where across a side the slope is looked for, pixels from the side (the steepest of these).
 _ACROSS = np.arange(-2.0, 2.01, 0.25)
 #: Where along a side, as shares of it (away from the corners, where the neighbours meet).
@@ -74,6 +79,47 @@ def edge_blur(image: np.ndarray, block_xy: np.ndarray) -> float:
     if not usable.any():
         return float("nan")
     return float(np.median(contrast[usable] / (np.sqrt(2.0 * np.pi) * steepest[usable])))
+
+
+def image_blur(image: np.ndarray, read: np.ndarray, unread: np.ndarray, corners: np.ndarray) -> float:
+    """An image's :func:`edge_blur` over its read blocks and those unread white squares that are of its corners' scale.
+
+    A blurred image reads few of its squares, so the unread ones are measured too. But not every unread "square" is
+    printed: a bright object's outline against a dark background can pass the white-square test as one quad many
+    times the patches' size (a held cylinder in a rendered take: 148 px where the printed squares are 6-10 px, and
+    10.9 px of blur measured in an image that is sharp). The corners of printed squares lie a side apart, so an
+    unread square counts only where its mean side is within :data:`SCALE_SPREAD` of the median distance from each of
+    the image's corners to its nearest.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        Grey image.
+    read : ndarray (B, 4, 2)
+        Read blocks' corners in order round the square, pixels.
+    unread : ndarray (U, 4, 2)
+        Unread white squares' corners, likewise.
+    corners : ndarray (K, 2)
+        Every corner found in the image, pixels (the unread squares' among them).
+
+    Returns
+    -------
+    float
+        Sigma, pixels; NaN where nothing is measured.
+    """
+    read = np.asarray(read, dtype=np.float64).reshape(-1, 4, 2)
+    unread = np.asarray(unread, dtype=np.float64).reshape(-1, 4, 2)
+    corners = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    if len(unread) and len(corners) >= 2:
+        spacing = np.median(cKDTree(corners).query(corners, 2)[0][:, 1])
+        side = _mean_side(unread)
+        unread = unread[(side <= SCALE_SPREAD * spacing) & (side >= spacing / SCALE_SPREAD)]
+    return edge_blur(image, np.concatenate([read, unread]))
+
+
+def _mean_side(quads: np.ndarray) -> np.ndarray:
+    """Each quad's mean side, pixels: (B,) of (B, 4, 2)."""
+    return np.linalg.norm(quads - np.roll(quads, -1, axis=1), axis=2).mean(axis=1)
 
 
 def _sample(image: np.ndarray, points: np.ndarray) -> np.ndarray:

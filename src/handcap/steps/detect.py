@@ -199,9 +199,9 @@ def detect(inputs, out, *, rig=None, pattern=None, alphabet: str | None = None, 
                         + ("they were denoised first (non-local means); " if denoise else "not denoised "
                            "(--no-denoise); ") + "fewer corners are found in them. More light, or less gain, helps")
     if sum(run.blurred):
-        cameras = [s.camera for s, n in zip(sources, run.blurred) if n]
-        warnings.append(f"{sum(run.blurred)} of {images} images ({_listed(cameras)}) show the printed edges blurred by "
-                        f"up to {run.blur:.1f} px (sigma), more than the detector's networks learned (about "
+        blurred = [s.camera for s, n in zip(sources, run.blurred) if n]  # not `cameras`: that is the rig
+        warnings.append(f"{sum(run.blurred)} of {images} images ({_listed(blurred)}) show the printed edges blurred by "
+                        f"up to {run.blur:.2f} px (sigma), more than the detector's networks learned (about "
                         f"{BLUR_LEARNED:g} px): fewer corners and tags are read in them. Focus the camera (or stop "
                         "the lens down), or shorten the exposure if it is motion blur")
     if run.twice >= MIN_SURE and run.twice > TWICE_SHARE * run.sure:
