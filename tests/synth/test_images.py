@@ -131,8 +131,17 @@ def test_synth_images_writes_frames_and_their_truth(gl_ok, tmp_path):
     args = ["synth", "--layout", "dense-patches", "--motion", "random", "--frames", "2", "--cameras", "3",
             "--images", "--image-scale", "0.2", "--object", "none"]
     assert main(args + ["--out", str(tmp_path / "a")]) == 0
-    assert main(args + ["--out", str(tmp_path / "b")]) == 0
+    assert main(args[:1] + args[3:] + ["--out", str(tmp_path / "b")]) == 0  # --images: dense-patches by default
     truth = np.load(tmp_path / "a" / "image_truth.npz")
+    # The images are a fifth of the cameras' size: image_cameras.toml is the rig that filmed them (it projects the
+    # corners to their pixels), cameras.toml the full-size rig of the capture's own detections.
+    from handcap.core.camera_rig import CameraRig
+
+    small, full = (CameraRig.load(tmp_path / "a" / f) for f in ("image_cameras.toml", "cameras.toml"))
+    np.testing.assert_array_equal(small.sizes, truth["image_size"])
+    np.testing.assert_allclose(full.sizes, 5 * truth["image_size"], atol=3)  # 2448 x 2048 -> 490 x 410
+    seen = truth["visible"][0]
+    np.testing.assert_allclose(small.project(truth["positions"][0])[0][seen], truth["all_xy"][0][seen], atol=1e-6)
     pattern = Pattern.load(tmp_path / "a" / "pattern.toml")
     names = list(truth["marker_names"])
     assert names == [n for p in pattern.patches for n in p.corner_names()]

@@ -18,7 +18,10 @@ _SETTINGS = ("layout", "frames", "rate", "seed", "side", "object", "cameras", "m
 def _cmd_synth(a):
     betas = None if a.betas is None else tuple(float(b) for b in a.betas.split(","))
     motion = a.motion or (CUBE_MOTION if a.moves is not None else SynthConfig.motion)
-    config = None if a.scene else SynthConfig(**{k: getattr(a, k) for k in _SETTINGS}, betas=betas, motion=motion,
+    settings = {k: getattr(a, k) for k in _SETTINGS}
+    if a.layout is None:  # images film printed patches: the patch layout unless another is asked for
+        settings["layout"] = "dense-patches" if a.images else SynthConfig.layout
+    config = None if a.scene else SynthConfig(**settings, betas=betas, motion=motion,
                                               moves=a.moves, max_view_angle_deg=a.max_view_angle)
     return synth.synth(a.out, config, scene=a.scene, force=a.force, images=a.images, image_scale=a.image_scale,
                        image_style=a.image_style, image_response=a.image_response)
@@ -41,7 +44,8 @@ def add_synth(verbs) -> None:
                                      "rig of cameras, decide visibility by ray casting and add capture faults. "
                                      "Writes markers.c3d/.npz, points.npz, detections.npz, cameras.toml, truth.npz "
                                      "and scene.toml into OUT; the same settings give the same bytes.")
-    p.add_argument("--layout", default=d.layout, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
+    p.add_argument("--layout", help=f"marker layout: {', '.join(SHIPPED)} or a .toml file (default {d.layout}; "
+                                    "dense-patches with --images)")
     p.add_argument("--motion", choices=MOTIONS + (CUBE_MOTION,),
                    help=f"default {d.motion}, or {CUBE_MOTION} with --moves")
     p.add_argument("--frames", type=int, default=d.frames)

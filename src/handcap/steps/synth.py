@@ -62,8 +62,10 @@ def synth(out, config: SynthConfig | None = None, *, scene=None, force: bool = F
     if images:
         style = replace(ImageStyle.clean() if image_style == "clean" else ImageStyle(), response=image_response)
         filmed = film_capture(capture, out, scale=image_scale, style=style)
+        rig = ("rig image_cameras.toml (cameras.toml scaled to the images)" if "image_cameras.toml" in filmed["paths"]
+               else "rig cameras.toml")
         lines.append(f"images: {filmed['images']} frames in {Path(out) / 'images'}, {filmed['visible']} visible "
-                     f"corners and {filmed['blocks']} visible tags in image_truth.npz, template pattern.toml")
+                     f"corners and {filmed['blocks']} visible tags in image_truth.npz, template pattern.toml, {rig}")
     return Step(tuple(lines), m.warnings, (str(out),), capture)
 
 

@@ -11,6 +11,9 @@ Files, in the capture folder:
 
 - ``images/CAMERA/FFFFFF.png``: 8-bit grayscale frames.
 - ``pattern.toml``: the template (tags and corner ids) of the patches drawn.
+- ``image_cameras.toml``: where the images are smaller than the rig's cameras (``scale`` under 1), the rig
+  that filmed them (``cameras.toml`` with each camera scaled, :func:`scaled_camera`): give it to
+  ``handcap detect --rig`` and ``triangulate --cameras`` with these images.
 - ``image_truth.npz``: the 2D detections File contract for what a perfect
   detector would report, plus the rest of the truth: ``camera_names (C,)``,
   ``marker_names (N,)`` (``right:PATCH_rRcC``), ``frame``, ``camera``,
@@ -163,7 +166,7 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     -------
     dict
         ``images`` (number written), ``visible`` (corner observations), ``blocks`` (tag observations) and
-        ``paths`` (the files written, by name).
+        ``paths`` (the files written, by name; ``image_cameras.toml`` among them where ``scale`` is under 1).
 
     Raises
     ------
@@ -231,6 +234,9 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     finally:
         renderer.close()
     paths["pattern.toml"] = pattern.save(folder / "pattern.toml")
+    if scale != 1.0:  # cameras.toml calibrates the full-size images, which these are not
+        paths["image_cameras.toml"] = folder / "image_cameras.toml"
+        CameraRig(cameras, capture.rig.warnings).save(paths["image_cameras.toml"])
     truth = _truth_arrays(patches, names, cameras, all_xy, visible, positions, config.rate / clocks.every)
     if clocks.every > 1 or any(clocks.starts):
         truth["camera_offsets"] = clocks.offsets()
