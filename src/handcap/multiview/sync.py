@@ -145,8 +145,18 @@ def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float
             warnings.append(f"cameras {names[a]} and {names[b]} agree best at the end of the search range "
                             f"({span} frames, {max_offset_s:g} s); search further (--max-offset)")
             continue
-        found.append(pair[:3])
-    offsets, used, disagree = join_offsets(found, len(names), ref)
+        found.append(pair)
+    # A pair whose views agree nowhere to within the noise matched no moments (they share few markers, seen at
+    # other times): left out where other pairs do agree. Where none does, the rig is off and a warning below says so.
+    far = [p for p in found if p[4] > noise_px]
+    if len(far) < len(found):
+        found = [p for p in found if not p[4] > noise_px]
+        warnings += [f"cameras {names[a]} and {names[b]} agree best {abs(shift):.0f} frames apart, but only to "
+                     f"{cost:.1f} px (median epipolar distance), more than the {noise_px:g} px synchronised views "
+                     f"agree within: they share too few markers to time one against the other (or one is calibrated "
+                     f"off), so that pair is left out"
+                     for a, b, shift, _, cost in far]
+    offsets, used, disagree = join_offsets([p[:3] for p in found], len(names), ref)
     if disagree:
         warnings.append(f"{disagree} pairs of cameras disagreed with the joined offsets by more than "
                         f"{AGREE_FRAMES:g} frames and were left out")
@@ -155,6 +165,7 @@ def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float
         warnings.append(f"no offset found for camera {', '.join(lost)}: it shares too few markers with the other "
                         f"cameras, or the take moves too little to tell one offset from another; its detections "
                         f"are left out")
+    offsets, in_step = _no_worse_than_none(views, used, offsets, names, ref)
     before = views.median_distance(used, np.zeros(len(names)))
     after = views.median_distance(used, offsets)
     if np.isfinite(after) and after > noise_px:
@@ -165,7 +176,7 @@ def estimate_sync(detections: Detections, rig: CameraRig, *, max_offset_s: float
     if lines:
         after = views.median_distance(used, offsets, drift)
     return Sync(tuple(names), offsets, names[ref], before, after, len(used), tuple(warnings), drift=drift,
-                notes=tuple(lines))
+                notes=tuple(lines) + ((in_step,) if in_step else ()))
 
 
 def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, reference: str | None = None,
@@ -227,22 +238,51 @@ def check_sync(detections: Detections, rig: CameraRig, offsets=None, *, referenc
 
 
 def _pair_offset(views: EpipolarViews, a: int, b: int, span: int, rng) -> tuple | None:
-    """(a, b, offset of b minus a's in frames, 'edge' or '') or None where no offset is clearly best."""
+    """(a, b, offset of b minus a's in frames, 'edge' or '', the views' median epipolar distance there in pixels)
+    or None where no offset is clearly best.
+
+    The whole-frame search samples a's views; the best shift and its two neighbours are then scored on all of them
+    (a slow take's neighbouring shifts differ by less than the sample's noise), before the fine search."""
     e = views.essential(a, b)
     if e is None:
         return None
-    rows = np.arange(len(views.keys[a]))
-    if len(rows) > SAMPLES:
-        rows = np.sort(rng.choice(rows, SAMPLES, replace=False))
+    every = np.arange(len(views.keys[a]))
+    rows = np.sort(rng.choice(every, SAMPLES, replace=False)) if len(every) > SAMPLES else every
     shifts = np.arange(-span, span + 1)
     best = clear_least(shifts, views.mean_by_shift(a, b, rows, shifts, e))
     if best is None:
         return None
     if best in (0, len(shifts) - 1) and span > 1:
-        return a, b, np.nan, "edge"
-    shift = views.fine_shift(a, b, int(shifts[best]), e)
+        return a, b, np.nan, "edge", np.nan
+    near = shifts[best] + np.arange(-1, 2)
+    cost = views.mean_by_shift(a, b, every, near, e)
+    shift = views.fine_shift(a, b, int(near[np.argmin(cost)] if np.isfinite(cost).any() else shifts[best]), e)
+    if shift is None:
+        return None
     # a's frame f and b's frame f + shift show one moment: b's offset is a's minus the shift
-    return (a, b, -shift, "") if shift is not None else None
+    at = np.zeros(len(views.keys))
+    at[b] = -shift
+    return a, b, -shift, "", views.median_distance([(a, b)], at)
+
+
+def _no_worse_than_none(views: EpipolarViews, pairs: list, offsets: np.ndarray, names, ref: int):
+    """``offsets`` with every camera set to 0 whose views agree as well there (its pairs' median epipolar distance),
+    and a line naming those cameras, if any. A camera filmed in step with the reference needs no offset; a search
+    over a take that moves slowly, or whose cameras share few markers, can settle a frame or more off it."""
+    offsets, reset = offsets.copy(), []
+    for c in range(len(offsets)):
+        if c == ref or not np.isfinite(offsets[c]) or offsets[c] == 0:
+            continue
+        own = [p for p in pairs if c in p[:2]]
+        at_zero = offsets.copy()
+        at_zero[c] = 0.0
+        found, none = views.median_distance(own, offsets), views.median_distance(own, at_zero)
+        if np.isfinite(none) and not none > found:
+            reset.append(f"{names[c]} ({none:.2f} px at 0 against {found:.2f} px at {offsets[c]:+.2f})")
+            offsets[c] = 0.0
+    if not reset:
+        return offsets, None
+    return offsets, ("in step with the others (their views agree as well with no offset): " + ", ".join(reset))
 
 
 def _clocks(views: EpipolarViews, pairs: list, offsets: np.ndarray, detections: Detections, ref: int):
