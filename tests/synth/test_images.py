@@ -16,7 +16,7 @@ from handcap.patterns import session_pattern
 from handcap.patterns.glyphs import load_font
 from handcap.hand import OpenHand
 from handcap.layouts import load_layout
-from handcap.synth.decals import patch_skin
+from handcap.synth.decals import corner_sides, patch_skin
 from handcap.synth.textures import build_atlas, patch_texture
 from handcap.synth.cameras import cage_rig
 from handcap.synth.visibility import camera_visibility
@@ -95,6 +95,25 @@ def test_patch_samples_sit_on_the_skin_at_the_layout_corners(posed):
                 gaps.append(np.linalg.norm(node - layout[name]))
     # The layout gives skin spots; the printed corner lies marker_radius (0.5 mm) above them.
     assert len(gaps) == len(layout) and np.allclose(gaps, 0.0005, atol=2e-5)
+
+
+def test_printed_patches_keep_their_pitch_on_any_hand():
+    """Tape does not stretch with the hand: a large hand (first shape value 2) and a small one (-2) carry squares
+    of the printed 5 mm; attached as the layout places them on the template they measured 5.70 and 4.64 mm."""
+    hand = OpenHand("right")
+    layout = load_layout("dense-patches")
+    for first, grown in ((2.0, 5.70), (-2.0, 4.64)):
+        betas = np.r_[first, np.zeros(9)]
+        rest = hand.forward(betas).vertices
+        as_placed, printed = (patch_skin(layout, PATTERN.patches, hand, betas, pitch=pitch) for pitch in (None, 0.005))
+        sides = [np.concatenate([corner_sides(g, r, c) for g, r, c in zip(s.grids(rest, hand.faces), s.rows, s.cols)])
+                 for s in (as_placed, printed)]
+        assert abs(1000 * np.median(sides[0]) - grown) < 0.05
+        assert abs(np.median(sides[1]) - 0.005) < 0.01 * 0.005
+        means = [np.mean(corner_sides(g, r, c)) for g, r, c in zip(printed.grids(rest, hand.faces), printed.rows,
+                                                                    printed.cols)]
+        # Every patch but the fingertips' smallest (1 x 3 squares over the nail's curve) within 1 % of the pitch.
+        assert sum(abs(m - 0.005) > 0.00005 for m in means) <= 2, np.round(1000 * np.array(means), 3)
 
 
 def test_visibility_agrees_with_ray_casting(gl_ok, posed):

@@ -55,7 +55,7 @@ class SceneMaker:
         self.hand = OpenHand("right")
         kwargs = {} if alphabet is None else {"alphabet": alphabet}
         pattern = session_pattern(("right",), (), **kwargs)
-        self.patches = pattern.patches
+        self.patches, self.pitch = pattern.patches, pattern.pitch  # printed: the same size on every hand
         self.alphabet = pattern.alphabet
         self.skin_layout = load_layout("dense-patches")
         self.names, self.blocks_index, self.block_text = _block_truth(self.patches)
@@ -71,7 +71,8 @@ class SceneMaker:
 
     def _skin(self, betas_key):
         if betas_key not in self._skins:
-            self._skins[betas_key] = patch_skin(self.skin_layout, self.patches, self.hand, np.array(betas_key))
+            self._skins[betas_key] = patch_skin(self.skin_layout, self.patches, self.hand, np.array(betas_key),
+                                                pitch=self.pitch)
         return self._skins[betas_key]
 
     def scene(self) -> Scene:

@@ -24,6 +24,10 @@ from handcap.hand.attachment import MarkerAttachment
 from handcap.synth.textures import patch_grid
 
 
+#: Steps that scale each patch to the printed pitch on the subject's hand (:func:`patch_skin`).
+PITCH_STEPS = 3
+
+
 @dataclass(frozen=True)
 class PatchSkin:
     """The sampled patches of one hand and their attachment to its skin.
@@ -65,8 +69,14 @@ class PatchSkin:
         return out
 
 
-def patch_skin(layout, patches, model, betas=None, *, subdivision: int = 4) -> PatchSkin:
+def patch_skin(layout, patches, model, betas=None, *, subdivision: int = 4, pitch: float | None = None) -> PatchSkin:
     """Attach the ``patches`` of a hand layout to the skin of ``model`` (see the module docstring).
+
+    A layout places its corners on the template hand; a subject's hand is larger or smaller, and the skin under
+    a patch curves, so the corners of a patch attached there lie a little more or less than the printed pitch
+    apart on the subject. Printed tape does not stretch with the hand: with ``pitch``, each patch is scaled about
+    its middle along the template's skin until its adjacent corners lie a median ``pitch`` apart on the subject's
+    hand at rest (:data:`PITCH_STEPS` steps, to well under 0.1 %).
 
     Parameters
     ----------
@@ -79,6 +89,8 @@ def patch_skin(layout, patches, model, betas=None, *, subdivision: int = 4) -> P
         The subject's shape.
     subdivision : int
         Samples per square side.
+    pitch : float, optional
+        Side of the printed squares, metres (None: the patches as the layout places them, which grow with the hand).
 
     Returns
     -------
@@ -92,7 +104,8 @@ def patch_skin(layout, patches, model, betas=None, *, subdivision: int = 4) -> P
     layout = layout.for_side(model.side)
     where = {m.name: m.position for m in layout.hand_markers if m.position is not None}
     template = model.forward(np.zeros(10)).vertices
-    rows, cols, samples = [], [], []
+    betas = np.zeros(10) if betas is None else np.asarray(betas, dtype=np.float64)
+    rows, cols, grids = [], [], []
     for patch in patches:
         known = np.full((patch.rows + 1, patch.cols + 1, 3), np.nan)
         for r in range(patch.rows + 1):
@@ -103,19 +116,47 @@ def patch_skin(layout, patches, model, betas=None, *, subdivision: int = 4) -> P
         if (~np.isnan(known[..., 0])).sum() < 3:
             raise HandcapError(f"layout {layout.name!r} places fewer than 3 corners of patch {patch.name}; it "
                                "cannot be drawn")
-        full = patch_grid(patch, known[None])[0]  # rows -0.5, 0 .. R, R + 0.5 and the same columns
-        r = _fine(patch.rows, subdivision)
-        c = _fine(patch.cols, subdivision)
-        samples.append(_bilinear(full, r, c).reshape(-1, 3))
-        rows.append(r)
-        cols.append(c)
-    points = np.concatenate(samples)
-    _, triangles, bary = closest_points_on_mesh(points, template, model.faces)
+        grids.append(patch_grid(patch, known[None])[0])  # rows -0.5, 0 .. R, R + 0.5 and the same columns
+        rows.append(_fine(patch.rows, subdivision))
+        cols.append(_fine(patch.cols, subdivision))
     names = tuple(f"{p.name}#{k}" for p, r, c in zip(patches, rows, cols) for k in range(len(r) * len(c)))
-    offset = np.full(len(points), layout.marker_radius)
-    betas = np.zeros(10) if betas is None else np.asarray(betas, dtype=np.float64)
-    attachment = MarkerAttachment(names, triangles, bary, offset, betas, model.name, model.side)
+    scale = np.ones(len(patches))
+    subject = None if pitch is None else model.forward(betas).vertices
+    for step in range(PITCH_STEPS + 1 if pitch is not None else 1):
+        samples = []
+        for full, r, c, k, patch in zip(grids, rows, cols, scale, patches):  # scaled along the skin, not in space
+            samples.append(_bilinear(full, patch.rows / 2 + k * (r - patch.rows / 2),
+                                     patch.cols / 2 + k * (c - patch.cols / 2)).reshape(-1, 3))
+        _, triangles, bary = closest_points_on_mesh(np.concatenate(samples), template, model.faces)
+        attachment = MarkerAttachment(names, triangles, bary, np.full(len(triangles), layout.marker_radius), betas,
+                                      model.name, model.side)
+        if subject is not None and step < PITCH_STEPS:
+            skin = PatchSkin(tuple(patches), tuple(rows), tuple(cols), attachment)
+            scale *= pitch / np.array([np.mean(corner_sides(g, r, c))
+                                       for g, r, c in zip(skin.grids(subject, model.faces), rows, cols)])
     return PatchSkin(tuple(patches), tuple(rows), tuple(cols), attachment)
+
+
+def corner_sides(grid: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Distances between a sampled patch's adjacent corners (its samples at whole grid coordinates).
+
+    Parameters
+    ----------
+    grid : ndarray (n_rows, n_cols, 3)
+        One patch's samples (:meth:`PatchSkin.grids`), metres.
+    rows, cols : ndarray
+        Their grid coordinates.
+
+    Returns
+    -------
+    ndarray (S,)
+        Metres, along rows and along columns.
+    """
+    whole_r, whole_c = np.flatnonzero(rows == np.round(rows)), np.flatnonzero(cols == np.round(cols))
+    whole_r, whole_c = whole_r[rows[whole_r] >= 0], whole_c[cols[whole_c] >= 0]
+    corners = np.asarray(grid)[whole_r][:, whole_c]
+    return np.r_[np.linalg.norm(np.diff(corners, axis=0), axis=-1).ravel(),
+                 np.linalg.norm(np.diff(corners, axis=1), axis=-1).ravel()]
 
 
 def _fine(n: int, subdivision: int) -> np.ndarray:

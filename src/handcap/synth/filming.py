@@ -189,7 +189,7 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     hand = OpenHand(config.side)
     motion = capture.hand_motion
     vertices = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
-    skin = patch_skin(layout, patches, hand, motion.betas)
+    skin = patch_skin(layout, patches, hand, motion.betas, pitch=pattern.pitch)  # printed: the same size on any hand
     grids = skin.grids(vertices, hand.faces)  # per patch (T, rows, cols, 3)
     style = style or ImageStyle()
     renderer = PatchRenderer(build_atlas(patches, load_font(None, pattern.alphabet)), hand.faces, style,
