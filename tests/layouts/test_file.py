@@ -61,6 +61,37 @@ def test_left_layout_is_mirrored_and_attaches_to_the_left_hand():
         OpenHand().forward().vertices, OpenHand().faces) * [1, 1, -1], atol=1e-9)
 
 
+def test_a_printed_patch_on_the_left_hand_is_not_mirrored():
+    """Mirroring the positions alone would mirror the print: each patch corner takes the mirrored place of the
+    corner in the same row and the opposite column (the patch's last column N - C), so its rows run along the
+    hand as on the right and the print reads the right way round."""
+    right, left = load_layout("dense-patches"), load_layout("dense-patches", side="left")
+    where = {m.name: m.position for m in right.markers}
+    assert len(left) == len(right) and left.segments == right.segments
+    assert "thumb_proximal_r2c0" in left.names and "thumb_proximal_r2c0" not in right.names
+    np.testing.assert_allclose(dict(zip(left.names, left.positions()))["thumb_distal_r1c0"],
+                               where["thumb_distal_r1c3"] * [1, 1, -1])  # thumb_distal: 3 columns of squares
+    np.testing.assert_allclose(dict(zip(left.names, left.positions()))["thumb_proximal_r2c0"],
+                               where["thumb_proximal_r2c3"] * [1, 1, -1])
+    # Seen from outside, a patch's columns run to the right of its rows on both hands: its normal row x column
+    # points out of the skin (away from the skin point it is attached above).
+    from handcap.core.geometry import closest_points_on_mesh
+    from handcap.patterns import session_pattern
+    from handcap.synth.decals import patch_skin
+
+    for side in ("right", "left"):
+        hand, pattern = OpenHand(side), session_pattern((side,), ())
+        rest = hand.forward().vertices
+        skin = patch_skin(load_layout("dense-patches"), pattern.patches, hand)
+        outward = []
+        for patch, r, c, g in zip(skin.patches, skin.rows, skin.cols, skin.grids(rest, hand.faces)):
+            ri, ci = np.searchsorted(r, patch.vertices()[:, 0]), np.searchsorted(c, patch.vertices()[:, 1])
+            normal = np.cross(g[ri + 1, ci] - g[ri - 1, ci], g[ri, ci + 1] - g[ri, ci - 1])
+            above = g[ri, ci] - closest_points_on_mesh(g[ri, ci], rest, hand.faces)[0]
+            outward.append(np.einsum("ij,ij->i", normal, above) > 0)
+        assert np.mean(np.concatenate(outward)) > 0.95, side
+
+
 def test_layout_file_round_trip(tmp_path):
     layout = load_layout("joints-19")
     layout.save(tmp_path / "mine.toml")

@@ -6,6 +6,7 @@ The file format is described in the package docstring (:mod:`handcap.layouts`).
 from __future__ import annotations
 
 import difflib
+import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from importlib.resources import files
@@ -24,6 +25,9 @@ MARKER_KINDS = ("sphere", "patch")
 #: and two that do merge into one blob in the cameras.
 MARKER_GAP = 0.001
 
+
+#: A patch corner's marker name: ``PATCH_rRcC`` (patch, row, column).
+_PATCH_CORNER = re.compile(r"^(.+)_r(\d+)c(\d+)$")
 
 @dataclass(frozen=True)
 class LayoutMarker:
@@ -128,12 +132,29 @@ class MarkerLayout:
         return out
 
     def mirrored(self) -> "MarkerLayout":
-        """The same layout on the other hand (positions mirrored in z)."""
+        """The same layout on the other hand (positions mirrored in z).
+
+        A printed patch is not mirrored: stuck on the other hand it reads the right way round, its rows running
+        along the hand as on this one and its columns the other way across it. So a patch corner ``PATCH_rRcC``
+        takes the place of ``PATCH_rRc(N - C)``, mirrored, where N is the patch's last column (the largest this
+        layout lists for it: every corner of a patch, or at least one of its last column).
+        """
         flip = np.array([1.0, 1.0, -1.0])
-        markers = tuple(LayoutMarker(m.name, m.segment, None if m.position is None else m.position * flip, m.patch)
-                        for m in self.markers)
-        return MarkerLayout(self.name, "left" if self.side == "right" else "right", markers, self.rigid,
-                            self.marker_radius, self.marker_kind, self.description)
+        last = {}
+        for m in self.markers:
+            grid = _PATCH_CORNER.match(m.name) if m.patch else None
+            if grid:
+                last[m.patch] = max(last.get(m.patch, 0), int(grid[3]))
+        renamed = {}
+        for m in self.markers:
+            grid = _PATCH_CORNER.match(m.name) if m.patch else None
+            if grid:
+                renamed[m.name] = f"{grid[1]}_r{grid[2]}c{last[m.patch] - int(grid[3])}"
+        markers = tuple(LayoutMarker(renamed.get(m.name, m.name), m.segment,
+                                     None if m.position is None else m.position * flip, m.patch) for m in self.markers)
+        return MarkerLayout(self.name, "left" if self.side == "right" else "right", markers,
+                            tuple(renamed.get(r, r) for r in self.rigid), self.marker_radius, self.marker_kind,
+                            self.description)
 
     def for_side(self, side: str) -> "MarkerLayout":
         """This layout on hand ``side`` (mirrored if needed)."""
