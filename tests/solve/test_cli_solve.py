@@ -35,6 +35,38 @@ def test_calibrate_solve_metrics(session, capsys):
     assert values["joint_error_mm"][0] < 15 and values["mre_mm"][0] < 5
 
 
+def test_a_take_of_left_prefixed_markers_is_calibrated_on_the_left_hand(tmp_path, capsys):
+    """detect names a left hand's corners ``left:PATCH_rRcC``: calibrate-markers takes that hand without --side (it
+    took the layout's, the right, and fitted the left hand's markers to the mirror-image hand)."""
+    from dataclasses import replace
+
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.io import read_markers, write_markers
+
+    assert main(["synth", "--layout", "tips-5", "--side", "left", "--motion", "calibration", "--frames", "60",
+                 "--seed", "1", "--out", str(tmp_path / "cal")]) == 0
+    markers = read_markers(tmp_path / "cal" / "markers.c3d")
+    left = replace(markers, names=tuple(f"left:{n}" for n in markers.names))
+    write_markers(left, tmp_path / "left.npz")
+    mre = {}
+    for name, extra in (("named", []), ("right", ["--side", "right"])):
+        out = tmp_path / f"{name}.npz"
+        capsys.readouterr()
+        assert main(["calibrate-markers", str(tmp_path / "left.npz"), "--layout", "tips-5", "--out", str(out),
+                     *extra]) == 0
+        said = capsys.readouterr()
+        mre[name] = float(said.out.split("calibration MRE ")[1].split(" mm")[0])
+        assert MarkerAttachment.load(out).side == ("left" if name == "named" else "right")
+        assert ("but the markers are named left" in said.err) == (name == "right")
+    assert mre["named"] < 1.0 < mre["right"], mre  # the mirror-image hand fits the left hand's markers badly
+    both = replace(markers, names=tuple(f"{'left' if k % 2 else 'right'}:{n}" for k, n in enumerate(markers.names)))
+    write_markers(both, tmp_path / "both.npz")
+    capsys.readouterr()
+    assert main(["calibrate-markers", str(tmp_path / "both.npz"), "--layout", "tips-5", "--out",
+                 str(tmp_path / "both_att.npz")]) == 2
+    assert "both hands" in capsys.readouterr().err and not (tmp_path / "both_att.npz").exists()
+
+
 def test_metrics_of_a_take_too_short_for_smoothness(session, tmp_path):
     # 3 frames: joint error against the truth, but no MSNR or jerk (a third difference needs 4 frames).
     from dataclasses import replace

@@ -34,7 +34,8 @@ def add_solve(verbs) -> None:
                                      "every marker on its segment) from a take of an open hand slowly turned.")
     p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
     p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
-    p.add_argument("--side", choices=("right", "left"), default=None, help="hand side (default: the layout's)")
+    p.add_argument("--side", choices=("right", "left"), default=None,
+                   help="hand side (default: the one the markers' left: or right: prefixes name, else the layout's)")
     p.add_argument("--frames", help="frames to use, A:B (default all)")
     p.add_argument("--betas", help="known shape: 10 comma-separated values or a .npz with betas")
     p.add_argument("--fit-shape", action=argparse.BooleanOptionalAction, default=None,

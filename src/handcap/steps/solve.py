@@ -32,7 +32,7 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
     layout : str
         Marker layout: a shipped name or a .toml file.
     side : {'right', 'left'} or None
-        Hand side (default: the layout's).
+        Hand side (default: the one the markers' ``left:`` or ``right:`` prefixes name, else the layout's).
     frames : slice or None
         Frames of the take to use (default all).
     betas : ndarray (10,) or None
@@ -54,6 +54,12 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
     check_not_input(out, path)
     marker_layout = load_layout(layout, side=side)
     markers = read_markers(path, units=units, hand=[m.name for m in marker_layout.hand_markers])
+    named = _named_side(markers.names)
+    if side is None and named is not None and named != marker_layout.side:
+        marker_layout = load_layout(layout, side=named)  # a left hand's take (left:...) is a left hand's
+    disagree = [] if side is None or named in (None, side) else [
+        f"--side {side}, but the markers are named {named}:...: calibrated on the {side} hand as asked (the mirror "
+        f"image of the hand they name)"]
     dropped = []
     if drop_unseen:
         wanted = marker_layout.names
@@ -78,6 +84,7 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
                       f"attachment ({', '.join(left_out[:4])}{' ...' if len(left_out) > 4 else ''}); calibration MRE "
                       f"{1000 * first:.2f} mm with them, {1000 * result.mre:.2f} mm without"]
     attachment, warnings = result.attachment, result.warnings
+    misfit = disagree + misfit
     if misfit:
         attachment = q.attach(attachment, misfit)
         warnings = (*warnings, *misfit)
@@ -89,6 +96,15 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
         warnings = (*warnings, note)
     attachment.save(out)
     return Step((f"{out}: {result.summary()}",), warnings, (str(out),), result)
+
+
+def _named_side(names) -> str | None:
+    """The hand every ``left:`` or ``right:`` prefixed marker name gives (None where none does); both: an error."""
+    sides = {str(n).split(":", 1)[0].lower() for n in names if ":" in str(n)} & {"left", "right"}
+    if len(sides) > 1:
+        raise HandcapError("the take holds markers of both hands (left:... and right:...): give --side right or "
+                           "--side left to calibrate one")
+    return sides.pop() if sides else None
 
 
 def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | None = None, filter_order: int = 2,
