@@ -121,6 +121,20 @@ def test_layout_groups_follow_the_patches(synthetic):
     assert layout_groups(names[:3], "dense-patches", radius=0.03).radii.tolist() == [0.03]
 
 
+def test_a_left_hands_take_is_cleaned_with_the_left_layout(synthetic, tmp_path):
+    # detect names a left hand's corners left:...; the left layout counts a patch's columns the other way, so
+    # thumb_proximal_r2c0 is on it (the right one starts that row at c1): grouped only with the left layout.
+    from handcap.steps.multiview import clean
+
+    truth, names, _ = synthetic
+    take = MarkerSequence(truth[:40, :3] * [1, 1, -1], ("left:thumb_proximal_r2c0", "left:thumb_proximal_r2c1",
+                                                        "left:thumb_proximal_r2c2"), 50.0)
+    write_markers(take, tmp_path / "left.npz")
+    groups = clean(tmp_path / "left.npz", tmp_path / "clean.npz", layout="dense-patches").result.groups
+    assert (groups.labels >= 0).all() and groups.names == ("thumb_proximal",)
+    assert layout_groups(take.names, "dense-patches").labels.tolist() == [-1, 0, 0]  # the right layout's
+
+
 def test_segment_groups_without_patches_are_wider():
     groups = layout_groups(["hand_top", "hand_left", "hand_right", "index_tip", "pillow_top"], "glove-13")
     assert groups.names[0] == "palm" and groups.labels.tolist() == [0, 0, 0, 1, -1]

@@ -39,9 +39,10 @@ Positions are on the right hand of :class:`handcap.hand.OpenHand` at
 ``betas = 0`` in its flat pose; a left-hand layout mirrors them (z negated).
 """
 
-from handcap.layouts.file import MARKER_GAP, MARKER_KINDS, SHIPPED, LayoutMarker, MarkerLayout, load_layout
+from handcap.layouts.file import (MARKER_GAP, MARKER_KINDS, SHIPPED, LayoutMarker, MarkerLayout, load_layout,
+                                  sides_named)
 from handcap.layouts.template import SEGMENT_HELP, layout_template
 from handcap.layouts.check import LayoutCheck, check_layout
 
 __all__ = ["MARKER_GAP", "MARKER_KINDS", "SEGMENT_HELP", "SHIPPED", "LayoutCheck", "LayoutMarker", "MarkerLayout",
-           "check_layout", "layout_template", "load_layout"]
+           "check_layout", "layout_template", "load_layout", "sides_named"]

@@ -272,6 +272,21 @@ def _layout_from_table(table: dict, source: str) -> MarkerLayout:
         raise HandcapError(f"{source}: malformed layout ({err})") from None
 
 
+def sides_named(names) -> set:
+    """The hands that ``left:`` or ``right:`` prefixes of marker names give (detect names each hand's corners so).
+
+    Parameters
+    ----------
+    names : iterable of str
+
+    Returns
+    -------
+    set of str
+        Empty, ``{"right"}``, ``{"left"}`` or both.
+    """
+    return {str(n).split(":", 1)[0].lower() for n in names if ":" in str(n)} & {"left", "right"}
+
+
 def load_layout(name_or_path, side: str | None = None) -> MarkerLayout:
     """A shipped layout by name, or a layout TOML file.
 

@@ -10,7 +10,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.io import check_not_input, marker_suffix, read_markers, write_markers
 from handcap.io.camera_formats import read_rig
-from handcap.layouts import load_layout
+from handcap.layouts import load_layout, sides_named
 from handcap.markerless import repair_handedness
 from handcap.markerless.keypoints import is_keypoints
 from handcap.multiview import merge_detections, quality_path, read_detections, triangulate_detections, write_quality
@@ -142,6 +142,9 @@ def clean(path, out, *, layout: str | None = None, radius: float | None = None, 
     marker_layout = None if layout is None else load_layout(layout)
     markers = read_markers(path, units=units,
                            hand=None if marker_layout is None else [m.name for m in marker_layout.hand_markers])
+    sides = sides_named(markers.names)
+    if marker_layout is not None and len(sides) == 1 and sides != {marker_layout.side}:
+        marker_layout = marker_layout.for_side(sides.pop())  # one hand's take, named so (left:...): its layout
     cleaned, report = cleaning.clean_markers(
         markers, marker_layout, radius=radius, window=window, z=z, floor=floor, max_linear_frames=max_linear_frames,
         max_rigid_frames=max_rigid_frames, max_spline_frames=max_spline_frames, rigid_tolerance=rigid_tolerance)

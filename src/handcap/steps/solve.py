@@ -11,7 +11,7 @@ from handcap.core.files import warnings_entry
 from handcap.hand import hand_model_from_options
 from handcap.hand.attachment import MarkerAttachment
 from handcap.io import check_not_input, check_output, read_markers, read_scan_points, save_npz, write_hand_motion
-from handcap.layouts import load_layout
+from handcap.layouts import load_layout, sides_named
 from handcap.quality import plausibility as q
 from handcap.solve.motion import observed_markers
 from handcap.solve import (betas_from_measurements, betas_from_scan, calibrate_attachment, calibrate_without_misfits,
@@ -54,7 +54,11 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
     check_not_input(out, path)
     marker_layout = load_layout(layout, side=side)
     markers = read_markers(path, units=units, hand=[m.name for m in marker_layout.hand_markers])
-    named = _named_side(markers.names)
+    sides = sides_named(markers.names)
+    if side is None and len(sides) > 1:
+        raise HandcapError("the take holds markers of both hands (left:... and right:...): give --side right or "
+                           "--side left to calibrate one")
+    named = sides.pop() if len(sides) == 1 else None
     if side is None and named is not None and named != marker_layout.side:
         marker_layout = load_layout(layout, side=named)  # a left hand's take (left:...) is a left hand's
     disagree = [] if side is None or named in (None, side) else [
@@ -96,15 +100,6 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
         warnings = (*warnings, note)
     attachment.save(out)
     return Step((f"{out}: {result.summary()}",), warnings, (str(out),), result)
-
-
-def _named_side(names) -> str | None:
-    """The hand every ``left:`` or ``right:`` prefixed marker name gives (None where none does); both: an error."""
-    sides = {str(n).split(":", 1)[0].lower() for n in names if ":" in str(n)} & {"left", "right"}
-    if len(sides) > 1:
-        raise HandcapError("the take holds markers of both hands (left:... and right:...): give --side right or "
-                           "--side left to calibrate one")
-    return sides.pop() if sides else None
 
 
 def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | None = None, filter_order: int = 2,
