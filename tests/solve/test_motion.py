@@ -56,6 +56,23 @@ def test_a_frame_without_markers_keeps_the_previous_pose(glove_session):
     np.testing.assert_allclose(motion.phi[50], motion.phi[49])
 
 
+def test_frames_before_any_marker_hold_the_first_seen_pose_and_lost_frames_are_said(glove_session):
+    # The hand out of view for the take's first 10 frames (a camera take that starts before the hand comes in):
+    # those frames held the solver's starting pose, the wrist at the origin, with no warning (a rendered take put
+    # them 0.4-1.1 m from the truth).
+    _, take = glove_session
+    positions = take.markers.positions.copy()
+    positions[:10] = np.nan
+    positions[60:62, 2:] = np.nan  # two frames with 2 markers: the hand frame is not fixed
+    motion = solve_hand(MarkerSequence(positions, take.markers.names, take.markers.rate), take.attachment)
+    np.testing.assert_allclose(motion.transl[:10], np.broadcast_to(motion.transl[10], (10, 3)))
+    np.testing.assert_allclose(motion.joints[:10], np.broadcast_to(motion.joints[10], (10, 21, 3)))
+    assert np.linalg.norm(motion.joints[:10] - take.hand_motion.joints[:10], axis=-1).max() < 0.05
+    said = [w for w in motion.warnings if "hand frame is lost" in w]
+    assert len(said) == 1 and "in 12 of 150 frames" in said[0] and "10 of them with none" in said[0], said
+    assert not any("hand frame is lost" in w for w in solve_hand(take.markers, take.attachment).warnings)
+
+
 def test_outlier_marker_is_resisted(glove_session):
     _, take = glove_session
     att = take.attachment

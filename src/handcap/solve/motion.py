@@ -147,12 +147,43 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     else:
         poses = solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
                           first_iterations, progress)
+    first = int(np.argmax(observed.any(axis=1)))  # frames before any marker is seen hold the first seen pose
+    poses.transl[:first], poses.rot[:first], poses.phi[:first] = poses.transl[first], poses.rot[first], poses.phi[first]
     if filter_cutoff is not None:
         poses = smoothed_poses(poses, markers.rate, filter_cutoff, filter_order)
     motion = motion_from_poses(hand, model, poses, target, observed, markers.rate, names)
     found = residual_warnings(motion.marker_residuals, names=names, what="solve MRE", limit=MRE_WARNING) + \
-        shape_warnings(motion.betas)
+        shape_warnings(motion.betas) + lost_frame_warnings(observed.sum(axis=1))
     return attach(motion.with_warnings(*attachment.warnings), found)
+
+
+def lost_frame_warnings(seen: np.ndarray) -> list[str]:
+    """A warning where the hand frame is lost: frames with fewer than :data:`FRAME_MARKERS` markers seen.
+
+    There the solve holds the pose of the frames beside it (the first seen frame's, before any) and moves it only
+    as far as the few markers pull: the hand's place and turn are not measured.
+
+    Parameters
+    ----------
+    seen : ndarray (T,) int
+        Markers seen in each frame.
+
+    Returns
+    -------
+    list of str
+        Empty where every frame shows enough.
+    """
+    lost = np.flatnonzero(np.asarray(seen) < FRAME_MARKERS)
+    if not len(lost):
+        return []
+    none = int((np.asarray(seen)[lost] == 0).sum())
+    return [f"the hand frame is lost in {len(lost)} of {len(seen)} frames (fewer than {FRAME_MARKERS} markers seen, "
+            f"{none} of them with none; the first at frame {lost[0]}): their pose is held from the frames beside "
+            f"them, not measured"]
+
+
+#: Markers a frame needs to fix the hand's place and turn (:func:`lost_frame_warnings`).
+FRAME_MARKERS = 3
 
 
 def smoothed_poses(poses: Poses, rate, cutoff, order) -> Poses:
