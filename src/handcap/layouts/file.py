@@ -29,6 +29,7 @@ MARKER_GAP = 0.001
 #: A patch corner's marker name: ``PATCH_rRcC`` (patch, row, column).
 _PATCH_CORNER = re.compile(r"^(.+)_r(\d+)c(\d+)$")
 
+
 @dataclass(frozen=True)
 class LayoutMarker:
     """One marker of a layout.
@@ -140,16 +141,11 @@ class MarkerLayout:
         layout lists for it: every corner of a patch, or at least one of its last column).
         """
         flip = np.array([1.0, 1.0, -1.0])
+        grids = {m.name: (m.patch, grid) for m in self.markers if m.patch and (grid := _PATCH_CORNER.match(m.name))}
         last = {}
-        for m in self.markers:
-            grid = _PATCH_CORNER.match(m.name) if m.patch else None
-            if grid:
-                last[m.patch] = max(last.get(m.patch, 0), int(grid[3]))
-        renamed = {}
-        for m in self.markers:
-            grid = _PATCH_CORNER.match(m.name) if m.patch else None
-            if grid:
-                renamed[m.name] = f"{grid[1]}_r{grid[2]}c{last[m.patch] - int(grid[3])}"
+        for patch, grid in grids.values():
+            last[patch] = max(last.get(patch, 0), int(grid[3]))
+        renamed = {name: f"{grid[1]}_r{grid[2]}c{last[patch] - int(grid[3])}" for name, (patch, grid) in grids.items()}
         markers = tuple(LayoutMarker(renamed.get(m.name, m.name), m.segment,
                                      None if m.position is None else m.position * flip, m.patch) for m in self.markers)
         return MarkerLayout(self.name, "left" if self.side == "right" else "right", markers,
