@@ -349,7 +349,8 @@ def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> M
     if name in ("grasp", "precision", "rotate-cube"):
         if duration < MIN_OBJECT_SECONDS:
             raise HandcapError(f"motion {name!r} needs at least {MIN_OBJECT_SECONDS:g} s to reach, grasp, carry and "
-                               f"release; {n_frames} frames at {rate:g} Hz last {duration:.2f} s: give more frames")
+                               f"release; {n_frames} frames at {rate:g} Hz span {duration:.2f} s (first to last): give "
+                               f"{int(np.ceil(MIN_OBJECT_SECONDS * rate - 1e-9)) + 1} frames or more")
         return _object_motion(name, hand, t, duration, rate, rng, obj)
 
     n_keys = max(3, int(round(duration / {"calibration": 1.0, "open-close": 0.7, "tapping": 0.2, "pinch": 0.8,
