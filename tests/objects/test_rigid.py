@@ -74,13 +74,37 @@ def test_frames_with_fewer_than_three_markers_are_reported_not_guessed(shared_da
     assert np.isfinite(track.motion.rotation[:100]).all()
 
 
+def test_markers_the_take_never_shows_are_left_out_and_said(shared_data):
+    # A patch's corners that no camera pair saw: asked for by 'NAME:*', never in the take. The track is the one of
+    # the markers seen, and the warning names the others.
+    from handcap.io import read_markers
+    from handcap.quality.plausibility import object_warnings
+
+    markers = read_markers(shared_data / "markers" / "ezc3d" / "Vicon.c3d")
+    box = markers.select([n for n in markers.names if n.startswith("boite:")])
+    unseen = np.full((box.n_frames, 2, 3), np.nan)
+    wider = MarkerSequence(np.concatenate([box.positions[:, :3], unseen, box.positions[:, 3:]], axis=1),
+                           [*box.names[:3], "boite:x_r0c0", "boite:x_r0c1", *box.names[3:]], box.rate)
+    alone, track = track_rigid(box, name="boite"), track_rigid(wider, name="boite")
+    assert track.left_out == ("boite:x_r0c0", "boite:x_r0c1") and track.motion.marker_names == box.names
+    np.testing.assert_array_equal(track.motion.translation, alone.motion.translation)
+    said = object_warnings(track, threshold=0.005)
+    assert said[0] == ("object 'boite': 2 of its 10 markers are never seen in the take and are left out of it "
+                       "(boite:x_r0c0, boite:x_r0c1)")
+    assert not object_warnings(alone, threshold=0.005)
+
+
 def test_bad_inputs():
     m = MarkerSequence(np.zeros((4, 2, 3)), ["a", "b"], 100)
     with pytest.raises(HandcapError, match="at least 3 markers"):
         track_rigid(m)
     nan = MarkerSequence(np.full((4, 3, 3), np.nan), ["a", "b", "c"], 100)
-    with pytest.raises(HandcapError, match="no frame sees 3"):
+    with pytest.raises(HandcapError, match="shows 0 of the object's 3 markers"):
         track_rigid(nan)
+    two = MarkerSequence(np.where(np.arange(3)[None, :, None] < 2, 1.0, np.nan) * np.ones((4, 3, 3)), ["a", "b", "c"],
+                         100)
+    with pytest.raises(HandcapError, match="shows 2 of the object's 3 markers"):
+        track_rigid(two)
     ok = MarkerSequence(np.random.default_rng(0).normal(size=(4, 3, 3)), ["a", "b", "c"], 100)
     with pytest.raises(HandcapError, match="canonical positions must have shape"):
         track_rigid(ok, canonical=np.zeros((2, 3)))

@@ -181,6 +181,8 @@ class RigidTrack:
         Frames with fewer than 3 (inlier) markers: reported, not guessed.
     observed : ndarray (T, M) bool or None
         Which samples the input held (an observed sample that is not an inlier is an outlier).
+    left_out : tuple of str
+        Markers asked for that the take never shows, so no shape estimated from it places them (not in ``motion``).
     """
 
     motion: ObjectMotion
@@ -188,6 +190,7 @@ class RigidTrack:
     inliers: np.ndarray
     unsolved: np.ndarray
     observed: np.ndarray | None = None
+    left_out: tuple[str, ...] = ()
 
     @property
     def mean_residual(self) -> float:
@@ -213,7 +216,8 @@ def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: st
     names : sequence of str, optional
         The body's markers (default: all of ``markers``).
     canonical : ndarray (M, 3), optional
-        Their positions in the body frame, metres; estimated from the take when omitted.
+        Their positions in the body frame, metres; estimated from the take when omitted (markers the take never
+        shows are then left out, and named in the track's ``left_out``: a patch's corners that no camera pair saw).
     name : str
     threshold : float
         RANSAC inlier distance, metres.
@@ -227,6 +231,16 @@ def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: st
     body = markers.select(list(names)) if names is not None else markers
     if body.n_markers < 3:
         raise HandcapError(f"a rigid body needs at least 3 markers, got {body.n_markers}: {', '.join(body.names)}")
+    left_out = ()
+    if canonical is None:
+        shown = np.isfinite(body.positions).all(axis=-1).any(axis=0)
+        if shown.sum() < 3:
+            raise HandcapError(f"the take shows {int(shown.sum())} of the object's {body.n_markers} markers "
+                               f"({', '.join(body.names[:4])}{' ...' if body.n_markers > 4 else ''}); a rigid body "
+                               "needs 3 or more seen to be tracked")
+        left_out = tuple(n for n, s in zip(body.names, shown) if not s)
+        if left_out:
+            body = body.select([n for n, s in zip(body.names, shown) if s])
     positions = body.positions
     canonical = canonical_from_markers(positions) if canonical is None else np.asarray(canonical, dtype=np.float64)
     if canonical.shape != (body.n_markers, 3):
@@ -253,4 +267,5 @@ def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: st
         inliers[t, used] = True
         residuals[t, used] = np.linalg.norm(canonical[used] @ rot.T + trans - positions[t, used], axis=1)
     motion = ObjectMotion(rotation, translation, markers.rate, name, body.names, canonical)
-    return RigidTrack(motion, residuals, inliers, np.array(unsolved, dtype=int), ~np.isnan(positions[..., 0]))
+    return RigidTrack(motion, residuals, inliers, np.array(unsolved, dtype=int), ~np.isnan(positions[..., 0]),
+                      left_out)

@@ -98,8 +98,8 @@ def object_warnings(track, *, threshold: float, rate: float | None = None) -> li
     """Checks of a rigid object's track (:class:`handcap.objects.rigid.RigidTrack`).
 
     The residual of a rigid fit is the markers' noise; crowding against the inlier distance (more than
-    half of it on average) means the object is not rigid or its markers are mislabelled. Also: frames
-    left unsolved, and jerk spikes of the object's origin.
+    half of it on average) means the object is not rigid or its markers are mislabelled. Also: markers never
+    seen (left out), frames left unsolved, and jerk spikes of the object's origin.
 
     Parameters
     ----------
@@ -114,6 +114,11 @@ def object_warnings(track, *, threshold: float, rate: float | None = None) -> li
     list of str
     """
     out = []
+    left_out = track.left_out
+    if left_out:
+        asked = len(left_out) + len(track.motion.marker_names)
+        out.append(f"object {track.motion.name!r}: {len(left_out)} of its {asked} markers are never seen in the take "
+                   f"and are left out of it ({', '.join(left_out[:3])}{' ...' if len(left_out) > 3 else ''})")
     residual = track.mean_residual
     if np.isfinite(residual) and residual > 0.5 * threshold:
         out.append(f"object {track.motion.name!r}: mean residual {MM * residual:.2f} mm is more than half the "
