@@ -11,16 +11,19 @@
    read from its neighbouring frames and the other cameras
    (:mod:`handcap.detect.motion`, :mod:`handcap.detect.views`).
 3. Triangulate the named corners (RANSAC over views), clean them, calibrate the
-   marker attachment on the calibration take and solve the grasp take.
+   marker attachment on the calibration take and solve the grasp take; track the
+   held object (its patches' corners, ``handcap track-object --markers 'NAME:*'``).
 4. Measure each stage against the truth: corners named per image and their
    pixel error, triangulated corners (mm), reprojection (px), calibration and
-   solve marker residuals (MRE, mm), joint error (mm).
+   solve marker residuals (MRE, mm), joint error (mm), the object's corners as
+   its track places them (mm).
 
 Writes into the output folder (rewritten on every run): ``calibration/`` and
 ``take/``, each with ``cameras.toml``, ``images/CAM/FRAME.png``,
 ``image_truth.npz``, ``pattern.toml``, ``detections.npz`` (from the images), ``overlay/CAM/FRAME.jpg``
 (the first camera's detections drawn over its frames, :mod:`handcap.detect.overlay`),
-``triangulated.c3d``, ``cleaned.c3d`` and ``truth.npz`` (the true hand motion);
+``triangulated.c3d``, ``cleaned.c3d``, ``truth.npz`` (the true hand motion) and, where an object is held,
+``object_motion.npz``;
 ``attachment.npz``, ``motion.npz`` and ``summary.json``/``summary.txt`` beside them.
 """
 
@@ -41,9 +44,10 @@ from handcap.detect.sources import frame_sources
 from handcap.detect.motion import name_from_frames
 from handcap.detect.seek import searched_frames, second_look
 from handcap.detect.views import name_from_views
-from handcap.io import write_hand_motion, write_markers
+from handcap.io import write_hand_motion, write_markers, write_object_motion
 from handcap.layouts import load_layout
 from handcap.multiview import clean_markers, read_detections, triangulate_detections
+from handcap.objects import track_rigid
 from handcap.patterns.pattern import Pattern
 from handcap.quality import plausibility as q
 from handcap.solve import calibrate_attachment, solve_hand
@@ -118,9 +122,11 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
                                               min_views=config.min_views, progress=progress)
         found = q.triangulation_warnings(triangulated.error_px, triangulated.views, threshold_px=5.0,
                                          used=triangulated.used)
-        # The template names its corners OWNER:PATCH_rRcC; the layout names them PATCH_rRcC.
+        # The template names its corners OWNER:PATCH_rRcC; the layout names the hand's PATCH_rRcC (a held object's
+        # keep their owner: cylinder:band_r0c0).
         markers = triangulated.to_markers()
-        markers = markers.renamed([n.split(":", 1)[-1] for n in markers.names])
+        side = f"{config.side}:"
+        markers = markers.renamed([n[len(side):] if n.startswith(side) else n for n in markers.names])
         # The printed squares as a ruler (as triangulate says it): synth's patches stretch with its hands.
         ruler, stretched = q.pitch_check(markers, pattern.pitch)
         summary[f"{key}_patch_square_mm"] = ruler.get("patch square (mm)")
@@ -134,6 +140,11 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         write_markers(cleaned[key], folder / "cleaned.c3d")
         warnings += found
         summary.update(_triangulation_figures(key, triangulated, folder / "image_truth.npz"))
+        if capture.object_motion is not None:
+            figures, said = _track_held_object(markers, capture.object_motion.name, folder / "object_motion.npz",
+                                               folder / "image_truth.npz")
+            summary.update({f"{key}_{k}": v for k, v in figures.items()})
+            warnings += said
     # Calibrate the markers the images showed; say how many were never found.
     full = load_layout(configs["calibration"].layout)
     calib = cleaned["calibration"]
@@ -192,6 +203,29 @@ def _detection_figures(key: str, images: int, a: dict, truth_path, seconds: floa
         f"{key}_read_tags": int(len(a["block_text"])),
         f"{key}_visible_tags": int(len(truth["block_text"])),
     }
+
+
+def _track_held_object(markers, name: str, out, truth_path) -> tuple[dict, list[str]]:
+    """Track the held object from its triangulated patch corners (``NAME:FACE_rRcC``, as ``handcap track-object
+    --markers 'NAME:*'``, its shape learnt from the take) into ``out``; the figures: its corners placed by the track
+    (pose and learnt shape) against their true positions, mm, and the frames it holds a pose in."""
+    names = [n for n in markers.names if n.startswith(f"{name}:")]
+    shown = [n for n in names if np.isfinite(markers.select([n]).positions).all(axis=-1).any()]
+    if len(shown) < 3:
+        return {"object_corners_tracked": len(shown)}, [
+            f"the held {name} showed {len(shown)} of its patch corners in the take: too few to track it"]
+    track = track_rigid(markers, names, name=name)
+    motion = q.attach(track.motion, q.object_warnings(track, threshold=0.005))
+    write_object_motion(motion, out)
+    truth = np.load(truth_path)
+    index = {str(n): k for k, n in enumerate(truth["marker_names"])}
+    true = truth["positions"][:, [index[n] for n in motion.marker_names]]  # (T, K, 3)
+    placed = motion.transform_points(motion.canonical)  # (T, K, 3), NaN in frames without a pose
+    error = 1000 * np.linalg.norm(placed - true, axis=-1)[np.isfinite(motion.translation).all(axis=1)]
+    return {"object_corners_tracked": len(motion.marker_names),
+            "object_posed_frames": f"{int(np.isfinite(motion.translation).all(axis=1).sum())} of {motion.n_frames}",
+            "object_corner_error_median_mm": round(float(np.median(error)), 3) if error.size else None,
+            "object_corner_error_max_mm": round(float(error.max()), 3) if error.size else None}, list(motion.warnings)
 
 
 def _triangulation_figures(key: str, triangulated, truth_path) -> dict:

@@ -74,9 +74,9 @@ def add_synth(verbs) -> None:
     p.add_argument("--subject-seed", type=int, default=None,
                    help="seed of the subject (hand shape, marker placement); share it between the takes of a session")
     p.add_argument("--images", action="store_true",
-                   help="also film the patched hand from every camera: images/CAMERA/FRAME.png, image_truth.npz "
-                        "(every visible corner and tag) and pattern.toml (needs a patch layout and the extra "
-                        "'images')")
+                   help="also film the patched hand (and the held cuboid, cylinder or sphere, with its faces' "
+                        "patches) from every camera: images/CAMERA/FRAME.png, image_truth.npz (every visible corner "
+                        "and tag) and pattern.toml (needs a patch layout and the extra 'images')")
     p.add_argument("--image-scale", type=float, default=1.0,
                    help="image size relative to the cameras' (default %(default)s: 2448 x 2048)")
     p.add_argument("--image-style", choices=("default", "clean"), default="default",

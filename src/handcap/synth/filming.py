@@ -3,9 +3,10 @@
 ``handcap synth --images`` calls :func:`film_capture` after writing the
 capture: every camera of the rig films every frame (:mod:`handcap.synth.images`).
 The hand wears the patches of the session template (``pattern.toml``, written
-beside the images) at the places the layout gives; a held object is drawn as
-an occluder (its own patches come with the articulated-object work), and a
-few random blobs per frame hide parts of the hand from every camera alike.
+beside the images) at the places the layout gives; a held cuboid, cylinder or
+sphere wears the template's patches of its faces (:mod:`handcap.synth.object_patches`),
+and the 2x2x2 cube, whose facelets turn with its layers, is drawn as an occluder
+only. A few random blobs per frame hide parts of the hand from every camera alike.
 
 Files, in the capture folder:
 
@@ -16,7 +17,7 @@ Files, in the capture folder:
   ``handcap detect --rig`` and ``triangulate --cameras`` with these images.
 - ``image_truth.npz``: the 2D detections File contract for what a perfect
   detector would report, plus the rest of the truth: ``camera_names (C,)``,
-  ``marker_names (N,)`` (``right:PATCH_rRcC``), ``frame``, ``camera``,
+  ``marker_names (N,)`` (``right:PATCH_rRcC``, then the object's ``cylinder:FACE_rRcC``), ``frame``, ``camera``,
   ``marker``, ``xy`` (pixels, distorted image), ``score`` (ones) for every
   visible corner; ``block_text (B,)``, ``block_frame``, ``block_camera``,
   ``block_xy (B, 4, 2)`` (reading order, underline at the bottom) for every tag
@@ -54,6 +55,7 @@ from handcap.io.npz import write_hand_motion
 from handcap.layouts import load_layout
 from handcap.synth.decals import patch_skin
 from handcap.synth.images import ImageStyle, PatchRenderer, random_blobs
+from handcap.synth.object_patches import PATCHED, object_patch_grids, patch_coords
 from handcap.synth.objects import make_object
 from handcap.synth.scene import synthesize
 from handcap.synth.textures import build_atlas
@@ -181,26 +183,29 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
         raise HandcapError(f"clocks {clocks} do not fit a capture of {len(capture.rig.cameras)} cameras and "
                            f"{config.frames} frames")
     folder = Path(folder)
-    pattern = session_pattern((config.side,), ())
+    obj = None
+    if capture.object_motion is not None:
+        obj = make_object(capture.object_motion.name, seed=config.seed)
+    pattern = session_pattern((config.side,), (obj.name,) if obj is not None and obj.kind in PATCHED else ())
     wanted = {m.patch for m in layout.markers if m.patch}
-    patches = tuple(p for p in pattern.patches if p.name in wanted)
+    patches = tuple(p for p in pattern.patches if p.owner == config.side and p.name in wanted)
     if not patches:
         raise HandcapError(f"layout {layout.name!r} names none of the patches of handcap pattern")
+    held = tuple(p for p in pattern.patches if obj is not None and p.owner == obj.name)
+    held_coords = [patch_coords(p) for p in held]
+    held_grids = object_patch_grids(obj, held, pattern.pitch, held_coords) if held else []
     hand = OpenHand(config.side)
     motion = capture.hand_motion
     vertices = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
     skin = patch_skin(layout, patches, hand, motion.betas, pitch=pattern.pitch)  # printed: the same size on any hand
     grids = skin.grids(vertices, hand.faces)  # per patch (T, rows, cols, 3)
     style = style or ImageStyle()
-    renderer = PatchRenderer(build_atlas(patches, load_font(None, pattern.alphabet)), hand.faces, style,
-                             coords=list(zip(skin.rows, skin.cols)))
+    renderer = PatchRenderer(build_atlas(patches + held, load_font(None, pattern.alphabet)), hand.faces, style,
+                             coords=list(zip(skin.rows, skin.cols)) + held_coords)
     cameras = [scaled_camera(c, scale) for c in capture.rig]
-    obj = None
-    if capture.object_motion is not None:
-        obj = make_object(capture.object_motion.name, seed=config.seed)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, 16]))
     n_frames, n_cams = clocks.frames(len(vertices)), len(cameras)
-    names = [f"{config.side}:{p.corner_name(int(r), int(c), owner=False)}" for p in patches for r, c in p.vertices()]
+    names = [name for p in patches + held for name in p.corner_names()]
     all_xy = np.zeros((n_frames, n_cams, len(names), 2))
     visible = np.zeros((n_frames, n_cams, len(names)), bool)
     positions = np.zeros((n_frames, len(names), 3))
@@ -218,7 +223,9 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
                                                                             style.occluders[1] + 1)))
                 if obj is not None:
                     turn = Rotation.from_rotvec(capture.object_motion.rotation[t]).as_matrix()
-                    occluders.append((obj.vertices @ turn.T + capture.object_motion.translation[t], obj.faces))
+                    where = capture.object_motion.translation[t]
+                    occluders.append((obj.vertices @ turn.T + where, obj.faces))
+                    frame_grids += [g @ turn.T + where for g in held_grids]
                 for c in filming:
                     camera, k = cameras[c], (t - clocks.starts[c]) // clocks.every
                     shot = renderer.render(camera, vertices[t], frame_grids, rng, occluders=occluders)
@@ -237,7 +244,7 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     if scale != 1.0:  # cameras.toml calibrates the full-size images, which these are not
         paths["image_cameras.toml"] = folder / "image_cameras.toml"
         CameraRig(cameras, capture.rig.warnings).save(paths["image_cameras.toml"])
-    truth = _truth_arrays(patches, names, cameras, all_xy, visible, positions, config.rate / clocks.every)
+    truth = _truth_arrays(patches + held, names, cameras, all_xy, visible, positions, config.rate / clocks.every)
     if clocks.every > 1 or any(clocks.starts):
         truth["camera_offsets"] = clocks.offsets()
     paths["image_truth.npz"] = folder / "image_truth.npz"
@@ -279,12 +286,11 @@ class Clocks:
 def _truth_arrays(patches, names, cameras, all_xy, visible, positions, rate) -> dict:
     frame, camera, marker = np.nonzero(visible)
     index = {n: k for k, n in enumerate(names)}
-    side = names[0].split(":", 1)[0]
     texts, corners = [], []
     for p in patches:
         for text, r, c in p.blocks():
             texts.append(text)
-            corners.append([index[f"{side}:{p.corner_name(vr, vc, owner=False)}"] for vr, vc in p.block_vertices(r, c)])
+            corners.append([index[p.corner_name(vr, vc)] for vr, vc in p.block_vertices(r, c)])
     corners = np.array(corners, dtype=np.int64).reshape(-1, 4)
     seen = visible[:, :, corners].all(axis=-1)  # (T, C, B)
     b_frame, b_camera, b_index = np.nonzero(seen)
