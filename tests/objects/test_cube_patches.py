@@ -43,3 +43,33 @@ def test_tracked_from_its_corners_with_most_hidden():
     markers = take.markers + rng.normal(0, 0.0005, take.markers.shape)
     markers[rng.random(markers.shape[:2]) < 0.5] = np.nan
     assert track_cube(markers, cube).moves == "R U' F2 D B L2"
+
+
+def test_a_half_seen_along_one_row_does_not_decide_which_half_turned():
+    # Filmed at 20 Hz, a cube's resting half showed, in a frame of the turn, only corners along one row of one
+    # patch: a fit of them turns freely about that line, so its orientation there was noise, the resting half
+    # looked the rougher and the tracker reported L F' for R U'. Such frames hold no pose of the half now.
+    from handcap.objects.cube_track import SMOOTH_SECONDS
+    from handcap.objects.rigid import kabsch_refit, line_spread
+
+    cube = load_articulated("cube2x2-patches")
+    take = cube_take("R U'", np.random.default_rng(3), rate=20.0, cube=cube)
+    rng = np.random.default_rng(4)
+    markers = take.markers + rng.normal(0, 0.0002, take.markers.shape)
+    names = np.array(cube.marker_names)
+    left = np.isin(names, [n for p in cube.parts[:4] for n in p.marker_names])  # the cubies of x < 0: R's rest
+    row = np.char.startswith(names.astype(str), "cube2x2:L0_r0c")  # one row of one patch of them, in a line
+    for t in range(int(take.move_frames[0][0]) + 1, int(take.move_frames[0][1]), 2):
+        markers[t, left & ~row] = np.nan
+    assert track_cube(markers, cube, window=1, rate=20.0).moves == "R U'"
+    assert round(SMOOTH_SECONDS * 120) == 10  # as before at 120 Hz
+    # The line test itself, against an independent computation: the RMS distance from the best line (SVD).
+    points = rng.normal(size=(7, 3)) * [0.01, 0.002, 0.0005]
+    used = rng.random((5, 7)) < 0.7
+    for k in range(5):
+        p = points[used[k]] - points[used[k]].mean(axis=0)
+        assert np.isclose(line_spread(points, used)[k], np.sqrt((np.linalg.svd(p, compute_uv=False)[1:] ** 2).sum()
+                                                                / used[k].sum()))
+    on_line = np.outer(np.linspace(0, 0.015, 4), [1.0, 2.0, 2.0]) / 3
+    rot, _ = kabsch_refit(on_line, on_line[None] + [0.1, 0, 0], np.ones((1, 4)), 0.003)
+    assert np.isnan(rot).all()

@@ -11,7 +11,7 @@ cube's frame), and it changes only by committed moves.
    :data:`MOVE_DEG` (from where it left :data:`REST_DEG`) and ends where the layer holds still at a quarter
    for :data:`HOLD` frames, so a half turn is one move and a layer turned back is none.
 3. Which half turned: the one whose orientation departs from a smooth (quadratic in time) path over the
-   move and :data:`SMOOTH_FRAMES` around it; the other half is the cube, carried smoothly by the hand. This is
+   move and :data:`SMOOTH_SECONDS` around it; the other half is the cube, carried smoothly by the hand. This is
    what tells a turn of D from a turn of U with the whole cube turned: both leave the same arrangement,
    and only the turning layer starts and stops.
 4. The move (face, clockwise quarter turns seen from the face) is committed to the state; consecutive moves
@@ -47,8 +47,10 @@ HOLD = 5
 SEARCH_MARKERS = 8
 #: Frames searched at once for the next move (more when a move outlasts them).
 SPAN = 256
-#: Frames before and after a move over which the two halves' smoothness is compared.
-SMOOTH_FRAMES = 10
+#: Time before and after a move over which the two halves' smoothness is compared, seconds (10 frames at 120 Hz).
+#: Counted in frames at another rate, the window grew with it: at 20 Hz 10 frames are half a second each side, over
+#: which the hand's carrying is no longer quadratic, and the body half's roughness came near the turning one's.
+SMOOTH_SECONDS = 10 / 120
 
 
 def cubie_poses(markers, cube: ArticulatedObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -241,7 +243,7 @@ def smooth_pose(rotation, translation, window: int) -> tuple[np.ndarray, np.ndar
     return rotation, translation
 
 
-def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrack:
+def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float = 120.0) -> CubeTrack:
     """Pose, layer angles and moves of a 2x2x2 cube from its labelled markers (see the module docstring).
 
     Parameters
@@ -253,6 +255,8 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
     window : int
         Frames of the quadratic Savitzky-Golay filter that smooths the cube's pose and the layers' angles
         (odd; 9 suits 100-120 Hz; below 5: none).
+    rate : float
+        Frames per second: :data:`SMOOTH_SECONDS` in frames (at least 2).
 
     Returns
     -------
@@ -270,6 +274,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
     if markers.ndim != 3 or markers.shape[1:] != (len(cube.marker_names), 3):
         raise HandcapError(f"cube markers must be (T, {len(cube.marker_names)}, 3), got {markers.shape}")
     w, _, seen = cubie_poses(markers, cube)
+    smooth = max(2, int(round(SMOOTH_SECONDS * rate)))
     cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
     rest = cube.markers
     valid = np.isfinite(markers).all(axis=2)
@@ -331,7 +336,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9) -> CubeTrac
         span = SPAN
         end = min(int(after[0]) + HOLD, len(frames)) - 1 if len(after) else len(frames) - 1
         seg = frames[s0:end + 1]
-        lo, hi = max(seg[0] - SMOOTH_FRAMES, first), min(seg[-1] + SMOOTH_FRAMES, n - 1)
+        lo, hi = max(seg[0] - smooth, first), min(seg[-1] + smooth, n - 1)
         (m_rot, m_trans), (p_rot, p_trans), full = halves(state, a, np.arange(lo, hi + 1))
         body_is_minus = _roughness(m_rot) <= _roughness(p_rot)
         inside = slice(seg[0] - lo, seg[-1] - lo + 1)

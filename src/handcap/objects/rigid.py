@@ -77,7 +77,8 @@ def kabsch_refit(source, target, weights, outlier: float):
     -------
     rotation : ndarray (T, 3, 3)
     translation : ndarray (T, 3)
-        NaN in frames where fewer than 3 points weigh.
+        NaN in frames where fewer than 3 points weigh, or where those that weigh lie within
+        :data:`MIN_SPREAD` of a line (the turn about it is free: one row of a patch's corners).
     """
     weights = np.asarray(weights, dtype=np.float64)
     rot, trans = kabsch(np.broadcast_to(source, target.shape), target, weights)
@@ -87,9 +88,36 @@ def kabsch_refit(source, target, weights, outlier: float):
     if redo.any():
         weights = np.where(redo[:, None], kept, weights)
         rot[redo], trans[redo] = kabsch(np.broadcast_to(source, target[redo].shape), target[redo], weights[redo])
-    bad = (weights > 0).sum(axis=1) < 3
+    bad = ((weights > 0).sum(axis=1) < 3) | (line_spread(source, weights > 0) < MIN_SPREAD)
     rot[bad], trans[bad] = np.nan, np.nan
     return rot, trans
+
+
+#: Least spread of a fit's points off their best line, metres (RMS distance): below it the turn about the line is
+#: left to the noise (one row of a patch's corners, or three markers nearly in a row).
+MIN_SPREAD = 0.001
+
+
+def line_spread(points, used) -> np.ndarray:
+    """RMS distance of the ``used`` points from their best line, per frame.
+
+    Parameters
+    ----------
+    points : ndarray (M, 3)
+        Metres.
+    used : ndarray (T, M) bool
+
+    Returns
+    -------
+    ndarray (T,)
+        Metres; 0 where fewer than 2 points are used.
+    """
+    points, used = np.asarray(points, dtype=np.float64), np.asarray(used, dtype=np.float64)
+    count = used.sum(axis=1)
+    mean = used @ points / np.maximum(count, 1)[:, None]
+    second = np.einsum("tm,mi,mj->tij", used, points, points) / np.maximum(count, 1)[:, None, None]
+    spread = np.linalg.eigvalsh(second - np.einsum("ti,tj->tij", mean, mean))  # ascending
+    return np.sqrt(np.clip(spread[:, 0] + spread[:, 1], 0.0, None)) * (count >= 2)
 
 
 def ransac_kabsch(source, target, *, threshold: float = 0.005, iterations: int = 64, rng=None):

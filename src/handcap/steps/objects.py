@@ -95,7 +95,7 @@ def _track_cube(path, out, articulated, units, start, labeled, filled) -> Step:
         raise HandcapError(f"{obj.name}: a puzzle cube's layers and revolute joints in one object are not "
                            f"tracked together; describe them as two objects")
     window = max(int(round(0.075 * take.rate)) | 1, 1)  # 75 ms of smoothing: 9 frames at 120 Hz
-    track = track_cube(positions, obj, window=window)
+    track = track_cube(positions, obj, window=window, rate=take.rate)
     warnings = [*take.warnings]
     lost = int(np.isnan(track.translation[:, 0]).sum())
     if lost:
