@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap import HandcapError
 from handcap.objects.articulated import load_articulated
-from handcap.objects.cube import FACES, format_moves, is_solved
+from handcap.objects.cube import FACES, format_moves, is_solved, quarter_turn
 from handcap.objects.cube_track import FACE_ORDER, track_cube
 from handcap.synth.cube import cube_take
 
@@ -61,12 +61,42 @@ def test_d_is_not_u_with_a_whole_cube_turn():
     assert _track("D U'", 3)[1].moves == "D U'"
 
 
+def test_the_one_cubie_never_seen_before_the_first_turn_is_placed_from_the_others():
+    # Against the move algebra: in scrambled cubes, turned whole too, any one cubie left out is put back exactly.
+    from handcap.objects.cube import apply_moves, complete_state, random_moves, solved_state, twists
+
+    rng = np.random.default_rng(5)
+    whole = quarter_turn((1, 0, 0), 1) @ quarter_turn((0, 1, 0), 1)  # the cube turned as a whole
+    for _ in range(30):
+        state = apply_moves(solved_state(), random_moves(12, rng))
+        for cube in (state, np.einsum("ij,njk->nik", whole, state)):
+            assert twists(cube).sum() % 3 == 0
+            for c in range(8):
+                known = np.arange(8) != c
+                guess = cube.copy()
+                guess[c] = np.eye(3, dtype=int)
+                np.testing.assert_array_equal(complete_state(guess, known), cube)
+    twisted = solved_state()
+    twisted[0] = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]])  # cubie DBL turned 120 degrees in its place
+    assert twists(twisted).sum() % 3 != 0  # one corner twisted alone: no cube is like that
+    crowded = solved_state()
+    crowded[2] = quarter_turn((1, 0, 0), -1)  # UBL turned into UFL's place, UFL still there
+    with pytest.raises(HandcapError, match="share a place"):
+        complete_state(crowded, np.arange(8) != 7)
+    with pytest.raises(HandcapError, match="one unknown cubie"):
+        complete_state(solved_state(), np.arange(8) > 1)
+
+
 def test_bad_takes():
     take = cube_take("R", rate=30.0)
     hidden = take.markers.copy()
-    hidden[:, :2] = np.nan  # one cubie never has 2 markers: where it starts is unknown
-    with pytest.raises(HandcapError, match="DBL are never seen"):
-        track_cube(hidden, CUBE)
+    hidden[:, :2] = np.nan  # one cubie never has 2 markers: the seven others leave it one place and one turn
+    assert track_cube(hidden, CUBE).moves == "R"
+    second = len(CUBE.parts[0].marker_names)
+    both = hidden.copy()
+    both[:, second:second + len(CUBE.parts[1].marker_names)] = np.nan  # two cubies: where they start is unknown
+    with pytest.raises(HandcapError, match="DBL, DFL are never seen"):
+        track_cube(both, CUBE)
     hidden[:, :1] = take.markers[:, :1]  # two markers and the cube's centre place it
     assert track_cube(hidden, CUBE).moves == "R"
     with pytest.raises(HandcapError, match="the cube is never seen"):

@@ -15,6 +15,7 @@ identity.
 from __future__ import annotations
 
 import re
+from itertools import permutations, product
 
 import numpy as np
 
@@ -150,6 +151,73 @@ def permutation(state) -> np.ndarray:
     for cubie, place in enumerate(where):
         out[index[tuple(place)]] = cubie
     return out
+
+
+def twists(state) -> np.ndarray:
+    """Each cubie's twist (8,) int, 0 to 2: how many turns of +120 degrees about its place's outward diagonal
+    bring the face of that place along y to the face that was its own y face at home. Every state that face
+    turns reach from the solved cube, in any frame of the cube, has twists summing to a multiple of 3.
+
+    Parameters
+    ----------
+    state : ndarray (8, 3, 3) int
+    """
+    state = np.asarray(state, dtype=np.int64)
+    out = np.zeros(8, dtype=np.int64)
+    cycle = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]])  # +120 degrees about (1, 1, 1): x -> y -> z -> x
+    for c, place in enumerate(positions(state)):
+        flip = np.diag(place)  # a reflection where the place has an odd number of minus signs
+        turn = flip @ (cycle if np.prod(place) > 0 else cycle.T) @ flip  # +120 degrees about the place's diagonal
+        mine, face = state[c] @ np.array([0, HOME[c][1], 0]), np.array([0, place[1], 0])
+        for k in range(3):
+            if (face == mine).all():
+                out[c] = k
+            face = turn @ face
+    return out
+
+
+def _rotations() -> np.ndarray:
+    """The 24 integer rotations (24, 3, 3): signed permutation matrices of determinant 1."""
+    out = [np.diag(signs)[list(order)] for order in permutations(range(3)) for signs in product((1, -1), repeat=3)]
+    return np.array([r for r in out if round(np.linalg.det(r)) == 1], dtype=np.int64)
+
+
+def complete_state(state, known) -> np.ndarray:
+    """The state with its one unknown cubie put where the seven others leave room and turned as the cube allows.
+
+    The cubie takes the one place the others do not hold, and of the three turns that put it there (their
+    twists are 0, 1 and 2) the one that makes the cube's total a multiple of 3 (:func:`twists`): a cubie hidden
+    all the while is still placed exactly, if the others are right.
+
+    Parameters
+    ----------
+    state : ndarray (8, 3, 3) int
+        The known cubies' rotations (the unknown one's is ignored).
+    known : ndarray (8,) bool
+        Exactly one False.
+
+    Returns
+    -------
+    ndarray (8, 3, 3) int
+
+    Raises
+    ------
+    HandcapError
+        Not exactly one cubie unknown, or two known cubies in one place.
+    """
+    state, known = np.array(state, dtype=np.int64), np.asarray(known, dtype=bool)
+    if (~known).sum() != 1:
+        raise HandcapError(f"complete_state places one unknown cubie, not {int((~known).sum())}")
+    c = int(np.flatnonzero(~known)[0])
+    taken = {tuple(p) for p in positions(state)[known]}
+    free = [h for h in HOME if tuple(h) not in taken]
+    if len(free) != 1:
+        raise HandcapError("the cube's known cubies share a place: the last one cannot be placed")
+    for turn in _rotations():
+        state[c] = turn
+        if (turn @ HOME[c] == free[0]).all() and twists(state).sum() % 3 == 0:
+            break
+    return state
 
 
 def cube_signed_distance(points, cube_pose, cubie_rotation, *, chunk: int = 64) -> np.ndarray:

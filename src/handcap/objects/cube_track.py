@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.objects.articulated import ArticulatedObject
-from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, format_moves, permutation
+from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, complete_state, format_moves, permutation
 from handcap.objects.rigid import kabsch, kabsch_refit
 
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
@@ -170,7 +170,8 @@ def _start(w, seen, world, valid, cubie, rest):
     From the first frame in which most cubies are seen (at least four, or as many as are ever seen), the
     first cubie seen sets the cube's frame; the others join as they are first seen (two markers and the
     cube's centre, about which every cubie turns), placed in the frame that the known cubies' markers give,
-    while those still move as one body (no layer is turning yet).
+    while those still move as one body (no layer is turning yet). One cubie never seen by then is placed from
+    the seven others (:func:`~handcap.objects.cube.complete_state`).
     """
     counts = seen.sum(axis=1)
     if counts.max() < 2:
@@ -200,6 +201,8 @@ def _start(w, seen, world, valid, cubie, rest):
             guess = rot.T @ turn
             if np.abs(guess - np.rint(guess)).max() < 0.2:
                 state[c], known[c] = np.rint(guess), True
+    if (~known).sum() == 1:  # the seven others leave one place, and the cube's twists one turn there
+        return first, complete_state(state, known)
     if not known.all():
         missing = ", ".join(np.array(["DBL", "DFL", "UBL", "UFL", "DBR", "DFR", "UBR", "UFR"])[~known])
         raise HandcapError(f"the cube's cubies {missing} are never seen (2 markers each) before its first turn: "
