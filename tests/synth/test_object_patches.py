@@ -60,3 +60,29 @@ def test_the_cube_and_patches_that_do_not_fit_are_refused():
         object_patch_grids(make_object("sphere"), faces[:1], PITCH)
     with pytest.raises(HandcapError, match="does not fit on a cap"):
         object_patch_grids(make_object("sphere", scale=0.2), sphere, PITCH)
+
+
+def test_the_cubes_facelet_patches_lie_where_its_tracker_looks_for_them():
+    from handcap.objects import load_articulated
+    from handcap.objects.cube import HOME
+    from handcap.synth.object_patches import cube_patch_grids
+
+    patches = [p for p in session_pattern((), ("cube2x2",)).patches if p.owner == "cube2x2"]
+    grids, cubies = cube_patch_grids(patches, PITCH)
+    cube = load_articulated("cube2x2-patches")  # the shipped description track-object --articulated reads
+    home = {n: (k, m) for k, part in enumerate(cube.parts) for n, m in zip(part.marker_names, part.markers)}
+    assert len(grids) == 24
+    for patch, grid, cubie in zip(patches, grids, cubies):
+        rows, cols = patch_coords(patch)
+        for (r, c), name in zip(patch.vertices(), patch.corner_names()):
+            part, spot = home[name]
+            assert part == cubie and (np.sign(spot) == HOME[cubie]).all()
+            np.testing.assert_allclose(grid[np.flatnonzero(rows == r)[0], np.flatnonzero(cols == c)[0]], spot,
+                                       atol=1e-6)  # the description is written to the micrometre
+        # Flat on its cubie's outer face, row x column pointing out of the cube.
+        face = np.argmax(np.abs(grid).min(axis=(0, 1)))
+        assert np.allclose(np.abs(grid[..., face]), 0.028)
+        normal = np.cross(grid[1, 0] - grid[0, 0], grid[0, 1] - grid[0, 0])
+        assert normal[face] * np.sign(grid[0, 0, face]) > 0
+    with pytest.raises(HandcapError, match="not a facelet"):
+        cube_patch_grids([p for p in session_pattern((), ("cuboid",)).patches if p.owner == "cuboid"], PITCH)

@@ -33,6 +33,28 @@ def cubie_name(place) -> str:
     return _CUBIE_NAMES[tuple(int(v) for v in place)]
 
 
+def facelet_frame(face: str, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where facelet ``k`` of ``face`` lies on the cube at home (see the module docstring).
+
+    Parameters
+    ----------
+    face : str
+        One of ``URFDLB``.
+    k : int
+        0 to 3, in reading order as the face is seen from outside.
+
+    Returns
+    -------
+    centre : ndarray (3,)
+        The facelet's centre on the cube's surface (:data:`HALF` out), cube frame, metres.
+    right, up : ndarray (3,)
+        Its directions as seen from outside (a patch's columns run right, its rows down).
+    """
+    right, up = (np.array(v, dtype=float) for v in FACE_AXES[face])
+    row, col = divmod(k, 2)
+    return HALF * (np.array(FACES[face], dtype=float) + (col - 0.5) * right + (0.5 - row) * up), right, up
+
+
 def patch_cube_table(*, pitch: float = PITCH) -> dict:
     """The description (as parsed TOML, metres) of the cube with a coded patch on every facelet.
 
@@ -49,11 +71,9 @@ def patch_cube_table(*, pitch: float = PITCH) -> dict:
     """
     patches = {p.name: p for p in session_pattern(hands=(), objects=("cube2x2",), pitch=pitch).patches}
     markers = {cubie_name(h): {} for h in HOME}
-    for face, normal in FACES.items():
-        right, up = (np.array(v, dtype=float) for v in FACE_AXES[face])
+    for face in FACES:
         for k in range(4):
-            row, col = divmod(k, 2)
-            centre = HALF * (np.array(normal) + (col - 0.5) * right + (0.5 - row) * up)
+            centre, right, up = facelet_frame(face, k)
             cubie = cubie_name(np.sign(centre))
             patch = patches[f"{face}{k}"]
             for (r, c), name in zip(patch.vertices(), patch.corner_names()):

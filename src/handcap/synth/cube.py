@@ -225,13 +225,31 @@ class TurningTake:
 
     def surface(self, t: int) -> tuple[np.ndarray, np.ndarray]:
         """The eight cubies' boxes in frame ``t``: vertices (V, 3) in the world (metres) and faces (F, 3)."""
-        box = trimesh.creation.box(extents=np.full(3, CUBIE_EDGE))
-        corners = np.asarray(box.vertices)
-        local = HOME[:, None, :] * CUBIE_OFFSET + corners[None]  # (8, 8, 3)
-        turned = np.einsum("nij,nkj->nki", self.cubie_rotation[t], local).reshape(-1, 3)
-        world = turned @ self.cube_pose[t, :3, :3].T + self.cube_pose[t, :3, 3]
-        faces = (np.asarray(box.faces)[None] + 8 * np.arange(8)[:, None, None]).reshape(-1, 3)
-        return world, faces
+        return cubie_boxes(self.cubie_rotation[t], self.cube_pose[t])
+
+
+def cubie_boxes(cubie_rotation, cube_pose) -> tuple[np.ndarray, np.ndarray]:
+    """The eight cubies' boxes of a turned cube in the world.
+
+    Parameters
+    ----------
+    cubie_rotation : ndarray (8, 3, 3)
+        Each cubie's rotation in the cube's frame (:data:`handcap.objects.cube.HOME` order).
+    cube_pose : ndarray (4, 4)
+        The cube's frame to the world, metres.
+
+    Returns
+    -------
+    vertices : ndarray (64, 3)
+        Metres.
+    faces : ndarray (96, 3)
+    """
+    box = trimesh.creation.box(extents=np.full(3, CUBIE_EDGE))
+    local = HOME[:, None, :] * CUBIE_OFFSET + np.asarray(box.vertices)[None]  # (8, 8, 3)
+    turned = np.einsum("nij,nkj->nki", np.asarray(cubie_rotation, dtype=np.float64), local).reshape(-1, 3)
+    world = turned @ cube_pose[:3, :3].T + cube_pose[:3, 3]
+    faces = (np.asarray(box.faces)[None] + 8 * np.arange(8)[:, None, None]).reshape(-1, 3)
+    return world, faces
 
 
 def _reach(hand, phi, finger: str, target, surface) -> np.ndarray:

@@ -5,8 +5,9 @@ capture: every camera of the rig films every frame (:mod:`handcap.synth.images`)
 The hand wears the patches of the session template (``pattern.toml``, written
 beside the images) at the places the layout gives; a held cuboid, cylinder or
 sphere wears the template's patches of its faces (:mod:`handcap.synth.object_patches`),
-and the 2x2x2 cube, whose facelets turn with its layers, is drawn as an occluder
-only. A few random blobs per frame hide parts of the hand from every camera alike.
+the 2x2x2 cube the patches of its 24 facelets, each turning with its cubie as the
+hand turns the layers. A few random blobs per frame hide parts of the hand from
+every camera alike.
 
 Files, in the capture folder:
 
@@ -47,6 +48,7 @@ from tqdm import tqdm
 from handcap.core.camera_rig import CameraRig
 from handcap.core.cameras import Camera
 from handcap.core.errors import HandcapError
+from handcap.core.transforms import homogeneous
 from handcap.core.files import atomic_output, save_npz
 from handcap.patterns.glyphs import load_font
 from handcap.patterns.session import session_pattern
@@ -55,7 +57,8 @@ from handcap.io.npz import write_hand_motion
 from handcap.layouts import load_layout
 from handcap.synth.decals import patch_skin
 from handcap.synth.images import ImageStyle, PatchRenderer, random_blobs
-from handcap.synth.object_patches import PATCHED, object_patch_grids, patch_coords
+from handcap.synth.cube import cubie_boxes
+from handcap.synth.object_patches import PATCHED, cube_patch_grids, object_patch_grids, patch_coords
 from handcap.synth.objects import make_object
 from handcap.synth.scene import synthesize
 from handcap.synth.textures import build_atlas
@@ -186,14 +189,20 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     obj = None
     if capture.object_motion is not None:
         obj = make_object(capture.object_motion.name, seed=config.seed)
-    pattern = session_pattern((config.side,), (obj.name,) if obj is not None and obj.kind in PATCHED else ())
+    # A cube whose layers the hand turns: each cubie's rotation in the cube's frame (T, 8, 3, 3).
+    cubies = capture.truth.get("cube_cubie_rotation") if obj is not None and obj.kind == "cube2x2" else None
+    patched = obj is not None and (obj.kind in PATCHED or cubies is not None)
+    pattern = session_pattern((config.side,), (obj.name,) if patched else ())
     wanted = {m.patch for m in layout.markers if m.patch}
     patches = tuple(p for p in pattern.patches if p.owner == config.side and p.name in wanted)
     if not patches:
         raise HandcapError(f"layout {layout.name!r} names none of the patches of handcap pattern")
     held = tuple(p for p in pattern.patches if obj is not None and p.owner == obj.name)
     held_coords = [patch_coords(p) for p in held]
-    held_grids = object_patch_grids(obj, held, pattern.pitch, held_coords) if held else []
+    if cubies is not None:
+        held_grids, on_cubie = cube_patch_grids(held, pattern.pitch, held_coords)
+    else:
+        held_grids = object_patch_grids(obj, held, pattern.pitch, held_coords) if held else []
     hand = OpenHand(config.side)
     motion = capture.hand_motion
     vertices = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
@@ -224,8 +233,12 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
                 if obj is not None:
                     turn = Rotation.from_rotvec(capture.object_motion.rotation[t]).as_matrix()
                     where = capture.object_motion.translation[t]
-                    occluders.append((obj.vertices @ turn.T + where, obj.faces))
-                    frame_grids += [g @ turn.T + where for g in held_grids]
+                    if cubies is not None:  # the cubies turn with the cube's layers, and their patches with them
+                        occluders.append(cubie_boxes(cubies[t], homogeneous(turn, where)))
+                        frame_grids += [g @ (turn @ cubies[t, q]).T + where for g, q in zip(held_grids, on_cubie)]
+                    else:
+                        occluders.append((obj.vertices @ turn.T + where, obj.faces))
+                        frame_grids += [g @ turn.T + where for g in held_grids]
                 for c in filming:
                     camera, k = cameras[c], (t - clocks.starts[c]) // clocks.every
                     shot = renderer.render(camera, vertices[t], frame_grids, rng, occluders=occluders)

@@ -10,9 +10,11 @@ creases; the squares there stretch across by at most 0.5 % at the caps' corners)
 :data:`LIFT` over the surface (paper and tape), which also keeps it in front of the object's own mesh when
 both are drawn.
 
+The 2x2x2 cube's 24 facelet patches (:func:`cube_patch_grids`) lie where the tracker's description
+``cube2x2-patches`` puts their corners (:mod:`handcap.objects.cube_patches`), each on its cubie, and turn with it.
+
 Rows and columns are placed as the renderer reads them (:mod:`handcap.synth.images`): seen from outside,
-columns run right and rows down, so the outward normal is row x column. The 2x2x2 cube's facelets move with
-its layers and are not placed here (:data:`PATCHED`).
+columns run right and rows down, so the outward normal is row x column.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.objects.cube import HOME
+from handcap.objects.cube_patches import facelet_frame
 
 #: Height of a printed patch over its object's surface, metres.
 LIFT = 0.0002
@@ -130,3 +134,43 @@ def object_patch_grids(obj, patches, pitch: float, coords=None) -> list[np.ndarr
             grid = (radius + LIFT) * (np.cos(far / radius) * normal + np.sin(far / radius) * toward)
         out.append(grid)
     return out
+
+
+def cube_patch_grids(patches, pitch: float, coords=None) -> tuple[list[np.ndarray], np.ndarray]:
+    """Where the 2x2x2 cube's facelet patches lie on it at home, and the cubie each is on.
+
+    Parameters
+    ----------
+    patches : sequence of Patch
+        The cube's patches (``U0`` ... ``B3``: face, then the facelet in reading order).
+    pitch : float
+        Printed side of a square, metres.
+    coords : sequence of (ndarray, ndarray), optional
+        Per patch, the grid coordinates of its sample rows and columns (default :func:`patch_coords`).
+
+    Returns
+    -------
+    grids : list of ndarray (n_rows, n_cols, 3)
+        The samples in the cube's frame at home, metres; the printed corners where ``cube2x2-patches`` puts them.
+    cubies : ndarray (P,) int
+        Index of each patch's cubie in :data:`handcap.objects.cube.HOME`.
+
+    Raises
+    ------
+    HandcapError
+        A patch that is not a facelet, or one larger than its facelet.
+    """
+    grids, cubies = [], []
+    for k, patch in enumerate(patches):
+        face, index = patch.name[:1], patch.name[1:]
+        if face not in "URFDLB" or len(face) != 1 or index not in ("0", "1", "2", "3"):
+            raise HandcapError(f"patch {patch.owner}:{patch.name} is not a facelet of the 2x2x2 cube (U0 ... B3)")
+        centre, right, up = facelet_frame(face, int(index))
+        if (max(patch.rows, patch.cols) + 1) * pitch > 2 * abs(centre).min():
+            raise HandcapError(f"patch {patch.owner}:{patch.name} ({patch.rows} x {patch.cols} squares of "
+                               f"{1000 * pitch:g} mm) is larger than a facelet of the cube")
+        r, c = patch_coords(patch) if coords is None else (np.asarray(v, dtype=np.float64) for v in coords[k])
+        rr, cc = np.meshgrid(patch.rows / 2 - r, c - patch.cols / 2, indexing="ij")
+        grids.append(centre + pitch * (cc[..., None] * right + rr[..., None] * up))
+        cubies.append(int(np.flatnonzero((HOME == np.sign(centre)).all(axis=1))[0]))
+    return grids, np.array(cubies, dtype=int)
