@@ -73,3 +73,28 @@ def test_a_half_seen_along_one_row_does_not_decide_which_half_turned():
     on_line = np.outer(np.linspace(0, 0.015, 4), [1.0, 2.0, 2.0]) / 3
     rot, _ = kabsch_refit(on_line, on_line[None] + [0.1, 0, 0], np.ones((1, 4)), 0.003)
     assert np.isnan(rot).all()
+
+
+def test_a_file_without_some_never_seen_corners_is_tracked_and_says_so(tmp_path, capsys):
+    # triangulate of another tool may write only the corners it placed: those it leaves out are never seen. A part
+    # left with fewer than 3 markers is still one clear line.
+    from handcap import MarkerSequence
+    from handcap.cli import main
+    from handcap.io import write_markers
+
+    cube = load_articulated("cube2x2-patches")
+    take = cube_take("R U'", np.random.default_rng(6), rate=60.0, cube=cube)
+    names = list(cube.marker_names)
+    dropped = set(names[:5]) | set(names[100:140])
+    keep = [k for k, n in enumerate(names) if n not in dropped]
+    write_markers(MarkerSequence(take.markers[:, keep], [names[k] for k in keep], 60.0), tmp_path / "some.c3d")
+    assert main(["track-object", str(tmp_path / "some.c3d"), "--articulated", "cube2x2-patches",
+                 "--out", str(tmp_path / "cube.npz")]) == 0
+    captured = capsys.readouterr()
+    assert "2 moves: R U'" in captured.out and "the other 45 (cube2x2:" in captured.err
+    first = [n for n in cube.parts[0].marker_names]
+    bare = [k for k, n in enumerate(names) if n not in first[2:]]
+    write_markers(MarkerSequence(take.markers[:, bare], [names[k] for k in bare], 60.0), tmp_path / "bare.c3d")
+    assert main(["track-object", str(tmp_path / "bare.c3d"), "--articulated", "cube2x2-patches",
+                 "--out", str(tmp_path / "x.npz")]) == 2
+    assert f"lacks {len(first) - 2} of the cube2x2-patches markers" in capsys.readouterr().err

@@ -84,11 +84,21 @@ def _track_cube(path, out, articulated, units, start, labeled, filled) -> Step:
             raise HandcapError("--labeled writes the markers that --start labels: give --start too")
         take = read_markers(path, units=units)
         missing = [n for n in obj.marker_names if n not in take.names]
-        if missing:
+        short = [part.name for part in obj.parts if sum(n not in missing for n in part.marker_names) < 3]
+        if short:
             raise HandcapError(f"{path} lacks {len(missing)} of the {obj.name} markers ({', '.join(missing[:6])}"
                                f"{' ...' if len(missing) > 6 else ''}): label them with the description's names, "
                                f"or give --start to label them from a labelled frame")
-        positions = take.select(list(obj.marker_names)).positions
+        # A file may leave out markers never seen (a patch corner no two cameras saw): they are missing throughout,
+        # where each part keeps three to be fitted by.
+        index = {n: k for k, n in enumerate(take.names)}
+        positions = np.full((take.n_frames, len(obj.marker_names), 3), np.nan)
+        present = [k for k, n in enumerate(obj.marker_names) if n in index]
+        positions[:, present] = take.positions[:, [index[obj.marker_names[k]] for k in present]]
+        if missing:
+            take = take.with_warnings(f"{path} holds {len(obj.marker_names) - len(missing)} of the {obj.name} "
+                                      f"markers; the other {len(missing)} ({', '.join(missing[:3])}"
+                                      f"{' ...' if len(missing) > 3 else ''}) are taken as never seen")
     if obj.layers is None:
         return _track_jointed(take, positions, obj, out)
     if any(j.kind == "revolute" for j in obj.joints):
