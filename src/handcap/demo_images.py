@@ -1,8 +1,9 @@
 """``handcap demo --images``: the whole DexterCap path from pixels, on rendered takes with their truth.
 
 1. Synthesize a calibration take (open hand, slowly turned) and a grasp take of
-   one subject wearing the ``dense-patches`` layout, seen by 13 cameras, and
-   render every frame of every camera (:func:`handcap.synth.filming.film_capture`).
+   one subject wearing the ``dense-patches`` layout, seen by 13 cameras, and a
+   take of the same hand turning the patched 2x2x2 cube through two moves, seen by
+   6, and render every frame of every camera (:func:`handcap.synth.filming.film_capture`).
    The cameras read out the window of their 5 MP sensor that holds the hand
    (:func:`~handcap.synth.filming.region_rig`): the same lens and pixels, a
    fraction of the rendering and detection time.
@@ -12,18 +13,19 @@
    (:mod:`handcap.detect.motion`, :mod:`handcap.detect.views`).
 3. Triangulate the named corners (RANSAC over views), clean them, calibrate the
    marker attachment on the calibration take and solve the grasp take; track the
-   held object (its patches' corners, ``handcap track-object --markers 'NAME:*'``).
+   held object (its patches' corners, ``handcap track-object --markers 'NAME:*'``) and
+   the cube (``track-object --articulated cube2x2-patches``: its pose and moves).
 4. Measure each stage against the truth: corners named per image and their
    pixel error, triangulated corners (mm), reprojection (px), calibration and
    solve marker residuals (MRE, mm), joint error (mm), the object's corners as
-   its track places them (mm).
+   its track places them (mm), the cube's moves and its pose and cubies (mm, degrees).
 
-Writes into the output folder (rewritten on every run): ``calibration/`` and
-``take/``, each with ``cameras.toml``, ``images/CAM/FRAME.png``,
+Writes into the output folder (rewritten on every run): ``calibration/``,
+``take/`` and ``cube/``, each with ``cameras.toml``, ``images/CAM/FRAME.png``,
 ``image_truth.npz``, ``pattern.toml``, ``detections.npz`` (from the images), ``overlay/CAM/FRAME.jpg``
 (the first camera's detections drawn over its frames, :mod:`handcap.detect.overlay`),
 ``triangulated.c3d``, ``cleaned.c3d``, ``truth.npz`` (the true hand motion) and, where an object is held,
-``object_motion.npz``;
+``object_motion.npz`` (``cube/``: ``cube_motion.npz``, the cube's pose, layer angles and moves);
 ``attachment.npz``, ``motion.npz`` and ``summary.json``/``summary.txt`` beside them.
 """
 
@@ -34,8 +36,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from handcap.core.files import atomic_output, file_stamps, save_npz, written_since
+from handcap.core.transforms import homogeneous
 from handcap.detect.overlay import write_pictures
 from handcap.detect.capture import detect_capture
 from handcap.detect.networks import load_checker, load_corner_net, load_reader, load_refiner
@@ -48,18 +52,24 @@ from handcap.io import write_hand_motion, write_markers, write_object_motion
 from handcap.layouts import load_layout
 from handcap.multiview import clean_markers, read_detections, triangulate_detections
 from handcap.objects import track_rigid
+from handcap.objects.cube_track import cube_errors
 from handcap.patterns.pattern import Pattern
 from handcap.quality import plausibility as q
 from handcap.solve import calibrate_attachment, solve_hand
+from handcap.steps.objects import track_object
 from handcap.synth.config import SynthConfig
 from handcap.synth.filming import film_take
 
-#: The two takes, one subject, 13 cameras at 4 Hz: 8 frames of calibration, 11 of the grasp (its shortest: 2.5 s).
+#: The takes, one subject: 13 cameras at 4 Hz, 8 frames of calibration and 11 of the grasp (its shortest: 2.5 s);
+#: 6 cameras at 15 Hz on the hand turning the patched 2x2x2 cube through two moves (its 24 textured patches make
+#: these frames the slowest to render, about 0.6 s each).
 IMAGE_DEMO_CONFIGS = {
     "calibration": SynthConfig(layout="dense-patches", motion="calibration", frames=8, rate=4.0, seed=8,
                                subject_seed=21, cameras=13, min_views=3, object="none"),
     "take": SynthConfig(layout="dense-patches", motion="grasp", frames=11, rate=4.0, seed=7, subject_seed=21,
                         cameras=13, min_views=3),
+    "cube": SynthConfig(layout="dense-patches", motion="turn-cube", moves="R U'", rate=15.0, seed=5, subject_seed=21,
+                        cameras=6, min_views=2),
 }
 
 
@@ -140,7 +150,11 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         write_markers(cleaned[key], folder / "cleaned.c3d")
         warnings += found
         summary.update(_triangulation_figures(key, triangulated, folder / "image_truth.npz"))
-        if capture.object_motion is not None:
+        if "cube_cubie_rotation" in capture.truth:  # the cube's moves, as track-object --articulated finds them
+            done = track_object(folder / "triangulated.c3d", folder / "cube_motion.npz", articulated="cube2x2-patches")
+            summary.update({f"{key}_{k}": v for k, v in _cube_figures(done.result, capture).items()})
+            warnings += list(done.warnings)
+        elif capture.object_motion is not None:
             figures, said = _track_held_object(markers, capture.object_motion.name, folder / "object_motion.npz",
                                                folder / "image_truth.npz")
             summary.update({f"{key}_{k}": v for k, v in figures.items()})
@@ -226,6 +240,20 @@ def _track_held_object(markers, name: str, out, truth_path) -> tuple[dict, list[
             "object_posed_frames": f"{int(np.isfinite(motion.translation).all(axis=1).sum())} of {motion.n_frames}",
             "object_corner_error_median_mm": round(float(np.median(error)), 3) if error.size else None,
             "object_corner_error_max_mm": round(float(error.max()), 3) if error.size else None}, list(motion.warnings)
+
+
+def _cube_figures(track, capture) -> dict:
+    """The cube's moves as tracked and as turned, and its pose and cubies against the truth (medians over the
+    frames with a pose)."""
+    motion = capture.object_motion
+    pose = homogeneous(Rotation.from_rotvec(motion.rotation).as_matrix(), motion.translation)
+    errors = cube_errors(track, pose, capture.truth["cube_cubie_rotation"])
+    posed = np.isfinite(errors["rotation_deg"])
+    return {"cube_moves": track.moves, "cube_moves_turned": str(capture.truth["cube_moves"]),
+            "cube_posed_frames": f"{int(posed.sum())} of {len(posed)}",
+            "cube_position_error_median_mm": round(float(np.median(errors["position_mm"][posed])), 3),
+            "cube_rotation_error_median_deg": round(float(np.median(errors["rotation_deg"][posed])), 3),
+            "cube_cubie_error_median_deg": round(float(np.median(errors["layer_deg"][posed])), 3)}
 
 
 def _triangulation_figures(key: str, triangulated, truth_path) -> dict:
