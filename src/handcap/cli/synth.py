@@ -96,9 +96,10 @@ def add_synth(verbs) -> None:
     p.add_argument("--out", help="output folder, rewritten on every run (default demo-output/, with --images "
                                  "demo-images/, with --markerless demo-markerless/)")
     p.add_argument("--images", action="store_true",
-                   help="the path from pixels instead: render 13 cameras' images of the patched hand, detect the "
-                        "coded patches, triangulate, clean, calibrate and solve, each stage against the truth "
-                        "(a few minutes)")
+                   help="the path from pixels instead: render 13 cameras' images of the patched hand and the "
+                        "object it holds, and 6 cameras' of it turning the patched 2x2x2 cube; detect the coded "
+                        "patches, triangulate, clean, calibrate and solve, track the object and the cube's moves, "
+                        "each stage against the truth (about 5 minutes on 2 cores)")
     p.add_argument("--markerless", action="store_true",
                    help="a grasp from one video instead: synthetic keypoints of a hand holding a box, structure "
                         "from motion, the hand fitted, the box placed by ICP and carried through the frames, "
