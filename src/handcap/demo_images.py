@@ -51,12 +51,11 @@ from handcap.detect.views import name_from_views
 from handcap.io import write_hand_motion, write_markers, write_object_motion
 from handcap.layouts import load_layout
 from handcap.multiview import clean_markers, read_detections, triangulate_detections
-from handcap.objects import track_rigid
-from handcap.objects.cube_track import cube_errors
+from handcap.objects import load_articulated, track_rigid
+from handcap.objects.cube_track import cube_errors, cube_motion, track_cube
 from handcap.patterns.pattern import Pattern
 from handcap.quality import plausibility as q
 from handcap.solve import calibrate_attachment, solve_hand
-from handcap.steps.objects import track_object
 from handcap.synth.config import SynthConfig
 from handcap.synth.filming import film_take
 
@@ -151,9 +150,8 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         warnings += found
         summary.update(_triangulation_figures(key, triangulated, folder / "image_truth.npz"))
         if "cube_cubie_rotation" in capture.truth:  # the cube's moves, as track-object --articulated finds them
-            done = track_object(folder / "triangulated.c3d", folder / "cube_motion.npz", articulated="cube2x2-patches")
-            summary.update({f"{key}_{k}": v for k, v in _cube_figures(done.result, capture).items()})
-            warnings += list(done.warnings)
+            track = _track_turned_cube(markers, folder / "cube_motion.npz")
+            summary.update({f"{key}_{k}": v for k, v in _cube_figures(track, capture).items()})
         elif capture.object_motion is not None:
             figures, said = _track_held_object(markers, capture.object_motion.name, folder / "object_motion.npz",
                                                folder / "image_truth.npz")
@@ -240,6 +238,21 @@ def _track_held_object(markers, name: str, out, truth_path) -> tuple[dict, list[
             "object_posed_frames": f"{int(np.isfinite(motion.translation).all(axis=1).sum())} of {motion.n_frames}",
             "object_corner_error_median_mm": round(float(np.median(error)), 3) if error.size else None,
             "object_corner_error_max_mm": round(float(error.max()), 3) if error.size else None}, list(motion.warnings)
+
+
+def _track_turned_cube(markers, out):
+    """Track the 2x2x2 cube from its triangulated facelet corners as ``track-object --articulated cube2x2-patches``
+    does (its corners never triangulated are missing throughout) into ``out``; the track."""
+    cube = load_articulated("cube2x2-patches")
+    index = {n: k for k, n in enumerate(markers.names)}
+    present = [k for k, n in enumerate(cube.marker_names) if n in index]
+    positions = np.full((markers.n_frames, len(cube.marker_names), 3), np.nan)
+    positions[:, present] = markers.positions[:, [index[cube.marker_names[k]] for k in present]]
+    window = max(int(round(0.075 * markers.rate)) | 1, 1)  # as track-object: 75 ms of smoothing
+    track = track_cube(positions, cube, window=window, rate=markers.rate)
+    motion, extra = cube_motion(track, cube, markers.rate)
+    write_object_motion(motion, out, extra)
+    return track
 
 
 def _cube_figures(track, capture) -> dict:

@@ -30,6 +30,7 @@ from scipy.signal import savgol_filter
 from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
+from handcap.core.motion import ObjectMotion
 from handcap.objects.articulated import ArticulatedObject
 from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, complete_state, format_moves, permutation
 from handcap.objects.rigid import kabsch, kabsch_refit
@@ -401,6 +402,33 @@ def cube_errors(track: CubeTrack, pose, cubie_rotation) -> dict:
     layer = np.rad2deg(_angle(np.einsum("tnji,tnjk->tnik", track.cubie_rotation, cubie_rotation))).max(axis=1)
     rotation[~found] = np.nan
     return {"position_mm": position, "rotation_deg": rotation, "layer_deg": layer}
+
+
+def cube_motion(track: CubeTrack, cube: ArticulatedObject, rate: float, warnings=()) -> tuple[ObjectMotion, dict]:
+    """A cube's track as the object motion ``track-object --articulated`` writes, and the arrays written with it.
+
+    Parameters
+    ----------
+    track : CubeTrack
+    cube : ArticulatedObject
+    rate : float
+        Frames per second.
+    warnings : sequence of str
+        Stored with the motion.
+
+    Returns
+    -------
+    motion : ObjectMotion
+        The cube's pose (NaN where none), its markers' places on it, ``layer_angles`` (T, 6) as extra.
+    extra : dict
+        ``moves``, ``faces`` (the order of the layer angles), ``cubie_rotation`` (T, 8, 3, 3) and
+        ``cubie_of_marker`` (M,), for :func:`handcap.io.write_object_motion`.
+    """
+    motion = ObjectMotion(track.rotation, track.translation, rate, cube.name, cube.marker_names, cube.markers,
+                          {"layer_angles": track.layer_angle}, tuple(warnings))
+    return motion, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER)),
+                    "cubie_rotation": track.cubie_rotation,
+                    "cubie_of_marker": np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])}
 
 
 def fitted_markers(track: CubeTrack, cube: ArticulatedObject) -> np.ndarray:

@@ -11,7 +11,7 @@ from handcap.io import check_not_input, load_npz, read_markers, read_points, wri
 from handcap.objects import load_articulated, track_rigid
 from handcap.objects.articulated import SHIPPED
 from handcap.objects.cube_label import label_cube
-from handcap.objects.cube_track import FACE_ORDER, fitted_markers, track_cube
+from handcap.objects.cube_track import cube_motion, fitted_markers, track_cube
 from handcap.objects.jointed import track_jointed
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
@@ -110,12 +110,8 @@ def _track_cube(path, out, articulated, units, start, labeled, filled) -> Step:
     lost = int(np.isnan(track.translation[:, 0]).sum())
     if lost:
         warnings.append(f"{obj.name}: no pose in {lost} of {take.n_frames} frames (fewer than 3 markers seen)")
-    motion = ObjectMotion(track.rotation, track.translation, take.rate, obj.name, obj.marker_names, obj.markers,
-                          {"layer_angles": track.layer_angle}, tuple(warnings))
-    write_object_motion(motion, out, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER)),
-                                      "cubie_rotation": track.cubie_rotation,
-                                      "cubie_of_marker": np.repeat(np.arange(8), [len(p.marker_names)
-                                                                                  for p in obj.parts])})
+    motion, extra = cube_motion(track, obj, take.rate, warnings)
+    write_object_motion(motion, out, extra)
     line = (f"{out}: {obj.name} over {take.n_frames} frames, {len(track.moves.split())} moves: "
             f"{track.moves or '(none)'}")
     written = (str(out),)
