@@ -189,8 +189,12 @@ def film_capture(capture, folder, *, scale: float = 1.0, style: ImageStyle | Non
     obj = None
     if capture.object_motion is not None:
         obj = make_object(capture.object_motion.name, seed=config.seed)
-    # A cube whose layers the hand turns: each cubie's rotation in the cube's frame (T, 8, 3, 3).
-    cubies = capture.truth.get("cube_cubie_rotation") if obj is not None and obj.kind == "cube2x2" else None
+    # The 2x2x2 cube: each cubie's rotation in the cube's frame (T, 8, 3, 3), turning where the hand turns its
+    # layers (turn-cube), else held whole (rotate-cube).
+    cubies = None
+    if obj is not None and obj.kind == "cube2x2":
+        cubies = capture.truth.get("cube_cubie_rotation",
+                                   np.tile(np.eye(3), (len(capture.object_motion.rotation), 8, 1, 1)))
     patched = obj is not None and (obj.kind in PATCHED or cubies is not None)
     pattern = session_pattern((config.side,), (obj.name,) if patched else ())
     wanted = {m.patch for m in layout.markers if m.patch}
