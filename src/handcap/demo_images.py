@@ -52,7 +52,7 @@ from handcap.io import write_hand_motion, write_markers, write_object_motion
 from handcap.layouts import load_layout
 from handcap.multiview import clean_markers, read_detections, triangulate_detections
 from handcap.objects import load_articulated, track_rigid
-from handcap.objects.cube_track import cube_errors, cube_motion, track_cube
+from handcap.objects.cube_track import cube_errors, cube_motion, smoothing_window, track_cube
 from handcap.patterns.pattern import Pattern
 from handcap.quality import plausibility as q
 from handcap.solve import calibrate_attachment, solve_hand
@@ -244,12 +244,8 @@ def _track_turned_cube(markers, out):
     """Track the 2x2x2 cube from its triangulated facelet corners as ``track-object --articulated cube2x2-patches``
     does (its corners never triangulated are missing throughout) into ``out``; the track."""
     cube = load_articulated("cube2x2-patches")
-    index = {n: k for k, n in enumerate(markers.names)}
-    present = [k for k, n in enumerate(cube.marker_names) if n in index]
-    positions = np.full((markers.n_frames, len(cube.marker_names), 3), np.nan)
-    positions[:, present] = markers.positions[:, [index[cube.marker_names[k]] for k in present]]
-    window = max(int(round(0.075 * markers.rate)) | 1, 1)  # as track-object: 75 ms of smoothing
-    track = track_cube(positions, cube, window=window, rate=markers.rate)
+    track = track_cube(markers.positions_of(cube.marker_names), cube, window=smoothing_window(markers.rate),
+                       rate=markers.rate)
     motion, extra = cube_motion(track, cube, markers.rate)
     write_object_motion(motion, out, extra)
     return track

@@ -115,3 +115,11 @@ def test_hand_and_object_motion_validation_and_slicing():
     np.testing.assert_allclose(om.matrices()[0, :3, 3], [1, 0, 0])
     with pytest.raises(HandcapError, match="canonical"):
         ObjectMotion(np.zeros((T, 3)), np.zeros((T, 3)), 30, "box", ("a", "b"), np.zeros((1, 3)))
+
+
+def test_positions_of_names_the_sequence_lacks_are_nan_throughout():
+    rng = np.random.default_rng(0)
+    m = MarkerSequence(rng.normal(size=(4, 3, 3)), ["a", "b", "c"], 100.0)
+    got = m.positions_of(["c", "x", "a"])
+    np.testing.assert_array_equal(got[:, [0, 2]], m.select(["c", "a"]).positions)
+    assert got.shape == (4, 3, 3) and np.isnan(got[:, 1]).all()

@@ -219,6 +219,15 @@ class MarkerSequence:
         return MarkerSequence(self.positions[:, idx], [self.names[i] for i in idx], self.rate,
                               None if self.residuals is None else self.residuals[:, idx], self.warnings)
 
+    def positions_of(self, names) -> np.ndarray:
+        """Positions (T, N, 3) of the markers ``names``, in that order; NaN throughout for a name the sequence lacks
+        (a marker never seen, left out of the file)."""
+        index = {n: k for k, n in enumerate(self.names)}
+        out = np.full((self.n_frames, len(names), 3), np.nan)
+        present = [k for k, n in enumerate(names) if n in index]
+        out[:, present] = self.positions[:, [index[names[k]] for k in present]]
+        return out
+
     def renamed(self, names) -> "MarkerSequence":
         """Same trajectories under new names (e.g. ``short_names``)."""
         return MarkerSequence(self.positions, names, self.rate, self.residuals, self.warnings)

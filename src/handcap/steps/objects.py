@@ -11,7 +11,7 @@ from handcap.io import check_not_input, load_npz, read_markers, read_points, wri
 from handcap.objects import load_articulated, track_rigid
 from handcap.objects.articulated import SHIPPED
 from handcap.objects.cube_label import label_cube
-from handcap.objects.cube_track import cube_motion, fitted_markers, track_cube
+from handcap.objects.cube_track import cube_motion, fitted_markers, smoothing_window, track_cube
 from handcap.objects.jointed import track_jointed
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
@@ -91,10 +91,7 @@ def _track_cube(path, out, articulated, units, start, labeled, filled) -> Step:
                                f"or give --start to label them from a labelled frame")
         # A file may leave out markers never seen (a patch corner no two cameras saw): they are missing throughout,
         # where each part keeps three to be fitted by.
-        index = {n: k for k, n in enumerate(take.names)}
-        positions = np.full((take.n_frames, len(obj.marker_names), 3), np.nan)
-        present = [k for k, n in enumerate(obj.marker_names) if n in index]
-        positions[:, present] = take.positions[:, [index[obj.marker_names[k]] for k in present]]
+        positions = take.positions_of(obj.marker_names)
         if missing:
             take = take.with_warnings(f"{path} holds {len(obj.marker_names) - len(missing)} of the {obj.name} "
                                       f"markers; the other {len(missing)} ({', '.join(missing[:3])}"
@@ -104,8 +101,7 @@ def _track_cube(path, out, articulated, units, start, labeled, filled) -> Step:
     if any(j.kind == "revolute" for j in obj.joints):
         raise HandcapError(f"{obj.name}: a puzzle cube's layers and revolute joints in one object are not "
                            f"tracked together; describe them as two objects")
-    window = max(int(round(0.075 * take.rate)) | 1, 1)  # 75 ms of smoothing: 9 frames at 120 Hz
-    track = track_cube(positions, obj, window=window, rate=take.rate)
+    track = track_cube(positions, obj, window=smoothing_window(take.rate), rate=take.rate)
     warnings = [*take.warnings]
     lost = int(np.isnan(track.translation[:, 0]).sum())
     if lost:
