@@ -159,3 +159,15 @@ def test_bad_cube_files_and_takes_through_the_verb(tmp_path, capsys):
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
         assert not (tmp_path / "out").exists()
+
+
+def test_quick_moves_at_a_low_frame_rate_stay_apart():
+    # a quick hand pauses 0.1-0.15 s between moves; counted in frames, the layer's hold at a quarter was a third
+    # of a second at 15 Hz and "R U R' U'" read as nothing ("R U" as "R")
+    from handcap.objects.cube_track import smoothing_window
+
+    for moves, rate, pause, turn in (("R U R' U'", 15.0, 0.15, 0.35), ("F D' L2 B", 24.0, 0.1, 0.2)):
+        rng = np.random.default_rng(0)
+        take = cube_take(moves, rng, rate=rate, pause_seconds=pause, turn_seconds=turn)
+        noisy = take.markers + rng.normal(0.0, 0.001, take.markers.shape)
+        assert track_cube(noisy, CUBE, rate=rate, window=smoothing_window(rate)).moves == moves

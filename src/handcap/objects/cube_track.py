@@ -9,7 +9,7 @@ cube's frame), and it changes only by committed moves.
 2. For each axis, the two halves of the cube (the cubies on either side) are fitted on their own; the angle
    of one relative to the other about the axis is their layer's turn. A move begins where it exceeds
    :data:`MOVE_DEG` (from where it left :data:`REST_DEG`) and ends where the layer holds still at a quarter
-   for :data:`HOLD` frames, so a half turn is one move and a layer turned back is none.
+   for :data:`HOLD_SECONDS`, so a half turn is one move and a layer turned back is none.
 3. Which half turned: the one whose orientation departs from a smooth (quadratic in time) path over the
    move and :data:`SMOOTH_SECONDS` around it; the other half is the cube, carried smoothly by the hand. This is
    what tells a turn of D from a turn of U with the whole cube turned: both leave the same arrangement,
@@ -40,10 +40,12 @@ REST_DEG = 3.0
 #: A layer turned more than this from its last quarter (degrees) is moving: a move begins.
 MOVE_DEG = 6.0
 #: A move began where its layer last left this (degrees) from its quarter (its angle is measured from
-#: :data:`HOLD` frames before that).
+#: :data:`HOLD_SECONDS` before that).
 ONSET_DEG = 1.0
-#: Frames a layer must hold still at a quarter for its move to end (the move takes them in).
-HOLD = 5
+#: Time a layer must hold still at a quarter for its move to end (the move takes it in), seconds (5 frames at
+#: 120 Hz, at least 2 frames). Counted in frames, it was a third of a second at 15 Hz: a quick hand's pause between
+#: moves is shorter, and two moves merged into one (R U at 15 Hz with 0.15 s between them read as neither).
+HOLD_SECONDS = 5 / 120
 #: Markers per cubie (spread over it) that the search for moves looks at; a move's own frames use them all.
 SEARCH_MARKERS = 8
 #: Frames searched at once for the next move (more when a move outlasts them).
@@ -260,7 +262,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         Frames of the quadratic Savitzky-Golay filter that smooths the cube's pose and the layers' angles
         (odd; 9 suits 100-120 Hz; below 5: none).
     rate : float
-        Frames per second: :data:`SMOOTH_SECONDS` in frames (at least 2).
+        Frames per second: :data:`SMOOTH_SECONDS` and :data:`HOLD_SECONDS` in frames (at least 2 each).
 
     Returns
     -------
@@ -279,6 +281,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         raise HandcapError(f"cube markers must be (T, {len(cube.marker_names)}, 3), got {markers.shape}")
     w, _, seen = cubie_poses(markers, cube)
     smooth = max(2, int(round(SMOOTH_SECONDS * rate)))
+    hold = max(2, int(round(HOLD_SECONDS * rate)))  # frames
     cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
     rest = cube.markers
     valid = np.isfinite(markers).all(axis=2)
@@ -329,16 +332,16 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         s0 = begin
         while s0 > 0 and abs(theta[a, s0 - 1]) > np.deg2rad(ONSET_DEG):
             s0 -= 1
-        s0 = max(s0 - HOLD, 0)  # a slow start hides in the noise: measure the layer from a little before
-        # the move ends where the layer holds still at a quarter for HOLD frames
+        s0 = max(s0 - hold, 0)  # a slow start hides in the noise: measure the layer from a little before
+        # the move ends where the layer holds still at a quarter for hold frames
         off = np.abs(theta[a] - np.pi / 2 * np.round(theta[a] / (np.pi / 2)))
-        still = np.convolve((off <= np.deg2rad(REST_DEG)).astype(int), np.ones(HOLD, int), "full")[HOLD - 1:]
-        after = np.flatnonzero((np.arange(len(frames)) > begin) & (still >= HOLD))
-        if (not len(after) or after[0] + HOLD > len(frames)) and frames[-1] < n - 1:
+        still = np.convolve((off <= np.deg2rad(REST_DEG)).astype(int), np.ones(hold, int), "full")[hold - 1:]
+        after = np.flatnonzero((np.arange(len(frames)) > begin) & (still >= hold))
+        if (not len(after) or after[0] + hold > len(frames)) and frames[-1] < n - 1:
             span *= 2  # the move outlasts the stretch: look further
             continue
         span = SPAN
-        end = min(int(after[0]) + HOLD, len(frames)) - 1 if len(after) else len(frames) - 1
+        end = min(int(after[0]) + hold, len(frames)) - 1 if len(after) else len(frames) - 1
         seg = frames[s0:end + 1]
         lo, hi = max(seg[0] - smooth, first), min(seg[-1] + smooth, n - 1)
         (m_rot, m_trans), (p_rot, p_trans), full = halves(state, a, np.arange(lo, hi + 1))
