@@ -23,6 +23,7 @@ def made(tmp_path_factory, gl_ok):
 
 
 MARKER_STAGES = ("calibrate", "solve", "metrics", "report")
+HELD_STAGES = ("calibrate", "solve", "object", "metrics", "report")  # the marker takes track the cylinder they hold
 IMAGE_STAGES = ("detect", "triangulate", "clean", *MARKER_STAGES)
 CALIBRATED = tuple(s for s in IMAGE_STAGES if s != "calibrate")  # by its calibration take's attachment
 
@@ -47,7 +48,7 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     monkeypatch.setattr(metrics_step, "metrics", real)
     before = {p: json.loads(p.read_text()) for p in made.glob("results/*/*.manifest.json")}
     finished = {(p.parent.name, p.name.split(".")[0]) for p in before}
-    assert finished == ({(t, s) for t in ("take1", "take2") for s in MARKER_STAGES}  # take2 ended in the second run
+    assert finished == ({(t, s) for t in ("take1", "take2") for s in HELD_STAGES}  # take2 ended in the second run
                         | {("hands1", s) for s in ("fit", "metrics", "report")}
                         | {("calib-images", s) for s in IMAGE_STAGES}
                         | {("images1", s) for s in CALIBRATED[:-2]})
@@ -59,8 +60,10 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
     assert all(p.stat().st_mtime_ns == stamps[p] for p in before)  # finished stages untouched
     manifest = json.loads((made / "results/take2/metrics.manifest.json").read_text())
     assert manifest["settings"] == {"leave_one_out": False} and set(manifest["inputs"]) == {"motion", "markers",
-                                                                                            "truth"}
+                                                                                            "truth", "object"}
     assert manifest["figures"]["joint_error_mm"][0] < 10
+    # the cylinder tracked from its markers (its shape learnt from the take) puts them where the truth has them
+    assert manifest["figures"]["object_error_mm"][0] < 1 and manifest["figures"]["object_error_mm"][2] == 260
     keypoints = json.loads((made / "results/hands1/metrics.manifest.json").read_text())
     assert keypoints["figures"]["joint_error_mm"][0] < 4  # 2 mm of keypoint noise
     images = json.loads((made / "results/images1/metrics.manifest.json").read_text())
@@ -119,6 +122,13 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
      'stages.detect.sync is "auto" or offsets; an offset is CAMERA=FRAMES'),
     (lambda t: t.replace('response = "linear"', 'response = "gamma"', 1),
      "stages.detect.response is one of auto, linear, srgb, got 'gamma'"),
+    (lambda t: t.replace('name = "cylinder"', 'name = "cylinder"\narticulated = "cube2x2"', 1),
+     "takes[0].settings.object has both markers and articulated"),
+    (lambda t: t.replace('markers = "cylinder_*"', 'articulated = "cube3x3"', 1),
+     "takes[0].settings.object.articulated 'cube3x3': neither a shipped articulated object"),
+    (lambda t: t.replace('truth = "hands1/truth.npz"', 'truth = "hands1/truth.npz"\n[takes.settings.object]\n'
+                                                       'markers = "mug_*"'),
+     "takes[2].settings.object: a keypoints take has no object markers to track"),
 ])
 def test_bad_session_files(made, tmp_path, capsys, edit, message):
     text = (made / "session.toml").read_text()
@@ -220,3 +230,37 @@ def test_detect_names_unread_squares_on_the_clocks_triangulate_is_given(made):
         take = next(t for t in session.takes if t.kind == "images")
         got = stage_settings(session, take, "detect")
         assert {k: got[k] for k in ("sync", "max_offset_s") if k in got} == want
+
+
+def test_objects_tracked_in_camera_and_cube_takes(made, tmp_path):
+    """The object stage of a take of 2D detections reads its cleaned markers; a 2x2x2 cube's description tracks
+    its moves, which the metrics report (with the hand's penetration of the cubies); an object whose markers the
+    take lacks stops the run in one line naming the take and the stage."""
+    from handcap.synth.scene import SynthConfig, synthesize, write_capture
+
+    cube = synthesize(SynthConfig(motion="turn-cube", moves="R U'", rate=60.0, seed=3, subject_seed=7),
+                      progress=False)
+    write_capture(cube, tmp_path / "cube")
+    take1 = made / "take1"
+    text = ('[session]\nstages = ["triangulate", "clean", "calibrate", "solve", "object", "fit", "metrics"]\n'
+            f'[stages.calibrate]\nlayout = "glove-13"\n[stages.object]\nmarkers = "cylinder_*"\n'
+            f'[[takes]]\nname = "seen"\nkind = "detections"\ndetections = "{take1}/detections.npz"\n'
+            f'cameras = "{take1}/cameras.toml"\ncalibration = "{made}/calibration/markers.c3d"\n'
+            f'truth = "{take1}/truth.npz"\n'
+            f'[[takes]]\nname = "cube"\nmarkers = "cube/markers.c3d"\ncalibration = "{made}/calibration/markers.c3d"\n'
+            f'truth = "cube/truth.npz"\n[takes.settings.object]\narticulated = "cube2x2"\n'
+            f'[[takes]]\nname = "hands"\nkind = "keypoints"\nkeypoints = "{made}/hands1/keypoints.c3d"\n')
+    (tmp_path / "session.toml").write_text(text)
+    runs = process(load_session(tmp_path / "session.toml"), workers=1)
+    assert [(r.take, r.stage) for r in runs if r.stage in ("object", "metrics")] == [
+        ("seen", "object"), ("seen", "metrics"), ("cube", "object"), ("cube", "metrics"), ("hands", "metrics")]
+    seen = json.loads((tmp_path / "results/seen/object.manifest.json").read_text())
+    assert seen["input_paths"]["markers"].endswith("seen/cleaned.c3d")
+    figures = json.loads((tmp_path / "results/seen/metrics.json").read_text())
+    assert figures["object_error_mm"][0] < 1
+    figures = json.loads((tmp_path / "results/cube/metrics.json").read_text())
+    assert figures["cube_moves"] == "R U'" == str(np.load(tmp_path / "cube/truth.npz")["cube_moves"])
+    assert "penetration_mm" in figures and "object_error_mm" not in figures
+    (tmp_path / "session.toml").write_text(text.replace('"cylinder_*"', '"mug_*"'))
+    with pytest.raises(HandcapError, match=r"^take seen, stage object: no marker matches 'mug_\*'"):
+        process(load_session(tmp_path / "session.toml"), workers=1)

@@ -78,6 +78,8 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
     if obj is not None:
         cube = _cube_figures(obj, object_motion)
         out.update(cube)
+        if truth is not None and not cube:
+            out.update(_object_error(object_motion, truth))
         if cube and object_mesh is None:  # the cube's own geometry: its cubies where they are
             hand = _hand_for(motion, hand)
             verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
@@ -130,6 +132,29 @@ def _cube_figures(path, object_motion) -> dict:
             "cube_jerk_m_s3": [s.mean, s.std]}
 
 
+def _object_error(object_motion, truth) -> dict:
+    """Where the tracked object puts its markers against where a synthetic take's truth has them (the truth's
+    ``object_*`` keys, :func:`handcap.synth.scene.write_capture`), mm, mean and spread over the frames with a pose
+    in both of each frame's mean over the markers, and those frames: the
+    object's frame may differ (a track learns its shape from the take), its markers' places do not. Nothing when
+    the truth holds no object or none of the tracked markers."""
+    data = load_npz(truth)
+    keys = ("object_marker_names", "object_canonical", "object_rotation", "object_translation")
+    if not all(k in data for k in keys):
+        return {}
+    index = {str(n): k for k, n in enumerate(np.asarray(data["object_marker_names"]).reshape(-1))}
+    shared = [(k, index[n]) for k, n in enumerate(object_motion.marker_names) if n in index]
+    rotation, translation = np.asarray(data["object_rotation"], float), np.asarray(data["object_translation"], float)
+    if not shared or rotation.shape != (object_motion.n_frames, 3):
+        return {}
+    ours, theirs = (np.array(c) for c in zip(*shared))
+    true = (np.einsum("tij,mj->tmi", matrix_from_axis_angle(rotation), np.asarray(data["object_canonical"])[theirs])
+            + translation[:, None])
+    error = np.linalg.norm(object_motion.transform_points(object_motion.canonical[ours]) - true, axis=-1)
+    s = q.Stat.of(error[np.isfinite(error).all(axis=1)].mean(axis=1))  # per frame
+    return {"object_error_mm": [1000 * s.mean, 1000 * s.std, s.count]} if s.count else {}
+
+
 def _hand_for(motion, hand):
     """``hand``, or the OpenHand when the motion was solved with it."""
     if hand is not None:
@@ -176,7 +201,8 @@ def paper_rows(metrics: dict) -> list[tuple[str, ...]]:
 
 _LABELS = {"mre_mm": "MRE (mm)", "joint_error_mm": "joint error (mm)", "msnr_db": "MSNR (dB)",
            "jerk_m_s3": "jerk (m/s^3)", "diversity": "diversity", "coherence": "coherence",
-           "penetration_mm": "penetration (mm)", "frames": "frames", "rate_hz": "rate (Hz)",
+           "penetration_mm": "penetration (mm)", "object_error_mm": "object error (mm)", "frames": "frames",
+           "rate_hz": "rate (Hz)",
            "cube_msnr_db": "cube MSNR (dB)", "cube_jerk_m_s3": "cube jerk (m/s^3)", "cube_moves": "cube moves"}
 
 

@@ -85,6 +85,9 @@ kind = "markers"             # labelled markers (.c3d .trc .tsv .csv .npz)
 markers = "{name}/markers.c3d"
 calibration = "calibration/markers.c3d"   # or attachment = "attachment.npz"
 truth = "{name}/truth.npz"   # synthetic takes only: the metrics compare against it
+[takes.settings.object]      # the cylinder in the hand, tracked from its markers (its shape learnt from the take)
+markers = "cylinder_*"
+name = "cylinder"
 
 '''
 
@@ -156,7 +159,7 @@ def new_session(folder, *, takes: int = 2, frames: int = 300, images: bool = Tru
         written += [str(p) for p in write_capture(synthesize(config, progress=False), folder / name).values()]
     written += _keypoint_take(folder / "hands1", frames)
     tables = "".join(TAKE.format(name=n) for n in configs if n != "calibration") + KEYPOINTS.format(name="hands1")
-    stages = ["calibrate", "solve", "fit", "metrics", "report"]
+    stages = ["calibrate", "solve", "object", "fit", "metrics", "report"]
     if images:
         files, image_tables = _image_takes(folder, image_frames, progress)
         written += files

@@ -2,7 +2,8 @@
 
 Each take's results go to ``RESULTS/<take>/`` (:data:`OUTPUTS`): for an images take ``detections.npz``
 (detect), ``triangulated.c3d`` (triangulate), ``cleaned.c3d`` (clean); then ``attachment.npz`` (calibrate),
-``motion.npz`` (solve, or fit for a keypoints take), ``metrics.json`` (metrics), ``report.html`` (report).
+``motion.npz`` (solve, or fit for a keypoints take), ``object.npz`` (object: the held object's motion, when the
+take's settings name its markers), ``metrics.json`` (metrics), ``report.html`` (report).
 Beside each stage's output a manifest (``<stage>.manifest.json``) records the stage's settings, the SHA-256 of
 every input, handcap's version, the outputs, figures, warnings and seconds. A stage whose manifest matches (same
 settings, inputs and version, its outputs present) is skipped, so a killed run resumes where it stopped, and an
@@ -25,11 +26,13 @@ from handcap.core.errors import HandcapError
 from handcap.core.files import atomic_output
 from handcap.parallel import map_chunks
 from handcap.layouts.file import SHIPPED
+from handcap.objects.articulated import SHIPPED as ARTICULATED
 from handcap.session.spec import KIND_STAGES, Session, Take
 from handcap.steps import detect as detect_step
 from handcap.steps import markerless as markerless_step
 from handcap.steps import metrics as metrics_step
 from handcap.steps import multiview as multiview_step
+from handcap.steps import objects as objects_step
 from handcap.steps import report as report_step
 from handcap.steps import solve as solve_step
 
@@ -37,8 +40,8 @@ from handcap.steps import solve as solve_step
 CAMERA_KINDS = ("images", "detections")
 #: Each stage's output file in the take's folder.
 OUTPUTS = {"detect": "detections.npz", "triangulate": "triangulated.c3d", "clean": "cleaned.c3d",
-           "calibrate": "attachment.npz", "solve": "motion.npz", "fit": "motion.npz", "metrics": "metrics.json",
-           "report": "report.html"}
+           "calibrate": "attachment.npz", "solve": "motion.npz", "object": "object.npz", "fit": "motion.npz",
+           "metrics": "metrics.json", "report": "report.html"}
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,9 @@ def _inputs(session: Session, take: Take, stage: str, folder: Path) -> dict:
     # A layout file (not a shipped name) is an input of the stages that read it: editing it reruns them.
     layout = take.layout or stage_settings(session, take, "calibrate").get("layout")
     layout_file = None if layout is None or layout in SHIPPED else layout
+    held = stage_settings(session, take, "object")
+    description = held.get("articulated")
+    tracked = folder / OUTPUTS["object"] if "object" in _stages(session, take) else None
     return {"detect": {"images": take.inputs.get("images"), "cameras": take.inputs.get("cameras"),
                        "pattern": take.inputs.get("pattern")},
             "triangulate": {"detections": take.inputs.get("detections", folder / OUTPUTS["detect"]),
@@ -116,18 +122,23 @@ def _inputs(session: Session, take: Take, stage: str, folder: Path) -> dict:
             "clean": {"markers": folder / OUTPUTS["triangulate"], "layout_file": layout_file},
             "calibrate": {"calibration": _calibration_of(session, take), "layout_file": layout_file},
             "solve": {"markers": markers, "attachment": attachment},
+            "object": {"markers": markers,
+                       "description": None if description is None or description in ARTICULATED else description},
             "fit": {"keypoints": take.inputs.get("keypoints")},
             "metrics": {"motion": folder / OUTPUTS["solve"], "markers": markers or take.inputs.get("keypoints"),
-                        "truth": take.inputs.get("truth"), "object": take.inputs.get("object"),
+                        "truth": take.inputs.get("truth"), "object": tracked or take.inputs.get("object"),
                         "object_mesh": take.inputs.get("object_mesh")},
             "report": {"motion": folder / OUTPUTS["solve"], "metrics": folder / OUTPUTS["metrics"]}}[stage]
 
 
 def _stages(session: Session, take: Take) -> list[str]:
     """The stages that apply to ``take``: its kind's, those the session runs, calibrate only with something to
-    calibrate on and not when its calibration take calibrates it."""
+    calibrate on and not when its calibration take calibrates it, object only when its settings name the object's
+    markers or description."""
+    held = stage_settings(session, take, "object")
     return [s for s in KIND_STAGES[take.kind] if s in session.stages and (
-        s != "calibrate" or (_calibration_of(session, take) and _calibrated_by(session, take) == take.name))]
+        s != "calibrate" or (_calibration_of(session, take) and _calibrated_by(session, take) == take.name)) and (
+        s != "object" or {"markers", "articulated"} & set(held))]
 
 
 def _layout(take: Take, settings: dict, stage: str) -> str:
@@ -156,6 +167,10 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path, 
         return solve_step.calibrate_markers(inputs["calibration"], out, layout=layout, **options)
     if stage == "solve":
         return solve_step.solve(inputs["markers"], inputs["attachment"], out, **settings)
+    if stage == "object":
+        options = {k: v for k, v in settings.items() if k != "threshold_mm"}
+        return objects_step.track_object(inputs["markers"], out, threshold=settings.get("threshold_mm", 5.0) / 1000,
+                                         **options)
     if stage == "fit":
         return markerless_step.fit_keypoints(inputs["keypoints"], out, **settings)
     if stage == "metrics":
@@ -166,8 +181,10 @@ def _run_stage(stage: str, take: Take, settings: dict, inputs: dict, out: Path, 
 
 def stage_settings(session: Session, take: Take, stage: str) -> dict:
     """A stage's settings for one take: the session's, then the take's own over them; a ``filter_cutoff`` of 0
-    means no filter. Cameras started one by one are so for every stage: detect takes triangulate's ``sync`` (and
-    ``max_offset_s``) to name unread squares from the other cameras, unless it has its own or no ``views``.
+    means no filter. A take's own object (its ``markers`` or ``articulated``) is another object than the session's:
+    its settings replace the session's. Cameras started one by one are so for every stage: detect takes
+    triangulate's ``sync`` (and ``max_offset_s``) to name unread squares from the other cameras, unless it has its
+    own or no ``views``.
 
     Parameters
     ----------
@@ -175,7 +192,10 @@ def stage_settings(session: Session, take: Take, stage: str) -> dict:
     take : Take
     stage : str
     """
-    settings = {**session.settings.get(stage, {}), **take.settings.get(stage, {})}
+    own = take.settings.get(stage, {})
+    settings = {**session.settings.get(stage, {}), **own}
+    if stage == "object" and {"markers", "articulated"} & set(own):  # another object than the session's
+        settings = dict(own)
     if settings.get("filter_cutoff") == 0:
         del settings["filter_cutoff"]
     if stage == "detect" and settings.get("views", True) and "sync" not in settings:
@@ -219,7 +239,10 @@ def run_take(job) -> list[StageRun]:
             raise HandcapError(f"take {take.name}: stage {stage} lacks {missing[0]}")
         folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        step = _run_stage(stage, take, settings, inputs, out, session)
+        try:
+            step = _run_stage(stage, take, settings, inputs, out, session)
+        except HandcapError as error:  # which of many takes and stages: said first
+            raise HandcapError(f"take {take.name}, stage {stage}: {error}") from None
         seconds = time.perf_counter() - start
         figures = step.result if isinstance(step.result, dict) else {}
         if hasattr(step.result, "mre"):  # a calibration
@@ -228,7 +251,8 @@ def run_take(job) -> list[StageRun]:
                     "input_paths": {k: str(p) for k, p in inputs.items()}, "version": __version__,
                     "outputs": {OUTPUTS[stage]: file_hash(out)}, "seconds": round(seconds, 3),
                     "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "warnings": list(step.warnings),
-                    "figures": {k: v for k, v in figures.items() if k in ("mre_mm", "joint_error_mm", "msnr_db")},
+                    "figures": {k: v for k, v in figures.items() if k in ("mre_mm", "joint_error_mm", "msnr_db",
+                                                                             "object_error_mm", "cube_moves")},
                     "lines": list(step.lines)}
         with atomic_output(manifest_path, "w") as fh:
             json.dump(manifest, fh, indent=2)

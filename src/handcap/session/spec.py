@@ -40,6 +40,9 @@ mistake naming the key and the file (issue 19).
     [takes.settings.triangulate]
     sync = "auto"                       # cameras started one by one: find each one's offset (or "cam_2=+12.5, ...");
                                         # detect names unread squares with it too, unless it has a sync of its own
+    [takes.settings.object]             # the object the hand holds, tracked from its markers (or patch corners)
+    markers = "mug:*"                   # or articulated = "cube2x2-patches" (a 2x2x2 cube: its moves too)
+    name = "mug"
 
 Paths are relative to the session file.
 """
@@ -55,6 +58,7 @@ from handcap.core.errors import HandcapError
 from handcap.detect.response import RESPONSES
 from handcap.layouts.file import SHIPPED
 from handcap.multiview.sync import parse_offsets
+from handcap.objects.articulated import SHIPPED as ARTICULATED
 
 #: The stages, in the order they run; each one's settings and their types.
 STAGES = {
@@ -67,6 +71,7 @@ STAGES = {
     "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str,
                   "drop_unseen": bool, "drop_misfit_mm": float},
     "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
+    "object": {"markers": str, "articulated": str, "name": str, "threshold_mm": float, "units": str},
     "fit": {"fit_shape": bool, "robust_scale": float, "filter_cutoff": float, "side": str, "label": str,
             "units": str},
     "metrics": {"leave_one_out": bool},
@@ -77,15 +82,17 @@ STAGES = {
 #: markers (triangulate, clean, ...), labelled markers (calibrate, solve) and 3D hand keypoints (fit the hand
 #: model to them). ``layout`` and ``calibration_take`` are names, not files; ``images`` is a folder with one
 #: sub-folder of images (or one video) per camera of ``cameras``; ``object`` and ``object_mesh`` (an object's
-#: motion and surface) add the hand's penetration of it to the metrics.
+#: motion and surface) add the hand's penetration of it to the metrics. A take whose ``object`` settings name an
+#: object's ``markers`` (or an ``articulated`` description) has the object tracked from its own markers, and that
+#: motion goes to the metrics instead of ``object``.
 _CALIBRATION = ("calibration", "attachment", "calibration_take", "truth", "layout", "object", "object_mesh")
 KINDS = {"images": (("images", "cameras", "pattern"), _CALIBRATION),
          "detections": (("detections", "cameras"), _CALIBRATION),
          "markers": (("markers",), _CALIBRATION),
          "keypoints": (("keypoints",), ("truth",))}
-KIND_STAGES = {"images": ("detect", "triangulate", "clean", "calibrate", "solve", "metrics", "report"),
-               "detections": ("triangulate", "clean", "calibrate", "solve", "metrics", "report"),
-               "markers": ("calibrate", "solve", "metrics", "report"),
+KIND_STAGES = {"images": ("detect", "triangulate", "clean", "calibrate", "solve", "object", "metrics", "report"),
+               "detections": ("triangulate", "clean", "calibrate", "solve", "object", "metrics", "report"),
+               "markers": ("calibrate", "solve", "object", "metrics", "report"),
                "keypoints": ("fit", "metrics", "report")}
 #: Inputs that name something other than a file.
 NAMES = ("layout", "calibration_take")
@@ -168,15 +175,25 @@ def _settings(raw, where: str) -> dict:
     return settings
 
 
-def _layout_file(layout: str, path: Path, where: str) -> str:
-    """A shipped layout's name as it is; any other a layout file, relative to the session file, that must exist."""
-    if layout in SHIPPED:
+def _layout_file(layout: str, path: Path, where: str, key: str = "layout") -> str:
+    """A shipped layout's (or articulated object's, ``key``) name as it is; any other a file, relative to the
+    session file, that must exist."""
+    shipped, what = (SHIPPED, "layout") if key == "layout" else (ARTICULATED, "articulated object")
+    if layout in shipped:
         return layout
     file = path.parent / layout
     if not file.is_file():
-        raise HandcapError(f"{where}.layout {layout!r}: neither a shipped layout ({', '.join(SHIPPED)}) nor a layout "
-                           f"file (no such file {file})")
+        raise HandcapError(f"{where}.{key} {layout!r}: neither a shipped {what} ({', '.join(shipped)}) nor a "
+                           f"{what} file (no such file {file})")
     return str(file)
+
+
+def _files_in(settings: dict, path: Path, where: str) -> dict:
+    """``settings`` with their layout and articulated object resolved (:func:`_layout_file`)."""
+    for stage, key in (("calibrate", "layout"), ("object", "articulated")):
+        if key in settings.get(stage, {}):
+            settings[stage][key] = _layout_file(settings[stage][key], path, f"{where}.{stage}", key)
+    return settings
 
 
 def load_session(path) -> Session:
@@ -221,10 +238,7 @@ def load_session(path) -> Session:
         if stage not in STAGES:
             raise HandcapError(f"{path}: session.stages: unknown stage {stage!r} (choose from {', '.join(STAGES)})")
     raw = table.get("stages", {})
-    settings = _settings(raw, f"{path}: stages")
-    if "layout" in settings.get("calibrate", {}):
-        settings["calibrate"]["layout"] = _layout_file(settings["calibrate"]["layout"], path,
-                                                       f"{path}: stages.calibrate")
+    settings = _files_in(_settings(raw, f"{path}: stages"), path, f"{path}: stages")
     takes, seen = [], set()
     raw_takes = table.get("takes", [])
     if not isinstance(raw_takes, list) or not raw_takes:
@@ -256,9 +270,14 @@ def load_session(path) -> Session:
         named = {k: _typed(raw_take[k], str, f"{where}.{k}") for k in NAMES if k in raw_take}
         if "layout" in named:
             named["layout"] = _layout_file(named["layout"], path, where)
-        own = _settings(raw_take.get("settings", {}), f"{where}.settings")
-        if "layout" in own.get("calibrate", {}):
-            own["calibrate"]["layout"] = _layout_file(own["calibrate"]["layout"], path, f"{where}.settings.calibrate")
+        own = _files_in(_settings(raw_take.get("settings", {}), f"{where}.settings"), path, f"{where}.settings")
+        for table, table_name in ((settings.get("object", {}), f"{path}: stages.object"),
+                                  (own.get("object", {}), f"{where}.settings.object")):
+            if {"markers", "articulated"} <= set(table):
+                raise HandcapError(f"{table_name} has both markers and articulated; give one (a rigid object's "
+                                   f"markers, or an articulated object's description)")
+        if own.get("object") and kind == "keypoints":
+            raise HandcapError(f"{where}.settings.object: a keypoints take has no object markers to track")
         takes.append(Take(label, kind, inputs, named.get("layout"), named.get("calibration_take"), own))
     sources = {t.calibration_take for t in takes} - {None}
     by_name = {t.name: t for t in takes}
