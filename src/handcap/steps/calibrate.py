@@ -10,6 +10,7 @@ from handcap.core.cameras import CameraRig, check_rig_suffix
 from handcap.core.errors import HandcapError
 from handcap.io import check_output
 from handcap.io.camera_formats import read_rig
+from handcap.multiview.board_guess import board_hint
 from handcap.multiview.boards import detect_in_files, parse_board
 from handcap.multiview.board_sync import board_offsets, shift_boards
 from handcap.multiview.calibration import calibrate_intrinsics, calibrate_rig
@@ -23,6 +24,17 @@ def _camera_file_out(out, inputs) -> None:
     """Check a camera file's name before the slow work: .toml, in a folder that can be written, not an input."""
     check_rig_suffix(out)
     check_output(out, *inputs)
+
+
+def _check_seen(detections, recordings) -> None:
+    """One line naming the cameras that never see the board, with what the first of them shows instead
+    (:func:`handcap.multiview.board_guess.board_hint`: the spec that finds the board there, if one near it does)."""
+    never = [(d, path) for d, path in zip(detections, recordings) if not d.found.any()]
+    if never:
+        (first, path), board = never[0], never[0][0].board
+        cameras = ", ".join(f"{d.source} ({d.n_frames} frames)" for d, _ in never)
+        raise HandcapError(f"the board {board.spec} is never seen in {cameras}; in {Path(first.source).name}, "
+                           f"{board_hint(path, board)}")
 
 
 def intrinsics(inputs, out, *, board: str, name: str | None = None, every: int = 1, fix_k3: bool = False,
@@ -49,6 +61,7 @@ def intrinsics(inputs, out, *, board: str, name: str | None = None, every: int =
     parsed = parse_board(board)
     _camera_file_out(out, inputs)
     detections = detect_in_files(inputs, parsed, every=every)
+    _check_seen([detections], [inputs])
     result = calibrate_intrinsics(detections, name=name, fix_k3=fix_k3, reject_outliers=not keep_outliers)
     rig = q.attach(CameraRig([result.camera]), q.camera_warnings(result.rms, names=[result.camera.name]))
     rig.save(out)  # the warnings go to the file's [metadata]
@@ -107,6 +120,7 @@ def rig(recordings, out, *, board: str, names=None, every: int = 1, intrinsics=N
     _camera_file_out(out, recordings + ([intrinsics] if intrinsics else []))
     cameras = None if intrinsics is None else read_rig(intrinsics, positions=False)  # extrinsics unused
     detections = [detect_in_files(path, parsed, every=every) for path in recordings]
+    _check_seen(detections, recordings)
     lines, sync_warnings = [], []
     if sync is not None:
         found = _synchronise(detections, names, cameras, sync, max_offset, fix_k3)
