@@ -34,7 +34,7 @@ SAMPLES = 8
 #: board of ``DICT_4X4_50`` is found as ``DICT_4X4_1000`` too. The commonest first: the search stops at a family
 #: that shows :data:`MIN_MARKERS` markers per frame.
 FAMILIES = ("DICT_4X4_1000", "DICT_5X5_1000", "DICT_6X6_1000", "DICT_ARUCO_ORIGINAL", "DICT_7X7_1000",
-            "DICT_APRILTAG_36h11", "DICT_APRILTAG_16h5", "DICT_APRILTAG_25h9", "DICT_APRILTAG_36h10")
+            "DICT_APRILTAG_36h11")
 #: Markers a family must show (over the frames looked at) to be taken for the board's.
 MIN_MARKERS = 4
 #: Squares along a side of the ChArUco boards tried for the number of markers seen.
@@ -214,6 +214,8 @@ def board_hint(paths, board: Board) -> str:
         nonlocal best
         for candidate in candidates:
             seen, looked = _seen(frames, candidate)
+            if seen < min(looked, 2):  # one frame of many may be a part of the board, or a false find
+                continue
             if seen > best[0]:
                 best = (seen, looked, candidate, markers)
             if 2 * seen >= looked:
@@ -241,7 +243,7 @@ def board_hint(paths, board: Board) -> str:
     if board.kind == "charuco":
         return (f"looking at {len(frames)} of its frames, no ArUco markers of any dictionary are found, nor a "
                 f"checkerboard of about {board.columns - 1}x{board.rows - 1} inner corners: is the board in view "
-                f"and in focus?")
+                f"and in focus (a checkerboard of other size: checkerboard:COLSxROWS:SQUARE_M, inner corners)?")
     return (f"looking at {len(frames)} of its frames, no checkerboard of about {board.columns}x{board.rows} inner "
             f"corners is found, nor ArUco markers: is the board in view and in focus?")
 
