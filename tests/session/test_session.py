@@ -264,3 +264,27 @@ def test_objects_tracked_in_camera_and_cube_takes(made, tmp_path):
     (tmp_path / "session.toml").write_text(text.replace('"cylinder_*"', '"mug_*"'))
     with pytest.raises(HandcapError, match=r"^take seen, stage object: no marker matches 'mug_\*'"):
         process(load_session(tmp_path / "session.toml"), workers=1)
+
+
+def test_each_warning_is_said_once_per_take(made, monkeypatch, capsys):
+    """A warning a take's later stages carry on (the calibration's, stored in the attachment, read by solve and
+    metrics) is printed once, with the stage that first said it; the library's own issue of it is not repeated."""
+    import warnings
+
+    from handcap.core.errors import HandcapWarning
+    from handcap.session import commands
+    from handcap.session.runner import StageRun
+
+    def fake(session, **kw):
+        warnings.warn("calibration MRE of 1 marker(s) above 5 mm: index_middle (8.1 mm)", HandcapWarning, stacklevel=2)
+        said = ("calibration MRE of 1 marker(s) above 5 mm: index_middle (8.1 mm)",)
+        return [StageRun(take, stage, "done", 1.0, said, f"{take}/{stage}")
+                for take, stage in (("take1", "calibrate"), ("take1", "solve"), ("take2", "solve"))]
+
+    monkeypatch.setattr(commands, "process", fake)
+    assert main(["process", str(made / "session.toml")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["handcap process: warning: take1 calibrate: calibration MRE of 1 marker(s) above 5 mm: "
+                   "index_middle (8.1 mm)",
+                   "handcap process: warning: take2 solve: calibration MRE of 1 marker(s) above 5 mm: "
+                   "index_middle (8.1 mm)"]

@@ -89,6 +89,10 @@ def main(argv=None) -> int:
             if done.lines:
                 print(done.summary())
         issued_lines = [str(w.message) for w in issued if issubclass(w.category, HandcapWarning)]
+        # a line the verb returns with its context ("take1 solve: ...") is not said again bare
+        told = [" ".join(str(w).split()) for w in done.warnings]
+        issued_lines = [line for line in issued_lines
+                        if not any(w.endswith(": " + " ".join(line.split())) for w in told)]
         found = merge_warnings(done.warnings, issued_lines)
         for w in issued:
             if not issubclass(w.category, HandcapWarning):

@@ -24,7 +24,11 @@ def run_session(path, *, dry_run: bool = False, scheduler=None, workers: int | N
     """
     session = load_session(path)
     runs = process(session, dry_run=dry_run, scheduler=scheduler, workers=workers)
-    warnings = tuple(dict.fromkeys(f"{r.take} {r.stage}: {w}" for r in runs for w in r.warnings))
+    said: dict = {}  # a warning that a take's later stages carry on (the calibration's in solve and metrics): once
+    for r in runs:
+        for w in r.warnings:
+            said.setdefault((r.take, w), f"{r.take} {r.stage}: {w}")
+    warnings = tuple(said.values())
     done = sum(r.status == "done" for r in runs)
     head = (f"{session.path}: plan of {len(session.takes)} takes" if dry_run else
             f"{session.path}: {done} stages run, {sum(r.status == 'skipped' for r in runs)} up to date, "
