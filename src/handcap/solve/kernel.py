@@ -382,7 +382,8 @@ class FrameKernel:
         self.tip_parents = TIP_PARENTS.astype(np.int64)
 
     def solve(self, transl, rot, phi, target, observed, *, scale: float, iterations: int, held=None,
-              lam: float = 1e-3, tolerance: float = 3e-5, gain_tolerance: float = 1e-3):
+              lam: float = 1e-3, tolerance: float = 3e-5, gain_tolerance: float = 1e-3, rest=None,
+              rest_weight: float | None = None):
         """Iterate from a pose, as :func:`~handcap.solve.lm.levenberg_marquardt` does for one frame.
 
         Parameters
@@ -404,6 +405,9 @@ class FrameKernel:
             constrained them, see :func:`~handcap.solve.lm.held_angles`).
         lam, tolerance, gain_tolerance : float
             As :func:`~handcap.solve.lm.levenberg_marquardt`.
+        rest, rest_weight : ndarray (27,) and float, optional
+            Another target (radians) and weight (metres per radian) of the priors' weak pull for this solve
+            (default the priors': :class:`~handcap.solve.lm.Priors`).
 
         Returns
         -------
@@ -420,4 +424,15 @@ class FrameKernel:
         return _solve(np.asarray(transl, dtype=np.float64), np.ascontiguousarray(rot, dtype=np.float64),
                       np.asarray(phi, dtype=np.float64), np.ascontiguousarray(target, dtype=np.float64), observed,
                       held, free, float(scale), float(lam), int(iterations), float(tolerance), float(gain_tolerance),
-                      self.mc, self.pc, self.rest_tips, self.tip_parents)
+                      self.mc, self._pulled(rest, rest_weight), self.rest_tips, self.tip_parents)
+
+    def _pulled(self, rest, rest_weight) -> tuple:
+        """The priors' constants with another target and weight of the weak pull."""
+        if rest is None and rest_weight is None:
+            return self.pc
+        pc = list(self.pc)
+        if rest is not None:
+            pc[6] = np.ascontiguousarray(rest, dtype=np.float64)
+        if rest_weight is not None:
+            pc[7] = float(rest_weight)
+        return tuple(pc)

@@ -11,7 +11,9 @@ Per frame, the pose that brings the attached markers onto the observed ones
 3. The frames between, solved together by batched Levenberg-Marquardt, each
    starting from the key frames' angles joined linearly.
 4. Frames that end far worse than the rest (a poor local minimum) are solved
-   again from the previous frame's pose.
+   again from the previous frame's pose; short excursions into another pose
+   and back (jerk spikes) likewise, keeping the more likely pose
+   (:mod:`handcap.solve.continuity`).
 5. An angle that no visible marker depends on (its segment and every segment
    beyond it unseen) keeps its value from the previous frame, as in the paper,
    once markers have constrained it; an angle no marker has constrained yet
@@ -31,6 +33,8 @@ bounds, besides the attachment's own warnings (checks of
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from tqdm import tqdm
 
@@ -41,6 +45,7 @@ from handcap.core.rotations import axis_angle_from_matrix
 from handcap.hand import OpenHand
 from handcap.quality.filters import lowpass, smooth_rotations
 from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
+from handcap.solve.continuity import mend_excursions
 from handcap.solve.kernel import FrameKernel
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
 from handcap.solve.markers import MarkerModel
@@ -281,7 +286,28 @@ def solve_lm(model, target, observed, priors, scale, rate, iterations, first_ite
     _retry_outliers(model, target, observed, solved, cost, priors, scale, iterations, held)
     # 4. Angles nothing constrains keep the previous frame's value (the paper's rule).
     _forward_fill(solved.phi, held, rest)
+    # 5. Short excursions into another pose, and back, are solved again from the frames around them.
+    def pulled(t, init, phi, weight):
+        if not (kernel.available and observed[t].any()):
+            return levenberg_marquardt(model, target[t:t + 1], observed[t:t + 1], init,
+                                       priors if phi is None else replace(priors, rest=phi, rest_weight=weight),
+                                       scale=scale, iterations=2 * iterations, held=held[t:t + 1])[0]
+        transl, rot, angles, _, _ = kernel.solve(init.transl[0], init.rot[0], init.phi[0], target[t], observed[t],
+                                                 scale=scale, iterations=2 * iterations, held=held[t], rest=phi,
+                                                 rest_weight=None if phi is None else weight)
+        return Poses(transl[None], rot[None], angles[None])
+
+    if mend_excursions(solved, lambda p: _skeleton_and_markers(model, p),
+                       lambda f, p: _costs(model, p, target[f], observed[f], held[f], priors, scale), pulled, rate):
+        _forward_fill(solved.phi, held, rest)
     return solved
+
+
+def _skeleton_and_markers(model, poses: Poses) -> np.ndarray:
+    """The 16 joints and the attached markers of ``poses``, (T, 16 + M, 3) metres: where a hand can jump while
+    its markers hardly move (another pose that fits them as well), and where it is seen."""
+    return np.concatenate([model.kinematics(poses.transl, poses.rot, poses.phi)[1],
+                           model.positions(poses.transl, poses.rot, poses.phi)], axis=1)
 
 
 KEY_SECONDS = 0.1  # spacing of the key frames solved one after the other

@@ -109,7 +109,8 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
     hand : HandModel, optional
         The attachment's model.
     rigid : sequence of str
-        The hand's rigid-set markers: removed only in frames the solve did not explain.
+        The hand's rigid-set markers: removed only in frames the solve did not explain, or beyond
+        ``max(carry_floor, limit)`` in those it did.
     frame_ok : float
         Median marker residual (metres) under which the solve explains a frame.
     floor, spread : float
@@ -169,7 +170,10 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
     limit = np.maximum(floor, spread * scale)
     with np.errstate(invalid="ignore"):
         removed = seen & explained[:, None] & (residual > limit)
-        removed[:, [names.index(r) for r in rigid if r in names]] = False
+        # a rigid-set label goes only where the hand is not explained, or where it is and that label lies further
+        # than a carried frame allows (the solve, kept on course by the frames around, outvoted it)
+        fixed = [names.index(r) for r in rigid if r in names]
+        removed[:, fixed] &= residual[:, fixed] > np.maximum(limit[fixed], carry_floor)
         removed |= seen & (judged & ~explained)[:, None] & (residual > np.maximum(limit, carry_floor))
     pos[removed] = np.nan
     if removed.any():  # the hand solved again without them: the wrong labels pulled it a little their way
