@@ -124,6 +124,8 @@ def test_process_resume_and_rerun(made, monkeypatch, capsys):
      "stages.detect.response is one of auto, linear, srgb, got 'gamma'"),
     (lambda t: t.replace('name = "cylinder"', 'name = "cylinder"\narticulated = "cube2x2"', 1),
      "takes[0].settings.object has both markers and articulated"),
+    (lambda t: t.replace('name = "cylinder"', 'name = "cylinder"\ncanonical = "none.npz"', 1),
+     "takes[0].settings.object.canonical: no such file"),
     (lambda t: t.replace('markers = "cylinder_*"', 'articulated = "cube3x3"', 1),
      "takes[0].settings.object.articulated 'cube3x3': neither a shipped articulated object"),
     (lambda t: t.replace('truth = "hands1/truth.npz"', 'truth = "hands1/truth.npz"\n[takes.settings.object]\n'
@@ -288,3 +290,30 @@ def test_each_warning_is_said_once_per_take(made, monkeypatch, capsys):
                    "index_middle (8.1 mm)",
                    "handcap process: warning: take2 solve: calibration MRE of 1 marker(s) above 5 mm: "
                    "index_middle (8.1 mm)"]
+
+
+def test_an_object_mesh_needs_the_markers_in_its_frame(made, tmp_path):
+    """With the object's mesh, the metrics' penetration needs the motion in the mesh's frame: tracked with the
+    markers' positions in that frame (``canonical``) it is; with the frame learnt from the take a warning says
+    the penetration means little."""
+    import trimesh
+
+    from handcap.synth.objects import make_object
+
+    truth = np.load(made / "take1/truth.npz")
+    np.savez(tmp_path / "cylinder.npz", canonical=truth["object_canonical"])
+    obj = make_object("cylinder", seed=1)  # take1's seed
+    (tmp_path / "cylinder.ply").write_bytes(trimesh.Trimesh(obj.vertices, obj.faces, process=False).export(
+        file_type="ply"))
+    text = ('[session]\nstages = ["calibrate", "solve", "object", "metrics"]\n[stages.calibrate]\nlayout = "glove-13"\n'
+            f'[[takes]]\nname = "held"\nmarkers = "{made}/take1/markers.c3d"\n'
+            f'calibration = "{made}/calibration/markers.c3d"\nobject_mesh = "cylinder.ply"\n'
+            '[takes.settings.object]\nmarkers = "cylinder_*"\nname = "cylinder"\n')
+    said = {}
+    for canonical in (True, False):
+        (tmp_path / "session.toml").write_text(text + ('canonical = "cylinder.npz"\n' if canonical else ""))
+        runs = process(load_session(tmp_path / "session.toml"), workers=1)
+        said[canonical] = [w for r in runs if r.stage == "metrics" for w in r.warnings if "surface of" in w]
+    assert said[True] == [] and len(said[False]) == 1
+    manifest = json.loads((tmp_path / "results/held/object.manifest.json").read_text())
+    assert "canonical" not in manifest["inputs"]  # the last run learnt the frame

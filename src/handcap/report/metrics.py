@@ -93,6 +93,7 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         mesh = read_mesh(object_mesh)
         if len(getattr(mesh, "faces", ())) == 0:
             raise HandcapError(f"{object_mesh}: holds no mesh faces; give the object's surface mesh")
+        out["warnings"] = _mesh_frame_warnings(object_motion, mesh, object_mesh)
         hand = _hand_for(motion, hand)
         verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
         # The hand in the object's frame, so the object's mesh is one for all frames (see q.penetration);
@@ -130,6 +131,29 @@ def _cube_figures(path, object_motion) -> dict:
     s = q.jerk(world[:, 1:], object_motion.rate)
     return {"cube_moves": str(data.get("moves", "")), "cube_msnr_db": q.msnr(world),
             "cube_jerk_m_s3": [s.mean, s.std]}
+
+
+#: Furthest an object's marker may lie from the surface of its mesh (metres): markers sit on it (a sphere on its
+#: base, a printed corner), so further means the motion's object frame is not the mesh's.
+MESH_MARKER_LIMIT = 0.015
+
+
+def _mesh_frame_warnings(object_motion, mesh, path) -> list[str]:
+    """A warning when the object's markers (its ``canonical``, in the motion's object frame) do not lie on the
+    mesh's surface: penetration into a mesh in another frame means nothing. ``track-object`` learns the frame from
+    the take (centred on its markers) unless ``--canonical`` gives the markers in the mesh's frame."""
+    import trimesh  # noqa: PLC0415 (slow to import: only where a mesh is given)
+
+    canonical = np.asarray(object_motion.canonical, dtype=np.float64)
+    distance = np.abs(trimesh.proximity.signed_distance(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False),
+                                                        canonical))
+    if not len(distance) or distance.max() <= MESH_MARKER_LIMIT:
+        return []
+    return [f"object {object_motion.name!r}: its markers lie up to {1000 * distance.max():.0f} mm (median "
+            f"{1000 * np.median(distance):.0f} mm) from the surface of {path} (plausible: <= "
+            f"{1000 * MESH_MARKER_LIMIT:.0f} mm, markers sit on it); the motion's object frame is likely not the "
+            f"mesh's, and its penetration means little: track-object learns the frame from the take unless "
+            f"--canonical gives the markers in the mesh's frame"]
 
 
 def _object_error(object_motion, truth) -> dict:

@@ -42,7 +42,7 @@ mistake naming the key and the file (issue 19).
                                         # detect names unread squares with it too, unless it has a sync of its own
     [takes.settings.object]             # the object the hand holds, tracked from its markers (or patch corners)
     markers = "mug:*"                   # or articulated = "cube2x2-patches" (a 2x2x2 cube: its moves too)
-    name = "mug"
+    name = "mug"                        # canonical = "mug.npz": its markers in its mesh's frame (object_mesh)
 
 Paths are relative to the session file.
 """
@@ -71,7 +71,8 @@ STAGES = {
     "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str,
                   "drop_unseen": bool, "drop_misfit_mm": float},
     "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
-    "object": {"markers": str, "articulated": str, "name": str, "threshold_mm": float, "units": str},
+    "object": {"markers": str, "articulated": str, "name": str, "threshold_mm": float, "units": str,
+               "canonical": str},
     "fit": {"fit_shape": bool, "robust_scale": float, "filter_cutoff": float, "side": str, "label": str,
             "units": str},
     "metrics": {"leave_one_out": bool},
@@ -193,6 +194,11 @@ def _files_in(settings: dict, path: Path, where: str) -> dict:
     for stage, key in (("calibrate", "layout"), ("object", "articulated")):
         if key in settings.get(stage, {}):
             settings[stage][key] = _layout_file(settings[stage][key], path, f"{where}.{stage}", key)
+    if "canonical" in settings.get("object", {}):  # the object's markers in its mesh's frame: a file
+        file = path.parent / settings["object"]["canonical"]
+        if not file.is_file():
+            raise HandcapError(f"{where}.object.canonical: no such file {file}")
+        settings["object"]["canonical"] = str(file)
     return settings
 
 

@@ -48,6 +48,7 @@ def metrics(motion, *, truth=None, markers=None, obj=None, object_mesh=None, att
     figures = motion_metrics(motion, truth=truth, markers=markers, obj=obj, object_mesh=object_mesh,
                              attachment=attachment, leave_one_out=leave_one_out, hand=hand)
     stored, warnings = motion_file_warnings(motion, markers)
+    warnings = merge_warnings(warnings, figures.pop("warnings", ()))
     figures["warnings"] = list(warnings)
     lines = (metrics_table(figures),
              f"{'quality':22s} " + (f"{len(warnings)} warning(s), {len(stored)} of them stored in {motion}; see below"

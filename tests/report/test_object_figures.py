@@ -1,0 +1,45 @@
+"""Object figures of the metrics against a synthetic grasp's truth: the tracked object's markers against the
+true ones, and a mesh whose frame is not the motion's object frame said in a warning (its penetration means
+little)."""
+
+import pytest
+import trimesh
+
+from handcap.io import write_object_motion
+from handcap.objects import track_rigid
+from handcap.report import motion_metrics
+from handcap.steps import metrics as metrics_step
+from handcap.synth.objects import make_object
+from handcap.synth.scene import SynthConfig, synthesize, write_capture
+
+
+@pytest.fixture(scope="module")
+def grasp(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("grasp")
+    config = SynthConfig(motion="grasp", frames=130, rate=50.0, seed=4, subject_seed=7)
+    capture = synthesize(config, progress=False)
+    paths = write_capture(capture, folder)
+    obj = make_object(config.object_kind, seed=config.seed)
+    (folder / "object.ply").write_bytes(trimesh.Trimesh(obj.vertices, obj.faces, process=False).export(
+        file_type="ply"))
+    write_object_motion(capture.object_motion, folder / "true_object.npz")  # the mesh's own frame
+    names = [n for n in capture.markers.names if n.startswith(f"{capture.object_motion.name}_")]
+    write_object_motion(track_rigid(capture.markers, names, name="cylinder").motion, folder / "tracked.npz")
+    return folder, paths["truth.npz"]
+
+
+def test_the_tracked_object_against_the_truth(grasp):
+    folder, truth = grasp
+    figures = motion_metrics(truth, truth=truth, obj=folder / "tracked.npz")
+    error, spread, frames = figures["object_error_mm"]
+    assert error < 1.0 and frames == 130  # its markers where the truth has them, in every frame
+    assert motion_metrics(truth, truth=truth, obj=folder / "true_object.npz")["object_error_mm"][0] < 1e-6
+
+
+def test_a_mesh_in_another_frame_is_said(grasp):
+    folder, truth = grasp
+    aligned = metrics_step.metrics(truth, obj=folder / "true_object.npz", object_mesh=folder / "object.ply")
+    assert not any("surface of" in w for w in aligned.warnings)
+    learnt = metrics_step.metrics(truth, obj=folder / "tracked.npz", object_mesh=folder / "object.ply")
+    said = [w for w in learnt.warnings if "surface of" in w]
+    assert len(said) == 1 and "--canonical" in said[0], learnt.warnings
