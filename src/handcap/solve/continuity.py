@@ -26,8 +26,8 @@ import numpy as np
 from handcap.quality.motion_checks import jerk_spikes
 from handcap.solve.lm import Poses
 
-#: The longest stretch between two spikes taken for an excursion, seconds; and how far past its end the mended
-#: frames may go before they rejoin the solved ones.
+#: The longest stretch between two spikes taken for one excursion, seconds; and how far beyond it frames next to
+#: a changed one are looked at again.
 MAX_SECONDS = 0.15
 #: Sweeps over an excursion's frames at most (each lowers its cost plus its lack of smoothness, or ends them).
 SWEEPS = 3
@@ -36,12 +36,12 @@ JOINTS = 16
 
 
 def excursions(fitted, rate: float) -> list[np.ndarray]:
-    """Stretches of frames (each an array of frame numbers) in and between jerk spikes of the fitted markers.
+    """Stretches of frames (each an array of frame numbers) in and between jerk spikes of the posed hand.
 
     Parameters
     ----------
-    fitted : ndarray (T, M, 3)
-        The fitted markers of every frame, metres.
+    fitted : ndarray (T, P, 3)
+        Points of the posed hand in every frame (joints, markers), metres.
     rate : float
         Hz.
 
@@ -70,7 +70,8 @@ def mend_excursions(poses, fitted_of, cost_of, solve_pulled, rate: float) -> int
     poses : Poses
         The take's solved poses (T frames); changed in place.
     fitted_of : callable
-        ``fitted_of(poses) -> (T', P, 3)``: points of the posed hand (joints, markers), metres.
+        ``fitted_of(poses) -> (T', 16 + M, 3)``: points of the posed hand, its 16 joints then its M markers,
+        metres.
     cost_of : callable
         ``cost_of(frames, poses) -> (T',)``: the solver's cost of ``poses`` at ``frames``, square metres.
     solve_pulled : callable
@@ -135,8 +136,9 @@ def mend_excursions(poses, fitted_of, cost_of, solve_pulled, rate: float) -> int
 
 
 def _surprise(fitted, frames) -> np.ndarray:
-    """Squared distance of the fitted markers at ``frames`` (each >= 2) from the constant-velocity prediction of
-    the two frames before, summed over the markers, square metres."""
+    """Squared distance of the hand's points at ``frames`` (each >= 2) from the constant-velocity prediction of
+    the two frames before, summed over the points, square metres."""
     return np.sum((fitted[frames] - 2 * fitted[frames - 1] + fitted[frames - 2]) ** 2, axis=(-1, -2))
+
 
 __all__ = ["MAX_SECONDS", "excursions", "mend_excursions"]
