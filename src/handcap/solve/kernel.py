@@ -281,10 +281,13 @@ def _rodrigues(v):
 
 
 @_njit
-def _solve(transl, rot, phi, target, observed, held, free, scale, lam, iterations, tolerance, gain_tolerance,
+def _solve(transl, rot, phi, target, observed, held, free, scale, lam, iterations, tries, tolerance, gain_tolerance,
            mc, pc, rest_tips, tip_parents):
     state = _evaluate(transl, rot, phi, target, observed, held, free, scale, mc, pc)
-    for _ in range(iterations):
+    accepted = 0
+    for attempt in range(max(tries, iterations)):
+        if attempt >= iterations and accepted:  # past the iterations: only until a step is taken
+            break
         cost, world_rot, world_pos, angles, cols, resid, norms, r_p, j_p = state
         weights = np.zeros(norms.shape[0])
         for i in range(norms.shape[0]):
@@ -319,6 +322,7 @@ def _solve(transl, rot, phi, target, observed, held, free, scale, lam, iteration
             gain = (cost - trial[0]) / max(cost, 1e-300)
             transl, rot, phi, state = new_transl, new_rot, new_phi, trial
             lam = max(lam / 3.0, 1e-7)
+            accepted += 1
         else:
             lam *= 4.0
         largest = 0.0
@@ -383,7 +387,7 @@ class FrameKernel:
 
     def solve(self, transl, rot, phi, target, observed, *, scale: float, iterations: int, held=None,
               lam: float = 1e-3, tolerance: float = 3e-5, gain_tolerance: float = 1e-3, rest=None,
-              rest_weight: float | None = None):
+              rest_weight: float | None = None, tries: int = 0):
         """Iterate from a pose, as :func:`~handcap.solve.lm.levenberg_marquardt` does for one frame.
 
         Parameters
@@ -405,6 +409,9 @@ class FrameKernel:
             constrained them, see :func:`~handcap.solve.lm.held_angles`).
         lam, tolerance, gain_tolerance : float
             As :func:`~handcap.solve.lm.levenberg_marquardt`.
+        tries : int
+            Steps tried at most: past ``iterations``, until one is taken (a step that raised the cost is tried
+            again, more damped). Default: ``iterations`` (a rejected step counts as one).
         rest, rest_weight : ndarray (27,) and float, optional
             Another target (radians) and weight (metres per radian) of the priors' weak pull for this solve
             (default the priors': :class:`~handcap.solve.lm.Priors`).
@@ -423,7 +430,8 @@ class FrameKernel:
         free = unconstrained_angles(self.model, observed[None])[0] & ~held
         return _solve(np.asarray(transl, dtype=np.float64), np.ascontiguousarray(rot, dtype=np.float64),
                       np.asarray(phi, dtype=np.float64), np.ascontiguousarray(target, dtype=np.float64), observed,
-                      held, free, float(scale), float(lam), int(iterations), float(tolerance), float(gain_tolerance),
+                      held, free, float(scale), float(lam), int(iterations), int(tries), float(tolerance),
+                      float(gain_tolerance),
                       self.mc, self._pulled(rest, rest_weight), self.rest_tips, self.tip_parents)
 
     def _pulled(self, rest, rest_weight) -> tuple:

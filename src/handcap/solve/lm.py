@@ -295,7 +295,7 @@ def frame_costs(model, poses: Poses, target, observed, held, priors: Priors, sca
 
 def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *, scale: float = 0.005,
                         iterations: int = 10, tolerance: float = 3e-5, gain_tolerance: float = 1e-3, held=None,
-                        lam: float = 1e-3, return_parts: bool = False, start_kin=None):
+                        lam: float = 1e-3, return_parts: bool = False, start_kin=None, tries: int = 0):
     """Fit poses to observed markers, every frame at once.
 
     Parameters
@@ -327,6 +327,9 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     start_kin : tuple, optional
         :meth:`MarkerModel.kinematics` of the initial ``poses`` (a warm start from the poses an earlier call
         returned, with their ``parts[0]``): the first cost then needs no forward pass.
+    tries : int
+        Steps tried at most: past ``iterations``, a frame goes on only until it has taken a step (one that raised
+        the cost is tried again, more damped). Default: ``iterations`` (a rejected step counts as one).
 
     Returns
     -------
@@ -346,7 +349,10 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
     active = ~blind
     cost, parts = frame_costs(model, poses, target, observed, held, priors, scale, free, kin=start_kin)
     eye = np.eye(N_PARAMS)
-    for _ in range(iterations):
+    taken = np.zeros(n, bool)
+    for attempt in range(max(tries, iterations)):
+        if attempt >= iterations:  # past the iterations: only the frames that have not taken a step
+            active &= ~taken
         if not active.any():
             break
         idx = np.flatnonzero(active)
@@ -374,6 +380,7 @@ def levenberg_marquardt(model, target, observed, poses: Poses, priors: Priors, *
         gain = (cost[idx] - new_cost) / np.maximum(cost[idx], 1e-300)
         poses.put(good, trial.take(better))
         cost[good] = new_cost[better]
+        taken[good] = True
         parts = new_parts if whole and better.all() else _merge(parts, new_parts, idx, better)
         damping[good] = np.maximum(damping[good] / 3.0, 1e-7)
         damping[idx[~better]] *= 4.0
