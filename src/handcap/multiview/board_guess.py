@@ -146,6 +146,11 @@ def _family(dictionary: str) -> str:
     return re.sub(r"^(DICT_\dX\d)_\d+$", r"\1", dictionary)
 
 
+def _sizes_with(markers: int) -> list[tuple[int, int]]:
+    """ChArUco boards (columns, rows of squares) with as many markers as the ids seen say."""
+    return [(a, b) for a in SIDES for b in SIDES if a * b // 2 == markers]
+
+
 def _checkerboards(columns: int, rows: int, square: float) -> list[Board]:
     """Checkerboards of about ``columns`` x ``rows`` inner corners: the larger first (OpenCV finds a smaller grid
     inside a larger board), then the swapped, then the smaller (squares counted instead of inner corners)."""
@@ -161,8 +166,7 @@ def _candidates(board: Board, family: tuple[str, bool, int] | None) -> list[Boar
     if board.kind == "checkerboard":
         c, r = board.columns, board.rows
         if family is not None:  # markers on it: a ChArUco board of (corners + 1) squares, looked for first
-            sizes = [*((a, b) for a in SIDES for b in SIDES if a * b // 2 == family[2]),  # as many markers as seen
-                     (c + 1, r + 1), (r + 1, c + 1), (c + 2, r + 2), (r + 2, c + 2)]
+            sizes = [*_sizes_with(family[2]), (c + 1, r + 1), (r + 1, c + 1), (c + 2, r + 2), (r + 2, c + 2)]
             for a, b in dict.fromkeys(sizes):
                 for legacy in (False, True)[:1 + (b % 2 == 0)]:  # OpenCV's old pattern differs with even rows
                     try:
@@ -174,8 +178,7 @@ def _candidates(board: Board, family: tuple[str, bool, int] | None) -> list[Boar
     if family is None:  # no markers: a checkerboard of its inner corners?
         return _checkerboards(board.columns - 1, board.rows - 1, board.square)
     dictionary = board.dictionary if _family(family[0]) == _family(board.dictionary) else family[0]
-    by_count = [(a, b) for a in SIDES for b in SIDES if a * b // 2 == family[2]]  # as many markers as seen
-    for columns, rows in ((board.columns, board.rows), (board.rows, board.columns), *by_count):
+    for columns, rows in ((board.columns, board.rows), (board.rows, board.columns), *_sizes_with(family[2])):
         for legacy in (board.legacy, not board.legacy)[:1 + (rows % 2 == 0)]:  # the same with odd rows
             try:
                 out.append(replace(board, columns=columns, rows=rows, dictionary=dictionary, inverted=family[1],
