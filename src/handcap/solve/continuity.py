@@ -31,6 +31,9 @@ from handcap.solve.lm import Poses
 MAX_SECONDS = 0.15
 #: Sweeps over an excursion's frames at most (each lowers its cost plus its lack of smoothness, or ends them).
 SWEEPS = 3
+#: A frame whose second differences (and the next two frames') are all within this many times the take's median
+#: (squared distances) is on course and is not solved again.
+CALM = 4.0
 #: Joints among the points of the posed hand (the rest are its markers).
 JOINTS = 16
 
@@ -92,7 +95,8 @@ def mend_excursions(poses, fitted_of, cost_of, solve_pulled, rate: float) -> int
         return 0
     n = len(fitted)
     cost = cost_of(np.arange(n), poses)
-    lam = np.median(cost) / max(float(np.median(_surprise(fitted, np.arange(2, n)))), 1e-12)
+    typical = max(float(np.median(_surprise(fitted, np.arange(2, n)))), 1e-12)
+    lam = np.median(cost) / typical
     # the pull: an angle as far from its neighbours' mean as in a typical frame costs as much as a typical marker's
     # residual does
     bend = np.sqrt(np.mean((poses.phi[2:] - 2 * poses.phi[1:-1] + poses.phi[:-2]) ** 2, axis=1))
@@ -115,6 +119,9 @@ def mend_excursions(poses, fitted_of, cost_of, solve_pulled, rate: float) -> int
         for _ in range(SWEEPS):  # each frame of the work, then those next to a frame that moved
             moved = set()
             for t in sorted(work):
+                near = np.arange(max(t, 2), min(t + 3, n))
+                if _surprise(fitted, near).max() <= CALM * typical:  # on course already: nothing to mend
+                    continue
                 middle = (poses.phi[t - 1] + poses.phi[t + 1]) / 2 if t + 1 < n else 2 * poses.phi[t - 1] - poses.phi[
                     t - 2]
                 previous = poses.take(slice(t - 1, t)).copy()
