@@ -43,3 +43,15 @@ def test_a_mesh_in_another_frame_is_said(grasp):
     learnt = metrics_step.metrics(truth, obj=folder / "tracked.npz", object_mesh=folder / "object.ply")
     said = [w for w in learnt.warnings if "surface of" in w]
     assert len(said) == 1 and "--canonical" in said[0], learnt.warnings
+
+
+def test_a_mesh_in_millimetres_is_read_so_and_said(grasp, tmp_path):
+    folder, truth = grasp
+    mesh = trimesh.load(folder / "object.ply", force="mesh", process=False)
+    mesh.vertices = mesh.vertices * 1000.0  # a CAD export in millimetres
+    (tmp_path / "mm.ply").write_bytes(mesh.export(file_type="ply"))
+    metres = metrics_step.metrics(truth, obj=folder / "true_object.npz", object_mesh=folder / "object.ply")
+    millimetres = metrics_step.metrics(truth, obj=folder / "true_object.npz", object_mesh=tmp_path / "mm.ply")
+    assert millimetres.result["penetration_mm"] == pytest.approx(metres.result["penetration_mm"], rel=1e-6)
+    said = [w for w in millimetres.warnings if "read in mm" in w]
+    assert len(said) == 1 and not any("surface of" in w for w in millimetres.warnings), millimetres.warnings

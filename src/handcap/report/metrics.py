@@ -93,7 +93,8 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         mesh = read_mesh(object_mesh)
         if len(getattr(mesh, "faces", ())) == 0:
             raise HandcapError(f"{object_mesh}: holds no mesh faces; give the object's surface mesh")
-        out["warnings"] = _mesh_frame_warnings(object_motion, mesh, object_mesh)
+        out["warnings"] = _mesh_unit_warnings(object_motion, mesh, object_mesh)
+        out["warnings"] += _mesh_frame_warnings(object_motion, mesh, object_mesh)
         hand = _hand_for(motion, hand)
         verts = hand.forward(motion.betas, motion.global_orient, motion.hand_pose, motion.transl).vertices
         # The hand in the object's frame, so the object's mesh is one for all frames (see q.penetration);
@@ -136,6 +137,26 @@ def _cube_figures(path, object_motion) -> dict:
 #: Furthest an object's marker may lie from the surface of its mesh (metres): markers sit on it (a sphere on its
 #: base, a printed corner), so further means the motion's object frame is not the mesh's.
 MESH_MARKER_LIMIT = 0.015
+
+
+#: Units a mesh file may be in (metres per file unit), tried when its size is far from its markers' spread.
+MESH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def _mesh_unit_warnings(object_motion, mesh, path) -> list[str]:
+    """Scale ``mesh`` (in place) to metres when its file is plainly in centimetres or millimetres, as CAD exports
+    often are: its size more than 20 times off its markers' spread, and within 5 times of it once converted. The
+    markers sit on the object, so the two sizes agree in the right unit."""
+    spread = float(np.ptp(np.asarray(object_motion.canonical, dtype=np.float64), axis=0).max(initial=0.0))
+    size = float(np.max(mesh.extents)) if len(mesh.vertices) else 0.0
+    if spread <= 0 or size <= 0 or abs(np.log(size / spread)) <= np.log(20):
+        return []
+    unit = min(MESH_UNITS, key=lambda u: abs(np.log(size * MESH_UNITS[u] / spread)))
+    if unit == "m" or abs(np.log(size * MESH_UNITS[unit] / spread)) > np.log(5):
+        return []
+    mesh.vertices = np.asarray(mesh.vertices, dtype=np.float64) * MESH_UNITS[unit]
+    return [f"{path}: read in {unit} (it spans {size:g} units, its object's markers {1000 * spread:.0f} mm): "
+            f"converted to metres; save meshes in metres"]
 
 
 def _mesh_frame_warnings(object_motion, mesh, path) -> list[str]:
