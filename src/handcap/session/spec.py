@@ -176,24 +176,24 @@ def _settings(raw, where: str) -> dict:
     return settings
 
 
-def _layout_file(layout: str, path: Path, where: str, key: str = "layout") -> str:
+def _shipped_or_file(name: str, path: Path, where: str, key: str = "layout") -> str:
     """A shipped layout's (or articulated object's, ``key``) name as it is; any other a file, relative to the
     session file, that must exist."""
     shipped, what = (SHIPPED, "layout") if key == "layout" else (ARTICULATED, "articulated object")
-    if layout in shipped:
-        return layout
-    file = path.parent / layout
+    if name in shipped:
+        return name
+    file = path.parent / name
     if not file.is_file():
-        raise HandcapError(f"{where}.{key} {layout!r}: neither a shipped {what} ({', '.join(shipped)}) nor a "
+        raise HandcapError(f"{where}.{key} {name!r}: neither a shipped {what} ({', '.join(shipped)}) nor a "
                            f"{what} file (no such file {file})")
     return str(file)
 
 
 def _files_in(settings: dict, path: Path, where: str) -> dict:
-    """``settings`` with their layout and articulated object resolved (:func:`_layout_file`)."""
+    """``settings`` with their layout and articulated object resolved (:func:`_shipped_or_file`)."""
     for stage, key in (("calibrate", "layout"), ("object", "articulated")):
         if key in settings.get(stage, {}):
-            settings[stage][key] = _layout_file(settings[stage][key], path, f"{where}.{stage}", key)
+            settings[stage][key] = _shipped_or_file(settings[stage][key], path, f"{where}.{stage}", key)
     if "canonical" in settings.get("object", {}):  # the object's markers in its mesh's frame: a file
         file = path.parent / settings["object"]["canonical"]
         if not file.is_file():
@@ -275,7 +275,7 @@ def load_session(path) -> Session:
             inputs[key] = file
         named = {k: _typed(raw_take[k], str, f"{where}.{k}") for k in NAMES if k in raw_take}
         if "layout" in named:
-            named["layout"] = _layout_file(named["layout"], path, where)
+            named["layout"] = _shipped_or_file(named["layout"], path, where)
         own = _files_in(_settings(raw_take.get("settings", {}), f"{where}.settings"), path, f"{where}.settings")
         for table, table_name in ((settings.get("object", {}), f"{path}: stages.object"),
                                   (own.get("object", {}), f"{where}.settings.object")):
