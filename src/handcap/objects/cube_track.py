@@ -33,7 +33,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.motion import ObjectMotion
 from handcap.objects.articulated import ArticulatedObject
 from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, complete_state, format_moves, permutation
-from handcap.objects.rigid import kabsch, kabsch_refit
+from handcap.objects.rigid import kabsch, kabsch_refit, smooth_pose
 
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
 REST_DEG = 3.0
@@ -211,42 +211,6 @@ def _start(w, seen, world, valid, cubie, rest):
         raise HandcapError(f"the cube's cubies {missing} are never seen (2 markers each) before its first turn: "
                            f"cannot tell where they start")
     return first, state
-
-
-def _runs(ok):
-    """(start, stop) of every run of True in ``ok`` (T,) bool."""
-    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
-    return edges.reshape(-1, 2)
-
-
-def smooth_pose(rotation, translation, window: int) -> tuple[np.ndarray, np.ndarray]:
-    """A pose track smoothed by a quadratic Savitzky-Golay filter over ``window`` frames, run by run (NaN
-    frames split runs; runs shorter than ``window`` are left alone).
-
-    Parameters
-    ----------
-    rotation : ndarray (T, 3, 3)
-    translation : ndarray (T, 3)
-        Metres; NaN where the pose is unknown.
-    window : int
-        Odd number of frames; below 5 returns the inputs.
-
-    Returns
-    -------
-    rotation, translation : ndarrays (T, 3, 3), (T, 3)
-    """
-    rotation, translation = rotation.copy(), translation.copy()
-    if window < 5:
-        return rotation, translation
-    for a, b in _runs(np.isfinite(translation).all(axis=1)):
-        if b - a < window:
-            continue
-        q = Rotation.from_matrix(rotation[a:b]).as_quat()
-        q *= np.where(np.cumprod(np.r_[1.0, np.sign(np.sum(q[1:] * q[:-1], axis=1))]) < 0, -1.0, 1.0)[:, None]
-        q = savgol_filter(q, window, 2, axis=0)
-        rotation[a:b] = Rotation.from_quat(q).as_matrix()
-        translation[a:b] = savgol_filter(translation[a:b], window, 2, axis=0)
-    return rotation, translation
 
 
 def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float = 120.0) -> CubeTrack:

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.core.markers import MarkerSequence
@@ -158,6 +159,32 @@ def ransac_kabsch(source, target, *, threshold: float = 0.005, iterations: int =
     return rot, trans, best
 
 
+def _chained_shape(positions, seen, counts) -> np.ndarray:
+    """A first shape (M, 3) for :func:`canonical_from_markers`: the frame with most markers, then frame after frame
+    (the one sharing most markers with those placed, at least 3) aligned on the placed markers, its new ones placed.
+
+    Markers no such chain reaches take their mean position over the take. (That mean, for every marker the first
+    frame lacks, was the whole start once: on an object that moves, a place it never was, and the refinement
+    settled 1-3 mm off the true shape where frames share few markers.)
+    """
+    ref = int(np.argmax(counts))
+    shape = np.where(seen[ref][:, None], positions[ref], np.nanmean(positions, axis=0))
+    placed = seen[ref].copy()
+    todo = np.flatnonzero(counts >= 3)
+    while not placed.all():
+        overlap = (seen[todo] & placed).sum(axis=1)
+        new = (seen[todo] & ~placed).sum(axis=1)
+        candidates = np.flatnonzero((overlap >= 3) & (new > 0))
+        if not len(candidates):
+            break
+        f = todo[candidates[np.argmax(overlap[candidates])]]
+        both, fresh = seen[f] & placed, seen[f] & ~placed
+        rot, trans = kabsch(shape[both], positions[f, both])
+        shape[fresh] = (positions[f, fresh] - trans) @ rot
+        placed |= fresh
+    return shape
+
+
 def canonical_from_markers(positions, *, iterations: int = 10) -> np.ndarray:
     """Marker positions (M, 3) in a body frame, estimated from a take (generalised Procrustes).
 
@@ -179,8 +206,7 @@ def canonical_from_markers(positions, *, iterations: int = 10) -> np.ndarray:
     never = ~seen.any(axis=0)
     if never.any():
         raise HandcapError(f"markers {np.flatnonzero(never).tolist()} are never seen; cannot place them on the object")
-    ref = positions[int(np.argmax(counts))]
-    shape = np.where(np.isnan(ref), np.nanmean(positions, axis=0), ref)
+    shape = _chained_shape(positions, seen, counts)
     shape = shape - shape.mean(axis=0)
     usable = counts >= 3
     data = np.where(seen[..., None], positions, 0.0)[usable]
@@ -297,3 +323,41 @@ def track_rigid(markers: MarkerSequence, names=None, canonical=None, *, name: st
     motion = ObjectMotion(rotation, translation, markers.rate, name, body.names, canonical)
     return RigidTrack(motion, residuals, inliers, np.array(unsolved, dtype=int), ~np.isnan(positions[..., 0]),
                       left_out)
+
+
+def _runs(ok):
+    """(start, stop) of every run of True in ``ok`` (T,) bool."""
+    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
+    return edges.reshape(-1, 2)
+
+
+def smooth_pose(rotation, translation, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """A pose track smoothed by a quadratic Savitzky-Golay filter over ``window`` frames, run by run (NaN
+    frames split runs; runs shorter than ``window`` are left alone).
+
+    Parameters
+    ----------
+    rotation : ndarray (T, 3, 3)
+    translation : ndarray (T, 3)
+        Metres; NaN where the pose is unknown.
+    window : int
+        Odd number of frames; below 5 returns the inputs.
+
+    Returns
+    -------
+    rotation, translation : ndarrays (T, 3, 3), (T, 3)
+    """
+    from scipy.signal import savgol_filter  # here: every triangulation worker imports this module, not the filter
+
+    rotation, translation = rotation.copy(), translation.copy()
+    if window < 5:
+        return rotation, translation
+    for a, b in _runs(np.isfinite(translation).all(axis=1)):
+        if b - a < window:
+            continue
+        q = Rotation.from_matrix(rotation[a:b]).as_quat()
+        q *= np.where(np.cumprod(np.r_[1.0, np.sign(np.sum(q[1:] * q[:-1], axis=1))]) < 0, -1.0, 1.0)[:, None]
+        q = savgol_filter(q, window, 2, axis=0)
+        rotation[a:b] = Rotation.from_quat(q).as_matrix()
+        translation[a:b] = savgol_filter(translation[a:b], window, 2, axis=0)
+    return rotation, translation
