@@ -52,6 +52,7 @@ def test_a_mesh_in_millimetres_is_read_so_and_said(grasp, tmp_path):
     (tmp_path / "mm.ply").write_bytes(mesh.export(file_type="ply"))
     metres = metrics_step.metrics(truth, obj=folder / "true_object.npz", object_mesh=folder / "object.ply")
     millimetres = metrics_step.metrics(truth, obj=folder / "true_object.npz", object_mesh=tmp_path / "mm.ply")
-    assert millimetres.result["penetration_mm"] == pytest.approx(metres.result["penetration_mm"], rel=1e-6)
+    # To 0.1 um: the PLY file holds float32 vertices, and 1000 times larger ones round elsewhere.
+    assert millimetres.result["penetration_mm"] == pytest.approx(metres.result["penetration_mm"], abs=1e-4)
     said = [w for w in millimetres.warnings if "read in mm" in w]
     assert len(said) == 1 and not any("surface of" in w for w in millimetres.warnings), millimetres.warnings

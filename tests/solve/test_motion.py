@@ -67,7 +67,10 @@ def test_frames_before_any_marker_hold_the_first_seen_pose_and_lost_frames_are_s
     motion = solve_hand(MarkerSequence(positions, take.markers.names, take.markers.rate), take.attachment)
     np.testing.assert_allclose(motion.transl[:10], np.broadcast_to(motion.transl[10], (10, 3)))
     np.testing.assert_allclose(motion.joints[:10], np.broadcast_to(motion.joints[10], (10, 21, 3)))
-    assert np.linalg.norm(motion.joints[:10] - take.hand_motion.joints[:10], axis=-1).max() < 0.05
+    # As far from the truth as the true hand moved since (plus the solve's error), not 0.4-1.1 m.
+    truth = take.hand_motion.joints
+    moved = np.linalg.norm(truth[:10] - truth[10], axis=-1).max()
+    assert np.linalg.norm(motion.joints[:10] - truth[:10], axis=-1).max() < moved + 0.01
     said = [w for w in motion.warnings if "hand frame is lost" in w]
     assert len(said) == 1 and "in 12 of 150 frames" in said[0] and "10 of them with none" in said[0], said
     assert not any("hand frame is lost" in w for w in solve_hand(take.markers, take.attachment).warnings)
@@ -107,7 +110,8 @@ def test_tip_missing_from_the_whole_take_follows_the_anatomical_priors(glove_ses
     motion = solve_hand(MarkerSequence(positions, names, take.markers.rate), take.attachment)
     i = {n: k for k, n in enumerate(PHI_NAMES)}
     mcp, pip, dip = (motion.phi[:, i[f"index_{j}_bend"]] for j in ("mcp", "pip", "dip"))
-    assert np.ptp(mcp) > np.deg2rad(20)  # the grasp closes the finger, so the priors have work to do
+    # The grasp closes the finger (its true PIP by 45 deg), and the solved MCP follows, so the priors have work to do.
+    assert np.ptp(take.hand_motion.phi[:, i["index_pip_bend"]]) > np.deg2rad(30) and np.ptp(mcp) > np.deg2rad(12)
     assert np.abs(pip - mcp).max() < np.deg2rad(3)  # PIP follows MCP (synergy 1.0)
     assert np.abs(dip - 2 / 3 * pip).max() < np.deg2rad(3)  # DIP follows PIP (coupling 2/3)
     # The unseen tip is predicted better than by holding the relaxed pose all take (19 vs 23 mm here).

@@ -23,7 +23,8 @@ from handcap.hand import OpenHand
 from handcap.markerless.contact import ContactMap
 from handcap.markerless.keypoints import hand_names, keypoints_from_joints
 from handcap.multiview.detections import Detections
-from handcap.synth.motions import grasp_configuration, make_motion, natural_pose
+from handcap.synth.grasps import grasp_configuration
+from handcap.synth.motions import make_motion, natural_pose
 from handcap.synth.objects import make_object
 
 
@@ -255,7 +256,7 @@ def synthetic_grasp(kind: str = "precision", object_name: str = "cuboid", *, max
     Parameters
     ----------
     kind : {"power", "precision"}
-        As :func:`handcap.synth.motions.grasp_configuration` (fingers closed until they touch).
+        As :func:`handcap.synth.grasps.grasp_configuration` (fingers closed until they touch).
     object_name : str
         ``cuboid``, ``cylinder`` or ``sphere`` (:func:`handcap.synth.objects.make_object`).
     max_edge : float

@@ -62,7 +62,7 @@ def simulate_take(layout, motion: str, frames: int, rate: float, seed: int, *, s
                                               hand, betas)
     kind = DEFAULT_OBJECT.get(motion)
     obj = make_object(kind, seed=seed) if kind else None
-    m = make_motion(motion, hand, frames, rate, rng_motion, obj)
+    m = make_motion(motion, hand, frames, rate, rng_motion, obj, betas=betas)
     out = hand.forward(betas, m.global_orient, hand.hand_pose_from_phi(m.phi), m.transl)
     markers = attachment.positions(out.vertices, hand.faces)
     markers = markers + rng_noise.normal(0, noise_mm / 1000, markers.shape)

@@ -30,7 +30,8 @@ from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES
 from handcap.objects.articulated import ArticulatedObject, load_articulated
 from handcap.objects.cube import CUBIE_EDGE, CUBIE_OFFSET, FACE_ORDER, FACES, HOME, apply_moves, layer, parse_moves
 from handcap.objects.cube import cube_signed_distance, solved_state
-from handcap.synth.motions import NEUTRAL, WORK_CENTRE, Motion, finish_motion, grasp_configuration, rotation_path
+from handcap.synth.grasps import grasp_configuration
+from handcap.synth.motions import NEUTRAL, WORK_CENTRE, Motion, finish_motion, rotation_path
 from handcap.synth.motions import spline, wrist_keys
 from handcap.synth.objects import make_object
 

@@ -7,10 +7,16 @@ and ``random``. Every motion is made of key poses placed in time and joined by c
 splines (zero velocity at the ends: smooth, no jumps), plus a small
 physiological tremor (band-limited noise below 6 Hz). Finger flexion follows
 the usual synergies: the DIP flexes two thirds as much as the PIP, and
-neighbouring fingers move together. Grasps close each finger along a path from
-an open to a closed pose until its skin touches the object (analytic signed
-distance, at most 1.5 mm of soft-tissue compression), so contacts are real
-and fingers pass behind the object for the cameras.
+neighbouring fingers move together.
+
+Object motions (:mod:`handcap.synth.grasps`) go approach, close, carry, put down,
+open, leave; the hand is still between these phases (minimum-jerk moves,
+:func:`rest_path`; a spline through keys that repeat would swing the hand 14-21 mm
+into the object it closes on). Each finger closes until its skin touches the
+object (analytic signed distance, at most 1.5 mm of soft-tissue compression), so
+contacts are real and fingers pass behind the object for the cameras; while it
+holds the object it rests on it: it gives way to an object turning in the
+fingers, and its tremor does not press it in.
 
 World frame: metres, z up; the hand works around ``WORK_CENTRE``. In the
 neutral wrist pose the palm faces down and the fingers point along +x.
@@ -22,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.optimize import least_squares
 from scipy.signal import butter, sosfiltfilt
 from scipy.spatial.transform import Rotation, RotationSpline
 
@@ -31,12 +36,12 @@ from handcap.core.transforms import homogeneous
 from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
 from handcap.hand.anatomy import pose_from_degrees as _pose
 from handcap.synth.clearance import clear_keys
+from handcap.synth.grasps import FINGERS, grasp_configuration, pinch_pose, rest_on_object
 
 MOTIONS = ("calibration", "open-close", "tapping", "pinch", "grasp", "precision", "rotate-cube", "wrist", "random")
 WORK_CENTRE = np.array([0.0, 0.0, 1.0])
 # Model axes (x distal, y dorsal, z = x cross y) to world: palm down, fingers along +x.
 NEUTRAL = Rotation.from_matrix(np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]))
-FINGERS = ("index", "middle", "ring", "pinky")
 _I = {n: i for i, n in enumerate(PHI_NAMES)}
 MIN_OBJECT_SECONDS = 2.5  # shortest take in which a hand can reach, grasp, carry and release
 
@@ -123,6 +128,27 @@ def rotation_path(times, rotations: Rotation, t) -> Rotation:
     return RotationSpline(times, rotations)(t)
 
 
+def rest_path(times, values, t):
+    """Minimum-jerk moves from key to key, at rest at every key (zero velocity and acceleration there).
+
+    The path a hand takes between two still poses (Flash and Hogan 1985): no overshoot, unlike a spline
+    through keys that repeat (a hand that closes, holds, then carries would swing past its hold).
+
+    Parameters
+    ----------
+    times : ndarray (K,)
+        Seconds, increasing.
+    values : ndarray (K, ...)
+    t : ndarray (T,)
+        Seconds to evaluate at; held at the first and last keys outside them.
+    """
+    times, values = np.asarray(times, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
+    u = np.clip((t - times[k]) / np.maximum(times[k + 1] - times[k], 1e-12), 0.0, 1.0)
+    s = (u ** 3 * (10.0 - 15.0 * u + 6.0 * u ** 2)).reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[k] + s * (values[k + 1] - values[k])
+
+
 def _tremor(rng, n, width, rate, amplitude, cutoff=6.0):
     """Band-limited noise (T, width) with standard deviation ``amplitude``."""
     noise = rng.normal(size=(n + 64, width))
@@ -153,177 +179,9 @@ def wrist_keys(rng, n_keys, *, turn_deg=25.0, move=0.05, centre=WORK_CENTRE, bas
     return Rotation.concatenate(rots), np.array(pos)
 
 
-# -- grasping ----------------------------------------------------------------
-
-def _finger_vertices(hand, finger: str) -> np.ndarray:
-    seg = hand.segment_of_vertex
-    ids = [hand.segment_id(f"{finger}_{s}") for s in ("proximal", "middle", "distal")]
-    return np.flatnonzero(np.isin(seg, ids))
-
-
-_JOINT_GROUPS = {f: ((f"{f}_mcp_twist", f"{f}_mcp_spread", f"{f}_mcp_bend"), (f"{f}_pip_bend",), (f"{f}_dip_bend",))
-                 for f in FINGERS}
-_JOINT_GROUPS["thumb"] = (("thumb_cmc_twist", "thumb_cmc_spread", "thumb_cmc_bend"),
-                          ("thumb_mcp_twist", "thumb_mcp_spread", "thumb_mcp_bend"), ("thumb_ip_bend",))
-
-
-def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *, squeeze=0.0015, steps=40):
-    """Close each finger, joint after joint, until its skin touches the object.
-
-    Like a grasp planner's auto-grasp: the first joint of a finger turns from
-    its open towards its closed value until any part of the finger would press
-    deeper than ``squeeze`` into the object, then the next joint does the same,
-    so fingers wrap round what they hold.
-
-    Parameters
-    ----------
-    hand : HandModel
-    obj : SynthObject
-    object2hand : ndarray (4, 4)
-        Object frame to hand-model frame.
-    open_phi, closed_phi : ndarray (27,)
-    fingers : sequence of str
-        Fingers that close (others stay at ``open_phi``); ``"thumb"`` included.
-    squeeze : float
-        Deepest allowed skin compression, metres.
-
-    Returns
-    -------
-    phi : ndarray (27,)
-    contact : dict finger -> bool
-    """
-    hand2object = np.linalg.inv(object2hand)
-    phi = open_phi.copy()
-    contact = {}
-    s = np.linspace(0.0, 1.0, steps)
-    for finger in fingers:
-        verts_idx = _finger_vertices(hand, finger)
-        touched = False
-        for group in _JOINT_GROUPS[finger]:
-            idx = [_I[n] for n in group]
-            path = np.repeat(phi[None], steps, axis=0)
-            path[:, idx] = phi[idx] + s[:, None] * (closed_phi[idx] - phi[idx])
-            verts = hand.forward(phi=path).vertices[:, verts_idx]
-            depth = obj.signed_distance(verts @ hand2object[:3, :3].T + hand2object[:3, 3]).min(axis=1)
-            # A finger already resting on the object may slide along it, not into it.
-            blocked = np.flatnonzero(depth < min(-squeeze, depth[0] - squeeze))
-            k = steps - 1 if len(blocked) == 0 else max(blocked[0] - 1, 0)
-            touched |= len(blocked) > 0
-            phi[idx] = path[k, idx]
-        contact[finger] = touched
-    return phi, contact
-
-
-def _place_against_palm(hand, obj, rotation, start, direction, open_phi, *, clearance=0.001):
-    """Slide the object along ``direction`` from ``start`` until the open hand's palm and fingers are clear of it."""
-    thumb = np.isin(hand.segment_of_vertex, [hand.segment_id(f"thumb_{k}") for k in ("proximal", "middle", "distal")])
-    skin = hand.forward(phi=open_phi).vertices[~thumb]  # the thumb closes round it later
-    for step in np.arange(0.0, 0.08, 0.0005):
-        centre = start + step * direction
-        local = (skin - centre) @ rotation
-        if obj.signed_distance(local).min() >= clearance:
-            break
-    return homogeneous(rotation, centre)
-
-
-def grasp_configuration(hand, obj, kind: str):
-    """Object pose in the hand frame and the grasping pose for a power or precision grasp.
-
-    Power: the object's long axis lies across the palm under the proximal
-    phalanges, against the palm; all five digits wrap round it. Precision: the
-    object sits between the thumb and the index and middle fingertips, where a
-    pinch of the object's width would put it; those three close on it.
-
-    Parameters
-    ----------
-    hand : HandModel
-        Posed at its average shape (``betas = 0``).
-    obj : SynthObject
-        Its ``size`` in metres sets where it is put.
-    kind : str
-        ``"power"``; anything else gives a precision grasp.
-
-    Returns
-    -------
-    object2hand : ndarray (4, 4)
-        Object frame to hand-model frame, translation in metres.
-    open_phi, grasp_phi : ndarray (27,)
-        Radians: the hand before closing, and closed until its fingers touch the object.
-    """
-    palmar = np.array([0.0, -1.0, 0.0])
-    ulnar = np.array([0.0, 0.0, 1.0 if hand.is_right else -1.0])
-    if kind == "power":
-        # Object x towards the back of the hand, z along the hand's ulnar axis.
-        rotation = np.column_stack([-palmar, np.cross(ulnar, -palmar), ulnar])
-        mcp_x = hand.rest_joints()[4, 0]
-        start = np.array([mcp_x + 0.012, 0.0, 0.006 * ulnar[2]]) + palmar * obj.size[0]
-        open_phi = _pose(thumb_cmc_bend=-20, thumb_cmc_spread=10, thumb_mcp_bend=5)
-        for finger in FINGERS:
-            open_phi = finger_flexion(open_phi, finger, 0.05)
-        object2hand = _place_against_palm(hand, obj, rotation, start, palmar, open_phi)
-        closed = _pose(thumb_cmc_bend=70, thumb_cmc_spread=-30, thumb_cmc_twist=30, thumb_mcp_bend=55,
-                       thumb_ip_bend=80)
-        for finger in FINGERS:
-            closed = finger_flexion(closed, finger, 1.1, pip=100)
-        fingers = ("index", "middle", "ring", "pinky", "thumb")
-    else:
-        relaxed = relaxed_pose()
-        width = 2.0 * float(np.min(obj.size))
-        pinch = pinch_pose(hand, "index", relaxed, gap=width + 0.012)
-        # Thumb, index and middle open straight; the others stay relaxed.
-        open_phi = relaxed.copy()
-        open_phi[[i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", "index_", "middle_"))]] = 0.0
-        joints = hand.forward(phi=pinch, vertices=False).joints
-        centre = 0.5 * (joints[16] + joints[17]) + 0.25 * (joints[18] - joints[17])
-        object2hand = _place_against_palm(hand, obj, np.eye(3), centre, np.array([1.0, 0.0, 0.0]), open_phi)
-        closed = pinch_pose(hand, "index", relaxed, gap=0.0)
-        closed = finger_flexion(closed, "middle", 0.9)
-        fingers = ("index", "middle", "thumb")
-    grasp_phi, _ = close_until_contact(hand, obj, object2hand, open_phi, closed, fingers)
-    return object2hand, open_phi, grasp_phi
-
-
-def pinch_pose(hand, finger: str, start_phi, *, gap: float = 0.012) -> np.ndarray:
-    """Thumb and ``finger`` tips brought ``gap`` apart by least squares.
-
-    Only the thumb's and the finger's angles move, within :data:`PHI_LIMITS`, weakly pulled towards
-    ``start_phi``; the others keep their start values.
-
-    Parameters
-    ----------
-    hand : HandModel
-        Posed at its average shape.
-    finger : {"index", "middle", "ring", "pinky"}
-    start_phi : ndarray (27,)
-        Radians.
-    gap : float
-        Distance between the thumb's tip point and the finger's (joints 16 and 17-20), metres.
-
-    Returns
-    -------
-    ndarray (27,)
-        Radians.
-    """
-    tips = {"index": 17, "middle": 18, "ring": 19, "pinky": 20}
-    idx = [i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", finger + "_"))]
-    lo, hi = PHI_LIMITS[idx, 0], PHI_LIMITS[idx, 1]
-
-    def residual(x):
-        phi = start_phi.copy()
-        phi[idx] = x
-        joints = hand.forward(phi=phi, vertices=False).joints
-        return np.r_[np.linalg.norm(joints[16] - joints[tips[finger]]) - gap, 0.05 * (x - start_phi[idx])]
-
-    x0 = np.clip(start_phi[idx], lo + 1e-6, hi - 1e-6)
-    fit = least_squares(residual, x0, bounds=(lo, hi), x_scale=0.3, max_nfev=200)
-    phi = start_phi.copy()
-    phi[idx] = fit.x
-    return phi
-
-
 # -- motions -----------------------------------------------------------------
 
-def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> Motion:
+def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None, *, betas=None) -> Motion:
     """Generate one of :data:`MOTIONS`.
 
     Parameters
@@ -336,6 +194,8 @@ def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> M
     rng : numpy.random.Generator
     obj : SynthObject, optional
         Needed by ``grasp``, ``precision`` and ``rotate-cube``.
+    betas : ndarray (10,), optional
+        The hand's shape, for which grasps are planned (the average hand when omitted).
     """
     if name not in MOTIONS:
         raise HandcapError(f"unknown motion {name!r}; choose one of {', '.join(MOTIONS)}")
@@ -351,7 +211,7 @@ def make_motion(name: str, hand, n_frames: int, rate: float, rng, obj=None) -> M
             raise HandcapError(f"motion {name!r} needs at least {MIN_OBJECT_SECONDS:g} s to reach, grasp, carry and "
                                f"release; {n_frames} frames at {rate:g} Hz span {duration:.2f} s (first to last): give "
                                f"{int(np.ceil(MIN_OBJECT_SECONDS * rate - 1e-9)) + 1} frames or more")
-        return _object_motion(name, hand, t, duration, rate, rng, obj)
+        return _object_motion(name, hand, t, duration, rate, rng, obj, betas)
 
     n_keys = max(3, int(round(duration / {"calibration": 1.0, "open-close": 0.7, "tapping": 0.2, "pinch": 0.8,
                                           "wrist": 0.7, "random": 0.6}[name])) + 1)
@@ -413,10 +273,12 @@ def finish_motion(phi, orient: Rotation, transl, rng, rate):
     return Motion(phi, orient.as_rotvec(), transl)
 
 
-def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
+def _object_motion(name, hand, t, duration, rate, rng, obj, betas) -> Motion:
     kind = "power" if name == "grasp" else "precision"
-    object2hand, open_phi, grasp_phi = grasp_configuration(hand, obj, kind)
-    # Timeline (fractions of the take): approach, close, carry, put down, open, leave.
+    object2hand, open_phi, grasp_phi = grasp_configuration(hand, obj, kind, betas=betas)
+    # Timeline (fractions of the take): approach, close, carry, put down, open, leave. The hand is still at each
+    # phase's start and end: it moves to the object, stops, closes, carries it (a smooth course through the
+    # carry's keys), stops, opens, leaves.
     f = np.array([0.0, 0.15, 0.28, 0.82, 0.92, 1.0]) * duration
     n_carry = max(2, int(round((f[3] - f[2]) / 0.7)))
     tilt = Rotation.from_rotvec(np.deg2rad(rng.normal(0, 10, 3)))
@@ -430,32 +292,47 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
                                        base=grasp_rot)
     put_down = carry_pos[-1].copy()
     put_down[2] = grasp_pos[2]
-    key_t = np.concatenate([[f[0], f[1], f[2]], np.linspace(f[2], f[3], n_carry + 2)[1:-1], [f[3], f[4], f[5]]])
-    rots = Rotation.concatenate([grasp_rot * Rotation.from_rotvec([0.3, 0.0, 0.0]), grasp_rot, grasp_rot,
-                                 carry_rot, carry_rot[-1], carry_rot[-1],
-                                 carry_rot[-1] * Rotation.from_rotvec([0.3, 0.0, 0.0])])
-    approach = grasp_pos + 0.12 * up + grasp_rot.apply([-0.06, 0.0, 0.0])
-    pos = np.vstack([approach, grasp_pos, grasp_pos, carry_pos, put_down, put_down,
-                     put_down + 0.12 * up])
-    phis = np.vstack([open_phi, open_phi, grasp_phi] + [grasp_phi] * n_carry + [grasp_phi, open_phi, open_phi])
-    key_t, order = np.unique(key_t, return_index=True)
-    orient = rotation_path(key_t, rots[order], t)
-    transl = spline(key_t, pos[order], t)
-    phi = spline(key_t, phis[order], t)
-    motion = finish_motion(phi, orient, transl, rng, rate)
-    holding = (t >= f[2]) & (t <= f[3])
-    # The object: on the table, then carried rigidly (turning in the fingers for
-    # rotate-cube, about the axis through the thumb and finger contacts), then put down.
+    # The hand comes onto the object and leaves it straight, along the line from the object to the wrist, turning
+    # only once its fingers are clear of it, the object's size away (turned near the object, or moved straight up
+    # with the hand turned, a relaxed finger swept 8 mm into it).
+    above = (0.5 * (f[0] + f[1]), 0.5 * (f[4] + f[5]))
+    clear = 2.0 * float(np.max(obj.size)) + 0.01
+    away = -object2hand[:3, 3] / np.linalg.norm(object2hand[:3, 3])  # in the hand's frame
+    key_t = np.concatenate([[f[0], above[0], f[1], f[2]], np.linspace(f[2], f[3], n_carry + 2)[1:-1],
+                            [f[3], f[4], above[1], f[5]]])
+    lift = Rotation.from_rotvec([0.3, 0.0, 0.0])
+    rots = Rotation.concatenate([grasp_rot * lift, grasp_rot, grasp_rot, grasp_rot, carry_rot, carry_rot[-1],
+                                 carry_rot[-1], carry_rot[-1], carry_rot[-1] * lift])
+    approach = grasp_pos + clear * grasp_rot.apply(away) + 0.06 * up + grasp_rot.apply([-0.06, 0.0, 0.0])
+    off = put_down + clear * carry_rot[-1].apply(away)
+    pos = np.vstack([approach, grasp_pos + clear * grasp_rot.apply(away), grasp_pos, grasp_pos, carry_pos, put_down,
+                     put_down, off, off + 0.06 * up])
+    phi = rest_path(key_t, np.vstack([open_phi] * 3 + [grasp_phi] * (n_carry + 2) + [open_phi] * 3), t)
+    carry = (t >= f[2]) & (t <= f[3])
+    ends = slice(3, 5 + n_carry)  # the carry's keys, from the grasp to the put-down
+
+    def course(values):
+        out = rest_path(key_t, values, t)
+        out[carry] = spline(key_t[ends], values[ends], t[carry])
+        return out
+
+    # Orientations as turns from the grasp's (under 180 degrees: the carry's spread is 50).
+    orient = grasp_rot * Rotation.from_rotvec(course((grasp_rot.inv() * rots).as_rotvec()))
+    motion = finish_motion(phi, orient, course(pos), rng, rate)
+    holding = carry
+    # The object: on the table, then carried rigidly (turning half a turn in the fingers for
+    # rotate-cube), then put down.
     wrist = np.zeros((len(t), 4, 4))
     wrist[:, :3, :3] = Rotation.from_rotvec(motion.global_orient).as_matrix()
     wrist[:, :3, 3] = motion.transl
     wrist[:, 3, 3] = 1.0
     in_hand = np.repeat(object2hand[None], len(t), axis=0)
-    if name == "rotate-cube":
-        joints = hand.forward(phi=grasp_phi, vertices=False).joints
-        axis = joints[16] - 0.5 * (joints[17] + joints[18])
-        axis /= np.linalg.norm(axis)
-        pivot = 0.5 * (joints[16] + 0.5 * (joints[17] + joints[18]))
+    if name == "rotate-cube":  # about the axis through the centres of the faces pinched (the thumb's and fingers')
+        joints = hand.forward(betas, phi=grasp_phi, vertices=False).joints
+        pinch = joints[16] - 0.5 * (joints[17] + joints[18])
+        normals = object2hand[:3, :3].T @ pinch  # the pinch in the object's frame: its faces' normals are its axes
+        axis = object2hand[:3, :3][:, np.argmax(np.abs(normals))]
+        pivot = object2hand[:3, 3]
         progress = np.clip((t - f[2]) / max(f[3] - f[2], 1e-9), 0, 1)
         angle = np.deg2rad(180.0) * (0.5 - 0.5 * np.cos(np.pi * progress))
         turn = Rotation.from_rotvec(angle[:, None] * axis).as_matrix()
@@ -466,5 +343,7 @@ def _object_motion(name, hand, t, duration, rate, rng, obj) -> Motion:
     obj_pose = carried.copy()
     obj_pose[:first] = carried[first]
     obj_pose[last + 1:] = carried[last]
-    return Motion(motion.phi, motion.global_orient, motion.transl,
+    # Fingers rest on the object: they give way to it, and their tremor does not press them in.
+    fingers = rest_on_object(hand, obj, np.linalg.inv(wrist) @ obj_pose, phi, motion.phi, open_phi, rate, betas=betas)
+    return Motion(fingers, motion.global_orient, motion.transl,
                   Rotation.from_matrix(obj_pose[:, :3, :3]).as_rotvec(), obj_pose[:, :3, 3], holding)

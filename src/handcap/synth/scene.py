@@ -225,7 +225,7 @@ def synthesize(config: SynthConfig, *, progress: bool | None = None) -> SynthCap
 
     # 1. Motion and the hand surface in every frame.
     motion = turning.motion if turning else make_motion(config.motion, hand, config.frames, config.rate,
-                                                        rng_motion, obj)
+                                                        rng_motion, obj, betas=betas)
     hand_pose = hand.hand_pose_from_phi(motion.phi)
     out = hand.forward(betas, motion.global_orient, hand_pose, motion.transl)
     vertices, joints = out.vertices, out.joints

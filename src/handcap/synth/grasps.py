@@ -1,0 +1,296 @@
+"""Grasps for synthetic captures: where an object sits in the hand, and fingers that rest on it, not in it.
+
+A grasp is planned like a grasp planner's auto-grasp (:func:`close_until_contact`): the object is placed against
+the open hand (:func:`grasp_configuration`), then each finger closes, joint after joint, until its skin touches
+the object's analytic surface. Skin gives: a vertex may press at most :data:`SQUEEZE` (1.5 mm) into the object,
+within DexterCap's 3.8 +- 3.1 mm of hand-object penetration measured on real captures (where tracking error adds
+to it). A hand that holds an object keeps resting on it while its tremor goes on: :func:`rest_on_object`
+holds back the part of each finger's tremor that would press it deeper.
+
+Frames: the hand model's (metres; x distal, y dorsal); ``object2hand`` maps the object's frame into it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import convolve1d, maximum_filter1d
+from scipy.optimize import least_squares
+
+from handcap.core.transforms import homogeneous
+from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
+from handcap.hand.anatomy import pose_from_degrees as _pose
+
+FINGERS = ("index", "middle", "ring", "pinky")
+#: Deepest a vertex of the skin may press into a held object, metres (soft tissue gives).
+SQUEEZE = 0.0015
+_I = {n: i for i, n in enumerate(PHI_NAMES)}
+
+
+def _finger_vertices(hand, finger: str) -> np.ndarray:
+    seg = hand.segment_of_vertex
+    ids = [hand.segment_id(f"{finger}_{s}") for s in ("proximal", "middle", "distal")]
+    return np.flatnonzero(np.isin(seg, ids))
+
+
+_JOINT_GROUPS = {f: ((f"{f}_mcp_twist", f"{f}_mcp_spread", f"{f}_mcp_bend"), (f"{f}_pip_bend",), (f"{f}_dip_bend",))
+                 for f in FINGERS}
+_JOINT_GROUPS["thumb"] = (("thumb_cmc_twist", "thumb_cmc_spread", "thumb_cmc_bend"),
+                          ("thumb_mcp_twist", "thumb_mcp_spread", "thumb_mcp_bend"), ("thumb_ip_bend",))
+
+
+def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *, squeeze=SQUEEZE, steps=40,
+                        betas=None):
+    """Close each finger, joint after joint, until its skin touches the object.
+
+    Like a grasp planner's auto-grasp: the first joint of a finger turns from
+    its open towards its closed value until any vertex of the finger would press
+    deeper than ``squeeze`` into the object (or, if it already did, deeper than it
+    was), then the next joint does the same, so fingers wrap round what they hold.
+
+    Parameters
+    ----------
+    hand : HandModel
+    obj : SynthObject
+    object2hand : ndarray (4, 4)
+        Object frame to hand-model frame.
+    open_phi, closed_phi : ndarray (27,)
+    fingers : sequence of str
+        Fingers that close (others stay at ``open_phi``); ``"thumb"`` included.
+    squeeze : float
+        Deepest allowed skin compression, metres.
+    steps : int
+        Poses tried along each joint group's way from open to closed.
+    betas : ndarray (10,), optional
+        The hand's shape (the average hand when omitted).
+
+    Returns
+    -------
+    phi : ndarray (27,)
+    contact : dict finger -> bool
+    """
+    hand2object = np.linalg.inv(object2hand)
+    phi = open_phi.copy()
+    contact = {}
+    s = np.linspace(0.0, 1.0, steps)
+    for finger in fingers:
+        verts_idx = _finger_vertices(hand, finger)
+        touched = False
+        for group in _JOINT_GROUPS[finger]:
+            idx = [_I[n] for n in group]
+            path = np.repeat(phi[None], steps, axis=0)
+            path[:, idx] = phi[idx] + s[:, None] * (closed_phi[idx] - phi[idx])
+            verts = hand.forward(betas, phi=path).vertices[:, verts_idx]
+            depth = obj.signed_distance(verts @ hand2object[:3, :3].T + hand2object[:3, 3])
+            # A vertex already resting on the object may slide along it, not into it; one the joint does not move
+            # keeps its depth.
+            blocked = np.flatnonzero((depth < np.minimum(-squeeze, depth[0]) - 1e-7).any(axis=1))
+            k = steps - 1 if len(blocked) == 0 else max(blocked[0] - 1, 0)
+            touched |= len(blocked) > 0
+            phi[idx] = path[k, idx]
+        contact[finger] = touched
+    return phi, contact
+
+
+def rest_on_object(hand, obj, object2hand, smooth_phi, phi, open_phi, rate, *, squeeze=SQUEEZE, betas=None):
+    """Fingers that rest on the object they hold: they give way to it, and their tremor does not press them in.
+
+    Two steps, each digit (the four fingers and the thumb) on its own:
+
+    1. *Giving way.* Where a digit's skin in the planned pose ``smooth_phi`` lies deeper in the object than
+       ``squeeze`` (an object turning in the fingers pushes them aside), the digit opens towards ``open_phi`` by
+       the least fraction that keeps it out (bisection, 1/64). The fractions are then made smooth in time
+       without falling below what each frame needs: the most over +-0.1 s, averaged over +-0.1 s (a Hann window).
+    2. *Settling.* Where the digit with its variation (``phi - smooth_phi``: tremor) lies deeper than ``squeeze``
+       (or than without it, when that is deeper), the variation is scaled down (half, a quarter, none) until it no
+       longer does.
+
+    Parameters
+    ----------
+    hand : HandModel
+    obj : SynthObject
+    object2hand : ndarray (T, 4, 4)
+        Object frame to hand-model frame in each frame, metres.
+    smooth_phi, phi : ndarray (T, 27)
+        Radians: the planned poses, and the same with their variation (tremor).
+    open_phi : ndarray (27,)
+        Radians: the open hand the fingers give way towards.
+    rate : float
+        Frames per second.
+    squeeze : float
+        Deepest allowed skin compression, metres.
+    betas : ndarray (10,), optional
+        The hand's shape (the average hand when omitted).
+
+    Returns
+    -------
+    ndarray (T, 27)
+        Radians.
+    """
+    digits = FINGERS + ("thumb",)
+    angles = [[_I[n] for group in _JOINT_GROUPS[f] for n in group] for f in digits]
+    verts = [_finger_vertices(hand, f) for f in digits]
+    hand2object = np.linalg.inv(object2hand)
+    every = np.arange(len(phi))
+
+    def depth(pose, rows):  # (len(rows), 5): each digit's deepest signed distance, metres
+        v = hand.forward(betas, phi=pose[rows]).vertices
+        local = np.einsum("tij,tvj->tvi", hand2object[rows, :3, :3], v) + hand2object[rows, None, :3, 3]
+        sd = obj.signed_distance(local.reshape(-1, 3)).reshape(len(rows), -1)
+        return np.stack([sd[:, i].min(axis=1) for i in verts], axis=1)
+
+    def blend(base, towards, weight, rows):  # base with each digit's angles moved towards ``towards`` by weight
+        out = base.copy()
+        for d, idx in enumerate(angles):
+            out[np.ix_(rows, idx)] += weight[rows, d, None] * (towards[np.ix_(rows, idx)] - base[np.ix_(rows, idx)])
+        return out
+
+    # 1. Giving way.
+    planned = depth(smooth_phi, every)
+    opened = np.broadcast_to(open_phi, phi.shape)
+    limit = np.full_like(planned, -squeeze)
+    rows = np.flatnonzero((planned < -squeeze).any(axis=1))
+    if len(rows):
+        limit[rows] = np.minimum(-squeeze, depth(opened, rows))
+    limit -= 1e-7
+    needed = (planned < limit).astype(np.float64)
+    rows = np.flatnonzero(needed.any(axis=1))
+    if len(rows):
+        low, high = np.zeros_like(needed), needed.copy()
+        for _ in range(6):
+            middle = 0.5 * (low + high)
+            deep = depth(blend(smooth_phi, opened, middle, rows), rows) < limit[rows]
+            low[rows] = np.where(deep, middle[rows], low[rows])
+            high[rows] = np.where(deep, high[rows], middle[rows])
+        width = max(1, int(round(0.1 * rate)))
+        window = np.hanning(2 * width + 3)[1:-1]
+        needed = convolve1d(maximum_filter1d(high, 2 * width + 1, axis=0, mode="nearest"), window / window.sum(),
+                            axis=0, mode="nearest")
+        smooth_phi = blend(smooth_phi, opened, needed, every)
+        phi = blend(phi, opened, needed, every)
+        moved = np.flatnonzero(needed.any(axis=1))
+        planned[moved] = depth(smooth_phi, moved)
+
+    # 2. Settling.
+    allowed = np.minimum(-squeeze, planned) - 1e-7
+    keep = np.ones((len(phi), len(digits)))
+    out, rows = phi.copy(), every
+    for level in (0.5, 0.25, 0.0):
+        pressed = depth(out, rows) < allowed[rows]
+        if not pressed.any():
+            break
+        keep[rows] = np.where(pressed, level, keep[rows])
+        rows = rows[pressed.any(axis=1)]
+        out[rows] = blend(phi, smooth_phi, 1.0 - keep, rows)[rows]
+    return out
+
+
+def _place_against_palm(hand, obj, rotation, start, direction, open_phi, *, clearance=0.001, betas=None):
+    """Slide the object along ``direction`` from ``start`` until the open hand's palm and fingers are clear of it."""
+    thumb = np.isin(hand.segment_of_vertex, [hand.segment_id(f"thumb_{k}") for k in ("proximal", "middle", "distal")])
+    skin = hand.forward(betas, phi=open_phi).vertices[~thumb]  # the thumb closes round it later
+    for step in np.arange(0.0, 0.08, 0.0005):
+        centre = start + step * direction
+        local = (skin - centre) @ rotation
+        if obj.signed_distance(local).min() >= clearance:
+            break
+    return homogeneous(rotation, centre)
+
+
+def grasp_configuration(hand, obj, kind: str, *, betas=None):
+    """Object pose in the hand frame and the grasping pose for a power or precision grasp.
+
+    Power: the object's long axis lies across the palm under the proximal
+    phalanges, against the palm; all five digits wrap round it. Precision: the
+    object sits between the thumb and the index and middle fingertips, where a
+    pinch of the object's width would put it; those three close on it.
+
+    Parameters
+    ----------
+    hand : HandModel
+    obj : SynthObject
+        Its ``size`` in metres sets where it is put.
+    kind : str
+        ``"power"``; anything else gives a precision grasp.
+    betas : ndarray (10,), optional
+        The hand's shape (the average hand when omitted): the grasp is planned for the hand that makes it.
+
+    Returns
+    -------
+    object2hand : ndarray (4, 4)
+        Object frame to hand-model frame, translation in metres.
+    open_phi, grasp_phi : ndarray (27,)
+        Radians: the hand before closing, and closed until its fingers touch the object.
+    """
+    palmar = np.array([0.0, -1.0, 0.0])
+    ulnar = np.array([0.0, 0.0, 1.0 if hand.is_right else -1.0])
+    if kind == "power":
+        # Object x towards the back of the hand, z along the hand's ulnar axis.
+        rotation = np.column_stack([-palmar, np.cross(ulnar, -palmar), ulnar])
+        mcp_x = hand.rest_joints(betas)[4, 0]
+        start = np.array([mcp_x + 0.012, 0.0, 0.006 * ulnar[2]]) + palmar * obj.size[0]
+        open_phi = _pose(thumb_cmc_bend=-20, thumb_cmc_spread=10, thumb_mcp_bend=5)
+        for finger in FINGERS:
+            open_phi = finger_flexion(open_phi, finger, 0.05)
+        object2hand = _place_against_palm(hand, obj, rotation, start, palmar, open_phi, betas=betas)
+        closed = _pose(thumb_cmc_bend=70, thumb_cmc_spread=-30, thumb_cmc_twist=30, thumb_mcp_bend=55,
+                       thumb_ip_bend=80)
+        for finger in FINGERS:
+            closed = finger_flexion(closed, finger, 1.1, pip=100)
+        fingers = ("index", "middle", "ring", "pinky", "thumb")
+    else:
+        relaxed = relaxed_pose()
+        width = 2.0 * float(np.min(obj.size))
+        pinch = pinch_pose(hand, "index", relaxed, gap=width + 0.012, betas=betas)
+        # Thumb, index and middle open straight; the others stay relaxed.
+        open_phi = relaxed.copy()
+        open_phi[[i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", "index_", "middle_"))]] = 0.0
+        joints = hand.forward(betas, phi=pinch, vertices=False).joints
+        centre = 0.5 * (joints[16] + joints[17]) + 0.25 * (joints[18] - joints[17])
+        object2hand = _place_against_palm(hand, obj, np.eye(3), centre, np.array([1.0, 0.0, 0.0]), open_phi,
+                                          betas=betas)
+        closed = pinch_pose(hand, "index", relaxed, gap=0.0, betas=betas)
+        closed = finger_flexion(closed, "middle", 0.9)
+        fingers = ("index", "middle", "thumb")
+    grasp_phi, _ = close_until_contact(hand, obj, object2hand, open_phi, closed, fingers, betas=betas)
+    return object2hand, open_phi, grasp_phi
+
+
+def pinch_pose(hand, finger: str, start_phi, *, gap: float = 0.012, betas=None) -> np.ndarray:
+    """Thumb and ``finger`` tips brought ``gap`` apart by least squares.
+
+    Only the thumb's and the finger's angles move, within :data:`PHI_LIMITS`, weakly pulled towards
+    ``start_phi``; the others keep their start values.
+
+    Parameters
+    ----------
+    hand : HandModel
+    finger : {"index", "middle", "ring", "pinky"}
+    start_phi : ndarray (27,)
+        Radians.
+    gap : float
+        Distance between the thumb's tip point and the finger's (joints 16 and 17-20), metres.
+    betas : ndarray (10,), optional
+        The hand's shape (the average hand when omitted).
+
+    Returns
+    -------
+    ndarray (27,)
+        Radians.
+    """
+    tips = {"index": 17, "middle": 18, "ring": 19, "pinky": 20}
+    idx = [i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", finger + "_"))]
+    lo, hi = PHI_LIMITS[idx, 0], PHI_LIMITS[idx, 1]
+
+    def residual(x):
+        phi = start_phi.copy()
+        phi[idx] = x
+        joints = hand.forward(betas, phi=phi, vertices=False).joints
+        return np.r_[np.linalg.norm(joints[16] - joints[tips[finger]]) - gap, 0.05 * (x - start_phi[idx])]
+
+    x0 = np.clip(start_phi[idx], lo + 1e-6, hi - 1e-6)
+    fit = least_squares(residual, x0, bounds=(lo, hi), x_scale=0.3, max_nfev=200)
+    phi = start_phi.copy()
+    phi[idx] = fit.x
+    return phi
+
+
