@@ -324,3 +324,21 @@ def test_the_cubes_facelet_patches_turn_with_its_layers(gl_ok, tmp_path, motion)
     assert np.allclose(turned[-1, :4], turned[0, :4])
     assert np.allclose(turned[-1], turned[0]) == (motion == "rotate-cube")
     assert truth["visible"][:, :, [n.startswith("cube2x2:") for n in names]].any()
+
+
+def test_decal_cells_folded_flat_are_not_drawn():
+    # A decal's cell folded flat at a joint squeezes its texture into nothing; llvmpipe's anisotropic filter took
+    # 100 s over one image of such a hand instead of 0.1 s. Those triangles (under 1e-10 m^2, far under a pixel)
+    # are left out; the rest of the patch is drawn.
+    from handcap.synth.images import MIN_TRIANGLE_AREA, _drawable
+
+    rr, cc = np.meshgrid(np.arange(4.0), np.arange(5.0), indexing="ij")
+    grid = np.stack([cc * 1e-3, rr * 1e-3, np.zeros_like(rr)], axis=-1)  # 1 mm cells
+    grid[1] = grid[0] + [0.0, 1e-7, 0.0]  # row 1 folded onto row 0
+    faces = np.array([[r * 5 + c, r * 5 + c + 1, (r + 1) * 5 + c] for r in range(3) for c in range(4)]
+                     + [[r * 5 + c + 1, (r + 1) * 5 + c + 1, (r + 1) * 5 + c] for r in range(3) for c in range(4)])
+    kept = _drawable(grid.reshape(-1, 3), faces)
+    a, b, c = (grid.reshape(-1, 3)[faces[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    assert len(kept) == len(faces) - 8 and (area < MIN_TRIANGLE_AREA).sum() == 8
+    assert {tuple(f) for f in kept} == {tuple(f) for f in faces[area >= MIN_TRIANGLE_AREA]}

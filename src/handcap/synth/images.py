@@ -119,6 +119,17 @@ def _context():
                        + "; ".join(errors))
 
 
+#: Smallest patch triangle drawn, square metres: a decal's cell folded flat at a joint (its texture squeezed into
+#: nothing) made llvmpipe's anisotropic filter take 100 s over one image instead of 0.1 s.
+MIN_TRIANGLE_AREA = 1e-10
+
+
+def _drawable(vertices, faces):
+    """``faces`` (F, 3) of ``vertices`` (V, 3) but those under :data:`MIN_TRIANGLE_AREA`."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return faces[0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1) >= MIN_TRIANGLE_AREA]
+
+
 def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     tri = vertices[faces]
     face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -311,7 +322,8 @@ class PatchRenderer:
         points, corner_normals = [], []
         for k, grid in enumerate(corners):
             grid = np.asarray(grid, dtype=np.float64)
-            meshes.append((grid.reshape(-1, 3), self._patch_faces[k], self._patch_uv[k], None))
+            meshes.append((grid.reshape(-1, 3), _drawable(grid.reshape(-1, 3), self._patch_faces[k]),
+                           self._patch_uv[k], None))
             ri, ci = self._corner_nodes[k]
             points.append(grid[ri, ci])
             # Seen from outside, columns run right and rows down: the outward normal is row x column.
