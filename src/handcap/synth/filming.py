@@ -56,10 +56,10 @@ from handcap.hand import OpenHand
 from handcap.io.npz import write_hand_motion
 from handcap.layouts import load_layout
 from handcap.synth.decals import patch_skin
-from handcap.synth.images import ImageStyle, PatchRenderer, random_blobs
+from handcap.synth.images import ImageStyle, PatchRenderer
 from handcap.synth.cube import cubie_boxes
 from handcap.synth.object_patches import PATCHED, cube_patch_grids, object_patch_grids, patch_coords
-from handcap.synth.objects import make_object
+from handcap.synth.objects import make_object, random_blobs
 from handcap.synth.scene import synthesize
 from handcap.synth.textures import build_atlas
 

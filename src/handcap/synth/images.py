@@ -22,10 +22,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import trimesh
 
 from handcap.core.errors import HandcapError
 from handcap.core.srgb import srgb_encoded
+from handcap.synth.objects import random_blobs
 from handcap.synth.textures import PatchAtlas
 
 #: The GLSL shaders (files beside this module): vertex positions through the projection; grey shading of
@@ -137,39 +137,6 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     for k in range(3):
         np.add.at(normals, faces[:, k], face_n)
     return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-
-
-def random_blobs(vertices, rng, count: int, towards=None) -> list:
-    """``count`` ellipsoids 1-3 cm across near the hand: occluders (a sleeve, the other hand, a tool).
-
-    Parameters
-    ----------
-    vertices : ndarray (V, 3)
-        The hand mesh, metres.
-    rng : numpy.random.Generator
-    count : int
-    towards : ndarray (3,), optional
-        A unit direction (to a camera) to move the blobs along, 3-12 cm off the skin; default: any
-        direction, 1-6 cm off.
-
-    Returns
-    -------
-    list of (ndarray (V, 3), ndarray (F, 3))
-    """
-    sphere = trimesh.creation.icosphere(subdivisions=2)
-    vertices = np.asarray(vertices, dtype=np.float64)
-    extent = np.ptp(vertices, axis=0).max() / 2
-    blobs = []
-    for _ in range(count):
-        spot = vertices[rng.integers(len(vertices))] + rng.normal(0, 0.3 * extent, 3)
-        if towards is None:
-            way = rng.normal(size=3)
-            where = spot + way / np.linalg.norm(way) * rng.uniform(0.01, 0.06)
-        else:
-            where = spot + np.asarray(towards) * rng.uniform(0.03, 0.12)
-        radii = rng.uniform(0.01, 0.03, 3)
-        blobs.append((np.asarray(sphere.vertices) * radii + where, np.asarray(sphere.faces)))
-    return blobs
 
 
 def _grid_mesh(grid: np.ndarray):

@@ -2,7 +2,8 @@
 
 Each object lives in its own frame (metres, origin at its centre) and carries
 a handful of markers on its surface, as an object tracked by a capture system
-would (at least four, never all coplanar).
+would (at least four, never all coplanar). :func:`random_blobs` makes the
+occluders of rendered images (a sleeve, the other hand, a tool).
 """
 
 from __future__ import annotations
@@ -142,3 +143,36 @@ def make_object(kind: str, *, seed: int = 0, scale: float = 1.0) -> SynthObject:
         markers = normals * (r + radius)
     return SynthObject(kind, kind, half, np.asarray(mesh.vertices, dtype=np.float64),
                        np.asarray(mesh.faces, dtype=np.int64), markers, normals, radius)
+
+
+def random_blobs(vertices, rng, count: int, towards=None) -> list:
+    """``count`` ellipsoids 1-3 cm across near the hand: occluders (a sleeve, the other hand, a tool).
+
+    Parameters
+    ----------
+    vertices : ndarray (V, 3)
+        The hand mesh, metres.
+    rng : numpy.random.Generator
+    count : int
+    towards : ndarray (3,), optional
+        A unit direction (to a camera) to move the blobs along, 3-12 cm off the skin; default: any
+        direction, 1-6 cm off.
+
+    Returns
+    -------
+    list of (ndarray (V, 3), ndarray (F, 3))
+    """
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    vertices = np.asarray(vertices, dtype=np.float64)
+    extent = np.ptp(vertices, axis=0).max() / 2
+    blobs = []
+    for _ in range(count):
+        spot = vertices[rng.integers(len(vertices))] + rng.normal(0, 0.3 * extent, 3)
+        if towards is None:
+            way = rng.normal(size=3)
+            where = spot + way / np.linalg.norm(way) * rng.uniform(0.01, 0.06)
+        else:
+            where = spot + np.asarray(towards) * rng.uniform(0.03, 0.12)
+        radii = rng.uniform(0.01, 0.03, 3)
+        blobs.append((np.asarray(sphere.vertices) * radii + where, np.asarray(sphere.faces)))
+    return blobs
