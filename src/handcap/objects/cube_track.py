@@ -319,8 +319,9 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         # Each axis is judged on every marker over the move's first 3 frames (the search's few may miss the
         # turning layer there).
         a = int(np.argmax(np.abs(theta[:, begin])))
-        bends = np.array([[_bend(local(state), world[f], valid[f], np.einsum("nij,nj->ni", state, HOME)[cubie, k])
-                           for f in frames[begin:begin + 3]] for k in range(3)])
+        placed, side = local(state), np.einsum("nij,nj->ni", state, HOME)[cubie]
+        bends = np.array([[_bend(placed, world[f], valid[f], side[:, k]) for f in frames[begin:begin + 3]]
+                          for k in range(3)])
         bends = np.array([np.mean(b[np.isfinite(b)]) if np.isfinite(b).any() else np.inf for b in bends])
         if bends.min() <= OUTLIER:
             a = int(np.argmin(bends))

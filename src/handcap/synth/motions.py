@@ -319,7 +319,6 @@ def _object_motion(name, hand, t, duration, rate, rng, obj, betas) -> Motion:
     # Orientations as turns from the grasp's (under 180 degrees: the carry's spread is 50).
     orient = grasp_rot * Rotation.from_rotvec(course((grasp_rot.inv() * rots).as_rotvec()))
     motion = finish_motion(phi, orient, course(pos), rng, rate)
-    holding = carry
     # The object: on the table, then carried rigidly (turning half a turn in the fingers for
     # rotate-cube), then put down.
     wrist = np.zeros((len(t), 4, 4))
@@ -339,11 +338,11 @@ def _object_motion(name, hand, t, duration, rate, rng, obj, betas) -> Motion:
         spin = homogeneous(turn, pivot - np.einsum("tij,j->ti", turn, pivot))
         in_hand = spin @ in_hand
     carried = wrist @ in_hand
-    first, last = np.flatnonzero(holding)[[0, -1]]
+    first, last = np.flatnonzero(carry)[[0, -1]]
     obj_pose = carried.copy()
     obj_pose[:first] = carried[first]
     obj_pose[last + 1:] = carried[last]
     # Fingers rest on the object: they give way to it, and their tremor does not press them in.
     fingers = rest_on_object(hand, obj, np.linalg.inv(wrist) @ obj_pose, phi, motion.phi, open_phi, rate, betas=betas)
     return Motion(fingers, motion.global_orient, motion.transl,
-                  Rotation.from_matrix(obj_pose[:, :3, :3]).as_rotvec(), obj_pose[:, :3, 3], holding)
+                  Rotation.from_matrix(obj_pose[:, :3, :3]).as_rotvec(), obj_pose[:, :3, 3], carry)
