@@ -52,7 +52,8 @@ def _pose(capture):
 def cube_section(scrambles: int, faults: bool) -> None:
     from handcap.objects import load_articulated
     from handcap.objects.cube import format_moves, random_moves
-    from handcap.objects.cube_track import cube_errors, fitted_markers, track_cube
+    from handcap.objects.cube_output import cube_errors, fitted_markers
+    from handcap.objects.cube_track import track_cube
     from handcap.synth.scene import SynthConfig, synthesize
 
     cube = load_articulated("cube2x2")
@@ -178,7 +179,8 @@ def label_section(takes: int) -> None:
 def patches_section() -> None:
     from handcap.objects import load_articulated
     from handcap.objects.cube import format_moves, random_moves
-    from handcap.objects.cube_track import cube_errors, track_cube
+    from handcap.objects.cube_output import cube_errors
+    from handcap.objects.cube_track import track_cube
     from handcap.synth.cube import cube_take
 
     cube = load_articulated("cube2x2-patches")

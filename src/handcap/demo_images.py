@@ -52,7 +52,8 @@ from handcap.io import write_hand_motion, write_markers, write_object_motion
 from handcap.layouts import load_layout
 from handcap.multiview import clean_markers, read_detections, triangulate_detections
 from handcap.objects import load_articulated, track_rigid
-from handcap.objects.cube_track import cube_errors, cube_motion, smoothing_window, track_cube
+from handcap.objects.cube_output import cube_errors, cube_motion
+from handcap.objects.cube_track import smoothing_window, track_cube
 from handcap.patterns.pattern import Pattern
 from handcap.quality import plausibility as q
 from handcap.solve import calibrate_attachment, solve_hand
@@ -152,6 +153,7 @@ def run_image_demo(out="demo-images", *, configs=None, progress: bool | None = N
         if "cube_cubie_rotation" in capture.truth:  # the cube's moves, as track-object --articulated finds them
             track = _track_turned_cube(markers, folder / "cube_motion.npz")
             summary.update({f"{key}_{k}": v for k, v in _cube_figures(track, capture).items()})
+            warnings += list(track.warnings)
         elif capture.object_motion is not None:
             figures, said = _track_held_object(markers, capture.object_motion.name, folder / "object_motion.npz",
                                                folder / "image_truth.npz")

@@ -44,7 +44,7 @@ def test_scrambles_poses_and_layer_angles():
     for seed in range(3):
         text = _scramble(np.random.default_rng(100 + seed))
         take, track = _track(text, seed)
-        assert track.moves == text
+        assert track.moves == text and track.warnings == ()
         turned = Rotation.from_rotvec(track.rotation) * Rotation.from_matrix(take.global_pose[:, :3, :3]).inv()
         assert np.degrees(turned.magnitude()).mean() < 1.0
         assert 1000 * np.linalg.norm(track.translation - take.global_pose[:, :3, 3], axis=1).mean() < 1.0
@@ -196,3 +196,110 @@ def test_the_turning_layers_axis_is_the_one_whose_halves_stay_rigid():
         bends = [_bend(x, take.markers[f], seen, where[:, k]) for k in range(3)]
         assert bends[axis] < 1e-6 and min(np.delete(bends, axis)) > 0.003, (face, bends)
         assert _bend(x, take.markers[f], cubie == 0, where[:, axis]) == np.inf
+
+
+def test_cubies_that_disagree_about_a_cube_axis_are_counted_a_spoilt_cubie_is_not():
+    from handcap.objects.cube_check import disagreement
+
+    world = Rotation.random(5, random_state=1).as_matrix()  # the cube's orientation, frame by frame
+    seen_rotation = np.repeat(world[:, None], 8, axis=1)
+    arrangement = np.broadcast_to(np.eye(3), (5, 8, 3, 3))  # every cubie home
+    turned = {1: [0, 0, 90], 2: [0, 55, 0], 3: [180, 0, 0]}  # cubie 3 off about the cube's axes (degrees)
+    for f, rotvec in turned.items():
+        seen_rotation[f, 3] = world[f] @ Rotation.from_rotvec(rotvec, degrees=True).as_matrix()
+    # 180 deg about an axis in a symmetric marker triangle's plane: two labels swapped, not a turn
+    seen_rotation[4, 3] = world[4] @ Rotation.from_rotvec(180 * np.array([2, -1, -1]) / np.sqrt(6),
+                                                          degrees=True).as_matrix()
+    seen = np.ones((5, 8), bool)
+    np.testing.assert_allclose(np.degrees(disagreement(seen_rotation, seen, arrangement)), [0, 90, 55, 180, 0],
+                               atol=1e-6)
+    seen[1, 3] = False  # the odd one unseen; one cubie alone cannot disagree
+    seen[2, 1:] = False
+    assert np.degrees(disagreement(seen_rotation, seen, arrangement))[1] < 1e-6
+    assert np.isnan(disagreement(seen_rotation, seen, arrangement)[2])
+
+
+def _hide_all_but(markers, cubies, frames):
+    out = markers.copy()
+    cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in CUBE.parts])
+    out[:frames, ~np.isin(cubie, cubies)] = np.nan
+    return out
+
+
+def test_a_turn_before_the_cube_is_seen_whole_is_said():
+    # The moves are read from the first frame with most cubies seen. Until R has ended, only DBL and DBR are seen:
+    # they sit on either side of the R layer, and R parts them (a turn not read, and said so). Only DBR and DFR,
+    # both in the R layer, cannot tell: a turn could hide there, and that is said too.
+    rng = np.random.default_rng(6)
+    take = cube_take("R U", rng, rate=30.0)
+    after = take.move_frames[0][1] + 2
+    noisy = take.markers + rng.normal(0.0, 0.0005, take.markers.shape)
+    clean = track_cube(noisy, CUBE, rate=30.0)
+    assert clean.moves == "R U" and clean.warnings == ()
+    parted = track_cube(_hide_all_but(noisy, [0, 4], after), CUBE, rate=30.0)
+    assert parted.moves == "U"
+    assert len(parted.warnings) == 1 and "a turn before" in parted.warnings[0], parted.warnings
+    from handcap.objects.cube_output import cube_motion
+
+    motion, _ = cube_motion(parted, CUBE, 30.0, ["the take's own"])  # stored with the motion, before the caller's
+    assert motion.warnings == (*parted.warnings, "the take's own")
+    together = track_cube(_hide_all_but(noisy, [4, 5], after), CUBE, rate=30.0)
+    assert together.moves == "U"
+    assert len(together.warnings) == 1 and "would not be read" in together.warnings[0], together.warnings
+
+
+def test_a_track_the_cubies_contradict_is_said():
+    # Against the truth: the track of a clean take, and the same with one quarter turn too many from a frame on.
+    from handcap.objects.cube import apply_moves
+    from handcap.objects.cube_check import check_track
+    from handcap.objects.cube_track import cubie_poses
+
+    rng = np.random.default_rng(7)
+    take = cube_take("F U'", rng, rate=60.0)
+    noisy = take.markers + rng.normal(0.0, 0.0005, take.markers.shape)
+    track = track_cube(noisy, CUBE, rate=60.0)
+    assert track.moves == "F U'" and track.warnings == ()
+    rotation, _, seen = cubie_poses(noisy, CUBE)
+    wrong = track.cubie_rotation.copy()
+    last = len(noisy) - 10
+    wrong[last:] = apply_moves(np.rint(wrong[-1]).astype(int), [("R", 1)])
+    found = check_track(rotation, seen, wrong, 0, 60.0, "F U' R", 1.0)
+    assert len(found) == 1 and "in 10 frames" in found[0] and "may be wrong" in found[0], found
+    assert check_track(rotation, seen, track.cubie_rotation, 0, 60.0, "F U'", 1.0) == ()
+
+
+def test_a_swapped_label_spoils_neither_the_cubie_nor_the_move():
+    # Two cubies' labels swapped for a while: each cubie's own fit leaves the misplaced marker out (with 3 on a
+    # cubie, the cubie is unseen then), and the move is read as if they were right.
+    from handcap.objects.cube_track import cubie_poses
+
+    rng = np.random.default_rng(8)
+    take = cube_take("U", rng, rate=60.0)
+    swapped = take.markers + rng.normal(0.0, 0.0005, take.markers.shape)
+    a, b = 3, 9  # DFL_L and UFL_L: either side of the U layer
+    span = slice(take.move_frames[0][0], take.move_frames[0][1])
+    swapped[span, [a, b]] = swapped[span, [b, a]]
+    _, _, seen = cubie_poses(swapped, CUBE)
+    assert not seen[span, 1].any() and not seen[span, 3].any() and seen[span][:, [0, 2, 4, 5, 6, 7]].all()
+    track = track_cube(swapped, CUBE, rate=60.0)
+    assert track.moves == "U" and track.warnings == ()
+
+
+def test_four_camera_synthetic_takes_read_right_or_say_so():
+    # Never a silent wrong answer: marker-level takes that 4 cameras see poorly (2-3 of 8 cubies a frame) were
+    # read wrong with no word (turns before the cube was first seen whole; a swapped label that bent every axis's
+    # halves and made the still half look rough). Each now reads right, or warns, or stops with a clear error.
+    from handcap.objects.cube_track import smoothing_window
+    from handcap.synth.scene import SynthConfig, synthesize
+
+    results = []
+    for moves, rate, seed in (("F2 D", 12.0, 1), ("R U R' U'", 12.0, 1), ("R U R' U'", 24.0, 2), ("U'", 24.0, 1),
+                              ("R U R' U'", 60.0, 0), ("R U R' U'", 12.0, 0)):
+        capture = synthesize(SynthConfig(motion="turn-cube", moves=moves, seed=seed, noise_mm=0.5, rate=rate,
+                                         cameras=4), progress=False)
+        markers = capture.markers.select(list(CUBE.marker_names)).positions
+        track = track_cube(markers, CUBE, rate=rate, window=smoothing_window(rate))
+        results.append((moves, track.moves, bool(track.warnings)))
+        assert track.moves == moves or track.warnings, (moves, rate, seed, track.moves)
+    assert sum(read == moves for moves, read, _ in results) >= 2, results  # not all warned away
+    assert not any(said for moves, read, said in results if read == moves), results

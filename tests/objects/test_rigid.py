@@ -39,6 +39,27 @@ def test_ransac_rejects_a_mislabelled_marker():
     np.testing.assert_allclose(r, rot, atol=1e-9)
 
 
+def test_refit_drops_a_far_label_among_few_points_one_at_a_time():
+    # Five points of a 20 mm cubie, one label 28 mm off: the first fit is pulled about 5 mm, so every point lay
+    # beyond 3 mm of it; dropping them all at once left none, and the spoilt fit was returned.
+    from handcap.objects.rigid import kabsch_refit
+
+    rng = np.random.default_rng(4)
+    source = rng.uniform(-0.01, 0.01, size=(5, 3))
+    rot = Rotation.random(2, random_state=5).as_matrix()
+    target = np.einsum("tij,mj->tmi", rot, source) + [0.1, 0.2, 0.3]
+    target[0, 2] += [0.028, 0.0, 0.0]
+    fit_rot, fit_trans = kabsch_refit(source, target, np.ones((2, 5)), 0.003)
+    np.testing.assert_allclose(fit_rot, rot, atol=1e-9)
+    np.testing.assert_allclose(fit_trans, [[0.1, 0.2, 0.3]] * 2, atol=1e-9)
+    # three points left and one still off: no pose fits them
+    assert np.isnan(kabsch_refit(source[:3], target[:1, :3], np.ones((1, 3)), 0.003)[0]).all()
+    # with at most one drop allowed, two far labels leave the fit spoilt but not NaN (the caller measures it)
+    target[1, 3] += [0.0, 0.028, 0.0]
+    target[1, 2] += [0.028, 0.0, 0.0]
+    assert np.isfinite(kabsch_refit(source, target[1:], np.ones((1, 5)), 0.003, 1)[0]).all()
+
+
 def test_canonical_shape_from_a_take_matches_the_body_up_to_a_rigid_motion():
     rng = np.random.default_rng(4)
     body = rng.uniform(-0.05, 0.05, size=(6, 3))

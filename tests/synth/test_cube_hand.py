@@ -9,7 +9,8 @@ from handcap.cli import main
 from handcap.hand import OpenHand
 from handcap.objects.articulated import load_articulated
 from handcap.objects.cube import FACE_ORDER, FACES, apply_moves, cube_signed_distance, solved_state
-from handcap.objects.cube_track import cube_errors, track_cube
+from handcap.objects.cube_output import cube_errors
+from handcap.objects.cube_track import track_cube
 from handcap.synth.cube import cube_rotations, turning_motion
 from handcap.synth.scene import SynthConfig, synthesize
 

@@ -19,7 +19,9 @@ cube's frame), and it changes only by committed moves.
    of one face merge (``R R`` gives ``R2``). During a move the cube's pose is its body half's, and the
    layer's angle is reported per frame.
 
-Frames before the cube is first seen whole get its pose only.
+Frames before the cube is first seen whole get its pose only. The track is checked against the cubies as each
+is seen by its own markers (:mod:`handcap.objects.cube_check`): a turn missed or misread is said in
+:attr:`CubeTrack.warnings`, not left silent.
 """
 
 from __future__ import annotations
@@ -31,9 +33,9 @@ from scipy.signal import savgol_filter
 from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
-from handcap.core.motion import ObjectMotion
 from handcap.objects.articulated import ArticulatedObject
 from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, complete_state, format_moves, permutation
+from handcap.objects.cube_check import QUICK_TURN_SECONDS, check_track
 from handcap.objects.rigid import kabsch, kabsch_refit, smooth_pose
 
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
@@ -55,10 +57,14 @@ SPAN = 256
 #: Counted in frames at another rate, the window grew with it: at 20 Hz 10 frames are half a second each side, over
 #: which the hand's carrying is no longer quadratic, and the body half's roughness came near the turning one's.
 SMOOTH_SECONDS = 10 / 120
+#: A marker farther than this (metres) from its fit is dropped (a swapped or misplaced label) and the pose fitted
+#: again (:func:`handcap.objects.rigid.kabsch_refit`); on a cubie, one that does not fit the cubie's shape.
+OUTLIER = 0.003
 
 
 def cubie_poses(markers, cube: ArticulatedObject) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every cubie's pose in every frame by Kabsch of its markers.
+    """Every cubie's pose in every frame by Kabsch of its markers, a marker that does not fit the cubie's shape
+    (more than :data:`OUTLIER` off: a label swapped with another cubie's) left out.
 
     Parameters
     ----------
@@ -73,7 +79,8 @@ def cubie_poses(markers, cube: ArticulatedObject) -> tuple[np.ndarray, np.ndarra
     translation : ndarray (T, 8, 3)
         ``world = rotation @ rest + translation``.
     seen : ndarray (T, 8) bool
-        Cubies with 3 or more markers seen (elsewhere rotation and translation are NaN).
+        Cubies with 3 or more markers that fit their shape (elsewhere rotation and translation are NaN). With
+        3 markers on a cubie, one of them misplaced spoils the fit of all: the cubie is not seen then.
     """
     markers = np.asarray(markers, dtype=np.float64)
     n = len(markers)
@@ -86,11 +93,14 @@ def cubie_poses(markers, cube: ArticulatedObject) -> tuple[np.ndarray, np.ndarra
         obs = markers[:, start:start + m]
         start += m
         w = np.isfinite(obs).all(axis=2)
-        seen[:, c] = w.sum(axis=1) >= 3
-        if seen[:, c].any():
-            ok = seen[:, c]
-            rotation[ok, c], translation[ok, c] = kabsch(np.broadcast_to(part.markers, obs[ok].shape),
-                                                         np.nan_to_num(obs[ok]), w[ok])
+        ok = w.sum(axis=1) >= 3
+        if not ok.any():
+            continue
+        rot, trans = kabsch_refit(part.markers, np.nan_to_num(obs[ok]), w[ok].astype(np.float64), OUTLIER)
+        off = np.linalg.norm(np.einsum("fij,mj->fmi", rot, part.markers) + trans[:, None] - obs[ok], axis=-1)
+        fits = np.isfinite(rot).all(axis=(1, 2)) & ((off <= OUTLIER).sum(axis=1) >= 3)
+        seen[np.flatnonzero(ok)[fits], c] = True
+        rotation[seen[:, c], c], translation[seen[:, c], c] = rot[fits], trans[fits]
     return rotation, translation, seen
 
 
@@ -112,6 +122,8 @@ class CubeTrack:
     cubie_rotation : ndarray (T, 8, 3, 3)
         Every cubie's rotation in the cube's frame in every frame: the committed state at rest, the turning
         layer at its measured angle during a move.
+    warnings : tuple of str
+        Where the moves read may be wrong (:func:`handcap.objects.cube_check.check_track`).
     """
 
     rotation: np.ndarray
@@ -120,20 +132,12 @@ class CubeTrack:
     moves: str
     state: np.ndarray
     cubie_rotation: np.ndarray
+    warnings: tuple = ()
 
     @property
     def permutation(self) -> np.ndarray:
         """The cubie (start index) at each home place at the end, (8,) int."""
         return permutation(self.state)
-
-
-def _angle(r) -> np.ndarray:
-    return np.arccos(np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
-
-
-#: A marker farther than this (metres) from where the first fit puts it is dropped (a swapped or
-#: misplaced label) and the pose fitted again.
-OUTLIER = 0.003
 
 
 def _poses(local, world, weights):
@@ -168,24 +172,39 @@ def _bend(x, world, seen, where) -> float:
         use = seen & side
         if use.sum() < 3:
             return np.inf
-        rot, trans = _poses(x, world[None], use[None].astype(np.float64))
+        # a swapped label or two (a sixth of the half's markers) may be dropped, not a layer's worth
+        most = max(1, int(use.sum()) // 6)
+        rot, trans = kabsch_refit(x, world[None], use[None].astype(np.float64), OUTLIER, most)
         if not np.isfinite(rot).all():
             return np.inf
-        err = x[use] @ rot[0].T + trans[0] - world[use]
-        worst = max(worst, float(np.sqrt(np.mean(np.sum(err ** 2, axis=1)))))
+        err = np.sort(np.linalg.norm(x[use] @ rot[0].T + trans[0] - world[use], axis=1))
+        err = err[:len(err) - min(most, int((err > OUTLIER).sum()))]
+        worst = max(worst, float(np.sqrt(np.mean(err ** 2))))
     return worst
 
 
 def _roughness(rot) -> float:
-    """How far rotations (F, 3, 3) depart from a smooth (quadratic in time) turn, radians RMS: the noise for
-    a cube moved by a hand, degrees for a layer that starts and stops turning."""
+    """How far rotations (F, 3, 3) depart from a smooth (quadratic in time) turn, radians: the noise for a cube
+    moved by a hand, degrees for a layer that starts and stops turning.
+
+    Robust: the median departure, of a fit repeated without the frames more than 3 times the median of those kept
+    off, until they settle (a half seen by a few markers, one of them swapped into it for a few frames, jumps to the
+    turning layer there).
+    """
     ok = np.flatnonzero(np.isfinite(rot).all(axis=(1, 2)))
     if len(ok) < 4:
         return np.inf
     rv = Rotation.from_matrix(np.einsum("ji,fjk->fik", rot[ok[0]], rot[ok])).as_rotvec()
     basis = np.vander(ok - ok.mean(), 3)
-    fit = np.linalg.lstsq(basis, rv, rcond=None)[0]
-    return float(np.sqrt(np.mean((basis @ fit - rv) ** 2)))
+    keep = np.ones(len(ok), bool)
+    for _ in range(10):  # until the frames kept settle
+        fit = np.linalg.lstsq(basis[keep], rv[keep], rcond=None)[0]
+        off = np.linalg.norm(basis @ fit - rv, axis=1)
+        kept = off <= 3 * np.median(off[keep])
+        if kept.sum() < 4 or (kept == keep).all():
+            break
+        keep = kept
+    return float(np.median(off))
 
 
 def _start(w, seen, world, valid, cubie, rest):
@@ -264,12 +283,17 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
     markers = np.asarray(markers, dtype=np.float64)
     if markers.ndim != 3 or markers.shape[1:] != (len(cube.marker_names), 3):
         raise HandcapError(f"cube markers must be (T, {len(cube.marker_names)}, 3), got {markers.shape}")
-    w, _, seen = cubie_poses(markers, cube)
+    w, w_trans, seen = cubie_poses(markers, cube)
     smooth = max(2, int(round(SMOOTH_SECONDS * rate)))
     hold = max(2, int(round(HOLD_SECONDS * rate)))  # frames
     cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
     rest = cube.markers
+    # a marker that does not fit its cubie's shape (a label swapped with another cubie's) is not used; on a cubie
+    # with fewer than 3 markers seen there is no shape to check
     valid = np.isfinite(markers).all(axis=2)
+    counted = np.stack([valid[:, cubie == c].sum(axis=1) for c in range(8)], axis=1)[:, cubie] >= 3
+    off = np.linalg.norm(np.einsum("tmij,mj->tmi", w[:, cubie], rest) + w_trans[:, cubie] - markers, axis=-1)
+    valid &= ~counted | (off <= OUTLIER)
     world = np.nan_to_num(markers)
     n = len(markers)
     first, state = _start(w, seen, world, valid, cubie, rest)
@@ -278,6 +302,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
     angles = np.zeros((n, 6))
     cubies = np.repeat(start_state[None].astype(float), n, axis=0)
     committed: list[list] = []
+    quickest = np.inf  # frames: the quickest turn read
 
     def local(state):
         return np.einsum("mij,mj->mi", state[cubie], rest)
@@ -358,6 +383,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         cubies[seg[:, None], moving] = np.einsum("fij,njk->fnik", turn, state[moving].astype(float))
         quarters = int(np.round(progress[-1] / (np.pi / 2)))
         if quarters % 4:
+            quickest = min(quickest, max(len(seg) - 2 * hold, 1))  # from leaving its quarter to holding the next
             state = apply_moves(state, [(face, quarters)])
             if committed and committed[-1][0] == face:
                 committed[-1][1] += quarters
@@ -371,86 +397,13 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
     found = np.isfinite(translation).all(axis=1)  # _poses leaves rotation and translation NaN together
     rotvec = np.full((n, 3), np.nan)
     rotvec[found] = Rotation.from_matrix(rotation[found]).as_rotvec()
-    return CubeTrack(rotvec, translation, angles, format_moves(committed), state, cubies)
-
-
-
-
-def cube_errors(track: CubeTrack, pose, cubie_rotation) -> dict:
-    """How far a track is from the truth, frame by frame.
-
-    Parameters
-    ----------
-    track : CubeTrack
-    pose : ndarray (T, 4, 4)
-        The true cube frame (its body, the cubies not turning) to the world, metres.
-    cubie_rotation : ndarray (T, 8, 3, 3)
-        The true cubie rotations in the cube's frame.
-
-    Returns
-    -------
-    dict
-        ``position_mm`` (T,) and ``rotation_deg`` (T,): the cube's pose; ``layer_deg`` (T,): the largest
-        error of a cubie's rotation in the cube's frame (the turning layer's angle, which quarter it is
-        at included); NaN where the track has no pose.
-    """
-    rot = Rotation.from_rotvec(np.nan_to_num(track.rotation)).as_matrix()
-    found = np.isfinite(track.translation).all(axis=1)
-    position = np.linalg.norm(track.translation - pose[:, :3, 3], axis=1) * 1000
-    rotation = np.rad2deg(_angle(np.einsum("tji,tjk->tik", rot, pose[:, :3, :3])))
-    layer = np.rad2deg(_angle(np.einsum("tnji,tnjk->tnik", track.cubie_rotation, cubie_rotation))).max(axis=1)
-    rotation[~found] = np.nan
-    return {"position_mm": position, "rotation_deg": rotation, "layer_deg": layer}
+    moves = format_moves(committed)
+    return CubeTrack(rotvec, translation, angles, moves, state, cubies,
+                     check_track(w, seen, cubies, first, rate, moves,
+                                 quickest if np.isfinite(quickest) else QUICK_TURN_SECONDS * rate))
 
 
 def smoothing_window(rate: float) -> int:
     """Frames (odd) of the pose and angle smoothing of :func:`track_cube` for a take at ``rate`` Hz: 75 ms, 9 frames
     at 120 Hz; 1 (none) where 75 ms is under a frame and a half."""
     return max(int(round(0.075 * rate)) | 1, 1)
-
-
-def cube_motion(track: CubeTrack, cube: ArticulatedObject, rate: float, warnings=()) -> tuple[ObjectMotion, dict]:
-    """A cube's track as the object motion ``track-object --articulated`` writes, and the arrays written with it.
-
-    Parameters
-    ----------
-    track : CubeTrack
-    cube : ArticulatedObject
-    rate : float
-        Frames per second.
-    warnings : sequence of str
-        Stored with the motion.
-
-    Returns
-    -------
-    motion : ObjectMotion
-        The cube's pose (NaN where none), its markers' places on it, ``layer_angles`` (T, 6) as extra.
-    extra : dict
-        ``moves``, ``faces`` (the order of the layer angles), ``cubie_rotation`` (T, 8, 3, 3) and
-        ``cubie_of_marker`` (M,), for :func:`handcap.io.write_object_motion`.
-    """
-    motion = ObjectMotion(track.rotation, track.translation, rate, cube.name, cube.marker_names, cube.markers,
-                          {"layer_angles": track.layer_angle}, tuple(warnings))
-    return motion, {"moves": np.array(track.moves), "faces": np.array("".join(FACE_ORDER)),
-                    "cubie_rotation": track.cubie_rotation,
-                    "cubie_of_marker": np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])}
-
-
-def fitted_markers(track: CubeTrack, cube: ArticulatedObject) -> np.ndarray:
-    """Where the track puts every marker of the cube in every frame (the gaps of a take filled).
-
-    Parameters
-    ----------
-    track : CubeTrack
-    cube : ArticulatedObject
-        The description it was tracked with.
-
-    Returns
-    -------
-    ndarray (T, M, 3)
-        Metres, description order; NaN where the track has no pose.
-    """
-    cubie = np.repeat(np.arange(8), [len(p.marker_names) for p in cube.parts])
-    turn = Rotation.from_rotvec(np.nan_to_num(track.rotation)).as_matrix()
-    local = np.einsum("tmij,mj->tmi", track.cubie_rotation[:, cubie], cube.markers)
-    return np.einsum("tij,tmj->tmi", turn, local) + track.translation[:, None]

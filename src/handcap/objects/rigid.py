@@ -60,9 +60,14 @@ def kabsch(source, target, weights=None):
     return rotation, translation
 
 
-def kabsch_refit(source, target, weights, outlier: float):
-    """Kabsch of ``source`` (M, 3) onto every frame's ``target`` (T, M, 3), a point more than ``outlier``
-    metres from the first fit dropped and the fit repeated (a swapped or misplaced label).
+def kabsch_refit(source, target, weights, outlier: float, most: int | None = None):
+    """Kabsch of ``source`` (M, 3) onto every frame's ``target`` (T, M, 3), robust to swapped or misplaced labels:
+    while the farthest point is more than ``outlier`` metres from the fit and more than 3 points weigh, it is
+    dropped (with any as far as half of it) and the fit repeated, up to a quarter of the points (a body that bends
+    is not cut down to a rigid part).
+
+    The farthest first: a label 30 mm off pulls the first fit of a few points so far that good points lie
+    beyond ``outlier`` too (dropping them all at once left fewer than 3, and the spoilt fit).
 
     Parameters
     ----------
@@ -73,23 +78,43 @@ def kabsch_refit(source, target, weights, outlier: float):
         Non-negative; 0 drops a point.
     outlier : float
         Metres.
+    most : int, optional
+        At most this many points dropped in a frame (default: a quarter of those that weigh, at least 1).
 
     Returns
     -------
     rotation : ndarray (T, 3, 3)
     translation : ndarray (T, 3)
         NaN in frames where fewer than 3 points weigh, or where those that weigh lie within
-        :data:`MIN_SPREAD` of a line (the turn about it is free: one row of a patch's corners).
+        :data:`MIN_SPREAD` of a line (the turn about it is free: one row of a patch's corners), or (``most``
+        not given) where 3 points are left and one is still off.
     """
-    weights = np.asarray(weights, dtype=np.float64)
+    weights = np.array(weights, dtype=np.float64)
     rot, trans = kabsch(np.broadcast_to(source, target.shape), target, weights)
-    off = np.linalg.norm(np.einsum("tij,mj->tmi", rot, source) + trans[:, None] - target, axis=-1)
-    kept = np.where(off > outlier, 0.0, weights)
-    redo = (kept != weights).any(axis=1) & ((kept > 0).sum(axis=1) >= 3)
-    if redo.any():
-        weights = np.where(redo[:, None], kept, weights)
-        rot[redo], trans[redo] = kabsch(np.broadcast_to(source, target[redo].shape), target[redo], weights[redo])
+    allowed = np.maximum((weights > 0).sum(axis=1) // 4, 1) if most is None else np.full(len(target), most)
+    active = np.flatnonzero(allowed > 0)  # frames still being refitted
+    while len(active):
+        off = np.linalg.norm(np.einsum("tij,mj->tmi", rot[active], source) + trans[active, None] - target[active],
+                             axis=-1)
+        off = np.where(weights[active] > 0, off, -1.0)
+        # the farthest, and with it any as far as half of it (a few rounds, not one per point)
+        far = off > np.maximum(outlier, 0.5 * off.max(axis=1, keepdims=True))
+        count = np.minimum(np.minimum(far.sum(axis=1), allowed[active]), (weights[active] > 0).sum(axis=1) - 3)
+        keep = count > 0
+        active, off, count = active[keep], off[keep], count[keep]
+        if not len(active):
+            break
+        rank = np.argsort(np.argsort(-off, axis=1), axis=1)  # 0 for the farthest
+        weights[active] = np.where(rank < count[:, None], 0.0, weights[active])
+        allowed[active] -= count
+        rot[active], trans[active] = kabsch(np.broadcast_to(source, target[active].shape), target[active],
+                                            weights[active])
+        active = active[allowed[active] > 0]
     bad = ((weights > 0).sum(axis=1) < 3) | (line_spread(source, weights > 0) < MIN_SPREAD)
+    tight = np.flatnonzero((weights > 0).sum(axis=1) == 3) if most is None else []
+    if len(tight):  # down to 3 points and one still off: no pose fits them
+        off = np.linalg.norm(np.einsum("tij,mj->tmi", rot[tight], source) + trans[tight, None] - target[tight], axis=-1)
+        bad[tight] |= ((weights[tight] > 0) & (off > outlier)).any(axis=1)
     rot[bad], trans[bad] = np.nan, np.nan
     return rot, trans
 

@@ -11,7 +11,8 @@ from handcap.io import check_not_input, load_npz, read_markers, read_points, wri
 from handcap.objects import load_articulated, track_rigid
 from handcap.objects.articulated import SHIPPED
 from handcap.objects.cube_label import label_cube
-from handcap.objects.cube_track import cube_motion, fitted_markers, smoothing_window, track_cube
+from handcap.objects.cube_output import cube_motion, fitted_markers
+from handcap.objects.cube_track import smoothing_window, track_cube
 from handcap.objects.jointed import track_jointed
 from handcap.quality import plausibility as q
 from handcap.steps.step import Step, quality_line
