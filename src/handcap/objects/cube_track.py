@@ -35,8 +35,10 @@ from scipy.spatial.transform import Rotation
 from handcap.core.errors import HandcapError
 from handcap.objects.articulated import ArticulatedObject
 from handcap.objects.cube import FACE_ORDER, FACES, HOME, apply_moves, complete_state, format_moves, permutation
+from handcap.objects.cube_start import (cubie_history, free_place, place_cubie, start_state, undo_moves, unplaced,
+                                        unvouched)
 from handcap.objects.cube_check import QUICK_TURN_SECONDS, check_track
-from handcap.objects.rigid import kabsch, kabsch_refit, smooth_pose
+from handcap.objects.rigid import kabsch_refit, smooth_pose
 
 #: A layer within this of its last committed quarter (degrees) is at rest: the cube's spin is measured then.
 REST_DEG = 3.0
@@ -207,52 +209,6 @@ def _roughness(rot) -> float:
     return float(np.median(off))
 
 
-def _start(w, seen, world, valid, cubie, rest):
-    """The first frame to track from and the cubies' state there.
-
-    From the first frame in which most cubies are seen (at least four, or as many as are ever seen), the
-    first cubie seen sets the cube's frame; the others join as they are first seen (two markers and the
-    cube's centre, about which every cubie turns), placed in the frame that the known cubies' markers give,
-    while those still move as one body (no layer is turning yet). One cubie never seen by then is placed from
-    the seven others (:func:`~handcap.objects.cube.complete_state`).
-    """
-    counts = seen.sum(axis=1)
-    if counts.max() < 2:
-        raise HandcapError(f"the cube is never seen: in {len(w)} frames no two of its cubies show 3 markers "
-                           f"each")
-    first = int(np.argmax(counts >= min(4, counts.max())))
-    known = seen[first].copy()
-    state = np.zeros((8, 3, 3), dtype=np.int64)
-    state[known] = np.rint(np.einsum("ji,njk->nik", w[first, int(np.argmax(known))], w[first, known]))
-    for f in range(first + 1, len(w)):
-        if known.all():
-            break
-        use = valid[f] & known[cubie]
-        if use.sum() < 3:
-            continue
-        x = np.einsum("mij,mj->mi", state[cubie], rest)
-        rot, trans = kabsch(x, world[f], use.astype(float))
-        residual = np.sqrt(np.mean(np.sum((x[use] @ rot.T + trans - world[f, use]) ** 2, axis=1)))
-        if residual > 0.0025:  # a layer has begun to turn
-            break
-        for c in np.flatnonzero(~known):
-            mine = (cubie == c) & valid[f]
-            if mine.sum() < 2:
-                continue
-            # the cube's centre is a point of every cubie (it turns about it): with it, two markers place one
-            turn, _ = kabsch(np.vstack([rest[mine], np.zeros(3)]), np.vstack([world[f, mine], trans]))
-            guess = rot.T @ turn
-            if np.abs(guess - np.rint(guess)).max() < 0.2:
-                state[c], known[c] = np.rint(guess), True
-    if (~known).sum() == 1:  # the seven others leave one place, and the cube's twists one turn there
-        return first, complete_state(state, known)
-    if not known.all():
-        missing = ", ".join(np.array(["DBL", "DFL", "UBL", "UFL", "DBR", "DFR", "UBR", "UFR"])[~known])
-        raise HandcapError(f"the cube's cubies {missing} are never seen (2 markers each) before its first turn: "
-                           f"cannot tell where they start")
-    return first, state
-
-
 def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float = 120.0) -> CubeTrack:
     """Pose, layer angles and moves of a 2x2x2 cube from its labelled markers (see the module docstring).
 
@@ -296,27 +252,50 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
     valid &= ~counted | (off <= OUTLIER)
     world = np.nan_to_num(markers)
     n = len(markers)
-    first, state = _start(w, seen, world, valid, cubie, rest)
-    start_state = state.copy()
+    first, state, known = start_state(w, seen, world, valid, cubie, rest)
+    usable = valid & known[cubie]  # the markers of cubies placed so far
+    start = state.copy()
     rotation, translation = np.full((n, 3, 3), np.nan), np.full((n, 3), np.nan)
     angles = np.zeros((n, 6))
-    cubies = np.repeat(start_state[None].astype(float), n, axis=0)
+    cubies = np.repeat(start[None].astype(float), n, axis=0)
     committed: list[list] = []
+    turns: list[tuple] = []  # every turn read: frames, face, the layer's rotation, quarters
+    joins: list[tuple] = []  # cubies placed after the moves began to be read: cubie, frame, those placed before
     quickest = np.inf  # frames: the quickest turn read
 
     def local(state):
         return np.einsum("mij,mj->mi", state[cubie], rest)
 
+    def settle(c, now, frame):
+        """Cubie ``c`` placed at ``now`` (its rotation in the cube's frame) in ``frame``, where it started and its
+        past from the turns read since."""
+        joins.append((c, frame, known.copy()))
+        state[c], known[c] = now, True
+        start[c] = undo_moves(state, c, committed)
+        cubies[:, c] = cubie_history(start[c], c, turns, n)
+        usable[:] = valid & known[cubie]
+
+    def join(frames):
+        """Cubies not yet placed that ``frames`` (the cube at rest, its pose found) show with 2 markers."""
+        for c in np.flatnonzero(~known):
+            for f in frames:
+                mine = (cubie == c) & valid[f]
+                if mine.sum() >= 2 and np.isfinite(translation[f]).all():
+                    now = place_cubie(rest[mine], world[f, mine], rotation[f], translation[f])
+                    if now is not None and free_place(state, known, c, now):
+                        settle(c, now, f)
+                        break
+
     # the search for moves looks at a few markers spread over each cubie (a patched cube has dozens)
-    few = np.concatenate([start + np.unique(np.round(np.linspace(0, len(p.marker_names) - 1, SEARCH_MARKERS)))
-                          for start, p in zip(np.cumsum([0] + [len(p.marker_names) for p in cube.parts]),
+    few = np.concatenate([offset + np.unique(np.round(np.linspace(0, len(p.marker_names) - 1, SEARCH_MARKERS)))
+                          for offset, p in zip(np.cumsum([0] + [len(p.marker_names) for p in cube.parts]),
                                               cube.parts)]).astype(int)
 
     def halves(state, a, frames, markers=slice(None)):
         """Poses of the minus and plus halves along axis ``a`` in ``frames``, and their relative angle."""
         where = np.einsum("nij,nj->ni", state, HOME)[cubie, a][markers]
         x = local(state)[markers]
-        seen = valid[frames][:, markers]
+        seen = usable[frames][:, markers]
         minus = _poses(x, world[frames][:, markers], seen & (where < 0))
         plus = _poses(x, world[frames][:, markers], seen & (where > 0))
         return minus, plus, _relative_angle(minus[0], plus[0], np.eye(3)[a])
@@ -327,14 +306,16 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         theta = np.stack([halves(state, a, frames, few)[2] for a in range(3)])  # (3, F)
         moving = np.abs(theta) > np.deg2rad(MOVE_DEG)
         if not moving.any() and frames[-1] < n - 1:  # at rest throughout: on to the next stretch
-            rest = slice(t, int(frames[-1]) + 1 - SPAN // 8)
-            rotation[rest], translation[rest] = _poses(local(state), world[rest], valid[rest].astype(float))
-            cubies[rest] = state
-            t = rest.stop
+            calm = slice(t, int(frames[-1]) + 1 - SPAN // 8)  # (named apart from the markers' rest places)
+            rotation[calm], translation[calm] = _poses(local(state), world[calm], usable[calm].astype(float))
+            cubies[calm] = state
+            join(range(calm.start, calm.stop))
+            t = calm.stop
             continue
         begin = int(np.argmax(moving.any(axis=0))) if moving.any() else len(frames)
-        rot_all, trans_all = _poses(local(state), world[t:t + begin], valid[t:t + begin].astype(float))
+        rot_all, trans_all = _poses(local(state), world[t:t + begin], usable[t:t + begin].astype(float))
         rotation[t:t + begin], translation[t:t + begin] = rot_all, trans_all  # at rest: every marker
+        join(range(t, t + begin))
         if begin == len(frames):
             cubies[t:] = state
             break
@@ -345,7 +326,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         # turning layer there).
         a = int(np.argmax(np.abs(theta[:, begin])))
         placed, side = local(state), np.einsum("nij,nj->ni", state, HOME)[cubie]
-        bends = np.array([[_bend(placed, world[f], valid[f], side[:, k]) for f in frames[begin:begin + 3]]
+        bends = np.array([[_bend(placed, world[f], usable[f], side[:, k]) for f in frames[begin:begin + 3]]
                           for k in range(3)])
         bends = np.array([np.mean(b[np.isfinite(b)]) if np.isfinite(b).any() else np.inf for b in bends])
         if bends.min() <= OUTLIER:
@@ -382,6 +363,7 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
         cubies[seg] = state
         cubies[seg[:, None], moving] = np.einsum("fij,njk->fnik", turn, state[moving].astype(float))
         quarters = int(np.round(progress[-1] / (np.pi / 2)))
+        turns.append((seg, face, turn, quarters))
         if quarters % 4:
             quickest = min(quickest, max(len(seg) - 2 * hold, 1))  # from leaving its quarter to holding the next
             state = apply_moves(state, [(face, quarters)])
@@ -390,17 +372,22 @@ def track_cube(markers, cube: ArticulatedObject, *, window: int = 9, rate: float
             else:
                 committed.append([face, quarters])
         t = int(seg[-1]) + 1
+    if (~known).sum() == 1:  # never seen at rest: the seven others leave it one place and one turn
+        c = int(np.flatnonzero(~known)[0])
+        settle(c, complete_state(state, known)[c], n - 1)
+    if not known.all():
+        raise unplaced(known)
     if first:  # before the cube was first seen whole: its pose only, as at the start
-        rotation[:first], translation[:first] = _poses(local(start_state), world[:first],
-                                                       valid[:first].astype(float))
+        rotation[:first], translation[:first] = _poses(local(start), world[:first], usable[:first].astype(float))
     rotation, translation = smooth_pose(rotation, translation, window | 1)
     found = np.isfinite(translation).all(axis=1)  # _poses leaves rotation and translation NaN together
     rotvec = np.full((n, 3), np.nan)
     rotvec[found] = Rotation.from_matrix(rotation[found]).as_rotvec()
     moves = format_moves(committed)
+    quickest = quickest if np.isfinite(quickest) else QUICK_TURN_SECONDS * rate
     return CubeTrack(rotvec, translation, angles, moves, state, cubies,
-                     check_track(w, seen, cubies, first, rate, moves,
-                                 quickest if np.isfinite(quickest) else QUICK_TURN_SECONDS * rate))
+                     unvouched(joins, cubies, seen, rate, first + quickest)
+                     + check_track(w, seen, cubies, first, rate, moves, quickest))
 
 
 def smoothing_window(rate: float) -> int:
