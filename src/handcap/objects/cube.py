@@ -176,11 +176,6 @@ def twists(state) -> np.ndarray:
     return out
 
 
-def rotation_angle(rotation) -> np.ndarray:
-    """The angle of rotations (..., 3, 3), radians, 0 to pi."""
-    return np.arccos(np.clip((np.trace(rotation, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
-
-
 def _rotations() -> np.ndarray:
     """The 24 integer rotations (24, 3, 3): signed permutation matrices of determinant 1."""
     out = [np.diag(signs)[list(order)] for order in permutations(range(3)) for signs in product((1, -1), repeat=3)]

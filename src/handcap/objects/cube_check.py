@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from handcap.objects.cube import HOME, rotation_angle
+from handcap.core.rotations import axis_angle_from_matrix
+from handcap.objects.cube import HOME
 
 #: Two cubies seen in one frame contradict the track when the cube's orientations they give differ by more than
 #: this (degrees) about an axis of the cube. A missed or misread turn leaves a layer 90 deg off; over 100 synthetic
@@ -50,18 +51,12 @@ def disagreement(seen_rotation, seen, cubie_rotation, *, axis_deg: float = 20.0)
     """
     seen = np.asarray(seen, dtype=bool)
     cube = np.einsum("tcij,tckj->tcik", np.where(seen[..., None, None], seen_rotation, np.eye(3)), cubie_rotation)
-    turn = np.einsum("taji,tbjk->tabik", cube, cube)  # (T, 8, 8, 3, 3): b's orientation relative to a's
-    angle = rotation_angle(turn)
-    axis = np.stack([turn[..., 2, 1] - turn[..., 1, 2], turn[..., 0, 2] - turn[..., 2, 0],
-                     turn[..., 1, 0] - turn[..., 0, 1]], axis=-1)  # 2 sin(angle) times the axis
-    trace = np.trace(turn, axis1=-2, axis2=-1)
-    # near 180 deg the antisymmetric part vanishes: the axis is the column of R + I of largest norm
-    sym = turn + turn.swapaxes(-1, -2) + np.eye(3) * (1 - trace)[..., None, None]
-    half = np.take_along_axis(sym, np.argmax(np.linalg.norm(sym, axis=-2), axis=-1)[..., None, None], axis=-1)[..., 0]
-    axis = np.where((angle > np.pi * 5 / 6)[..., None], half, axis)
-    along = np.abs(axis).max(axis=-1) / np.maximum(np.linalg.norm(axis, axis=-1), 1e-300)
-    pairs = seen[:, :, None] & seen[:, None, :] & (along >= np.cos(np.deg2rad(axis_deg)))
-    out = np.where(pairs, angle, 0.0).max(axis=(1, 2))
+    a, b = np.triu_indices(8, 1)  # the 28 pairs
+    turn = axis_angle_from_matrix(np.einsum("tpji,tpjk->tpik", cube[:, a], cube[:, b]))  # (T, 28, 3): b from a
+    angle = np.linalg.norm(turn, axis=-1)
+    along = np.abs(turn).max(axis=-1) / np.maximum(angle, 1e-300)  # 1 for a turn about an axis of the cube
+    pairs = seen[:, a] & seen[:, b] & (along >= np.cos(np.deg2rad(axis_deg)))
+    out = np.where(pairs, angle, 0.0).max(axis=1)
     return np.where(seen.sum(axis=1) >= 2, out, np.nan)
 
 

@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.motion import ObjectMotion
 from handcap.objects.articulated import ArticulatedObject
-from handcap.objects.cube import FACE_ORDER, rotation_angle
+from handcap.core.rotations import rotation_angle
+from handcap.objects.cube import FACE_ORDER
 from handcap.objects.cube_track import CubeTrack
 
 
