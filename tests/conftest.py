@@ -26,7 +26,9 @@ SHARED_FIXTURE_GROUPS = {
         # module fixtures of 1-4 s that were built on both workers when the module's tests were shared out
         "tests/report/test_html.py", "tests/synth/test_scene.py", "tests/multiview/test_reconstruct.py",
         "tests/detect/test_pyramid.py", "tests/solve/test_cli_solve.py", "tests/multiview/test_clean.py",
-        "tests/markerless/test_grasp.py", "tests/markerless/test_contact.py", "tests/test_cli_bad_input.py")},
+        "tests/markerless/test_grasp.py", "tests/markerless/test_contact.py", "tests/test_cli_bad_input.py",
+        # a rendered, detected take of 8 cameras (10 s), built on both workers before
+        "tests/detect/test_seek.py")},
 }
 
 
