@@ -87,7 +87,8 @@ def test_stream_verb_and_bad_inputs(capture, tmp_path, capsys):
             "--fast", "--seconds", "0.5"]
     assert main(argv) == 0
     assert "60 frames, latency p50" in capsys.readouterr().out
-    for extra, message in ((["--osc", "nowhere"], "give PORT or HOST:PORT"), (["--osc", "1:99999"], "1-65535")):
+    for extra, message in ((["--osc", "nowhere"], "give PORT or HOST:PORT"), (["--osc", "1:99999"], "1-65535"),
+                           (["--smoothing", "-1"], "smoothing must be 0 or more")):
         assert main([*argv, *extra]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err

@@ -11,6 +11,7 @@ from handcap.occlusion import SHIPPED_MODELS
 from handcap.steps.step import Step
 from handcap.stream import LslOutput, OscOutput, WebSocketOutput
 from handcap.stream.live import stream, stream_source
+from handcap.stream.solver import SMOOTHING
 from handcap.stream.sources import QtmSource
 
 
@@ -30,10 +31,10 @@ def _cmd_stream(a):
         outputs += [LslOutput(name, source.rate, JOINT_NAMES + TIP_NAMES, PHI_NAMES) for name in a.lsl or ()]
         if a.qtm:  # live: no end known, so no joints kept
             stats = stream_source(source, attachment, hand, outputs, seconds=a.seconds, labeling=a.labeling,
-                                  fill=a.fill, keep_solved=False)
+                                  fill=a.fill, keep_solved=False, smoothing=a.smoothing)
         else:
             stats = stream(source, attachment, hand, outputs, realtime=not a.fast, seconds=a.seconds,
-                           labeling=a.labeling, fill=a.fill)
+                           labeling=a.labeling, fill=a.fill, smoothing=a.smoothing)
     finally:
         for output in outputs:
             output.close()
@@ -72,6 +73,10 @@ def add_stream(verbs) -> None:
                    help="serve WebSocket clients on this port (repeatable)")
     p.add_argument("--fast", action="store_true",
                    help="replay as fast as frames are solved, not at the take's rate")
+    p.add_argument("--smoothing", type=float, default=SMOOTHING, metavar="K",
+                   help=f"pull each frame's angles towards where the frames before carry them, K times as strong as "
+                        f"the markers in a typical frame (default {SMOOTHING}; 0: each frame from its markers alone). "
+                        "Keeps a sparse glove from jumping between two poses its markers allow")
     p.add_argument("--seconds", type=float, help="stop after this many seconds of frames")
     p.add_argument("--units", choices=("mm", "cm", "m"), help="unit of the replayed file's coordinates")
     p.set_defaults(run=_cmd_stream)

@@ -23,6 +23,7 @@ from handcap.core.errors import HandcapError
 from handcap.core.points import PointCloudSequence
 from handcap.core.markers import MarkerSequence
 from handcap.stream.pipeline import LivePipeline
+from handcap.stream.solver import SMOOTHING
 from handcap.stream.sources import ReplaySource
 
 
@@ -80,7 +81,7 @@ def resident_mb() -> float:
 
 
 def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seconds: float | None = None,
-           progress: bool | None = None, labeling=None, fill=None) -> StreamStats:
+           progress: bool | None = None, labeling=None, fill=None, smoothing: float = SMOOTHING) -> StreamStats:
     """Replay a take as a live stream: label, fill and solve every frame and send it to every output.
 
     Parameters
@@ -101,6 +102,8 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
         Progress bar (default: on a terminal).
     labeling, fill
         A labelling model and an occlusion model (see :class:`~handcap.stream.pipeline.LivePipeline`).
+    smoothing : float
+        The solve's pull towards the predicted angles (:class:`~handcap.stream.solver.FrameSolver`; 0: none).
 
     Returns
     -------
@@ -117,11 +120,13 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
         frames[:, columns < 0] = np.nan
     n = len(frames) if seconds is None else min(len(frames), int(round(seconds * markers.rate)))
     source = ReplaySource(frames[:n], markers.rate, names, realtime=realtime)
-    return stream_source(source, attachment, hand, outputs, progress=progress, labeling=labeling, fill=fill)
+    return stream_source(source, attachment, hand, outputs, progress=progress, labeling=labeling, fill=fill,
+                         smoothing=smoothing)
 
 
 def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None = None,
-                  progress: bool | None = None, labeling=None, fill=None, keep_solved: bool = True) -> StreamStats:
+                  progress: bool | None = None, labeling=None, fill=None, keep_solved: bool = True,
+                  smoothing: float = SMOOTHING) -> StreamStats:
     """Label, fill and solve every frame of a live source and send it to every output.
 
     Parameters
@@ -141,6 +146,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     keep_solved : bool
         Keep every frame's joints in the result (``solved``); a stream of no known end should not (its other
         records take 40 bytes a frame).
+    smoothing : float
+        The solve's pull towards the predicted angles (:class:`~handcap.stream.solver.FrameSolver`; 0: none).
 
     Returns
     -------
@@ -154,7 +161,7 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
         if tuple(source.names) != tuple(names):  # a replay comes in the attachment's order already
             columns = marker_columns(source.names, names)
     limit = None if seconds is None else int(round(seconds * source.rate))
-    pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill)
+    pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill, smoothing=smoothing)
     size = len(source) if hasattr(source, "__len__") else int(60 * source.rate)
     if limit is not None:
         size = min(size, limit)

@@ -23,7 +23,7 @@ import numpy as np
 from handcap.core.errors import HandcapError
 from handcap.labeling import LabelingModel, OnlineLabeler, lap
 from handcap.occlusion import OcclusionFiller, OcclusionModel
-from handcap.stream.solver import ITERATIONS, FrameSolver
+from handcap.stream.solver import ITERATIONS, SMOOTHING, FrameSolver
 
 #: Stages of a live frame, in order.
 STAGES = ("label", "fill", "solve")
@@ -89,12 +89,15 @@ class LivePipeline:
         The labeler's assignment hypotheses per frame.
     adapt_seconds : float
         Seconds between the labeler's re-alignments of its spatial model to the take.
+    smoothing : float
+        The solve's pull towards the angles the frames before predict (:class:`FrameSolver`; 0: none).
     """
 
     def __init__(self, attachment, hand, *, rate: float, labeling=None, fill=None, iterations: int = ITERATIONS,
-                 hypotheses: int = LIVE_HYPOTHESES, adapt_seconds: float = ADAPT_SECONDS):
+                 hypotheses: int = LIVE_HYPOTHESES, adapt_seconds: float = ADAPT_SECONDS,
+                 smoothing: float = SMOOTHING):
         self.names = tuple(attachment.marker_names)
-        self.solver = FrameSolver(attachment, hand, iterations=iterations)
+        self.solver = FrameSolver(attachment, hand, iterations=iterations, smoothing=smoothing)
         self.labeler = self.label_columns = None
         if labeling is not None:
             model = labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)
