@@ -51,7 +51,7 @@ def main() -> None:
         start = time.perf_counter()
         out = [solver.solve(f) for f in frames]
         per_frame = (time.perf_counter() - start) / len(frames)
-        weight = (smoothing * np.median(solver.residuals) / np.median(solver.surprises)) if smoothing else 0.0
+        weight = solver.weight or 0.0
         return np.array([o[0] for o in out]), np.array([o[2] for o in out]), per_frame, weight
 
     if GLOVE.is_file():

@@ -79,6 +79,8 @@ def main() -> None:
                         help="the range of motion the labelling model is trained on (another take of the subject)")
     parser.add_argument("--fast", action="store_true", help="as fast as frames are handled, not at the take's rate")
     parser.add_argument("--labelled", action="store_true", help="replay the labelled markers: no label, no fill")
+    parser.add_argument("--smoothing", type=float, default=None,
+                        help="the live solve's pull towards the predicted angles (default the solver's; 0: none)")
     a = parser.parse_args()
 
     from handcap.core.markers import MarkerSequence
@@ -123,10 +125,12 @@ def main() -> None:
     what = "labelled markers" if a.labelled else "unlabelled points: label + fill + solve"
     print(f"{len(layout.names)} markers ({len(layout.rigid)} on the back of the hand), {what} ({source.n_frames} "
           f"frames at {rate:g} Hz = {a.seconds:g} s, a {a.take_seconds:g} s take looped), "
-          f"{'as fast as handled' if a.fast else 'at the take rate'}")
+          f"{'as fast as handled' if a.fast else 'at the take rate'}"
+          f"{'' if a.smoothing is None else f', smoothing {a.smoothing:g}'}")
     start = time.perf_counter()
     stats = stream(source, capture.attachment, OpenHand(capture.hand_motion.side), [osc, lsl, ws],
-                   realtime=not a.fast, labeling=labeling, fill=fill)
+                   realtime=not a.fast, labeling=labeling, fill=fill,
+                   **({} if a.smoothing is None else {"smoothing": a.smoothing}))
     wall = time.perf_counter() - start
     stop.set()
     got = counts.get(timeout=60)

@@ -171,7 +171,9 @@ class LivePipeline:
 
     def idle(self) -> None:
         """The work the last frame left for before the next one (the labeler's filters and its periodic
-        re-alignment to the take, :meth:`OnlineLabeler.idle`): call it once the frame's result is sent, so that
-        its cost falls between frames. Without it, the next :meth:`frame` does it first (same labels)."""
+        re-alignment to the take, :meth:`OnlineLabeler.idle`; the solver's solve from the markers alone,
+        :meth:`FrameSolver.idle`): call it once the frame's result is sent, so that its cost falls between frames.
+        Without it, the next :meth:`frame` does it first (same labels, same joints)."""
         if self.labeler is not None:
             self.labeler.idle()
+        self.solver.idle()

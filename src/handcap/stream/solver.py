@@ -10,8 +10,9 @@ about 20 times faster on one frame than the batch code, which is the fallback.
 Where the markers leave two poses about equally good (a sparse glove whose markers sit a few millimetres off the
 calibrated hand), a frame solved on its own can jump to the other pose and back. The batch solver mends such
 excursions from the frames on both sides (:mod:`handcap.solve.continuity`); a live frame has only those before it.
-So each warm-started frame is solved twice: once from the markers alone, and once with the angles pulled towards
-where the two frames before carry them (half their last change, :data:`DAMPING`), and the second is kept. The pull's
+So each warm-started frame is solved with the angles pulled towards where the two frames before carry them (half
+their last change, :data:`DAMPING`), and once more from its markers alone, after the result is sent
+(:meth:`FrameSolver.idle`): only the later frames' weight needs that. The pull's
 weight is the stream's own: :data:`SMOOTHING` times the ratio of the median marker residual (RMS over the markers)
 to the median distance of the markers-alone solve's angles from that prediction (RMS over the angles), over the last
 :data:`WINDOW` frames, so that in a typical frame the pull weighs a fraction of what the markers do. A stream whose
@@ -109,6 +110,8 @@ class FrameSolver:
         self.smoothing = float(smoothing)
         self.recent: list = []  # the angles of the last two frames solved in a row (the prediction's)
         self.residuals, self.surprises = deque(maxlen=WINDOW), deque(maxlen=WINDOW)  # metres, radians
+        self.pending = None  # the work :meth:`idle` does
+        self.weight = None  # the pull's, metres per radian (None until WARMUP frames were measured)
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
         self.rest_joints, self.rest_tips = np.asarray(rest_joints), np.asarray(rest_tips)
@@ -136,6 +139,7 @@ class FrameSolver:
         rms : float
             RMS residual of the seen markers, metres (NaN when none).
         """
+        self.idle()
         target = np.asarray(positions, dtype=np.float64).reshape(1, len(self.names), 3)
         observed = np.isfinite(target).all(axis=2)
         if observed.sum() < 3:
@@ -148,17 +152,34 @@ class FrameSolver:
             self.recent = []
         else:  # from the frame before, whose kinematics the last solve returned
             init, iterations, kin = self.pose, self.iterations, self.kin
-        result = self._iterate(init, kin, target, observed, iterations)
-        if self.smoothing > 0 and len(self.recent) == 2:
+        if self.smoothing > 0 and len(self.recent) == 2 and self.weight is not None:
             prediction = self.recent[1] + DAMPING * (self.recent[1] - self.recent[0])
-            self.residuals.append(np.sqrt(np.mean(result[3] ** 2)))
-            self.surprises.append(np.sqrt(np.mean((result[0].phi[0] - prediction) ** 2)))
-            if len(self.surprises) >= WARMUP:
-                weight = self.smoothing * np.median(self.residuals) / max(float(np.median(self.surprises)), 1e-6)
-                result = self._iterate(init, kin, target, observed, iterations, prediction, weight)
+            result = self._iterate(init, kin, target, observed, iterations, prediction, self.weight)
+            self.pending = (init, kin, target, observed, iterations, prediction)  # the solve from the markers alone
+        else:
+            result = self._iterate(init, kin, target, observed, iterations)
+            if self.smoothing > 0 and len(self.recent) == 2:
+                self._measure(result, self.recent[1] + DAMPING * (self.recent[1] - self.recent[0]))
         out = self._finish(*result)
         self.recent = [] if self.pose is None else [*self.recent[-1:], out[1]]
         return out
+
+    def idle(self) -> None:
+        """The last frame's solve from its markers alone, which only the pull's weight in later frames needs: call
+        it once the frame's result is sent, so that its cost falls between frames. Without it, the next
+        :meth:`solve` does it first (same results)."""
+        if self.pending is not None:
+            init, kin, target, observed, iterations, prediction = self.pending
+            self.pending = None
+            self._measure(self._iterate(init, kin, target, observed, iterations), prediction)
+
+    def _measure(self, alone, prediction) -> None:
+        """Keep a frame's RMS marker residual and its angles' RMS distance from ``prediction``, solved from its
+        markers ``alone`` (the result of :meth:`_iterate`), and the pull's weight from their medians."""
+        self.residuals.append(np.sqrt(np.mean(alone[3] ** 2)))
+        self.surprises.append(np.sqrt(np.mean((alone[0].phi[0] - prediction) ** 2)))
+        if len(self.surprises) >= WARMUP:
+            self.weight = self.smoothing * np.median(self.residuals) / max(float(np.median(self.surprises)), 1e-6)
 
     def _iterate(self, init, kin, target, observed, iterations, prediction=None, weight=0.0):
         """Iterations from ``init`` (with its kinematics ``kin``, or None); with ``prediction`` (27,) radians, the
