@@ -18,7 +18,10 @@ from handcap.solve.continuity import excursions
 
 @pytest.fixture
 def unmended(monkeypatch):
-    """Solve as before the mending (step 5 of solve_lm off)."""
+    """Solve as before the mending (step 5 of solve_lm off); step 6 (the pull towards the neighbours) is off in
+    both the solves compared, so that the mending alone is measured."""
+    monkeypatch.setattr(motion_module, "NEIGHBOUR_PASSES", 0)
+
     def solve(*args, **kwargs):
         with monkeypatch.context() as patch:
             patch.setattr(motion_module, "mend_excursions", lambda *a: 0)
