@@ -59,6 +59,24 @@ def shared_data() -> Path:
 
 
 @pytest.fixture(scope="session")
+def real_glove(shared_data):
+    """The real Qualisys glove recording (its glove-13 markers, 6,000 frames at 100 Hz) and the attachment
+    calibrated on its first 1,000 frames: ``(MarkerSequence, MarkerAttachment)``."""
+    import warnings
+
+    from handcap.core.errors import HandcapWarning
+    from handcap.io import read_markers
+    from handcap.layouts import load_layout
+    from handcap.solve import calibrate_attachment
+
+    layout = load_layout("glove-13")
+    take = read_markers(shared_data / "markers/hand_embodiment_glove/recording.tsv").select(layout.names)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HandcapWarning)
+        return take, calibrate_attachment(take.frames(0, 1000), layout).attachment
+
+
+@pytest.fixture(scope="session")
 def gl_ok():
     """Skip, saying why, where the renderer cannot run: no moderngl (extra 'images') or no headless OpenGL."""
     pytest.importorskip("moderngl", reason="the renderer needs moderngl (extra 'images')")

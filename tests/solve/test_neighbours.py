@@ -36,17 +36,8 @@ def test_synthetic_joints_come_closer_to_the_truth(monkeypatch, layout, rate, se
     assert np.percentile(error[1], 99) < np.percentile(error[0], 99)
 
 
-@pytest.mark.realdata
-def test_the_real_glove_steadier_and_fitted_as_before(shared_data, monkeypatch):
-    from handcap.io import read_markers
-    from handcap.layouts import load_layout
-    from handcap.solve import calibrate_attachment
-
-    layout = load_layout("glove-13")
-    take = read_markers(shared_data / "markers/hand_embodiment_glove/recording.tsv").select(layout.names)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", HandcapWarning)
-        attachment = calibrate_attachment(take.frames(0, 1000), layout).attachment
+def test_the_real_glove_steadier_and_fitted_as_before(real_glove, monkeypatch):
+    take, attachment = real_glove
     before, after = _both(monkeypatch, take.frames(1500, 3000), attachment)
     # measured on the whole recording: MSNR 7.3 -> 9.5 dB, mean marker residual 1.340 -> 1.346 mm
     assert msnr(after.joints) > msnr(before.joints) + 1.0

@@ -69,23 +69,13 @@ def test_a_stream_solved_compiled_or_not_gives_the_same_joints():
     assert np.nanmedian(np.linalg.norm(a - capture.hand_motion.joints, axis=-1)) < 0.002
 
 
-def test_a_rejected_step_is_tried_again_and_the_hand_does_not_freeze(shared_data, monkeypatch):
+def test_a_rejected_step_is_tried_again_and_the_hand_does_not_freeze(real_glove, monkeypatch):
     # Real glove, 13 markers. With the one warm-started iteration's rejected step counted as the frame's
     # iteration, the pose froze while the markers moved, then jumped: 245 of 6,000 frames (p99 RMS 6.8 mm). Each
     # frame now takes a step (up to 4 tries, more damped each), compiled or not alike.
-    import warnings
-
     import handcap.stream.solver as stream_solver
-    from handcap.core.errors import HandcapWarning
-    from handcap.io import read_markers
-    from handcap.layouts import load_layout
-    from handcap.solve import calibrate_attachment
 
-    layout = load_layout("glove-13")
-    take = read_markers(shared_data / "markers/hand_embodiment_glove/recording.tsv").select(layout.names)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", HandcapWarning)
-        attachment = calibrate_attachment(take.frames(0, 1000), layout).attachment
+    take, attachment = real_glove
     frames = take.positions[:1500]
     moved = np.nanmax(np.linalg.norm(np.diff(frames, axis=0), axis=-1), axis=1) > 0.0005
 

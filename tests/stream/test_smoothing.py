@@ -2,13 +2,11 @@
 glove no longer jumps between the two poses its markers allow, synthetic takes come closer to their truth, and its
 weight follows the stream (rate, noise), not a constant."""
 
-import warnings
 
 import numpy as np
 import pytest
 
 from handcap import HandcapError
-from handcap.core.errors import HandcapWarning
 from handcap.hand import OpenHand
 from handcap.quality.metrics import msnr
 from handcap.quality.motion_checks import jerk_spikes
@@ -23,17 +21,8 @@ def _solved(solver, frames):
     return np.array([o[0] for o in out]), np.array([o[2] for o in out])
 
 
-@pytest.mark.realdata
-def test_the_real_glove_streams_without_jumping_between_poses(shared_data):
-    from handcap.io import read_markers
-    from handcap.layouts import load_layout
-    from handcap.solve import calibrate_attachment
-
-    layout = load_layout("glove-13")
-    take = read_markers(shared_data / "markers/hand_embodiment_glove/recording.tsv").select(layout.names)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", HandcapWarning)
-        attachment = calibrate_attachment(take.frames(0, 1000), layout).attachment
+def test_the_real_glove_streams_without_jumping_between_poses(real_glove):
+    take, attachment = real_glove
     frames = take.positions[1500:3000]  # frames the calibration did not see
     alone, alone_rms = _solved(FrameSolver(attachment, OpenHand("right"), smoothing=0.0), frames)
     pulled, pulled_rms = _solved(FrameSolver(attachment, OpenHand("right")), frames)

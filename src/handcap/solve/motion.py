@@ -326,7 +326,7 @@ def _pull_to_neighbours(kernel, model, target, observed, held, priors, scale, it
     seen marker) to the median RMS distance of the angles from their neighbours' mean, so that in a typical frame
     the pull weighs half what the markers do. It shares its target with the weak pull to a relaxed hand (weights
     added in quadrature), as the live solver's pull towards its prediction does (``handcap.stream.solver``).
-    Measured with ``benchmarks/solve_neighbours.py`` (2026-12-01): on 13 synthetic takes the joints came closer to
+    Measured with ``benchmarks/smoothing.py`` (2026-12-01): on 13 synthetic takes the joints came closer to
     the truth in every one (median 0.13-1.15 -> 0.11-0.97 mm, p99 lower in each), the fitted markers a little
     further from the measured ones (less of their noise followed); on the real glove 6 -> 0 jerk spikes, MSNR 7.3
     -> 9.5 dB, mean marker residual 1.340 -> 1.346 mm.

@@ -21,7 +21,7 @@ markers sit millimetres off the calibrated hand is so pulled harder than one who
 priors' weak pull to a relaxed hand (weights added in quadrature), which keeps the directions no marker constrains
 (a thumb seen by two markers turns about their line) from drifting along with the prediction.
 
-Measured with ``benchmarks/live_solve.py`` (2026-12-01): on the real Qualisys glove (6,000 frames at 100 Hz, 13
+Measured with ``benchmarks/smoothing.py`` (2026-12-01): on the real Qualisys glove (6,000 frames at 100 Hz, 13
 markers, calibrated on its first 1,500) the joints' jerk spikes fell from 121 to 0 and the motion signal-to-noise
 ratio rose from 3.2 to 13.2 dB (the batch solver: 6 spikes, 7.3 dB); the RMS marker residual rose from 1.67 to
 1.79 mm, and a frame takes 0.23 ms instead of 0.09. On eleven synthetic takes with truth (glove-13 and joints-19,
