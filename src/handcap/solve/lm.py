@@ -23,7 +23,7 @@ Numerical Optimization, ch. 10.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -86,6 +86,22 @@ class Priors:
         if self.rest is not None:
             return np.asarray(self.rest, dtype=np.float64)
         return _RELAXED.copy()
+
+    def pulled(self, target, weight: float) -> "Priors":
+        """These priors with a second pull, towards ``target`` at ``weight`` metres per radian, joined to the weak
+        pull: one quadratic pull towards the two targets weighed by their squared weights, of weight their
+        quadrature sum (the same cost, up to a constant).
+
+        Parameters
+        ----------
+        target : ndarray (27,) or (T, 27)
+            Radians (one target per frame where the solve takes several frames).
+        weight : float
+            Metres per radian.
+        """
+        both = float(np.hypot(self.rest_weight, weight))
+        joined = (self.rest_weight ** 2 * self.rest_phi() + weight ** 2 * np.asarray(target, np.float64)) / both ** 2
+        return replace(self, rest=joined, rest_weight=both)
 
 
 def robust_weights(norms, scale):

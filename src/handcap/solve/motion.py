@@ -334,19 +334,17 @@ def _pull_to_neighbours(kernel, model, target, observed, held, priors, scale, it
     frames = np.flatnonzero(observed[1:-1].sum(axis=1) >= 3) + 1
     if not len(frames):
         return
-    relaxed, light = priors.rest_phi(), priors.rest_weight
     markers = max(float(observed.sum(axis=1).mean()), 1.0)
     for _ in range(NEIGHBOUR_PASSES):
         middle = (solved.phi[frames - 1] + solved.phi[frames + 1]) / 2
         bend = np.sqrt(np.mean((solved.phi[frames] - middle) ** 2, axis=1))
         cost = _costs(model, solved, target, observed, held, priors, scale)
         weight = NEIGHBOUR_PULL * np.sqrt(np.median(cost) / markers) / max(float(np.median(bend)), 1e-6)
-        both = float(np.hypot(light, weight))
-        targets = (light ** 2 * relaxed + weight ** 2 * middle) / both ** 2
+        pulled = priors.pulled(middle, weight)
         for part in np.array_split(np.arange(len(frames)), max(1, int(np.ceil(len(frames) / CHUNK)))):
             chunk = frames[part]
             solved.put(chunk, _solve_frames(kernel, model, target, observed, solved.take(chunk), priors, scale, held,
-                                            chunk, iterations, pull=(targets[part], both)))
+                                            chunk, iterations, pull=(pulled.rest[part], pulled.rest_weight)))
 
 
 def _skeleton_and_markers(model, poses: Poses) -> np.ndarray:

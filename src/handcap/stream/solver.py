@@ -33,7 +33,6 @@ mm, 5.43 -> 2.74 mm, 22.6 -> 18.6 mm ...).
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import replace
 
 import numpy as np
 
@@ -185,11 +184,7 @@ class FrameSolver:
         """Iterations from ``init`` (with its kinematics ``kin``, or None); with ``prediction`` (27,) radians, the
         angles pulled towards it at ``weight`` metres per radian besides the priors' pull to a relaxed hand.
         Returns the pose, its kinematics (None when compiled), joints (21, 3) and the seen markers' residuals."""
-        priors = self.priors
-        if prediction is not None:  # one quadratic pull: the two targets weighed by their squared weights
-            both = float(np.hypot(priors.rest_weight, weight))
-            rest = (priors.rest_weight ** 2 * self.rest + weight ** 2 * prediction) / both ** 2
-            priors = replace(priors, rest=rest, rest_weight=both)
+        priors = self.priors if prediction is None else self.priors.pulled(prediction, weight)
         if self.compiled:
             pulled = {} if prediction is None else {"rest": priors.rest, "rest_weight": priors.rest_weight}
             transl, rot, phi, joints, norms = self.kernel.solve(init.transl[0], init.rot[0], init.phi[0], target[0],
