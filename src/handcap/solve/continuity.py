@@ -44,9 +44,27 @@ SWEEPS = 3
 CALM = 4.0
 #: Joints among the points of the posed hand (the rest are its markers).
 JOINTS = 16
-#: The prediction of a stretch solved again frame after frame: the last angles plus this fraction of their last
-#: change (as the live solver's, ``handcap.stream.solver.DAMPING``).
+#: The prediction of a frame from the two before it (:func:`predicted`): the last angles plus this fraction of their
+#: last change. 1 (constant velocity) let the angles the markers barely constrain run on in the live solver; 0
+#: holds them, which lags.
 DAMPING = 0.5
+
+
+def predicted(older, last) -> np.ndarray:
+    """Where the angles of two frames in a row carry the next frame: the last plus :data:`DAMPING` times their
+    change (the live solver's and the stretches' prediction).
+
+    Parameters
+    ----------
+    older, last : ndarray (27,)
+        The two frames' angles, radians, in time order.
+
+    Returns
+    -------
+    ndarray (27,)
+        Radians.
+    """
+    return last + DAMPING * (last - older)
 
 
 def excursions(fitted, rate: float) -> list[np.ndarray]:
@@ -135,7 +153,7 @@ def mend_excursions(poses, fitted_of, cost_of, solve_pulled, rate: float) -> int
         # there in the frame-by-frame search below, whose neighbours are in that pose too.
         swept = poses.take(slice(lo - 2, hi + 1)).copy()
         for i in range(2, hi - lo + 3):
-            prediction = swept.phi[i - 1] + DAMPING * (swept.phi[i - 1] - swept.phi[i - 2])
+            prediction = predicted(swept.phi[i - 2], swept.phi[i - 1])
             swept.put(slice(i, i + 1), solve_pulled(lo - 2 + i, swept.take(slice(i - 1, i)).copy(), prediction,
                                                     weight))
         swept = swept.take(slice(2, None))
@@ -181,4 +199,4 @@ def _surprise(fitted, frames) -> np.ndarray:
     return np.sum((fitted[frames] - 2 * fitted[frames - 1] + fitted[frames - 2]) ** 2, axis=(-1, -2))
 
 
-__all__ = ["MAX_SECONDS", "excursions", "mend_excursions"]
+__all__ = ["DAMPING", "MAX_SECONDS", "excursions", "mend_excursions", "predicted"]

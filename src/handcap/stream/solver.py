@@ -11,10 +11,10 @@ Where the markers leave two poses about equally good (a sparse glove whose marke
 calibrated hand), a frame solved on its own can jump to the other pose and back. The batch solver mends such
 excursions from the frames on both sides (:mod:`handcap.solve.continuity`); a live frame has only those before it.
 So each warm-started frame is solved with the angles pulled towards where the two frames before carry them (half
-their last change, :data:`DAMPING`), and once more from its markers alone, after the result is sent
-(:meth:`FrameSolver.idle`): only the later frames' weight needs that. The pull's
-weight is the stream's own: :data:`SMOOTHING` times the ratio of the median marker residual (RMS over the markers)
-to the median distance of the markers-alone solve's angles from that prediction (RMS over the angles), over the last
+their last change, :func:`handcap.solve.continuity.predicted`), and once more from its markers alone, after the
+result is sent (:meth:`FrameSolver.idle`): only the later frames' weight needs that. The pull's weight is the
+stream's own: :data:`SMOOTHING` times the ratio of the median marker residual (RMS over the markers) to the median
+distance of the markers-alone solve's angles from that prediction (RMS over the angles), over the last
 :data:`WINDOW` frames, so that in a typical frame the pull weighs a fraction of what the markers do. A stream whose
 markers sit millimetres off the calibrated hand is so pulled harder than one whose markers fit to a few tenths
 (measured: 0.04-0.06 m/rad on the real glove, 0.006-0.008 on synthetic takes). The pull shares its target with the
@@ -25,7 +25,7 @@ Measured with ``benchmarks/smoothing.py`` (2026-12-01): on the real Qualisys glo
 markers, calibrated on its first 1,500) the joints' jerk spikes fell from 121 to 0 and the motion signal-to-noise
 ratio rose from 3.2 to 13.2 dB (the batch solver: 6 spikes, 7.3 dB); the RMS marker residual rose from 1.67 to
 1.79 mm, and a frame takes 0.23 ms instead of 0.09. On eleven synthetic takes with truth (glove-13 and joints-19,
-grasps and random motion, 30-120 Hz; five chose :data:`SMOOTHING` and :data:`DAMPING`, six only checked them) the
+grasps and random motion, 30-120 Hz; five chose :data:`SMOOTHING` and the damping, six only checked them) the
 joints came closer to the truth in every one, median and p99 (medians 0.32-0.68 -> 0.29-0.62 mm; p99 4.65 -> 2.36
 mm, 5.43 -> 2.74 mm, 22.6 -> 18.6 mm ...).
 """
@@ -42,6 +42,7 @@ from handcap.hand.kinematics import attached_points
 from handcap.solve.lm import Poses, Priors, held_angles, levenberg_marquardt
 from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
+from handcap.solve.continuity import predicted
 from handcap.solve.kernel import FrameKernel
 
 #: Gauss-Newton iterations per streamed frame (from the frame before). One suffices: the frame before is close,
@@ -63,9 +64,6 @@ SCALE = 0.005
 #: The pull towards the predicted angles, as a fraction of the markers' weight in a typical frame (0: none). Chosen
 #: on synthetic takes (0.25, 0.5, 1: 0.5 gave the lowest p99 joint error in 3 of 5 and within 0.2 mm in the others).
 SMOOTHING = 0.5
-#: The prediction: the last angles plus this fraction of their last change (1, constant velocity, let angles the
-#: markers barely constrain run on; 0 holds them, which lags).
-DAMPING = 0.5
 #: Frames over which the pull's weight takes its medians.
 WINDOW = 256
 #: Frames of both medians before the pull starts.
@@ -151,14 +149,14 @@ class FrameSolver:
             self.recent = []
         else:  # from the frame before, whose kinematics the last solve returned
             init, iterations, kin = self.pose, self.iterations, self.kin
-        if self.smoothing > 0 and len(self.recent) == 2 and self.weight is not None:
-            prediction = self.recent[1] + DAMPING * (self.recent[1] - self.recent[0])
+        prediction = predicted(*self.recent) if self.smoothing > 0 and len(self.recent) == 2 else None
+        if prediction is not None and self.weight is not None:
             result = self._iterate(init, kin, target, observed, iterations, prediction, self.weight)
             self.pending = (init, kin, target, observed, iterations, prediction)  # the solve from the markers alone
         else:
             result = self._iterate(init, kin, target, observed, iterations)
-            if self.smoothing > 0 and len(self.recent) == 2:
-                self._measure(result, self.recent[1] + DAMPING * (self.recent[1] - self.recent[0]))
+            if prediction is not None:
+                self._measure(result, prediction)
         out = self._finish(*result)
         self.recent = [] if self.pose is None else [*self.recent[-1:], out[1]]
         return out
