@@ -61,3 +61,37 @@ def test_warm_start_with_its_kinematics_gives_the_same_fit(glove_session):
     for a, b in zip(parts[0], recomputed):
         assert np.allclose(a, b, atol=1e-12)
 
+
+
+def test_a_dip_the_markers_see_is_solved_from_them_not_from_the_coupling():
+    # A ring finger wrapped round something: its DIP bent 70 deg over a PIP of 25 (the tendon coupling says 17).
+    # joints-19 puts markers on the DIP and the tip, so the markers set the angle; the coupling at its full weight
+    # (0.01, as everywhere before) left it 36 deg short.
+    from handcap import MarkerSequence
+    from handcap.hand.attachment import MarkerAttachment
+    from handcap.hand.anatomy import PHI_NAMES, relaxed_pose
+    from handcap.layouts import load_layout
+    from handcap.solve import solve_hand
+
+    hand = OpenHand()
+    attachment = MarkerAttachment.from_layout(load_layout("joints-19"), hand)
+    rng = np.random.default_rng(5)
+    n = 12
+    i = {name: k for k, name in enumerate(PHI_NAMES)}
+    phi = np.repeat(relaxed_pose()[None], n, axis=0)
+    phi[:, i["ring_pip_bend"]] = np.deg2rad(25 + rng.normal(0, 1, n))
+    phi[:, i["ring_dip_bend"]] = np.deg2rad(70 + rng.normal(0, 1, n))
+    rot = Rotation.from_rotvec(rng.normal(0, 0.05, (n, 3))).as_matrix()
+    transl = np.array([0.0, 0.0, 0.5]) + rng.normal(0, 0.002, (n, 3))
+    positions = MarkerModel(hand, attachment).positions(transl, rot, phi) + rng.normal(0, 0.0003, (n, 19 + 3, 3))
+    markers = MarkerSequence(positions, list(attachment.marker_names), 50.0)
+    for priors, low, high in ((Priors(), 60, 75), (Priors(seen_coupling_weight=0.01), 0, 50)):  # 66.6, 33.6
+        solved = np.rad2deg(solve_hand(markers, attachment, priors=priors).phi[:, i["ring_dip_bend"]])
+        assert low < solved.mean() < high, (priors.seen_coupling_weight, solved.mean())
+    # The coupling's full weight stays where no marker sets the DIP: that prior row weighs 10 times more.
+    free = np.zeros((1, 27), bool)
+    free[0, i["ring_dip_bend"]] = True
+    row = 27 + 3  # the ring finger's coupling row (index, middle, pinky, ring)
+    seen = prior_terms(phi[:1], Priors(), np.zeros((1, 27), bool), np.zeros((1, 27), bool))[0][0, row]
+    unseen = prior_terms(phi[:1], Priors(), np.zeros((1, 27), bool), free)[0][0, row]
+    assert np.isclose(unseen, 10 * seen) and abs(unseen) > 0.005

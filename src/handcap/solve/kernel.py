@@ -154,7 +154,7 @@ def _columns(world_rot, world_pos, rest):
 @_njit
 def _priors(phi, held, free, pc):
     """Residuals (R,) and Jacobian (R, 27) of the priors, as ``handcap.solve.lm.prior_terms`` for one frame."""
-    limits, limit_w, coupling, coupling_w, synergy, synergy_w, relaxed, rest_w, coupled, syn = pc
+    limits, limit_w, coupling, coupling_w, synergy, synergy_w, relaxed, rest_w, coupled, syn, seen_coupling_w = pc
     n_c, n_s = coupled.shape[0], syn.shape[0]
     r, jac = np.zeros(54 + n_c + n_s), np.zeros((54 + n_c + n_s, 27))
     for d in range(27):
@@ -165,8 +165,9 @@ def _priors(phi, held, free, pc):
     for i in range(n_c):
         dip, pip = coupled[i, 0], coupled[i, 1]
         if not (held[dip] or held[pip]):
-            r[27 + i] = coupling_w * (phi[dip] - coupling * phi[pip])
-            jac[27 + i, dip], jac[27 + i, pip] = coupling_w, -coupling_w * coupling
+            w = coupling_w if free[dip] else seen_coupling_w
+            r[27 + i] = w * (phi[dip] - coupling * phi[pip])
+            jac[27 + i, dip], jac[27 + i, pip] = w, -w * coupling
     for i in range(n_s):
         distal, mcp = syn[i, 0], syn[i, 1]
         if free[distal] and not held[mcp]:
@@ -381,7 +382,7 @@ class FrameKernel:
         self.pc = (np.ascontiguousarray(priors.limits, dtype=np.float64), float(priors.limit_weight),
                    float(priors.coupling), float(priors.coupling_weight), float(priors.synergy),
                    float(priors.synergy_weight), np.ascontiguousarray(priors.rest_phi()), float(priors.rest_weight),
-                   COUPLED.astype(np.int64), SYNERGY.astype(np.int64))
+                   COUPLED.astype(np.int64), SYNERGY.astype(np.int64), float(priors.seen_coupling_weight))
         self.rest_tips = np.ascontiguousarray(rest_tips, dtype=np.float64)
         self.tip_parents = TIP_PARENTS.astype(np.int64)
 

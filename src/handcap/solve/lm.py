@@ -57,7 +57,13 @@ class Priors:
         DIP flexion per unit PIP flexion (2/3: tendon coupling of the finger
         flexors, as in handcap.synth).
     coupling_weight : float
-        Strength of that coupling (0.01: 10 degrees off cost like 1.7 mm).
+        Strength of that coupling where no marker sets the DIP (0.01: 10 degrees off cost like 1.7 mm).
+    seen_coupling_weight : float
+        Its strength where markers set the DIP (0.001: 10 degrees off cost like 0.17 mm, as the weak pull). The
+        coupling holds roughly in free motion only: a finger wrapped round an object or pressing on it bends its
+        DIP far more or less. At 0.01 it outweighed markers that see the DIP: synthetic grasps solved with their
+        true attachment put the ring and little fingers' DIPs 30-45 degrees off (joints 7-8 mm off at p99,
+        dense-patches and joints-19) with their markers 1-3.5 mm off.
     synergy : float
         PIP (thumb: IP) flexion per unit MCP flexion, applied only where no
         marker constrains the PIP (IP) joint and none did earlier in the take
@@ -76,6 +82,7 @@ class Priors:
     limit_weight: float = 0.1
     coupling: float = DIP_PIP_RATIO
     coupling_weight: float = 0.01
+    seen_coupling_weight: float = 0.001
     synergy: float = 1.0
     synergy_weight: float = 0.01
     rest: np.ndarray | None = None
@@ -148,7 +155,8 @@ def prior_terms(phi, priors: Priors, held, free=None):
     """Residuals (T, R) and their Jacobian (T, R, 27) of the priors; held angles get none.
 
     ``free`` (T, 27) marks the angles no marker constrains now or did before:
-    their PIP (IP) follows the MCP by the synergy prior.
+    their PIP (IP) follows the MCP by the synergy prior, and a free DIP follows
+    its PIP at the full coupling weight (at ``seen_coupling_weight`` where not free).
 
     Parameters
     ----------
@@ -158,7 +166,7 @@ def prior_terms(phi, priors: Priors, held, free=None):
     held : ndarray (T, 27) bool
         Angles held at their value: no coupling or rest pull on them (limits still apply).
     free : ndarray (T, 27) bool, optional
-        Angles no marker constrains; without it the synergy prior is off.
+        Angles no marker constrains; without it the synergy prior is off and the coupling at full weight.
 
     Returns
     -------
@@ -177,11 +185,13 @@ def prior_terms(phi, priors: Priors, held, free=None):
     residuals[:, :27] = priors.limit_weight * (np.clip(phi, low, high) - phi)
     jacobian[:, idx, idx] = np.where((phi < low) | (phi > high), -priors.limit_weight, 0.0)
     dip, pip = COUPLED[:, 0], COUPLED[:, 1]
-    active = ~(held[:, dip] | held[:, pip])
-    residuals[:, 27:31] = priors.coupling_weight * (phi[:, dip] - priors.coupling * phi[:, pip]) * active
+    weight = priors.coupling_weight if free is None else np.where(free[:, dip], priors.coupling_weight,
+                                                                  priors.seen_coupling_weight)
+    weight = weight * ~(held[:, dip] | held[:, pip])
+    residuals[:, 27:31] = weight * (phi[:, dip] - priors.coupling * phi[:, pip])
     rows = 27 + np.arange(4)
-    jacobian[:, rows, dip] = priors.coupling_weight * active
-    jacobian[:, rows, pip] = -priors.coupling_weight * priors.coupling * active
+    jacobian[:, rows, dip] = weight
+    jacobian[:, rows, pip] = -weight * priors.coupling
     distal, mcp = SYNERGY[:, 0], SYNERGY[:, 1]
     follows = np.zeros((n, n_syn), bool) if free is None else free[:, distal] & ~held[:, mcp]
     residuals[:, 31:31 + n_syn] = priors.synergy_weight * (phi[:, distal] - priors.synergy * phi[:, mcp]) * follows
