@@ -61,9 +61,10 @@ class Priors:
     seen_coupling_weight : float
         Its strength where markers set the DIP (0.001: 10 degrees off cost like 0.17 mm, as the weak pull). The
         coupling holds roughly in free motion only: a finger wrapped round an object or pressing on it bends its
-        DIP far more or less. At 0.01 it outweighed markers that see the DIP: synthetic grasps solved with their
-        true attachment put the ring and little fingers' DIPs 30-45 degrees off (joints 7-8 mm off at p99,
-        dense-patches and joints-19) with their markers 1-3.5 mm off.
+        DIP far more or less (DIP angles estimated linearly from the PIP's are 9-18 degrees off on average per
+        task of daily living; Roda-Sales A. et al. 2022, PeerJ 10:e14051). At 0.01 it outweighed markers that
+        see the DIP: synthetic grasps solved with their true attachment put the ring and little fingers' DIPs
+        30-45 degrees off (joints 7-8 mm off at p99, dense-patches and joints-19) with their markers 1-3.5 mm off.
     synergy : float
         PIP (thumb: IP) flexion per unit MCP flexion, applied only where no
         marker constrains the PIP (IP) joint and none did earlier in the take
