@@ -114,6 +114,62 @@ def test_an_injected_spike_is_found_at_its_frame(capture):
     assert "jerk spikes in" in line and "first: frame 67" in line
 
 
+def _moving_point(rate, frames=200, seed=0):
+    """A point on a smooth path (about 0.4 m/s), 0.3 mm of noise: (frames, 1, 3) metres."""
+    t = np.arange(frames) / rate
+    path = np.stack([np.sin(2 * t) * 0.2, np.cos(2 * t) * 0.2, 0.1 * t], axis=-1)[:, None]
+    return path + np.random.default_rng(seed).normal(0, 0.0003, (frames, 1, 3))
+
+
+def _bouncing_point(rate, frames=200, seed=0):
+    """A point falling at 1.5 m/s that bounces back at frame 100, keeping 80 % of its speed."""
+    velocity, x, out = np.array([0.0, -1.5, 0.0]), np.array([0.0, 0.3, 0.0]), []
+    for i in range(frames):
+        out.append(x.copy())
+        x = x + velocity / rate
+        if i == 100:
+            velocity = -0.8 * velocity
+    return np.array(out)[:, None] + np.random.default_rng(seed).normal(0, 0.0003, (frames, 1, 3))
+
+
+@pytest.mark.parametrize("kind", ["one frame", "four frames", "for good"])
+def test_a_jump_is_told_from_a_change_of_course(kind):
+    jumped = _moving_point(100)
+    jumped[100:{"one frame": 101, "four frames": 104, "for good": None}[kind], 0] += [0.0, 0.02, 0.0]
+    spikes = p.jerk_spikes(jumped, 100)
+    assert len(spikes) and not any(turns for _, _, turns in p.spike_events(jumped, 100, spikes))
+    (line,) = p.jerk_warnings(jumped, 100)
+    assert line.endswith("look for label swaps or a lost fit there") and "impact" not in line
+    bounced = _bouncing_point(100)
+    spikes = p.jerk_spikes(bounced, 100)
+    assert [turns for _, _, turns in p.spike_events(bounced, 100, spikes)] == [True]
+    (line,) = p.jerk_warnings(bounced, 100)
+    assert "each of the 1 changes course at once and keeps to it (an impact" in line and "swaps" not in line
+    # Both in one take: counted apart, the first jump named.
+    both = bounced.copy()
+    both[150, 0] += [0.0, 0.0, 0.02]
+    (line,) = p.jerk_warnings(both, 100)
+    assert "1 of the 2 change course" in line and "; 1 jump (first: frame 147, 1.47 s)" in line
+    # A point missing beside its spike cannot be told.
+    both[104:106] = np.nan
+    events = p.spike_events(both, 100, p.jerk_spikes(both, 100))
+    assert [kind for *_, kind in events] == [None, False]
+    assert "1 cannot be told, points missing around them (first: frame 99" in p.jerk_warnings(both, 100)[0]
+
+
+def test_a_real_hand_hitting_a_rim_changes_course(shared_data):
+    # kineticstoolkit's wheelchair racing: the right glove's 3-marker cluster at 70 Hz, the hand hitting the push
+    # rim at up to 5.8 m/s once a push. Every event is a change of course, none a jump.
+    take = read_markers(shared_data / "markers/kineticstoolkit/kinematics_racing_propulsion.c3d")
+    glove = take.positions_of(["GloveR1", "GloveR2", "GloveR3"])
+    spikes = p.jerk_spikes(glove, take.rate)
+    events = p.spike_events(glove, take.rate, spikes)
+    assert len(events) == 17 and [kind for *_, kind in events].count(False) == 0  # measured: 14 turns, 3 untold
+    assert [kind for *_, kind in events].count(True) >= 12
+    (line,) = p.jerk_warnings(glove, take.rate, what="marker")
+    assert "of the 17 change course at once and keep to it (an impact" in line and "jump" not in line
+
+
 def test_noise_alone_is_not_a_spike():
     rng = np.random.default_rng(3)
     t = np.arange(300) / 100
