@@ -381,3 +381,20 @@ def test_ezc3d_write_failure_leaves_nothing(tmp_path, monkeypatch):
         write_c3d(_random_markers(7, 3, 2), tmp_path / "old.c3d")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.c3d"]
     assert (tmp_path / "old.c3d").read_bytes() == b"old"
+
+
+def test_long_and_many_warnings_are_written_whole_and_read_back(tmp_path):
+    # A C3D string is at most 255 bytes and a parameter holds at most 255 of them; ezc3d wrote longer ones without
+    # a word and the file could not be read again (a jerk-spike warning of 300 characters on a synthetic take).
+    take = MarkerSequence(np.random.default_rng(0).normal(0, 0.1, (10, 3, 3)), ["a", "b", "c"], 100.0)
+    long = "marker jerk spikes " + "é, ünd " * 60 + "end"  # 440 characters, more bytes in UTF-8
+    texts = ("short", long, "x" * 254 + "\\y", "z" * 255, "ends in a backslash\\")
+    write_c3d(take.with_warnings(*texts), tmp_path / "long.c3d")
+    assert read_c3d(tmp_path / "long.c3d").warnings == texts
+    # Read by another reader, every string is within the format's bounds.
+    values = ezc3d.c3d(str(tmp_path / "long.c3d"))["parameters"]["HANDCAP"]["WARNINGS"]["value"]
+    assert all(len(v.encode()) <= 255 for v in values) and len(values) == 1 + 3 + 2 + 1 + 2
+    many = tuple(f"warning {k}" for k in range(300))
+    write_c3d(take.with_warnings(*many), tmp_path / "many.c3d")
+    back = read_c3d(tmp_path / "many.c3d").warnings
+    assert back[:254] == many[:254] and back[-1] == "46 more warning(s) left out: a C3D file holds 255 lines"

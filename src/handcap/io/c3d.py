@@ -208,8 +208,8 @@ def read_c3d(path, *, partial: bool = False, units: str | None = None, hand=None
         t, m = np.argwhere(np.isinf(positions) | (np.abs(positions) > _IMPLAUSIBLE))[0][:2]
         raise HandcapError(f"{path}: corrupt C3D data (coordinate beyond {_IMPLAUSIBLE:g} m at frame {t}, "
                            f"point {m}); export the file again")
-    warnings = (parameter_strings(layout.params[("HANDCAP", "WARNINGS")]) if ("HANDCAP", "WARNINGS") in layout.params
-                else [])
+    warnings = (_joined(parameter_strings(layout.params[("HANDCAP", "WARNINGS")]))
+                if ("HANDCAP", "WARNINGS") in layout.params else [])
     try:
         markers = MarkerSequence(positions, _labels(layout), layout.rate, residuals, tuple(w for w in warnings if w))
     except HandcapError as err:
@@ -218,6 +218,50 @@ def read_c3d(path, *, partial: bool = False, units: str | None = None, hand=None
 
 
 # -- writing -----------------------------------------------------------------------------
+
+#: A C3D parameter's dimensions are single bytes: its strings are at most 255 bytes long, and at most 255 of them.
+_C3D_DIM = 255
+#: Ends a piece of a warning that goes on in the next string of ``HANDCAP:WARNINGS``.
+_GOES_ON = "\\"
+
+
+def _pieces(texts) -> list[str]:
+    """``texts`` as the strings of a C3D character parameter: each at most :data:`_C3D_DIM` bytes (UTF-8), a
+    longer one cut into pieces that all but the last end in :data:`_GOES_ON`; at most :data:`_C3D_DIM` strings,
+    the last of them saying how many texts were left out. ezc3d writes longer or more strings without a word,
+    and the file it writes is damaged (a warning of 300 characters made a synthetic take unreadable)."""
+    out: list[list[str]] = []
+    for text in texts:
+        pieces, rest = [], text
+        while len(rest.encode()) > _C3D_DIM or rest.endswith(_GOES_ON):  # a text's own last backslash too
+            size = 1
+            while size < len(rest) and len(rest[:size + 1].encode()) < _C3D_DIM:
+                size += 1
+            pieces.append(rest[:size] + _GOES_ON)
+            rest = rest[size:]
+        out.append(pieces + [rest])
+    flat = [piece for pieces in out for piece in pieces]
+    if len(flat) <= _C3D_DIM:
+        return flat
+    kept: list[str] = []
+    for k, pieces in enumerate(out):
+        if len(kept) + len(pieces) > _C3D_DIM - 1:
+            return kept + [f"{len(out) - k} more warning(s) left out: a C3D file holds {_C3D_DIM} lines"]
+        kept += pieces
+    return kept
+
+
+def _joined(pieces) -> list[str]:
+    """The texts that :func:`_pieces` cut, joined again."""
+    out, carried = [], ""
+    for piece in pieces:
+        if piece.endswith(_GOES_ON):
+            carried += piece[:-len(_GOES_ON)]
+        else:
+            out.append(carried + piece)
+            carried = ""
+    return out + ([carried] if carried else [])
+
 
 def _check_names(names, path) -> None:
     for name in names:
@@ -275,7 +319,7 @@ def write_c3d(markers: MarkerSequence, path) -> None:
     c3d.add_parameter("POINT", "UNITS", "mm")
     c3d.add_parameter("POINT", "SCALE", -step)
     if markers.warnings:  # handcap's warnings about the data travel with it (File contracts)
-        c3d.add_parameter("HANDCAP", "WARNINGS", list(markers.warnings))
+        c3d.add_parameter("HANDCAP", "WARNINGS", _pieces(markers.warnings))
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"] = {"residuals": residual_mm.T[np.newaxis]}
     with atomic_output(path, mode=None) as tmp:
