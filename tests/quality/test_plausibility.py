@@ -164,10 +164,12 @@ def test_a_real_hand_hitting_a_rim_changes_course(shared_data):
     glove = take.positions_of(["GloveR1", "GloveR2", "GloveR3"])
     spikes = p.jerk_spikes(glove, take.rate)
     events = p.spike_events(glove, take.rate, spikes)
-    assert len(events) == 17 and [kind for *_, kind in events].count(False) == 0  # measured: 14 turns, 3 untold
-    assert [kind for *_, kind in events].count(True) >= 12
+    assert len(events) == 17 and all(kind for *_, kind in events)
     (line,) = p.jerk_warnings(glove, take.rate, what="marker")
-    assert "of the 17 change course at once and keep to it (an impact" in line and "jump" not in line
+    assert "each of the 17 changes course at once and keeps to it (an impact" in line and "swaps" not in line
+    # The left hand's too, with its two rebounds off the rim (the velocity strays 1.04 and 1.08 times the change).
+    left = take.positions_of(["GloveL1", "GloveL2", "GloveL3"])
+    assert all(kind for *_, kind in p.spike_events(left, take.rate, p.jerk_spikes(left, take.rate)))
 
 
 def test_noise_alone_is_not_a_spike():

@@ -10,6 +10,10 @@ Every limit is a module constant with the reason for its value; none is fitted t
 ``MIN_LABELED``     95 % of the visible points labelled (issue 14).
 ``SPIKE_Z``         10 robust standard deviations above the take's median jerk, and ``SPIKE_JUMP``
 ``SPIKE_JUMP``      5 mm: the one-frame jump a spike implies (a third difference of 3 x 5 mm).
+``SPIKE_STRAY``     3: a spike is a change of course (an impact), not a jump, when the velocities in it stray
+                    no further than 3 times the change from the old and new velocities; real hands bouncing
+                    off a wheelchair's rim stray up to 1.1 times, jumps of a point 30-90 times (a margin
+                    between the two, not a fit to either).
 ``HAND_SPREAD``     0.03-0.35 m: the extent of the markers of one hand (a fist to a spread adult hand).
 ``MAX_SPEED``       10 m/s: faster than a hand moves (the fastest throws reach ~10 m/s at the wrist).
 ``HAND_LENGTH_RANGE`` average adult hand length +- 5 standard deviations (SD 5.2 %, Pheasant & Haslegrave
@@ -43,6 +47,9 @@ MIN_LABELED = 0.95
 SPIKE_Z = 10.0
 #: ... and a one-frame jump of at least this many metres (its third difference is 3 x the jump).
 SPIKE_JUMP = 0.005
+#: A jerk spike changes course, not jumps, when its velocities stray from the old and new ones by at most this
+#: many times the change (:func:`handcap.quality.motion_checks.spike_events`).
+SPIKE_STRAY = 3.0
 #: Plausible extent (bounding-box diagonal) of the markers of one hand, metres.
 HAND_SPREAD = (0.03, 0.35)
 #: Plausible extent of all markers of a capture, metres (no capture volume is larger; a hand is not smaller).

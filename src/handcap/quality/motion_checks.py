@@ -7,8 +7,8 @@ import numpy as np
 
 from handcap.hand.anthropometry import HAND_LENGTH as AVERAGE_HAND_LENGTH
 from handcap.hand.anthropometry import rest_joints
-from handcap.quality.limits import (BONE_RATIO, HAND_LENGTH_RANGE, HAND_SPREAD, MAX_SPEED, MM, SPIKE_JUMP, SPIKE_Z,
-                                    default_names, listed)
+from handcap.quality.limits import (BONE_RATIO, HAND_LENGTH_RANGE, HAND_SPREAD, MAX_SPEED, MM, SPIKE_JUMP,
+                                    SPIKE_STRAY, SPIKE_Z, default_names, listed)
 
 
 # -- motion: jerk spikes, bones, size, speed --------------------------------------------------------
@@ -56,15 +56,16 @@ def jerk_spikes(positions, rate: float, *, z: float = SPIKE_Z, min_jump: float =
 def spike_events(positions, rate: float, spikes, *, frames: int = 4) -> list[tuple[int, int, bool | None]]:
     """The jerk spikes of :func:`jerk_spikes` as events, each told a change of course or a jump.
 
-    Spike frames no more than 3 apart are one event. Its point that jerks most has a velocity over the ``frames``
-    frames before the event and over those after. The event is a change of course (an impact, a flick: the hand
-    hits something and keeps its new velocity) when the velocity changed by at least half the event's third
-    difference and, on its way, strayed no further from the old and new velocities than the change itself. A
-    point that jumps and comes back (a label swap or a lost fit for a few frames) or jumps and stays (a swap that
-    lasts) leaves its velocity as it was, with a jump in between. On the kineticstoolkit wheelchair-racing glove
-    (70 Hz, the hand hitting the push rim) the velocity changed by 1.1-1.9 times the event's third difference and
-    strayed 0.4-0.8 times the change; on a jump of 2 cm for 1 to 4 frames and back, or to stay, by 0.01-0.02 times,
-    straying 30-90 times the change.
+    Spike frames no more than 3 apart are one event. Its point that jerks most (of those seen all around it) has
+    a velocity over the ``frames`` frames before the event and over those after. The event is a change of course
+    (an impact, a flick: the hand hits something and keeps its new velocity) when the velocity changed by at least
+    half the event's third difference and, on its way, strayed no further from the old and new velocities than
+    :data:`~handcap.quality.limits.SPIKE_STRAY` times the change. A point that jumps and comes back (a label swap
+    or a lost fit for a few frames) or jumps and stays (a swap that lasts) leaves its velocity as it was, with a
+    jump in between. On kineticstoolkit's wheelchair racing (70 Hz, the hands hitting the push rims; both gloves'
+    and forearms' clusters, 52 events) the velocity changed by 1.1-4.3 times the event's third difference and
+    strayed 0.2-1.1 times the change (a hand bouncing back off the rim faster than it then goes on); on a jump of
+    2 cm for 1 to 4 frames and back, or to stay, it changed by 0.01-0.02 times and strayed 30-90 times the change.
 
     Parameters
     ----------
@@ -80,8 +81,8 @@ def spike_events(positions, rate: float, spikes, *, frames: int = 4) -> list[tup
     Returns
     -------
     list of (first, last, changes_course)
-        The event's first and last spike frames; ``changes_course`` is False where it jumps, None where its point
-        is missing in the frames around it or they lie outside the take.
+        The event's first and last spike frames; ``changes_course`` is False where it jumps, None where no point
+        of it is seen all around it or those frames lie outside the take.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim == 2:
@@ -96,24 +97,26 @@ def spike_events(positions, rate: float, spikes, *, frames: int = 4) -> list[tup
     velocity = np.diff(positions, axis=0)  # velocity[i] = x[i + 1] - x[i], metres per frame
     out = []
     for first, last in runs:
-        jerks = np.where(np.isfinite(third[first:last + 1]), third[first:last + 1], -np.inf)
-        point = np.unravel_index(np.argmax(jerks), jerks.shape)[1]
-        size = jerks.max()
+        jerks = np.where(np.isfinite(third[first:last + 1]), third[first:last + 1], -np.inf).max(axis=0)  # (M,)
         low, high = first, last + 2  # the velocities the event's third differences use
         if low < frames or high + 1 + frames > len(velocity):
             out.append((first, last, None))
             continue
+        # The point that jerks most among those seen all around the event.
+        seen = np.isfinite(velocity[low - frames:high + 1 + frames]).all(axis=(0, 2)) & np.isfinite(jerks)
+        if not seen.any():
+            out.append((first, last, None))
+            continue
+        point = int(np.argmax(np.where(seen, jerks, -np.inf)))
+        size = jerks[point]
         before = velocity[low - frames:low, point].mean(axis=0)
         after = velocity[high + 1:high + 1 + frames, point].mean(axis=0)
         inside = velocity[low:high + 1, point]
         change = float(np.linalg.norm(after - before))
-        if not (np.isfinite(change) and np.isfinite(inside).all()):
-            out.append((first, last, None))
-            continue
         # How far the velocities inside stray from the segment between the old and the new velocity.
         along = np.clip((inside - before) @ (after - before) / max(change ** 2, 1e-24), 0.0, 1.0)
         stray = float(np.linalg.norm(inside - (before + along[:, None] * (after - before)), axis=1).max())
-        out.append((first, last, bool(change >= 0.5 * size and stray <= change)))
+        out.append((first, last, bool(change >= 0.5 * size and stray <= SPIKE_STRAY * change)))
     return out
 
 

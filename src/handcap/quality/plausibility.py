@@ -17,7 +17,8 @@ value; none is fitted to one file (the table of them is there).
 
 from handcap.quality.fit_checks import (labeling_warnings, limit_warnings, residual_warnings, shape_warnings)
 from handcap.quality.limits import (BONE_RATIO, CAPTURE_SPREAD, HAND_LENGTH_RANGE, HAND_SPREAD, MAX_SPEED, MIN_LABELED,
-                                    MRE_LIMIT, PITCH_TOLERANCE, REPROJECTION_PX, SHAPE_BOUND, SPIKE_JUMP, SPIKE_Z)
+                                    MRE_LIMIT, PITCH_TOLERANCE, REPROJECTION_PX, SHAPE_BOUND, SPIKE_JUMP, SPIKE_STRAY,
+                                    SPIKE_Z)
 from handcap.quality.motion_checks import (BONE_NAMES, anthropometric_bone_lengths, bone_lengths, bone_warnings,
                                            jerk_spikes, jerk_warnings, size_warnings, speed_warnings, speeds,
                                            spike_events, spread)
@@ -31,4 +32,4 @@ __all__ = ["anthropometric_bone_lengths", "attach", "bone_lengths", "BONE_NAMES"
            "MIN_LABELED", "motion_figures", "motion_warnings", "MRE_LIMIT", "object_warnings", "PITCH_TOLERANCE",
            "pitch_check", "REPROJECTION_PX",
            "residual_warnings", "SHAPE_BOUND", "shape_warnings", "size_warnings", "speed_warnings", "speeds",
-           "spike_events", "SPIKE_JUMP", "SPIKE_Z", "spread", "summary", "triangulation_warnings"]
+           "spike_events", "SPIKE_JUMP", "SPIKE_STRAY", "SPIKE_Z", "spread", "summary", "triangulation_warnings"]
