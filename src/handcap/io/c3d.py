@@ -234,11 +234,10 @@ def _pieces(texts) -> list[str]:
     for text in texts:
         pieces, rest = [], text
         while len(rest.encode()) > _C3D_DIM or rest.endswith(_GOES_ON):  # a text's own last backslash too
-            size = 1
-            while size < len(rest) and len(rest[:size + 1].encode()) < _C3D_DIM:
-                size += 1
-            pieces.append(rest[:size] + _GOES_ON)
-            rest = rest[size:]
+            # The longest head of at most 254 bytes that ends on a whole character (at least one).
+            head = rest.encode()[:_C3D_DIM - len(_GOES_ON)].decode(errors="ignore") or rest[0]
+            pieces.append(head + _GOES_ON)
+            rest = rest[len(head):]
         out.append(pieces + [rest])
     flat = [piece for pieces in out for piece in pieces]
     if len(flat) <= _C3D_DIM:

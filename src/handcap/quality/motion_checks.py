@@ -93,25 +93,26 @@ def spike_events(positions, rate: float, spikes, *, frames: int = 4) -> list[tup
             runs[-1][1] = int(t)
         else:
             runs.append([int(t), int(t)])
-    third = np.linalg.norm(np.diff(positions, n=3, axis=0), axis=-1)
-    velocity = np.diff(positions, axis=0)  # velocity[i] = x[i + 1] - x[i], metres per frame
     out = []
     for first, last in runs:
-        jerks = np.where(np.isfinite(third[first:last + 1]), third[first:last + 1], -np.inf).max(axis=0)  # (M,)
-        low, high = first, last + 2  # the velocities the event's third differences use
-        if low < frames or high + 1 + frames > len(velocity):
+        low, high = first, last + 2  # the velocities (x[i + 1] - x[i]) the event's third differences use
+        if low < frames or high + 2 + frames > len(positions):
             out.append((first, last, None))
             continue
+        # Only the frames around the event: its third differences, and the velocities before, in and after it.
+        third = np.linalg.norm(np.diff(positions[first:last + 4], n=3, axis=0), axis=-1)
+        jerks = np.where(np.isfinite(third), third, -np.inf).max(axis=0)  # (M,), metres
+        velocity = np.diff(positions[low - frames:high + 2 + frames], axis=0)  # metres per frame
         # The point that jerks most among those seen all around the event.
-        seen = np.isfinite(velocity[low - frames:high + 1 + frames]).all(axis=(0, 2)) & np.isfinite(jerks)
+        seen = np.isfinite(velocity).all(axis=(0, 2)) & np.isfinite(jerks)
         if not seen.any():
             out.append((first, last, None))
             continue
         point = int(np.argmax(np.where(seen, jerks, -np.inf)))
         size = jerks[point]
-        before = velocity[low - frames:low, point].mean(axis=0)
-        after = velocity[high + 1:high + 1 + frames, point].mean(axis=0)
-        inside = velocity[low:high + 1, point]
+        before = velocity[:frames, point].mean(axis=0)
+        after = velocity[-frames:, point].mean(axis=0)
+        inside = velocity[frames:-frames, point]
         change = float(np.linalg.norm(after - before))
         # How far the velocities inside stray from the segment between the old and the new velocity.
         along = np.clip((inside - before) @ (after - before) / max(change ** 2, 1e-24), 0.0, 1.0)
