@@ -9,7 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from handcap.hand import load_hand_model
-from handcap.synth.grasps import SQUEEZE, grasp_configuration, rest_on_object
+from handcap.hand.anatomy import PHI_NAMES, finger_flexion, pose_from_degrees
+from handcap.synth.grasps import SQUEEZE, close_until_contact, grasp_configuration, rest_on_object
 from handcap.synth.motions import make_motion, rest_path
 from handcap.synth.objects import make_object
 
@@ -107,3 +108,34 @@ def test_tremor_that_would_press_a_finger_in_is_held_back_and_other_tremor_kept(
     assert np.all(np.isin(np.round(scale, 9), [0.0, 0.25, 0.5, 1.0]))
     assert (np.ptp(scale, axis=2) < 1e-9).all()
     assert (scale == 1.0).any() and (scale < 1.0).any()
+
+
+
+@pytest.mark.parametrize("shape", ["cylinder", "sphere", "cuboid", "cube2x2"])
+def test_fingers_close_all_joints_together_and_stop_where_they_touch(shape):
+    # Before: each finger closed joint after joint (MCP, then PIP, then DIP), so a DIP could curl fully while the
+    # PIP stayed nearly straight (the middle finger round the cylinder: PIP 64, DIP 16 degrees; the little finger
+    # round the sphere: PIP 13, DIP 73), which no human grasp does.
+    hand, obj = load_hand_model(), make_object(shape)
+    object2hand, open_phi, _ = grasp_configuration(hand, obj, "power")
+    closed = pose_from_degrees(thumb_cmc_bend=70, thumb_cmc_spread=-30, thumb_cmc_twist=30, thumb_mcp_bend=55,
+                               thumb_ip_bend=80)
+    for finger in ("index", "middle", "ring", "pinky"):
+        closed = finger_flexion(closed, finger, 1.2, pip=100)
+    digits = ("index", "middle", "ring", "pinky", "thumb")
+    phi, contact = close_until_contact(hand, obj, object2hand, open_phi, closed, digits)
+    verts = hand.forward(phi=phi).vertices
+    depth = obj.signed_distance((verts - object2hand[:3, 3]) @ object2hand[:3, :3])
+    assert depth.min() >= -SQUEEZE - TOL
+    joints = {f: (f"{f}_mcp_bend", f"{f}_pip_bend", f"{f}_dip_bend") for f in digits[:4]}
+    joints["thumb"] = ("thumb_cmc_bend", "thumb_mcp_bend", "thumb_ip_bend")
+    links = ("proximal", "middle", "distal")
+    for finger in digits:
+        idx = [PHI_NAMES.index(n) for n in joints[finger]]
+        # How far each joint went from open to closed: the same for all until a phalanx touched, then no less.
+        fraction = (phi[idx] - open_phi[idx]) / (closed[idx] - open_phi[idx])
+        assert np.all(np.diff(fraction) >= -1e-9), (finger, fraction)
+        # A joint that stopped short of closed stopped because its phalanx, or one after it, touched.
+        for j in np.flatnonzero(fraction < 1 - 1e-9):
+            moved = np.isin(hand.segment_of_vertex, [hand.segment_id(f"{finger}_{s}") for s in links[j:]])
+            assert contact[finger] and depth[moved].min() < 0.001, (finger, links[j], depth[moved].min())

@@ -1,7 +1,7 @@
 """Grasps for synthetic captures: where an object sits in the hand, and fingers that rest on it, not in it.
 
 A grasp is planned like a grasp planner's auto-grasp (:func:`close_until_contact`): the object is placed against
-the open hand (:func:`grasp_configuration`), then each finger closes, joint after joint, until its skin touches
+the open hand (:func:`grasp_configuration`), then each finger closes, all its joints together, until its skin touches
 the object's analytic surface. Skin gives: a vertex may press at most :data:`SQUEEZE` (1.5 mm) into the object,
 within DexterCap's 3.8 +- 3.1 mm of hand-object penetration measured on real captures (where tracking error adds
 to it). A hand that holds an object keeps resting on it while its tremor goes on: :func:`rest_on_object`
@@ -26,10 +26,14 @@ SQUEEZE = 0.0015
 _I = {n: i for i, n in enumerate(PHI_NAMES)}
 
 
+def _finger_links(hand, finger: str) -> list:
+    """The vertices of a digit's proximal, middle and distal phalanx (for the thumb: metacarpal, proximal, distal)."""
+    return [np.flatnonzero(hand.segment_of_vertex == hand.segment_id(f"{finger}_{s}"))
+            for s in ("proximal", "middle", "distal")]
+
+
 def _finger_vertices(hand, finger: str) -> np.ndarray:
-    seg = hand.segment_of_vertex
-    ids = [hand.segment_id(f"{finger}_{s}") for s in ("proximal", "middle", "distal")]
-    return np.flatnonzero(np.isin(seg, ids))
+    return np.concatenate(_finger_links(hand, finger))
 
 
 _JOINT_GROUPS = {f: ((f"{f}_mcp_twist", f"{f}_mcp_spread", f"{f}_mcp_bend"), (f"{f}_pip_bend",), (f"{f}_dip_bend",))
@@ -38,14 +42,36 @@ _JOINT_GROUPS["thumb"] = (("thumb_cmc_twist", "thumb_cmc_spread", "thumb_cmc_ben
                           ("thumb_mcp_twist", "thumb_mcp_spread", "thumb_mcp_bend"), ("thumb_ip_bend",))
 
 
+def _pressed(hand, obj, hand2object, phi, open_phi, closed_phi, idx, links, moving, at, reference, squeeze, betas):
+    """Which phalanges (len(at), 3) press into the object with the angles ``idx`` at fractions ``at`` closed.
+
+    A vertex may press at most ``squeeze`` in, or no deeper than ``reference`` (its depth where the path began,
+    the first pose's when None): one already resting on the object may slide along it, not into it. Also returns
+    the depths of the first pose.
+    """
+    path = np.repeat(phi[None], len(at), axis=0)
+    path[:, idx] = open_phi[idx] + at[:, None] * (closed_phi[idx] - open_phi[idx])
+    verts = hand.forward(betas, phi=path).vertices
+    depth = obj.signed_distance(verts @ hand2object[:3, :3].T + hand2object[:3, 3])
+    deep = depth < np.minimum(-squeeze, depth[0] if reference is None else reference) - 1e-7
+    out = np.stack([deep[:, link].any(axis=1) for link in links], axis=1)
+    out[:, :moving] = False  # phalanges whose joints have stopped do not move
+    return out, depth[0]
+
+
 def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *, squeeze=SQUEEZE, steps=40,
                         betas=None):
-    """Close each finger, joint after joint, until its skin touches the object.
+    """Close each finger, all its joints together, until its skin touches the object.
 
-    Like a grasp planner's auto-grasp: the first joint of a finger turns from
-    its open towards its closed value until any vertex of the finger would press
-    deeper than ``squeeze`` into the object (or, if it already did, deeper than it
-    was), then the next joint does the same, so fingers wrap round what they hold.
+    Like a grasp planner's auto-grasp (GraspIt's): every joint of a finger turns
+    from its open towards its closed value at once, each at its own pace, so that
+    all arrive together. When a phalanx would press deeper than ``squeeze`` into the
+    object (or, if it already did, deeper than it was), the joints before it stop,
+    and its own joint too when that was the first still turning; the joints after
+    it go on. A finger whose first phalanx lands on the object wraps round it with
+    its PIP and DIP bending together, as a human's does, not with its PIP left
+    straight while the DIP alone closes; a fingertip that reached past an edge
+    curls round the edge.
 
     Parameters
     ----------
@@ -59,7 +85,7 @@ def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *
     squeeze : float
         Deepest allowed skin compression, metres.
     steps : int
-        Poses tried along each joint group's way from open to closed.
+        Poses tried along the way from open to closed.
     betas : ndarray (10,), optional
         The hand's shape (the average hand when omitted).
 
@@ -71,22 +97,33 @@ def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *
     hand2object = np.linalg.inv(object2hand)
     phi = open_phi.copy()
     contact = {}
-    s = np.linspace(0.0, 1.0, steps)
     for finger in fingers:
-        verts_idx = _finger_vertices(hand, finger)
-        touched = False
-        for group in _JOINT_GROUPS[finger]:
-            idx = [_I[n] for n in group]
-            path = np.repeat(phi[None], steps, axis=0)
-            path[:, idx] = phi[idx] + s[:, None] * (closed_phi[idx] - phi[idx])
-            verts = hand.forward(betas, phi=path).vertices[:, verts_idx]
-            depth = obj.signed_distance(verts @ hand2object[:3, :3].T + hand2object[:3, 3])
-            # A vertex already resting on the object may slide along it, not into it; one the joint does not move
-            # keeps its depth.
-            blocked = np.flatnonzero((depth < np.minimum(-squeeze, depth[0]) - 1e-7).any(axis=1))
-            k = steps - 1 if len(blocked) == 0 else max(blocked[0] - 1, 0)
-            touched |= len(blocked) > 0
-            phi[idx] = path[k, idx]
+        links = _finger_links(hand, finger)  # the vertices of its proximal, middle and distal phalanx
+        groups = [[_I[n] for n in group] for group in _JOINT_GROUPS[finger]]
+        moving, done, touched = 0, 0.0, False  # groups before ``moving`` have stopped; the others are ``done`` closed
+        while moving < len(groups) and done < 1.0:
+            idx = [i for g in groups[moving:] for i in g]
+            at = np.linspace(done, 1.0, max(2, int(np.ceil(steps * (1.0 - done)))))
+            hits, reference = _pressed(hand, obj, hand2object, phi, open_phi, closed_phi, idx, links, moving,
+                                       at, None, squeeze, betas)
+            first = np.flatnonzero(hits.any(axis=1))
+            if len(first) == 0:
+                phi[idx] = closed_phi[idx]
+                break
+            # Where between the last free pose and the first that presses in (bisection, 1/64 of a step).
+            low, high = at[first[0] - 1], at[first[0]]
+            hit = hits[first[0]]
+            for _ in range(6):
+                middle = np.array([0.5 * (low + high)])
+                pressed = _pressed(hand, obj, hand2object, phi, open_phi, closed_phi, idx, links, moving,
+                                   middle, reference, squeeze, betas)[0][0]
+                low, high, hit = (low, middle[0], pressed) if pressed.any() else (middle[0], high, hit)
+            phi[idx] = open_phi[idx] + low * (closed_phi[idx] - open_phi[idx])
+            done, touched = low, True
+            # The joints before the phalanx that touched stop; its own joint too when it was the first still
+            # moving (the phalanx lies on the object): a fingertip that reached past an edge curls round it.
+            link = int(np.flatnonzero(hit)[-1])
+            moving = link if link > moving else link + 1
         contact[finger] = touched
     return phi, contact
 
