@@ -8,7 +8,7 @@ Prints, for each weight:
 2. The thirteen synthetic takes of ``benchmarks/smoothing.py`` (glove-13, joints-19, dense-patches, tips-5; grasps
    and random motion; 30-120 Hz; 10 s each), solved with their true attachment: the joints' median / p99 distance
    from the truth and the MRE. The synthetic free motion bends each DIP exactly 2/3 of its PIP, as the prior says;
-   its grasps close each joint until the finger touches the object, which the coupling does not describe.
+   its grasps close each finger until its phalanges touch the object, which the coupling does not describe.
 
     .venv/bin/python benchmarks/coupling.py [--weights 0.01,0.001] [--threads 1]
 """
