@@ -22,7 +22,7 @@ def test_demo_from_images_runs_every_stage_and_scores_it(gl_ok, tmp_path, monkey
                                         subject_seed=21, cameras=4, min_views=2),
              "take": SynthConfig(layout="dense-patches", motion="calibration", frames=2, rate=4.0, seed=9,
                                  subject_seed=21, cameras=4, min_views=2),
-             "cube": SynthConfig(layout="dense-patches", motion="turn-cube", moves="R", rate=12.0, seed=5,
+             "cube": SynthConfig(layout="dense-patches", motion="turn-cube", moves="R", rate=8.0, seed=5,
                                  subject_seed=21, cameras=4, min_views=2)}
     monkeypatch.setattr(demo_images, "IMAGE_DEMO_CONFIGS", small)
     out = tmp_path / "demo"

@@ -37,7 +37,9 @@ def test_dask_client_gives_the_same_results():
             map_chunks(check_rate, [100.0, 0.0], scheduler=client)
 
 
-def test_bad_settings():
+def test_bad_settings(monkeypatch):
+    import handcap.parallel as parallel
+    monkeypatch.setattr(parallel, "_CONNECT_TIMEOUT", "1s")  # refused at once; Dask tries again until then
     with pytest.raises(HandcapError, match="workers must be"):
         map_chunks(math.factorial, NUMBERS, workers=0)
     with pytest.raises(HandcapError, match="scheduler must be an address"):

@@ -128,7 +128,9 @@ def test_truncated_png_in_a_folder(frames, weights, tmp_path, capsys):
     assert "000001.png" in capsys.readouterr().err
 
 
-def test_other_bad_input(frames, weights, tmp_path, capsys):
+def test_other_bad_input(frames, weights, tmp_path, capsys, monkeypatch):
+    import handcap.parallel as parallel
+    monkeypatch.setattr(parallel, "_CONNECT_TIMEOUT", "1s")  # refused at once; Dask tries again until then
     (tmp_path / "empty").mkdir()
     rig = tmp_path / "rig.toml"
     rig.write_text('[cam_a]\nname = "cam_a"\nsize = [200, 160]\nmatrix = [[100, 0, 100], [0, 100, 80], [0, 0, 1]]\n'
