@@ -139,3 +139,21 @@ def test_fingers_close_all_joints_together_and_stop_where_they_touch(shape):
         for j in np.flatnonzero(fraction < 1 - 1e-9):
             moved = np.isin(hand.segment_of_vertex, [hand.segment_id(f"{finger}_{s}") for s in links[j:]])
             assert contact[finger] and depth[moved].min() < 0.001, (finger, links[j], depth[moved].min())
+
+
+def test_each_take_grasps_its_own_way_and_rests_on_the_object():
+    # Before: every take's grasp of an object was the same pose but for the subject's hand shape.
+    hand, obj = load_hand_model(), make_object("cylinder")
+    grasps = [grasp_configuration(hand, obj, "power", rng=np.random.default_rng(seed)) for seed in range(3)]
+    planned = grasp_configuration(hand, obj, "power")
+    again = grasp_configuration(hand, obj, "power")
+    assert all(np.array_equal(a, b) for a, b in zip(planned, again))  # without a generator: one grasp
+    for object2hand, _, phi in grasps:
+        verts = hand.forward(phi=phi).vertices
+        depth = obj.signed_distance((verts - object2hand[:3, 3]) @ object2hand[:3, :3])
+        assert -SQUEEZE - TOL <= depth.min() < 0.001  # it touches, no deeper than the skin gives
+    phis = np.array([g[2] for g in grasps])
+    spread = np.rad2deg(np.ptp(phis, axis=0)).max()
+    assert spread > 5.0  # degrees: some joint differs between the takes' grasps
+    moved = np.linalg.norm(np.ptp([g[0][:3, 3] for g in grasps], axis=0))
+    assert 0.0005 < moved < 0.03  # metres: the object sits elsewhere in the hand, still in it

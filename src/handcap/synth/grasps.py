@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import convolve1d, maximum_filter1d
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from handcap.core.transforms import homogeneous
 from handcap.hand.anatomy import PHI_LIMITS, PHI_NAMES, finger_flexion, relaxed_pose
@@ -23,6 +24,12 @@ from handcap.hand.anatomy import pose_from_degrees as _pose
 FINGERS = ("index", "middle", "ring", "pinky")
 #: Deepest a vertex of the skin may press into a held object, metres (soft tissue gives).
 SQUEEZE = 0.0015
+#: How one person's grasp of an object differs from another's (:func:`grasp_configuration` with ``rng``): where the
+#: object sits (metres, standard deviation, along the palm; the way it is pushed against the palm is planned), how
+#: far a power grasp's object turns about the palm's normal (degrees, standard deviation), and each joint's pace of
+#: closing (uniform range, times the planned one). Chosen as a few millimetres, a few degrees and a sixth of the
+#: pace, not fitted to any take.
+GRASP_VARIETY = {"shift": 0.004, "slant_deg": 10.0, "pace": (0.85, 1.15)}
 _I = {n: i for i, n in enumerate(PHI_NAMES)}
 
 
@@ -233,13 +240,18 @@ def _place_against_palm(hand, obj, rotation, start, direction, open_phi, *, clea
     return homogeneous(rotation, centre)
 
 
-def grasp_configuration(hand, obj, kind: str, *, betas=None):
+def grasp_configuration(hand, obj, kind: str, *, betas=None, rng=None):
     """Object pose in the hand frame and the grasping pose for a power or precision grasp.
 
     Power: the object's long axis lies across the palm under the proximal
     phalanges, against the palm; all five digits wrap round it. Precision: the
     object sits between the thumb and the index and middle fingertips, where a
     pinch of the object's width would put it; those three close on it.
+
+    With ``rng``, the grasp is one person's of many (:data:`GRASP_VARIETY`): the object sits a few millimetres
+    elsewhere (and, in a power grasp, turned about the palm's normal, across the palm at a slant), and each joint
+    closes at its own pace, so the fingers meet the object in another shape. Without it, every call gives the
+    same grasp (for the same hand and object).
 
     Parameters
     ----------
@@ -250,6 +262,8 @@ def grasp_configuration(hand, obj, kind: str, *, betas=None):
         ``"power"``; anything else gives a precision grasp.
     betas : ndarray (10,), optional
         The hand's shape (the average hand when omitted): the grasp is planned for the hand that makes it.
+    rng : numpy.random.Generator, optional
+        Draws the grasp's variety.
 
     Returns
     -------
@@ -260,11 +274,15 @@ def grasp_configuration(hand, obj, kind: str, *, betas=None):
     """
     palmar = np.array([0.0, -1.0, 0.0])
     ulnar = np.array([0.0, 0.0, 1.0 if hand.is_right else -1.0])
+    vary = rng is not None
+    shift = rng.normal(0.0, GRASP_VARIETY["shift"], 3) if vary else np.zeros(3)
     if kind == "power":
-        # Object x towards the back of the hand, z along the hand's ulnar axis.
-        rotation = np.column_stack([-palmar, np.cross(ulnar, -palmar), ulnar])
+        # Object x towards the back of the hand, z along the hand's ulnar axis (turned about the palm's normal).
+        slant = Rotation.from_rotvec(np.deg2rad(rng.normal(0.0, GRASP_VARIETY["slant_deg"])) * palmar) if vary \
+            else Rotation.identity()
+        rotation = slant.as_matrix() @ np.column_stack([-palmar, np.cross(ulnar, -palmar), ulnar])
         mcp_x = hand.rest_joints(betas)[4, 0]
-        start = np.array([mcp_x + 0.012, 0.0, 0.006 * ulnar[2]]) + palmar * obj.size[0]
+        start = np.array([mcp_x + 0.012, 0.0, 0.006 * ulnar[2]]) + palmar * obj.size[0] + shift * [1, 0, 1]
         open_phi = _pose(thumb_cmc_bend=-20, thumb_cmc_spread=10, thumb_mcp_bend=5)
         for finger in FINGERS:
             open_phi = finger_flexion(open_phi, finger, 0.05)
@@ -282,12 +300,16 @@ def grasp_configuration(hand, obj, kind: str, *, betas=None):
         open_phi = relaxed.copy()
         open_phi[[i for i, n in enumerate(PHI_NAMES) if n.startswith(("thumb_", "index_", "middle_"))]] = 0.0
         joints = hand.forward(betas, phi=pinch, vertices=False).joints
-        centre = 0.5 * (joints[16] + joints[17]) + 0.25 * (joints[18] - joints[17])
+        centre = 0.5 * (joints[16] + joints[17]) + 0.25 * (joints[18] - joints[17]) + shift
         object2hand = _place_against_palm(hand, obj, np.eye(3), centre, np.array([1.0, 0.0, 0.0]), open_phi,
                                           betas=betas)
         closed = pinch_pose(hand, "index", relaxed, gap=0.0, betas=betas)
         closed = finger_flexion(closed, "middle", 0.9)
         fingers = ("index", "middle", "thumb")
+    if vary:  # each joint at its own pace
+        low, high = GRASP_VARIETY["pace"]
+        closed = np.clip(open_phi + (closed - open_phi) * rng.uniform(low, high, len(closed)), PHI_LIMITS[:, 0],
+                         PHI_LIMITS[:, 1])
     grasp_phi, _ = close_until_contact(hand, obj, object2hand, open_phi, closed, fingers, betas=betas)
     return object2hand, open_phi, grasp_phi
 
