@@ -49,15 +49,13 @@ _JOINT_GROUPS["thumb"] = (("thumb_cmc_twist", "thumb_cmc_spread", "thumb_cmc_ben
                           ("thumb_mcp_twist", "thumb_mcp_spread", "thumb_mcp_bend"), ("thumb_ip_bend",))
 
 
-def _pressed(hand, obj, hand2object, phi, open_phi, closed_phi, idx, links, moving, at, reference, squeeze, betas):
-    """Which phalanges (len(at), 3) press into the object with the angles ``idx`` at fractions ``at`` closed.
+def _pressed(hand, obj, hand2object, path, links, moving, reference, squeeze, betas):
+    """Which phalanges (len(path), 3) of the poses ``path`` (P, 27) press into the object.
 
     A vertex may press at most ``squeeze`` in, or no deeper than ``reference`` (its depth where the path began,
     the first pose's when None): one already resting on the object may slide along it, not into it. Also returns
     the depths of the first pose.
     """
-    path = np.repeat(phi[None], len(at), axis=0)
-    path[:, idx] = open_phi[idx] + at[:, None] * (closed_phi[idx] - open_phi[idx])
     verts = hand.forward(betas, phi=path).vertices
     depth = obj.signed_distance(verts @ hand2object[:3, :3].T + hand2object[:3, 3])
     deep = depth < np.minimum(-squeeze, depth[0] if reference is None else reference) - 1e-7
@@ -110,9 +108,14 @@ def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *
         moving, done, touched = 0, 0.0, False  # groups before ``moving`` have stopped; the others are ``done`` closed
         while moving < len(groups) and done < 1.0:
             idx = [i for g in groups[moving:] for i in g]
+
+            def path(at, idx=idx):  # the poses with the joints still turning at fractions ``at`` closed
+                out = np.repeat(phi[None], len(at), axis=0)
+                out[:, idx] = open_phi[idx] + np.asarray(at)[:, None] * (closed_phi[idx] - open_phi[idx])
+                return out
+
             at = np.linspace(done, 1.0, max(2, int(np.ceil(steps * (1.0 - done)))))
-            hits, reference = _pressed(hand, obj, hand2object, phi, open_phi, closed_phi, idx, links, moving,
-                                       at, None, squeeze, betas)
+            hits, reference = _pressed(hand, obj, hand2object, path(at), links, moving, None, squeeze, betas)
             first = np.flatnonzero(hits.any(axis=1))
             if len(first) == 0:
                 phi[idx] = closed_phi[idx]
@@ -121,11 +124,11 @@ def close_until_contact(hand, obj, object2hand, open_phi, closed_phi, fingers, *
             low, high = at[first[0] - 1], at[first[0]]
             hit = hits[first[0]]
             for _ in range(6):
-                middle = np.array([0.5 * (low + high)])
-                pressed = _pressed(hand, obj, hand2object, phi, open_phi, closed_phi, idx, links, moving,
-                                   middle, reference, squeeze, betas)[0][0]
-                low, high, hit = (low, middle[0], pressed) if pressed.any() else (middle[0], high, hit)
-            phi[idx] = open_phi[idx] + low * (closed_phi[idx] - open_phi[idx])
+                middle = 0.5 * (low + high)
+                pressed = _pressed(hand, obj, hand2object, path([middle]), links, moving, reference, squeeze,
+                                   betas)[0][0]
+                low, high, hit = (low, middle, pressed) if pressed.any() else (middle, high, hit)
+            phi[idx] = path([low])[0, idx]
             done, touched = low, True
             # The joints before the phalanx that touched stop; its own joint too when it was the first still
             # moving (the phalanx lies on the object): a fingertip that reached past an edge curls round it.
