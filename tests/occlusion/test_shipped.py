@@ -19,8 +19,9 @@ def test_shipped_model_meets_the_joint_error_target(layout):
     motions = ("random", "grasp", "precision", "open-close")
     takes = [simulate_take(layout, motion, 600, 100.0, 424_242 + i) for i, motion in enumerate(motions)]
     table = joint_error_table(takes, model, counts=(1, 3), durations=(0.2, 1.0), seeds=range(1), windows=60)
-    # The issue's target: 5 mm mean joint error with no occlusion (active-9 4.5, glove-13 4.1, joints-19 3.8 mm here,
-    # with the models trained on the varied grasps of 2026-12-01; one take alone reaches 5.4 mm, joints-19's grasp).
+    # The issue's target: 5 mm mean joint error with no occlusion (active-9 4.4, glove-13 4.0, joints-19 3.7 mm here,
+    # with the models trained on the varied grasps of 2026-12-01, whose wrist no longer presses the hand into the
+    # object on the table; the grasp take alone reaches 7.0 mm with active-9, 5.2 mm with the others).
     assert table["none_all"] <= 0.005, table["none_all"]
     assert (table["all"] < 0.01).all(), table["all"]  # occluded markers predicted, pose still close
     assert (table["all"] >= table["none_all"] * 0.8).all()

@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 
 from handcap.hand import load_hand_model
 from handcap.hand.anatomy import PHI_NAMES, finger_flexion, pose_from_degrees
-from handcap.synth.grasps import SQUEEZE, close_until_contact, grasp_configuration, rest_on_object
+from handcap.hand.openhand import OpenHand
+from handcap.synth.grasps import SQUEEZE, close_until_contact, grasp_configuration, rest_on_object, steady_wrist
 from handcap.synth.motions import make_motion, rest_path
 from handcap.synth.objects import make_object
 
@@ -109,6 +110,47 @@ def test_tremor_that_would_press_a_finger_in_is_held_back_and_other_tremor_kept(
     assert (np.ptp(scale, axis=2) < 1e-9).all()
     assert (scale == 1.0).any() and (scale < 1.0).any()
 
+
+
+def test_the_wrists_tremor_does_not_press_the_hand_into_the_object_on_the_table():
+    # Before: this left hand's middle finger went 2.6 mm into the cylinder as it closed on it (frame 30, not yet
+    # held), pressed in by the wrist's tremor; without that tremor 1.5 mm.
+    hand, obj = OpenHand("left"), make_object("cylinder", seed=0)
+    rng = np.random.default_rng(0)
+    betas = rng.normal(0.0, 0.5, 10)
+    motion = make_motion("grasp", hand, 120, 30.0, rng, obj, betas=betas)
+    depth = _depths(hand, obj, motion, betas)
+    assert depth.max() <= SQUEEZE + TOL, f"{depth.max() * 1e3:.2f} mm in at frame {depth.argmax()}"
+
+
+def test_wrist_tremor_that_would_press_the_hand_in_is_held_back_and_other_tremor_kept():
+    hand, obj = load_hand_model(), make_object("sphere")
+    object2hand, open_phi, _ = grasp_configuration(hand, obj, "power")  # the open hand about to close on it
+    n = 16
+    rng = np.random.default_rng(0)
+    phi = np.repeat(open_phi[None], n, axis=0)
+    object_pose = np.repeat(object2hand[None], n, axis=0)  # the hand model's frame is the world's
+    smooth = np.repeat(np.eye(4)[None], n, axis=0)
+    turns = Rotation.from_rotvec(np.deg2rad(rng.normal(0.0, 1.0, (n, 3))))
+    shaken = smooth.copy()
+    shaken[:, :3, :3] = turns.as_matrix()
+    shaken[:, :3, 3] = rng.normal(0.0, 0.003, (n, 3))
+    out = steady_wrist(hand, obj, object_pose, smooth, shaken, phi)
+
+    def depth(wrists):  # the posed hands' deepest vertex in the sphere, metres (positive: inside)
+        verts = hand.forward(None, Rotation.from_matrix(wrists[:, :3, :3]).as_rotvec(), None, wrists[:, :3, 3],
+                             phi=phi).vertices
+        return -obj.signed_distance((verts - object2hand[:3, 3]) @ object2hand[:3, :3]).min(axis=1)
+
+    planned = depth(smooth)
+    assert depth(shaken).max() > max(SQUEEZE, planned.max()) + 0.001  # the shaken wrist pressed the hand in
+    assert (depth(out) <= np.maximum(SQUEEZE, planned) + TOL).all()
+    # Each wrist's turn and shift are its shaken ones scaled back by 1, 1/2, 1/4 or 0.
+    shift = (out[:, :3, 3] / shaken[:, :3, 3]).round(9)
+    turn = (Rotation.from_matrix(out[:, :3, :3]).as_rotvec() / turns.as_rotvec()).round(9)
+    assert np.isin(shift, [0.0, 0.25, 0.5, 1.0]).all() and (np.ptp(shift, axis=1) == 0).all()
+    assert np.allclose(turn, shift)
+    assert (shift == 1.0).any() and (shift < 1.0).any()
 
 
 @pytest.mark.parametrize("shape", ["cylinder", "sphere", "cuboid", "cube2x2"])

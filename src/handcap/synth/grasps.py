@@ -5,7 +5,8 @@ the open hand (:func:`grasp_configuration`), then each finger closes, all its jo
 the object's analytic surface. Skin gives: a vertex may press at most :data:`SQUEEZE` (1.5 mm) into the object,
 within DexterCap's 3.8 +- 3.1 mm of hand-object penetration measured on real captures (where tracking error adds
 to it). A hand that holds an object keeps resting on it while its tremor goes on: :func:`rest_on_object`
-holds back the part of each finger's tremor that would press it deeper.
+holds back the part of each finger's tremor that would press it deeper, and :func:`steady_wrist` the part of the
+wrist's that would press the hand into an object it does not hold (on the table, it cannot give way).
 
 Frames: the hand model's (metres; x distal, y dorsal); ``object2hand`` maps the object's frame into it.
 """
@@ -228,6 +229,61 @@ def rest_on_object(hand, obj, object2hand, smooth_phi, phi, open_phi, rate, *, s
         keep[rows] = np.where(pressed, level, keep[rows])
         rows = rows[pressed.any(axis=1)]
         out[rows] = blend(phi, smooth_phi, 1.0 - keep, rows)[rows]
+    return out
+
+
+def steady_wrist(hand, obj, object_pose, smooth_wrist, wrist, phi, *, squeeze=SQUEEZE, betas=None):
+    """Wrist poses whose tremor does not press the hand into an object it does not hold.
+
+    An object standing on the table cannot give way to a hand closing on it or opening off it, and a hand does
+    not push into what it is about to grasp. Where the hand in its planned angles ``phi``, moved by ``wrist``,
+    lies deeper in the object than ``squeeze`` (or than with ``smooth_wrist``, when that is deeper), the wrist's
+    variation from ``smooth_wrist`` (its tremor: turn and shift) is scaled down, to a half, a quarter, none,
+    until it no longer does. The fingers' own tremor is :func:`rest_on_object`'s.
+
+    Parameters
+    ----------
+    hand : HandModel
+    obj : SynthObject
+    object_pose, smooth_wrist, wrist : ndarray (T, 4, 4)
+        The object's pose and the hand model's frame without and with the wrist's tremor, in the world, metres.
+    phi : ndarray (T, 27)
+        Radians: the planned angles.
+    squeeze : float
+        Deepest allowed skin compression, metres.
+    betas : ndarray (10,), optional
+        The hand's shape (the average hand when omitted).
+
+    Returns
+    -------
+    ndarray (T, 4, 4)
+        ``wrist`` with its tremor held back where it pressed the hand in.
+    """
+    verts = hand.forward(betas, phi=phi).vertices  # (T, V, 3) in the hand model's frame
+    world2object = np.linalg.inv(object_pose)
+    smooth_rot = Rotation.from_matrix(smooth_wrist[:, :3, :3])
+    turn = (smooth_rot.inv() * Rotation.from_matrix(wrist[:, :3, :3])).as_rotvec()
+    shift = wrist[:, :3, 3] - smooth_wrist[:, :3, 3]
+
+    def posed(scale, rows):  # the wrists with their tremor scaled by ``scale`` (len(rows),)
+        rot = (smooth_rot[rows] * Rotation.from_rotvec(scale[:, None] * turn[rows])).as_matrix()
+        return homogeneous(rot, smooth_wrist[rows, :3, 3] + scale[:, None] * shift[rows])
+
+    def depth(pose, rows):  # (len(rows),): the hand's deepest signed distance, metres
+        to_object = world2object[rows] @ pose
+        local = np.einsum("tij,tvj->tvi", to_object[:, :3, :3], verts[rows]) + to_object[:, None, :3, 3]
+        return obj.signed_distance(local.reshape(-1, 3)).reshape(len(rows), -1).min(axis=1)
+
+    every = np.arange(len(phi))
+    allowed = np.minimum(-squeeze, depth(smooth_wrist, every)) - 1e-7
+    out = np.array(wrist, dtype=np.float64)
+    rows = every
+    for level in (0.5, 0.25, 0.0):
+        pressed = depth(out[rows], rows) < allowed[rows]
+        if not pressed.any():
+            break
+        rows = rows[pressed]
+        out[rows] = posed(np.full(len(rows), level), rows)
     return out
 
 
