@@ -140,7 +140,8 @@ def test_shape_default_nan_attachment_and_strict_warnings(session, tmp_path, cap
                  "--out", str(tmp_path / "m.npz")]) == 2
     err = capsys.readouterr().err.strip()
     assert "NaN" in err and len(err.splitlines()) == 1
-    # Markers the attachment does not fit (two labels swapped): a warning, stored, and exit 2 with --strict.
+    # Two labels swapped in every frame: solved exchanged with a warning that names them, stored, and exit 2 with
+    # --strict; solved as labelled (--keep-swaps), markers the attachment does not fit: the MRE's warning.
     from handcap import MarkerSequence
     from handcap.io import read_markers, write_markers_npz
     take = read_markers(session / "take" / "markers.c3d")
@@ -151,5 +152,8 @@ def test_shape_default_nan_attachment_and_strict_warnings(session, tmp_path, cap
     write_markers_npz(MarkerSequence(take.positions, names, take.rate), swapped)
     out = tmp_path / "motion.npz"
     assert main(["--strict", "solve", str(swapped), "--attachment", str(att), "--out", str(out)]) == 2
+    assert "warning: solve: 1 label swap(s)" in capsys.readouterr().err
+    assert any("thumb_tip and pinky_tip in frames 0-" in w for w in read_hand_motion(out).warnings)
+    assert main(["--strict", "solve", str(swapped), "--attachment", str(att), "--out", str(out), "--keep-swaps"]) == 2
     assert "warning: solve MRE" in capsys.readouterr().err
     assert any("solve MRE" in w for w in read_hand_motion(out).warnings)

@@ -99,8 +99,12 @@ def test_swapped_labels_give_a_warned_solve(glove_session):
     names[i], names[j] = names[j], names[i]
     from handcap import MarkerSequence
     swapped = MarkerSequence(take.markers.positions, names, take.markers.rate)
+    with pytest.warns(HandcapWarning, match="label swap"):
+        motion = solve_hand(swapped, attachment)  # solved with the two exchanged, and said
+    assert any("index_tip and little_tip in frames 0-149" in w for w in motion.warnings)
+    assert np.nanmean(motion.marker_residuals) < MRE_WARNING
     with pytest.warns(HandcapWarning, match="solve MRE"):
-        motion = solve_hand(swapped, attachment)
+        motion = solve_hand(swapped, attachment, mend_swaps=False)
     assert np.nanmean(motion.marker_residuals) > MRE_WARNING
     assert any("solve MRE" in w for w in motion.warnings)
     assert not solve_hand(take.markers, attachment).warnings

@@ -80,14 +80,14 @@ def test_labels_swapped_between_two_fingertips_are_removed(turned):
         checked, line = checked_by_hand(labelled, unlabelled, layout)
     assert line.startswith("checked against the solved hand") and "pinky_mcp never labelled: not checked" in line
     seen = np.isfinite(swapped[frames][:, [i, j], 0])
-    # A swapped label is removed, or (where the other tip's label went too) given its own tip's point. Not all:
-    # in 5 of the 30 frames the solve bends the middle finger to the index tip's point (1 mm off it) and that
-    # label stays (measured 54 of the 59 seen removed or given back).
+    # A swapped label is removed, or (where the other tip's label went too) given its own tip's point: measured 59
+    # of the 59 seen, the solve having found the swap itself. Before it did, in 5 of the 30 frames it bent the middle
+    # finger to the index tip's point (1 mm off it) and that label stayed (54 of 59).
     gone = np.isnan(checked.positions[frames][:, [i, j], 0])
     own = np.linalg.norm(checked.positions[frames][:, [i, j]] - truth.positions[frames][:, [i, j]], axis=-1) < 1e-9
     mended = (gone | own)[seen]
     print(f"swapped tip labels removed or given back: {mended.sum()} of {mended.size}")
-    assert mended.mean() > 0.85 and gone[seen].any()
+    assert mended.mean() > 0.95 and gone[seen].any()
     after = score_labels(checked, truth)
     assert after.erroneous.sum() == (~mended).sum() and after.false_marker.sum() == 0  # nothing else wrong
     assert np.isnan(checked.positions[:, names.index("pinky_mcp")]).all()  # nothing guessed for it

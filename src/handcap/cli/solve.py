@@ -20,7 +20,8 @@ def _cmd_calibrate_markers(a):
 
 def _cmd_solve(a):
     return solve.solve(a.input, a.attachment, a.out, method=a.method, filter_cutoff=a.filter_cutoff,
-                       filter_order=a.filter_order, units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir)
+                       filter_order=a.filter_order, units=a.units, hand_model=a.hand_model, mano_dir=a.mano_dir,
+                       keep_swaps=a.keep_swaps)
 
 
 def _cmd_shape(a):
@@ -63,6 +64,9 @@ def add_solve(verbs) -> None:
     p.add_argument("--method", choices=METHODS, default="lm", help="lm (default) or adam (the paper's, slow)")
     p.add_argument("--filter-cutoff", type=float, default=None, help="low-pass the motion at this frequency, Hz")
     p.add_argument("--filter-order", type=int, default=2, help="Butterworth order (default %(default)s)")
+    p.add_argument("--keep-swaps", action="store_true",
+                   help="solve two labels the hand finds swapped for a stretch of frames as they are labelled "
+                        "(default: solved exchanged there, with a warning that names them)")
     p.add_argument("--out", required=True, help="hand motion .npz")
     add_units(p)
     add_hand_model(p, "the attachment's")

@@ -1,4 +1,5 @@
-"""Plausibility of fits and labels: residuals, limits reached, shape values, labelled share (issue 14)."""
+"""Plausibility of fits and labels: residuals, limits reached, shape values, labelled share, frames too few markers
+fix (issue 14)."""
 
 from __future__ import annotations
 
@@ -156,3 +157,32 @@ def labeling_warnings(points, labeled, *, n_labels: int | None = None, lost_fram
         out.append(f"hand frame lost in {len(lost)}{of} frames (first: {lost.min()}); the rigid markers did not "
                    f"match the training take there")
     return out
+
+
+#: Markers a frame needs to fix the hand's place and turn (:func:`lost_frame_warnings`).
+FRAME_MARKERS = 3
+
+
+def lost_frame_warnings(seen: np.ndarray) -> list[str]:
+    """A warning where the hand frame is lost: frames with fewer than :data:`FRAME_MARKERS` markers seen.
+
+    There the solve holds the pose of the frames beside it (the first seen frame's, before any) and moves it only
+    as far as the few markers pull: the hand's place and turn are not measured.
+
+    Parameters
+    ----------
+    seen : ndarray (T,) int
+        Markers seen in each frame.
+
+    Returns
+    -------
+    list of str
+        Empty where every frame shows enough.
+    """
+    lost = np.flatnonzero(np.asarray(seen) < FRAME_MARKERS)
+    if not len(lost):
+        return []
+    none = int((np.asarray(seen)[lost] == 0).sum())
+    return [f"the hand frame is lost in {len(lost)} of {len(seen)} frames (fewer than {FRAME_MARKERS} markers seen, "
+            f"{none} of them with none; the first at frame {lost[0]}): their pose is held from the frames beside "
+            f"them, not measured"]

@@ -15,7 +15,8 @@ module names them all. Every limit is a constant of :mod:`~handcap.quality.limit
 value; none is fitted to one file (the table of them is there).
 """
 
-from handcap.quality.fit_checks import (labeling_warnings, limit_warnings, residual_warnings, shape_warnings)
+from handcap.quality.fit_checks import (FRAME_MARKERS, labeling_warnings, limit_warnings, lost_frame_warnings,
+                                        residual_warnings, shape_warnings)
 from handcap.quality.limits import (BONE_RATIO, CAPTURE_SPREAD, HAND_LENGTH_RANGE, HAND_SPREAD, MAX_SPEED, MIN_LABELED,
                                     MRE_LIMIT, PITCH_TOLERANCE, REPROJECTION_PX, SHAPE_BOUND, SPIKE_JUMP, SPIKE_STRAY,
                                     SPIKE_Z)
@@ -29,7 +30,7 @@ from handcap.quality.stage_checks import (attach, camera_warnings, clean_warning
 __all__ = ["anthropometric_bone_lengths", "attach", "bone_lengths", "BONE_NAMES", "BONE_RATIO", "bone_warnings",
            "camera_warnings", "CAPTURE_SPREAD", "clean_warnings", "HAND_LENGTH_RANGE", "HAND_SPREAD", "jerk_spikes",
            "jerk_warnings", "labeling_warnings", "limit_warnings", "marker_figures", "marker_warnings", "MAX_SPEED",
-           "MIN_LABELED", "motion_figures", "motion_warnings", "MRE_LIMIT", "object_warnings", "PITCH_TOLERANCE",
-           "pitch_check", "REPROJECTION_PX",
-           "residual_warnings", "SHAPE_BOUND", "shape_warnings", "size_warnings", "speed_warnings", "speeds",
-           "spike_events", "SPIKE_JUMP", "SPIKE_STRAY", "SPIKE_Z", "spread", "summary", "triangulation_warnings"]
+           "MIN_LABELED", "FRAME_MARKERS", "lost_frame_warnings", "motion_figures", "motion_warnings", "MRE_LIMIT",
+           "object_warnings", "PITCH_TOLERANCE", "pitch_check", "REPROJECTION_PX", "residual_warnings", "SHAPE_BOUND",
+           "shape_warnings", "size_warnings", "speed_warnings", "speeds", "spike_events", "SPIKE_JUMP", "SPIKE_STRAY",
+           "SPIKE_Z", "spread", "summary", "triangulation_warnings"]

@@ -70,7 +70,7 @@ STAGES = {
               "max_spline_frames": int},
     "calibrate": {"layout": str, "side": str, "fit_shape": bool, "estimate_offset": bool, "units": str,
                   "drop_unseen": bool, "drop_misfit_mm": float},
-    "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str},
+    "solve": {"method": str, "filter_cutoff": float, "filter_order": int, "units": str, "keep_swaps": bool},
     "object": {"markers": str, "articulated": str, "name": str, "threshold_mm": float, "units": str,
                "canonical": str},
     "fit": {"fit_shape": bool, "robust_scale": float, "filter_cutoff": float, "side": str, "label": str,

@@ -21,6 +21,9 @@ Per frame, the pose that brings the attached markers onto the observed ones
    by the anatomical priors instead: DIP follows PIP, PIP follows MCP, and a
    weak pull to the relaxed hand. A frame with no marker at all keeps the
    whole previous pose.
+6. Two labels swapped for a stretch of frames (both markers off the fitted
+   hand there, and the hand fitting them exchanged) are solved exchanged, with
+   a warning that names them (:mod:`handcap.solve.swaps`; ``mend_swaps``).
 
 Methods: ``lm`` (the above, default) and ``adam`` (the paper's optimiser,
 :mod:`handcap.solve.adam`), kept as the baseline.
@@ -44,12 +47,13 @@ from handcap.core.motion import HandMotion
 from handcap.core.rotations import axis_angle_from_matrix
 from handcap.hand import OpenHand
 from handcap.quality.filters import lowpass, smooth_rotations
-from handcap.quality.plausibility import MRE_LIMIT, attach, residual_warnings, shape_warnings
+from handcap.quality.plausibility import MRE_LIMIT, attach, lost_frame_warnings, residual_warnings, shape_warnings
 from handcap.solve.continuity import mend_excursions
 from handcap.solve.kernel import FrameKernel
 from handcap.solve.lm import Poses, Priors, frame_costs, held_angles, levenberg_marquardt, unconstrained_angles
 from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
+from handcap.solve.swaps import CONTEXT, exchanged, find_swaps, swap_warnings
 
 METHODS = ("lm", "adam")
 #: A fit whose mean marker error exceeds this (metres) is implausible for a calibrated attachment: warned.
@@ -85,7 +89,7 @@ def observed_markers(markers: MarkerSequence, names) -> tuple[np.ndarray, list[s
 
 def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = "lm", priors: Priors | None = None,
                robust_scale: float = 0.005, iterations: int = 8, first_iterations: int = 60,
-               filter_cutoff: float | None = None, filter_order: int = 2,
+               filter_cutoff: float | None = None, filter_order: int = 2, mend_swaps: bool = True,
                progress: bool | None = None) -> HandMotion:
     """Solve hand motion from labeled markers.
 
@@ -111,6 +115,8 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         joints, ``marker_fit`` and residuals then describe the smoothed motion.
     filter_order : int
         Order of that filter.
+    mend_swaps : bool
+        Two labels the hand finds swapped in some frames are solved exchanged there, with a warning (:mod:`.swaps`).
     progress : bool, optional
         Progress bar (default: on a terminal only).
 
@@ -146,49 +152,38 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     if not observed.any():
         raise HandcapError("the input has no visible marker of the attachment in any frame")
     model = MarkerModel(hand, attachment)
-    if method == "adam":
-        from handcap.solve.adam import solve_adam  # imports torch: only for the baseline solver
-        poses = solve_adam(model, target, observed, priors, progress=progress)
-    else:
-        poses = solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
-                          first_iterations, progress, neighbours=True)
-    first = int(np.argmax(observed.any(axis=1)))  # frames before any marker is seen hold the first seen pose
-    poses.transl[:first], poses.rot[:first], poses.phi[:first] = poses.transl[first], poses.rot[first], poses.phi[first]
+
+    def run(target, observed, progress=progress):  # the poses (frames before any marker seen: the first seen)
+        if method == "adam":
+            from handcap.solve.adam import solve_adam  # imports torch: only for the baseline solver
+            poses = solve_adam(model, target, observed, priors, progress=progress)
+        else:
+            poses = solve_lm(model, target, observed, priors, robust_scale, markers.rate, iterations,
+                             first_iterations, progress, neighbours=True)
+        first = int(np.argmax(observed.any(axis=1)))
+        poses.transl[:first], poses.rot[:first], poses.phi[:first] = (poses.transl[first], poses.rot[first],
+                                                                       poses.phi[first])
+        return poses
+
+    def fit(poses):  # (T, M, 3) metres
+        return model.positions(poses.transl, poses.rot, poses.phi)
+
+    poses = run(target, observed)
+    swaps = find_swaps(target, observed, fit(poses), lambda t, o: fit(run(t, o, False))) if mend_swaps else []
+    if swaps:  # each stretch solved again with its labels exchanged, with the frames beside it, and put in its place
+        target, observed = exchanged(target, observed, swaps)
+        for swap in swaps:
+            lo, hi = max(0, swap.first - CONTEXT), min(len(target), swap.last + 1 + CONTEXT)
+            part = run(target[lo:hi], observed[lo:hi], False)
+            for mine, theirs in ((poses.transl, part.transl), (poses.rot, part.rot), (poses.phi, part.phi)):
+                mine[swap.first:swap.last + 1] = theirs[swap.first - lo:swap.last + 1 - lo]
     if filter_cutoff is not None:
         poses = smoothed_poses(poses, markers.rate, filter_cutoff, filter_order)
     motion = motion_from_poses(hand, model, poses, target, observed, markers.rate, names)
-    found = residual_warnings(motion.marker_residuals, names=names, what="solve MRE", limit=MRE_WARNING) + \
+    found = swap_warnings(swaps, names, markers.rate) + \
+        residual_warnings(motion.marker_residuals, names=names, what="solve MRE", limit=MRE_WARNING) + \
         shape_warnings(motion.betas) + lost_frame_warnings(observed.sum(axis=1))
     return attach(motion.with_warnings(*attachment.warnings), found)
-
-
-def lost_frame_warnings(seen: np.ndarray) -> list[str]:
-    """A warning where the hand frame is lost: frames with fewer than :data:`FRAME_MARKERS` markers seen.
-
-    There the solve holds the pose of the frames beside it (the first seen frame's, before any) and moves it only
-    as far as the few markers pull: the hand's place and turn are not measured.
-
-    Parameters
-    ----------
-    seen : ndarray (T,) int
-        Markers seen in each frame.
-
-    Returns
-    -------
-    list of str
-        Empty where every frame shows enough.
-    """
-    lost = np.flatnonzero(np.asarray(seen) < FRAME_MARKERS)
-    if not len(lost):
-        return []
-    none = int((np.asarray(seen)[lost] == 0).sum())
-    return [f"the hand frame is lost in {len(lost)} of {len(seen)} frames (fewer than {FRAME_MARKERS} markers seen, "
-            f"{none} of them with none; the first at frame {lost[0]}): their pose is held from the frames beside "
-            f"them, not measured"]
-
-
-#: Markers a frame needs to fix the hand's place and turn (:func:`lost_frame_warnings`).
-FRAME_MARKERS = 3
 
 
 def smoothed_poses(poses: Poses, rate, cutoff, order) -> Poses:

@@ -137,7 +137,9 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
     pos = labelled.positions.copy()
     model = motion.marker_fit.copy()
     seen = np.isfinite(pos[..., 0])
-    residual = motion.marker_residuals.copy()  # NaN where no label
+    # Each label against where the hand puts its marker (the solve may have exchanged two swapped labels: its own
+    # residuals are of the labels it solved).
+    residual = np.where(seen, np.linalg.norm(np.nan_to_num(pos) - model, axis=-1), np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # frames or markers with no label
         frame_median = np.nanmedian(residual, axis=1)

@@ -103,7 +103,7 @@ def calibrate_markers(path, out, *, layout: str, side: str | None = None, frames
 
 
 def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | None = None, filter_order: int = 2,
-          units: str | None = None, hand_model: str | None = None, mano_dir=None) -> Step:
+          units: str | None = None, hand_model: str | None = None, mano_dir=None, keep_swaps: bool = False) -> Step:
     """Solve the hand motion of a labeled take with a calibrated attachment (see :func:`handcap.solve.solve_hand`).
 
     Parameters
@@ -120,6 +120,8 @@ def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | N
         Unit of the input's coordinates, overriding what the file says.
     hand_model, mano_dir : str or None
         The hand model (default: the one the attachment was made with).
+    keep_swaps : bool
+        Solve labels the hand finds swapped as they are (default: exchanged, with a warning).
     """
     check_not_input(out, path, attachment)
     attached = MarkerAttachment.load(attachment)
@@ -127,7 +129,8 @@ def solve(path, attachment, out, *, method: str = "lm", filter_cutoff: float | N
     hand = hand_model_from_options(hand_model, mano_dir, side=attached.side, recorded=attached.model,
                                    what=str(attachment))
     start = time.perf_counter()
-    motion = solve_hand(markers, attached, hand, method=method, filter_cutoff=filter_cutoff, filter_order=filter_order)
+    motion = solve_hand(markers, attached, hand, method=method, filter_cutoff=filter_cutoff, filter_order=filter_order,
+                        mend_swaps=not keep_swaps)
     seconds = time.perf_counter() - start
     motion = motion.with_warnings(*markers.warnings)  # e.g. the unit of the input guessed: kept with the result
     write_hand_motion(motion, out)

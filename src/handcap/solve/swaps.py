@@ -1,0 +1,175 @@
+"""Label swaps found by the hand solved from them, and mended (issue 14: never a silent wrong answer).
+
+A labelled take can swap two labels for a stretch of frames: a capture system's labeller (or ``handcap label``)
+confuses two fingertips that pass close to each other, or a finger's two markers. The solve then bends the hand
+to reach the swapped markers, and its mean residual hardly shows it: in a synthetic ``glove-13`` grasp whose ring
+and little fingertip labels are swapped for 19 frames, the solved ring fingertip lies 40 mm from the truth while the
+take's MRE is 0.54 mm.
+
+:func:`find_swaps` looks where a marker lies further than :data:`~handcap.quality.limits.MRE_LIMIT` from the fitted
+hand for a stretch of frames, pairs it with each marker also off the hand there and with the markers seen nearest to
+it (the solve can follow one of two swapped markers to within the limit), and solves each such stretch again with
+the two labels exchanged. Where the hand then fits both within that limit, and :data:`CLOSER` times closer than as
+labelled, and the other markers as well as before, the labels are swapped there. The verdict is the hand's fit, not
+how far the markers strayed: the real Qualisys glove's markers stray up to 16 mm from the fitted hand (the glove
+slides on the skin), 77 times for 5 mm or more, and no swap is found in it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from handcap.quality.limits import MM, MRE_LIMIT
+
+#: Frames solved on each side of a stretch, so that its first frames start from a settled pose; two stretches of a
+#: pair this close are one.
+CONTEXT = 5
+#: A frame with more markers off the fitted hand than this has lost its fit; its pairs are not tried.
+MAX_FAR = 6
+#: With the labels exchanged, the hand must fit the pair this many times closer than as labelled (and within the
+#: limit): the swaps synth made in the takes of ``benchmarks/swaps.py`` come 39-176 times closer; two markers that
+#: both fit the hand about as well either way (a finger of two markers can bend to reach either) are no evidence of
+#: a swap (the real glove's middle and ring fingertips, 1.2-1.4 times closer exchanged in a few stretches where both
+#: lie 4-6 mm off).
+CLOSER = 3.0
+#: ... and the other markers no further from it on average than as labelled plus this, metres (two back-of-hand
+#: markers exchanged in one frame of the real glove fitted within 1.6 mm, the hand turned, its other markers 60 mm
+#: off).
+OTHERS_WORSE = 0.0005
+#: Markers seen nearest to a marker off the hand that are tried as its partner (besides those off it too).
+PARTNERS = 2
+#: A pair's stretch is tried when, in its middle frame, each marker lies within this many times the larger of the
+#: two residuals of where the fit puts the other (swaps the solve followed: 2.8 at most in synthetic takes). It
+#: spares solves only; the verdict is the solve with the labels exchanged.
+CANDIDATE_RATIO = 4.0
+
+
+@dataclass(frozen=True)
+class Swap:
+    """Two labels swapped in frames ``first`` to ``last`` (inclusive); residuals in metres (means over the
+    stretch of the two markers): as given, and with the labels exchanged."""
+
+    a: int
+    b: int
+    first: int
+    last: int
+    given: float
+    exchanged: float
+
+
+def _stretches(far, target, fit, residuals):
+    """Candidate (a, b, first, last): a run of frames in which marker a is ``far`` from the fitted hand (runs a few
+    frames apart joined), with each marker b also far in its middle frame or among the :data:`PARTNERS` markers
+    seen nearest to it there (the solve can follow one of two swapped markers to within the limit)."""
+    out = set()
+    for a in np.flatnonzero(far.any(axis=0)):
+        ts = np.flatnonzero(far[:, a])
+        breaks = np.flatnonzero(np.diff(ts) > 1 + CONTEXT)  # a few frames apart (the two crossing): one stretch
+        for first, last in zip(ts[np.r_[0, breaks + 1]], ts[np.r_[breaks, len(ts) - 1]]):
+            t = ts[np.searchsorted(ts, (first + last) // 2)]  # the middle frame, or the next where a is far
+            if far[t].sum() > MAX_FAR:
+                continue
+            gap = np.linalg.norm(target[t] - target[t, a], axis=-1)
+            gap[a] = np.nan
+            near = np.argsort(np.where(np.isfinite(gap), gap, np.inf))[:PARTNERS]
+            for b in set(np.flatnonzero(far[t])) | set(near[np.isfinite(gap[near])]):
+                if b == a:
+                    continue
+                cross = max(np.linalg.norm(target[t, a] - fit[t, b]), np.linalg.norm(target[t, b] - fit[t, a]))
+                if cross <= CANDIDATE_RATIO * max(residuals[t, a], residuals[t, b]):
+                    out.add((int(min(a, b)), int(max(a, b)), int(first), int(last)))
+    return sorted(out, key=lambda c: (c[2], c[0], c[1]))
+
+
+def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> list[Swap]:
+    """Stretches of frames in which two labels are swapped, by the hand solved again with them exchanged.
+
+    Parameters
+    ----------
+    target : ndarray (T, M, 3)
+        Observed markers, metres (anything where not ``observed``).
+    observed : ndarray (T, M) bool
+    fit : ndarray (T, M, 3)
+        Where the solved hand puts each marker, metres.
+    solve : callable
+        ``solve(target, observed) -> fit`` for a stretch of frames (the same solve, frames ``(N, M, 3)``).
+    limit : float
+        Metres: a marker further than this from the fitted hand is off it; with the labels exchanged both of a pair
+        must come within it.
+
+    Returns
+    -------
+    list of Swap
+        In order of their first frame; no two share a marker in overlapping frames.
+    """
+    residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), 0.0)
+    far = observed & (residuals > limit)
+    found = []
+    for a, b, first, last in _stretches(far, target, fit, residuals):
+        lo, hi = max(0, first - CONTEXT), min(len(target), last + 1 + CONTEXT)
+        swap = Swap(a, b, first - lo, last - lo, 0.0, 0.0)
+        swapped, seen = exchanged(target[lo:hi], observed[lo:hi], [swap])
+        stretch = slice(swap.first, swap.last + 1)
+        distance = np.linalg.norm(solve(swapped, seen)[stretch] - np.nan_to_num(swapped[stretch]), axis=-1)
+        pair, seen = np.zeros(distance.shape[1], dtype=bool), seen[stretch]
+        pair[[a, b]] = True
+        exchanged_fit, others = distance[seen & pair].mean(), distance[seen & ~pair]
+        given, given_others = (residuals[first:last + 1][observed[first:last + 1] & pair].mean(),
+                               residuals[first:last + 1][observed[first:last + 1] & ~pair])
+        if exchanged_fit <= min(limit, given / CLOSER) and (not len(others) or
+                                                            others.mean() <= given_others.mean() + OTHERS_WORSE):
+            found.append(Swap(a, b, first, last, float(given), float(exchanged_fit)))
+    kept = []
+    for swap in sorted(found, key=lambda s: s.exchanged):  # a marker swapped with two others at once: the closer fit
+        if not any({swap.a, swap.b} & {k.a, k.b} and swap.first <= k.last and k.first <= swap.last for k in kept):
+            kept.append(swap)
+    return sorted(kept, key=lambda s: s.first)
+
+
+def exchanged(target, observed, swaps) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of ``target`` and ``observed`` with each swap's two labels exchanged in its frames.
+
+    Parameters
+    ----------
+    target : ndarray (T, M, 3)
+        Observed markers, metres.
+    observed : ndarray (T, M) bool
+    swaps : list of Swap
+
+    Returns
+    -------
+    ndarray (T, M, 3), ndarray (T, M) bool
+    """
+    target, observed = np.array(target, copy=True), np.array(observed, copy=True)
+    for s in swaps:
+        for values in (target, observed):
+            values[s.first:s.last + 1, [s.a, s.b]] = values[s.first:s.last + 1, [s.b, s.a]]
+    return target, observed
+
+
+def swap_warnings(swaps, names, rate: float) -> list[str]:
+    """One line for the swaps mended (at most five named).
+
+    Parameters
+    ----------
+    swaps : list of Swap
+    names : sequence of str
+        The markers' names.
+    rate : float
+        Frames per second.
+
+    Returns
+    -------
+    list of str
+    """
+    if not swaps:
+        return []
+    told = "; ".join(f"{names[s.a]} and {names[s.b]} in frames {s.first}-{s.last} ({s.first / rate:.2f}-"
+                     f"{s.last / rate:.2f} s: {MM * s.given:.1f} mm from the hand as labelled, "
+                     f"{MM * s.exchanged:.1f} mm exchanged)" for s in swaps[:5])
+    more = f"; and {len(swaps) - 5} more" if len(swaps) > 5 else ""
+    return [f"solve: {len(swaps)} label swap(s) found by the hand and solved exchanged: {told}{more}; "
+            "the input file is unchanged (relabel it with handcap label --offline, or solve with --keep-swaps "
+            "to solve the labels as given)"]
