@@ -169,7 +169,8 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
         return model.positions(poses.transl, poses.rot, poses.phi)
 
     poses = run(target, observed)
-    swaps = find_swaps(target, observed, fit(poses), lambda t, o: fit(run(t, o, False))) if mend_swaps else []
+    swaps, untried = find_swaps(target, observed, fit(poses), lambda t, o: fit(run(t, o, False))) if mend_swaps \
+        else ([], 0)
     if swaps:  # each stretch solved again with its labels exchanged, with the frames beside it, and put in its place
         target, observed = exchanged(target, observed, swaps)
         for swap in swaps:
@@ -180,7 +181,7 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     if filter_cutoff is not None:
         poses = smoothed_poses(poses, markers.rate, filter_cutoff, filter_order)
     motion = motion_from_poses(hand, model, poses, target, observed, markers.rate, names)
-    found = swap_warnings(swaps, names, markers.rate) + \
+    found = swap_warnings(swaps, names, markers.rate, untried) + \
         residual_warnings(motion.marker_residuals, names=names, what="solve MRE", limit=MRE_WARNING) + \
         shape_warnings(motion.betas) + lost_frame_warnings(observed.sum(axis=1))
     return attach(motion.with_warnings(*attachment.warnings), found)

@@ -26,7 +26,8 @@ from handcap.quality.limits import MM, MRE_LIMIT
 #: Frames solved on each side of a stretch, so that its first frames start from a settled pose; two stretches of a
 #: pair this close are one.
 CONTEXT = 5
-#: A frame with more markers off the fitted hand than this has lost its fit; its pairs are not tried.
+#: A frame with more markers off the fitted hand than this, or whose median marker lies further than half the limit
+#: from it, has lost its fit (or the attachment does not fit the hand): its pairs are not tried.
 MAX_FAR = 6
 #: With the labels exchanged, the hand must fit the pair this many times closer than as labelled (and within the
 #: limit): the swaps synth made in the takes of ``benchmarks/swaps.py`` come 39-176 times closer; two markers that
@@ -38,6 +39,9 @@ CLOSER = 3.0
 #: markers exchanged in one frame of the real glove fitted within 1.6 mm, the hand turned, its other markers 60 mm
 #: off).
 OTHERS_WORSE = 0.0005
+#: The stretches tried are solved again for at most this many times the take's frames (the likeliest first): the
+#: search costs at most three solves more (the real glove: 0.15).
+BUDGET = 3.0
 #: Markers seen nearest to a marker off the hand that are tried as its partner (besides those off it too).
 PARTNERS = 2
 #: A pair's stretch is tried when, in its middle frame, each marker lies within this many times the larger of the
@@ -59,7 +63,7 @@ class Swap:
     exchanged: float
 
 
-def _stretches(far, target, fit, residuals):
+def _stretches(far, seen, target, fit, residuals, limit):
     """Candidate (a, b, first, last): a run of frames in which marker a is ``far`` from the fitted hand (runs a few
     frames apart joined), with each marker b also far in its middle frame or among the :data:`PARTNERS` markers
     seen nearest to it there (the solve can follow one of two swapped markers to within the limit)."""
@@ -69,7 +73,7 @@ def _stretches(far, target, fit, residuals):
         breaks = np.flatnonzero(np.diff(ts) > 1 + CONTEXT)  # a few frames apart (the two crossing): one stretch
         for first, last in zip(ts[np.r_[0, breaks + 1]], ts[np.r_[breaks, len(ts) - 1]]):
             t = ts[np.searchsorted(ts, (first + last) // 2)]  # the middle frame, or the next where a is far
-            if far[t].sum() > MAX_FAR:
+            if far[t].sum() > MAX_FAR or np.median(residuals[t, seen[t]]) > limit / 2:
                 continue
             gap = np.linalg.norm(target[t] - target[t, a], axis=-1)
             gap[a] = np.nan
@@ -78,12 +82,13 @@ def _stretches(far, target, fit, residuals):
                 if b == a:
                     continue
                 cross = max(np.linalg.norm(target[t, a] - fit[t, b]), np.linalg.norm(target[t, b] - fit[t, a]))
-                if cross <= CANDIDATE_RATIO * max(residuals[t, a], residuals[t, b]):
-                    out.add((int(min(a, b)), int(max(a, b)), int(first), int(last)))
-    return sorted(out, key=lambda c: (c[2], c[0], c[1]))
+                ratio = cross / max(residuals[t, a], residuals[t, b])
+                if ratio <= CANDIDATE_RATIO:
+                    out.add((float(ratio), int(min(a, b)), int(max(a, b)), int(first), int(last)))
+    return sorted(out)  # the likeliest first
 
 
-def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> list[Swap]:
+def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tuple[list[Swap], int]:
     """Stretches of frames in which two labels are swapped, by the hand solved again with them exchanged.
 
     Parameters
@@ -103,12 +108,18 @@ def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> lis
     -------
     list of Swap
         In order of their first frame; no two share a marker in overlapping frames.
+    int
+        Stretches left untried: their solves would have exceeded :data:`BUDGET` times the take's frames.
     """
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), 0.0)
     far = observed & (residuals > limit)
-    found = []
-    for a, b, first, last in _stretches(far, target, fit, residuals):
+    found, spent, untried = [], 0, 0
+    for _, a, b, first, last in _stretches(far, observed, target, fit, residuals, limit):
         lo, hi = max(0, first - CONTEXT), min(len(target), last + 1 + CONTEXT)
+        if spent + hi - lo > BUDGET * len(target):
+            untried += 1
+            continue
+        spent += hi - lo
         swap = Swap(a, b, first - lo, last - lo, 0.0, 0.0)
         swapped, seen = exchanged(target[lo:hi], observed[lo:hi], [swap])
         stretch = slice(swap.first, swap.last + 1)
@@ -125,7 +136,7 @@ def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> lis
     for swap in sorted(found, key=lambda s: s.exchanged):  # a marker swapped with two others at once: the closer fit
         if not any({swap.a, swap.b} & {k.a, k.b} and swap.first <= k.last and k.first <= swap.last for k in kept):
             kept.append(swap)
-    return sorted(kept, key=lambda s: s.first)
+    return sorted(kept, key=lambda s: s.first), untried
 
 
 def exchanged(target, observed, swaps) -> tuple[np.ndarray, np.ndarray]:
@@ -149,8 +160,8 @@ def exchanged(target, observed, swaps) -> tuple[np.ndarray, np.ndarray]:
     return target, observed
 
 
-def swap_warnings(swaps, names, rate: float) -> list[str]:
-    """One line for the swaps mended (at most five named).
+def swap_warnings(swaps, names, rate: float, untried: int = 0) -> list[str]:
+    """One line for the swaps mended (at most five named), and one for stretches left untried.
 
     Parameters
     ----------
@@ -159,17 +170,21 @@ def swap_warnings(swaps, names, rate: float) -> list[str]:
         The markers' names.
     rate : float
         Frames per second.
+    untried : int
+        Stretches :func:`find_swaps` did not try.
 
     Returns
     -------
     list of str
     """
+    out = [f"solve: {untried} stretch(es) of frames where markers lie off the fitted hand were not checked for label "
+           f"swaps (more than the search's budget of {BUDGET:g} of the take's frames)"] if untried else []
     if not swaps:
-        return []
+        return out
     told = "; ".join(f"{names[s.a]} and {names[s.b]} in frames {s.first}-{s.last} ({s.first / rate:.2f}-"
                      f"{s.last / rate:.2f} s: {MM * s.given:.1f} mm from the hand as labelled, "
                      f"{MM * s.exchanged:.1f} mm exchanged)" for s in swaps[:5])
     more = f"; and {len(swaps) - 5} more" if len(swaps) > 5 else ""
-    return [f"solve: {len(swaps)} label swap(s) found by the hand and solved exchanged: {told}{more}; "
+    return out + [f"solve: {len(swaps)} label swap(s) found by the hand and solved exchanged: {told}{more}; "
             "the input file is unchanged (relabel it with handcap label --offline, or solve with --keep-swaps "
             "to solve the labels as given)"]
