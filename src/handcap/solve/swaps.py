@@ -40,8 +40,8 @@ CLOSER = 3.0
 #: off).
 OTHERS_WORSE = 0.0005
 #: The stretches tried are solved again for at most this many times the take's frames (the likeliest first): the
-#: search costs at most three solves more (the real glove: 0.15).
-BUDGET = 3.0
+#: search costs at most one solve more (the real glove: 0.15).
+BUDGET = 1.0
 #: Markers seen nearest to a marker off the hand that are tried as its partner (besides those off it too).
 PARTNERS = 2
 #: A pair's stretch is tried when, in its middle frame, each marker lies within this many times the larger of the
@@ -83,9 +83,9 @@ def _stretches(far, seen, target, fit, residuals, limit):
                     continue
                 cross = max(np.linalg.norm(target[t, a] - fit[t, b]), np.linalg.norm(target[t, b] - fit[t, a]))
                 ratio = cross / max(residuals[t, a], residuals[t, b])
-                if ratio <= CANDIDATE_RATIO:
-                    out.add((float(ratio), int(min(a, b)), int(max(a, b)), int(first), int(last)))
-    return sorted(out)  # the likeliest first
+                if ratio <= CANDIDATE_RATIO:  # the likeliest first: both off the hand, then the closest exchanged
+                    out.add((not far[t, b], float(ratio), int(min(a, b)), int(max(a, b)), int(first), int(last)))
+    return sorted(out)
 
 
 def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tuple[list[Swap], int]:
@@ -114,7 +114,7 @@ def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tup
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), 0.0)
     far = observed & (residuals > limit)
     found, spent, untried = [], 0, 0
-    for _, a, b, first, last in _stretches(far, observed, target, fit, residuals, limit):
+    for _, _, a, b, first, last in _stretches(far, observed, target, fit, residuals, limit):
         lo, hi = max(0, first - CONTEXT), min(len(target), last + 1 + CONTEXT)
         if spent + hi - lo > BUDGET * len(target):
             untried += 1
