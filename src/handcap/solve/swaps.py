@@ -113,8 +113,11 @@ def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tup
     """
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), 0.0)
     far = observed & (residuals > limit)
-    found, spent, untried = [], 0, 0
+    found, tried, spent, untried = [], [], 0, 0
     for _, _, a, b, first, last in _stretches(far, observed, target, fit, residuals, limit):
+        if any((a, b) == (c, d) and first <= end and start <= last for c, d, start, end in tried):
+            continue  # the same pair from the other marker's stretch
+        tried.append((a, b, first, last))
         lo, hi = max(0, first - CONTEXT), min(len(target), last + 1 + CONTEXT)
         if spent + hi - lo > BUDGET * len(target):
             untried += 1
