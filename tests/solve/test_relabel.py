@@ -35,13 +35,21 @@ def turned():
     return layout, model, unlabelled, truth
 
 
-def test_the_check_removes_wrong_labels_and_labels_missed_markers(turned):
-    layout, model, unlabelled, truth = turned
+@pytest.fixture(scope="module")
+def labelled(turned):
+    """The turned take labelled offline, and the attachment calibrated on those labels as the verb's check
+    calibrates it."""
+    layout, model, unlabelled, _ = turned
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HandcapWarning)
-        labelled = label_take(unlabelled, model, offline=True).markers
+        markers = label_take(unlabelled, model, offline=True).markers
         priors = Priors(rest=np.zeros(27), rest_weight=CALIBRATION_PRIOR)  # as the verb's check calibrates
-        attachment = calibrate_attachment(labelled, layout, priors=priors).attachment
+        return markers, calibrate_attachment(markers, layout, priors=priors).attachment
+
+
+def test_the_check_removes_wrong_labels_and_labels_missed_markers(turned, labelled):
+    layout, model, unlabelled, truth = turned
+    labelled, attachment = labelled
     check = check_labels(labelled, unlabelled, attachment, rigid=layout.rigid)
     before, after = score_labels(labelled, truth), score_labels(check.markers, truth)
     assert after.fraction("erroneous") <= 0.001 and after.fraction("correct") >= 0.99  # issue 14's line
@@ -134,7 +142,7 @@ def test_labels_that_fit_no_hand_are_warnings(turned):
         assert set(check.warnings) <= set(check.markers.warnings)
 
 
-def test_wrong_labels_no_longer_throw_the_hand_off(turned, monkeypatch):
+def test_wrong_labels_no_longer_throw_the_hand_off(turned, labelled, monkeypatch):
     # The labeler put the rigid back triad on finger points in some frames. Solved frame by frame, the hand followed
     # the triad, tens of millimetres from where it was; with the excursions mended (handcap.solve.continuity) it
     # stays with its fingers. The check then removes those triad labels where they lie further than a carried
@@ -142,16 +150,15 @@ def test_wrong_labels_no_longer_throw_the_hand_off(turned, monkeypatch):
     import handcap.solve.motion as motion_module
     from handcap.solve import solve_hand
 
-    layout, model, unlabelled, truth = turned
-    with warnings.catch_warnings():
+    truth = turned[3]
+    labelled, attachment = labelled
+    with warnings.catch_warnings():  # excursions only (no label swap is looked for)
         warnings.simplefilter("ignore", HandcapWarning)
-        labelled = label_take(unlabelled, model, offline=True).markers
-        priors = Priors(rest=np.zeros(27), rest_weight=CALIBRATION_PRIOR)
-        attachment = calibrate_attachment(labelled, layout, priors=priors).attachment
-        after = solve_hand(labelled, attachment)
+        after = solve_hand(labelled, attachment, mend_swaps=False)
         monkeypatch.setattr(motion_module, "mend_excursions", lambda *a: 0)
-        before = solve_hand(labelled, attachment)
+        before = solve_hand(labelled, attachment, mend_swaps=False)
     true = truth.select(list(attachment.marker_names)).positions
     off_before = 1000 * np.nanmean(np.linalg.norm(before.marker_fit - true, axis=-1))
     off_after = 1000 * np.nanmean(np.linalg.norm(after.marker_fit - true, axis=-1))
-    assert off_after < 0.8 * off_before, (off_before, off_after)  # measured 1.94 -> 1.39 mm
+    print(f"mean marker error, excursions left / mended: {off_before:.2f} / {off_after:.2f} mm")
+    assert off_after < 0.8 * off_before, (off_before, off_after)  # measured 1.55 -> 0.94 mm (swaps not mended)

@@ -178,8 +178,10 @@ def check_labels(markers: MarkerSequence, points, attachment, hand=None, *, rigi
         removed[:, fixed] &= residual[:, fixed] > np.maximum(limit[fixed], carry_floor)
         removed |= seen & (judged & ~explained)[:, None] & (residual > np.maximum(limit, carry_floor))
     pos[removed] = np.nan
-    if removed.any():  # the hand solved again without them: the wrong labels pulled it a little their way
-        again = solve_hand(MarkerSequence(pos, tuple(names), labelled.rate), attachment, hand).marker_fit
+    if removed.any():  # the hand solved again without them: the wrong labels pulled it a little their way (a swap
+        # the first solve found is gone with them: its labels lie off the hand it solved exchanged)
+        again = solve_hand(MarkerSequence(pos, tuple(names), labelled.rate), attachment, hand,
+                           mend_swaps=False).marker_fit
         model[explained] = again[explained]
     gate = np.maximum(reach, 2 * scale)
     for t in np.flatnonzero(judged):
