@@ -13,7 +13,7 @@ stage's, the process's resident memory after the first minute and at the end (go
 the receivers got, and the streamed joints against the synthetic truth.
 
     .venv/bin/python benchmarks/stream.py [--seconds 600] [--take-seconds 20] [--rom-seconds 30] [--fast]
-                                          [--labelled]
+                                          [--labelled] [--keep-swaps]
 """
 
 from __future__ import annotations
@@ -81,6 +81,8 @@ def main() -> None:
     parser.add_argument("--labelled", action="store_true", help="replay the labelled markers: no label, no fill")
     parser.add_argument("--smoothing", type=float, default=None,
                         help="the live solve's pull towards the predicted angles (default the solver's; 0: none)")
+    parser.add_argument("--keep-swaps", action="store_true",
+                        help="solve the labels as given (default: labels the solved hand finds swapped are exchanged)")
     a = parser.parse_args()
 
     from handcap.core.markers import MarkerSequence
@@ -126,10 +128,10 @@ def main() -> None:
     print(f"{len(layout.names)} markers ({len(layout.rigid)} on the back of the hand), {what} ({source.n_frames} "
           f"frames at {rate:g} Hz = {a.seconds:g} s, a {a.take_seconds:g} s take looped), "
           f"{'as fast as handled' if a.fast else 'at the take rate'}"
-          f"{'' if a.smoothing is None else f', smoothing {a.smoothing:g}'}")
+          f"{'' if a.smoothing is None else f', smoothing {a.smoothing:g}'}{', swaps kept' if a.keep_swaps else ''}")
     start = time.perf_counter()
     stats = stream(source, capture.attachment, OpenHand(capture.hand_motion.side), [osc, lsl, ws],
-                   realtime=not a.fast, labeling=labeling, fill=fill,
+                   realtime=not a.fast, labeling=labeling, fill=fill, mend_swaps=not a.keep_swaps,
                    **({} if a.smoothing is None else {"smoothing": a.smoothing}))
     wall = time.perf_counter() - start
     stop.set()
@@ -151,6 +153,8 @@ def main() -> None:
     print(f"  received            OSC {got['osc']} / {stats.frames}, WebSocket {got['ws']} / {stats.frames}, LSL "
           f"{' and '.join(str(c) for c in got['lsl'])} / {stats.frames}")
     print(f"  joints vs truth     median {np.nanmedian(error):.2f} mm, p99 {np.nanpercentile(error, 99):.2f} mm")
+    for line in stats.warnings:
+        print(f"  warning             {line[:300]}{'...' if len(line) > 300 else ''}")
 
 
 if __name__ == "__main__":

@@ -10,6 +10,14 @@ Prints:
    and random motion; 30-120 Hz; 10 s each; ``synth`` swaps two labels now and then, 0.1 a second), solved with
    their true attachment: the swaps synth made (frames first-last, marker numbers) against those found, the
    joints' median / p99 distance from the truth and the time, labels as given -> swaps mended.
+3. The same, live (``handcap.stream.FrameSolver``, each frame judged on its own): on the real glove the changes of
+   labels found (none expected) and the p50 / p99 time of a frame; on each synthetic take the changes found (the
+   frame a swap starts and the frame after its last) and the joints' median / p99 distance from the truth and the
+   p99 time of a frame, labels as given -> swaps mended.
+4. The live pipeline with the labeller in the loop (``handcap.stream.LivePipeline``: label, fill, solve), on the take
+   of ``benchmarks/stream.py`` (joints-19, 120 Hz, 20 s, its points unlabelled; the labelling model trained on
+   another take of the subject): the labels wrong against the truth as the labeller gave them and as the solve read
+   them, the changes found and the joints' p99 distance from the truth, labels as given -> swaps mended.
 
     .venv/bin/python benchmarks/swaps.py [--threads 1]
 """
@@ -34,7 +42,9 @@ def main() -> None:
     import numpy as np
 
     from handcap.core.errors import HandcapWarning
+    from handcap.hand import OpenHand
     from handcap.solve import solve_hand
+    from handcap.stream.solver import FrameSolver
     from handcap.synth.scene import SynthConfig, synthesize
 
     warnings.simplefilter("ignore", HandcapWarning)
@@ -43,6 +53,20 @@ def main() -> None:
         start = time.perf_counter()
         motion = solve_hand(markers, attachment, mend_swaps=mend)
         return motion, time.perf_counter() - start
+
+    def live(markers, attachment, mend):
+        """Joints (T, 21, 3) streamed frame by frame, each frame's milliseconds, and the solver."""
+        solver = FrameSolver(attachment, OpenHand(attachment.side), mend_swaps=mend)
+        joints, ms = [], []
+        for frame in markers.positions:
+            start = time.perf_counter()
+            joints.append(solver.solve(frame)[0])
+            ms.append(1000 * (time.perf_counter() - start))
+        return np.array(joints), np.array(ms), solver
+
+    def changes(solver):
+        return "; ".join(f"{solver.names[s.a]} and {solver.names[s.b]} {'back ' if s.back else ''}at {s.frame}"
+                         for s in solver.swaps) or "none"
 
     def found(motion):
         return [w.split(": ", 1)[1].split("; the input file")[0] for w in motion.warnings if "label swap" in w]
@@ -59,11 +83,13 @@ def main() -> None:
         far = np.nanmax(motion.marker_residuals) * 1000
         print(f"real glove, {len(take.positions)} frames: swaps found {found(motion) or 'none'} (markers up to "
               f"{far:.1f} mm from the fitted hand); {plain:.2f} s -> {mended:.2f} s ({mended / plain:.2f} x)")
+        glove = [live(take, attachment, mend) for mend in (False, True)]
     else:
         print(f"real glove: {GLOVE} is absent (put ../shared beside the checkout); skipped")
     print("synthetic takes: swaps made (first, end, markers) / found; joints vs truth median / p99, time: "
           "labels as given -> swaps mended")
     made = hits = extra = 0
+    lines = []  # section 3's
     for layout_name, motion_name, rate, seed in TAKES:
         capture = synthesize(SynthConfig(layout=layout_name, motion=motion_name, frames=int(args.seconds * rate),
                                          rate=rate, seed=seed, subject_seed=3), progress=False)
@@ -73,7 +99,7 @@ def main() -> None:
             motion, seconds = solved(markers, capture.attachment, mend)
             error = np.linalg.norm(motion.joints - capture.hand_motion.joints, axis=-1) * 1000
             cells.append(f"{np.nanmedian(error):.2f} / {np.nanpercentile(error, 99):5.2f} mm {seconds:5.2f} s")
-        names = capture.truth["names"]
+        names = list(capture.truth["names"])
         truth = [f"{names[min(i, j)]} and {names[max(i, j)]} in frames {first}-{end - 1}"
                  for first, end, i, j in capture.truth["swaps"]]
         told = found(motion)
@@ -82,7 +108,76 @@ def main() -> None:
         extra += sum(w.count(" in frames ") for w in told) - sum(any(t in w for w in told) for t in truth)
         print(f"  {layout_name:13s} {motion_name:6s} {rate:5g} Hz seed {seed:2d}: " + "  ->  ".join(cells))
         print(f"      made: {'; '.join(truth) or 'none'}\n      found: {'; '.join(told) or 'none'}", flush=True)
+        cells = []
+        for mend in (False, True):
+            joints, ms, solver = live(markers, capture.attachment, mend)
+            error = np.linalg.norm(joints - capture.hand_motion.joints, axis=-1) * 1000
+            cells.append(f"{np.nanmedian(error):.2f} / {np.nanpercentile(error, 99):5.2f} mm p99 "
+                         f"{np.percentile(ms, 99):.2f} ms")
+        events = [(int(first), names[min(i, j)], names[max(i, j)]) for first, _, i, j in capture.truth["swaps"]] + [
+            (int(end), names[min(i, j)], names[max(i, j)]) for _, end, i, j in capture.truth["swaps"]]
+        got = [(s.frame, *sorted((solver.names[s.a], solver.names[s.b]), key=names.index)) for s in solver.swaps]
+        lines.append((f"  {layout_name:13s} {motion_name:6s} {rate:5g} Hz seed {seed:2d}: " + "  ->  ".join(cells),
+                      f"      found: {changes(solver)}", len(events), len(set(events) & set(got)),
+                      len(set(got) - set(events))))
     print(f"swaps found where synth made them: {hits} of {made}; found where it made none: {extra}")
+    print("\n== 3. live (FrameSolver), labels as given -> swaps mended ==")
+    if GLOVE.is_file():
+        for mend, (_, ms, solver) in zip((False, True), glove):
+            print(f"real glove, {'mended' if mend else 'as given'}: changes {changes(solver)}; a frame p50 "
+                  f"{np.percentile(ms, 50):.3f} ms, p99 {np.percentile(ms, 99):.3f} ms")
+    print("synthetic takes: joints vs truth median / p99 and a frame's p99 time; the changes of labels found "
+          "(a swap's first frame, and back at the frame after its last)")
+    for line, listed, *_ in lines:
+        print(f"{line}\n{listed}")
+    print(f"live: changes at a swap's first frame or the frame after its last: {sum(x[3] for x in lines)} of "
+          f"{sum(x[2] for x in lines)}; elsewhere: {sum(x[4] for x in lines)}")
+    labelled_loop(np)
+
+
+def labelled_loop(np) -> None:
+    """Section 4: the labeller's labels, as given and as the live solve read them, against the truth."""
+    from handcap.hand import OpenHand
+    from handcap.labeling import LabelingModel
+    from handcap.layouts import load_layout
+    from handcap.stream.pipeline import LivePipeline
+    from handcap.synth.scene import SynthConfig, synthesize
+
+    rate, layout = 120.0, load_layout("joints-19")
+    capture = synthesize(SynthConfig(layout=layout.name, motion="random", frames=int(20 * rate), rate=rate, seed=4,
+                                     subject_seed=3), progress=False)
+    rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=int(30 * rate), rate=rate, seed=11,
+                                 subject_seed=3), progress=False)
+    model = LabelingModel.train(rom.markers, layout.names, layout.rigid)
+    names = list(capture.attachment.marker_names)
+    truth = capture.labeled_points(names).positions
+    points = capture.points.padded()
+    print("\n== 4. live pipeline with the labeller (benchmarks/stream.py's take, 20 s), labels as given -> mended ==")
+    cells = []
+    for mend in (False, True):
+        pipeline = LivePipeline(capture.attachment, OpenHand("right"), rate=rate, labeling=model, fill=layout.name,
+                                mend_swaps=mend)
+        given, read, joints = [], [], []
+        for frame in points:
+            live = pipeline.frame(frame)
+            order = pipeline.solver.order
+            as_given = np.empty_like(live.markers)
+            as_given[order] = live.markers
+            given.append(as_given)
+            read.append(live.markers)
+            joints.append(live.joints)
+
+        def wrong(markers):
+            markers = np.array(markers)
+            both = np.isfinite(markers[..., 0]) & np.isfinite(truth[..., 0])
+            return int((both & (np.linalg.norm(np.nan_to_num(markers - truth), axis=-1) > 1e-6)).sum())
+
+        error = np.linalg.norm(np.array(joints) - capture.hand_motion.joints, axis=-1) * 1000
+        changes = "; ".join(f"{names[s.a]} and {names[s.b]} {'back ' if s.back else ''}at {s.frame}"
+                            for s in pipeline.solver.swaps) or "none"
+        cells.append(f"labels wrong as given {wrong(given)}, as solved {wrong(read)}; joints median / p99 "
+                     f"{np.nanmedian(error):.2f} / {np.nanpercentile(error, 99):.2f} mm; changes: {changes}")
+    print("  as given: " + cells[0] + "\n  mended:   " + cells[1])
 
 
 if __name__ == "__main__":

@@ -31,16 +31,17 @@ def _cmd_stream(a):
         outputs += [LslOutput(name, source.rate, JOINT_NAMES + TIP_NAMES, PHI_NAMES) for name in a.lsl or ()]
         if a.qtm:  # live: no end known, so no joints kept
             stats = stream_source(source, attachment, hand, outputs, seconds=a.seconds, labeling=a.labeling,
-                                  fill=a.fill, keep_solved=False, smoothing=a.smoothing)
+                                  fill=a.fill, keep_solved=False, smoothing=a.smoothing,
+                                  mend_swaps=not a.keep_swaps)
         else:
             stats = stream(source, attachment, hand, outputs, realtime=not a.fast, seconds=a.seconds,
-                           labeling=a.labeling, fill=a.fill, smoothing=a.smoothing)
+                           labeling=a.labeling, fill=a.fill, smoothing=a.smoothing, mend_swaps=not a.keep_swaps)
     finally:
         for output in outputs:
             output.close()
         if a.qtm:
             source.close()
-    return Step((f"{a.qtm or a.replay}: {stats.summary()}",), (), (), stats)
+    return Step((f"{a.qtm or a.replay}: {stats.summary()}",), stats.warnings, (), stats)
 
 
 def add_stream(verbs) -> None:
@@ -77,6 +78,9 @@ def add_stream(verbs) -> None:
                    help=f"pull each frame's angles towards where the frames before carry them, K times as strong as "
                         f"the markers in a typical frame (default {SMOOTHING}; 0: each frame from its markers alone). "
                         "Keeps a sparse glove from jumping between two poses its markers allow")
+    p.add_argument("--keep-swaps", action="store_true",
+                   help="solve the labels as given: by default two labels the solved hand finds swapped are solved "
+                        "exchanged from that frame on, and a warning names them at the end")
     p.add_argument("--seconds", type=float, help="stop after this many seconds of frames")
     p.add_argument("--units", choices=("mm", "cm", "m"), help="unit of the replayed file's coordinates")
     p.set_defaults(run=_cmd_stream)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from handcap.core.errors import HandcapError
+from handcap.core.errors import HandcapError, warn
 from handcap.core.points import PointCloudSequence
 from handcap.core.markers import MarkerSequence
 from handcap.stream.pipeline import LivePipeline
@@ -49,6 +49,9 @@ class StreamStats:
         Each stage's time per frame (``label``, ``fill``, ``solve`` where they ran, and ``send``), milliseconds.
     seen, filled : ndarray (frames,) int
         Markers measured (labelled) and predicted in each frame.
+    warnings : tuple of str
+        Labels the solve found swapped and solved exchanged (:meth:`FrameSolver.swap_warnings`), printed as
+        :class:`~handcap.HandcapWarning` at the stream's end.
     """
 
     frames: int
@@ -58,6 +61,7 @@ class StreamStats:
     stage_ms: dict = field(default_factory=dict)
     seen: np.ndarray | None = None
     filled: np.ndarray | None = None
+    warnings: tuple = ()
 
     def summary(self) -> str:
         """Frames, latency p50 / p99 / worst, each stage's p99, markers seen and filled, memory growth."""
@@ -81,7 +85,8 @@ def resident_mb() -> float:
 
 
 def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seconds: float | None = None,
-           progress: bool | None = None, labeling=None, fill=None, smoothing: float = SMOOTHING) -> StreamStats:
+           progress: bool | None = None, labeling=None, fill=None, smoothing: float = SMOOTHING,
+           mend_swaps: bool = True) -> StreamStats:
     """Replay a take as a live stream: label, fill and solve every frame and send it to every output.
 
     Parameters
@@ -104,6 +109,8 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
         A labelling model and an occlusion model (see :class:`~handcap.stream.pipeline.LivePipeline`).
     smoothing : float
         The solve's pull towards the predicted angles (:class:`~handcap.stream.solver.FrameSolver`; 0: none).
+    mend_swaps : bool
+        Labels the solved hand finds swapped are solved exchanged, with a warning (False: as given).
 
     Returns
     -------
@@ -121,12 +128,12 @@ def stream(markers, attachment, hand, outputs=(), *, realtime: bool = True, seco
     n = len(frames) if seconds is None else min(len(frames), int(round(seconds * markers.rate)))
     source = ReplaySource(frames[:n], markers.rate, names, realtime=realtime)
     return stream_source(source, attachment, hand, outputs, progress=progress, labeling=labeling, fill=fill,
-                         smoothing=smoothing)
+                         smoothing=smoothing, mend_swaps=mend_swaps)
 
 
 def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None = None,
                   progress: bool | None = None, labeling=None, fill=None, keep_solved: bool = True,
-                  smoothing: float = SMOOTHING) -> StreamStats:
+                  smoothing: float = SMOOTHING, mend_swaps: bool = True) -> StreamStats:
     """Label, fill and solve every frame of a live source and send it to every output.
 
     Parameters
@@ -148,6 +155,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
         records take 40 bytes a frame).
     smoothing : float
         The solve's pull towards the predicted angles (:class:`~handcap.stream.solver.FrameSolver`; 0: none).
+    mend_swaps : bool
+        Labels the solved hand finds swapped are solved exchanged, with a warning (False: as given).
 
     Returns
     -------
@@ -161,7 +170,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
         if tuple(source.names) != tuple(names):  # a replay comes in the attachment's order already
             columns = marker_columns(source.names, names)
     limit = None if seconds is None else int(round(seconds * source.rate))
-    pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill, smoothing=smoothing)
+    pipeline = LivePipeline(attachment, hand, rate=source.rate, labeling=labeling, fill=fill, smoothing=smoothing,
+                            mend_swaps=mend_swaps)
     size = len(source) if hasattr(source, "__len__") else int(60 * source.rate)
     if limit is not None:
         size = min(size, limit)
@@ -197,8 +207,9 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     n = rows.count
     stage_ms = {k: v[:n].astype(np.float64) for k, v in rows.stage_ms.items()}
     solved = rows.solved[:n] if keep_solved else np.zeros((0, 21, 3))
+    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate))
     return StreamStats(n, rows.latency[:n].astype(np.float64), tuple(memory), solved, stage_ms, rows.seen[:n],
-                       rows.filled[:n])
+                       rows.filled[:n], found)
 
 
 class _Rows:

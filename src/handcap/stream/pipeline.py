@@ -49,7 +49,8 @@ class LiveFrame:
     phi : ndarray (27,)
         Joint angles, radians.
     markers : ndarray (M, 3)
-        The attachment's markers as solved from (labelled and filled), metres, NaN where neither.
+        The attachment's markers as solved from (labelled and filled, with the labels the solve found swapped
+        exchanged), metres, NaN where neither.
     seen : int
         Markers measured (labelled) in this frame.
     filled : int
@@ -91,13 +92,17 @@ class LivePipeline:
         Seconds between the labeler's re-alignments of its spatial model to the take.
     smoothing : float
         The solve's pull towards the angles the frames before predict (:class:`FrameSolver`; 0: none).
+    mend_swaps : bool
+        Labels the solved hand finds swapped are solved exchanged (:class:`FrameSolver`); the filler sees the
+        labels as given.
     """
 
     def __init__(self, attachment, hand, *, rate: float, labeling=None, fill=None, iterations: int = ITERATIONS,
                  hypotheses: int = LIVE_HYPOTHESES, adapt_seconds: float = ADAPT_SECONDS,
-                 smoothing: float = SMOOTHING):
+                 smoothing: float = SMOOTHING, mend_swaps: bool = True):
         self.names = tuple(attachment.marker_names)
-        self.solver = FrameSolver(attachment, hand, iterations=iterations, smoothing=smoothing)
+        self.solver = FrameSolver(attachment, hand, iterations=iterations, smoothing=smoothing,
+                                  mend_swaps=mend_swaps)
         self.labeler = self.label_columns = None
         if labeling is not None:
             model = labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)
@@ -167,7 +172,7 @@ class LivePipeline:
         done = clock()
         self.last_ms = {"label": 1000 * (labelled - start), "fill": 1000 * (completed - labelled),
                         "solve": 1000 * (done - completed)}
-        return LiveFrame(joints, phi, markers, seen, filled, rms)
+        return LiveFrame(joints, phi, markers[self.solver.order], seen, filled, rms)
 
     def idle(self) -> None:
         """The work the last frame left for before the next one (the labeler's filters and its periodic
