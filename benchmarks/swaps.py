@@ -9,7 +9,9 @@ Prints:
 2. The thirteen synthetic takes of ``benchmarks/smoothing.py`` (glove-13, joints-19, dense-patches, tips-5; grasps
    and random motion; 30-120 Hz; 10 s each; ``synth`` swaps two labels now and then, 0.1 a second), solved with
    their true attachment: the swaps synth made (frames first-last, marker numbers) against those found, the
-   joints' median / p99 distance from the truth and the time, labels as given -> swaps mended.
+   joints' median / p99 distance from the truth and the time, labels as given -> swaps mended; in the takes with
+   index, middle and ring fingertips, the same with three of their labels made to go round a cycle for 0.3 s in the
+   middle of the take (index_tip's marker labelled middle_tip, middle_tip's ring_tip, ring_tip's index_tip).
 3. The same, live (``handcap.stream.FrameSolver``, each frame judged on its own): on the real glove the changes of
    labels found (none expected) and the p50 / p99 time of a frame; on each synthetic take the changes found (the
    frame a swap starts and the frame after its last) and the joints' median / p99 distance from the truth and the
@@ -42,6 +44,7 @@ def main() -> None:
     import numpy as np
 
     from handcap.core.errors import HandcapWarning
+    from handcap.core.markers import MarkerSequence
     from handcap.hand import OpenHand
     from handcap.solve import solve_hand
     from handcap.stream.solver import FrameSolver
@@ -89,6 +92,7 @@ def main() -> None:
     print("synthetic takes: swaps made (first, end, markers) / found; joints vs truth median / p99, time: "
           "labels as given -> swaps mended")
     made = hits = extra = 0
+    cycles = [0, 0]  # made up, found
     lines = []  # section 3's
     for layout_name, motion_name, rate, seed in TAKES:
         capture = synthesize(SynthConfig(layout=layout_name, motion=motion_name, frames=int(args.seconds * rate),
@@ -108,6 +112,24 @@ def main() -> None:
         extra += sum(w.count(" in frames ") for w in told) - sum(any(t in w for w in told) for t in truth)
         print(f"  {layout_name:13s} {motion_name:6s} {rate:5g} Hz seed {seed:2d}: " + "  ->  ".join(cells))
         print(f"      made: {'; '.join(truth) or 'none'}\n      found: {'; '.join(told) or 'none'}", flush=True)
+        tips = [names.index(n) for n in ("index_tip", "middle_tip", "ring_tip") if n in names]
+        if len(tips) == 3:  # a cycle of three fingertip labels made up in 0.3 s from the middle of the take
+            span = slice(len(markers.positions) // 2, len(markers.positions) // 2 + int(0.3 * rate))
+            positions = markers.positions.copy()
+            i, m, r = (list(markers.names).index(names[k]) for k in tips)
+            positions[span, [m, r, i]] = markers.positions[span][:, [i, m, r]]
+            cycled = MarkerSequence(positions, markers.names, markers.rate)
+            cells = []
+            for mend in (False, True):
+                motion, seconds = solved(cycled, capture.attachment, mend)
+                error = np.linalg.norm(motion.joints - capture.hand_motion.joints, axis=-1) * 1000
+                cells.append(f"{np.nanpercentile(error, 99):5.2f} mm {seconds:5.2f} s")
+            cycle = f"in frames {span.start}-{span.stop - 1}"
+            told = [w for w in found(motion) if "round a cycle" in w]
+            cycles[0] += 1
+            cycles[1] += any(cycle in w and "index_tip read from middle_tip's label" in w for w in told)
+            print(f"      a made-up cycle of index_tip, middle_tip and ring_tip {cycle}: p99 {cells[0]} -> {cells[1]};"
+                  f" found: {'; '.join(told) or 'none'}", flush=True)
         cells = []
         for mend in (False, True):
             joints, ms, solver = live(markers, capture.attachment, mend)
@@ -120,7 +142,8 @@ def main() -> None:
         lines.append((f"  {layout_name:13s} {motion_name:6s} {rate:5g} Hz seed {seed:2d}: " + "  ->  ".join(cells),
                       f"      found: {changes(solver)}", len(events), len(set(events) & set(got)),
                       len(set(got) - set(events))))
-    print(f"swaps found where synth made them: {hits} of {made}; found where it made none: {extra}")
+    print(f"swaps found where synth made them: {hits} of {made}; found where it made none: {extra}; made-up cycles "
+          f"of three found: {cycles[1]} of {cycles[0]}")
     print("\n== 3. live (FrameSolver), labels as given -> swaps mended ==")
     if GLOVE.is_file():
         for mend, (_, ms, solver) in zip((False, True), glove):

@@ -126,3 +126,28 @@ def test_the_command_solves_swaps_exchanged_unless_told_and_says_so(clean_take, 
                  "--out", str(tmp_path / "kept.npz"), "--keep-swaps"]) == 0
     assert "label swap" not in capsys.readouterr().err
     assert (tmp_path / "take.c3d").read_bytes() == stamp
+
+
+def test_three_labels_round_a_cycle_are_found_and_solved_exchanged(clean_take):
+    # index_tip carries middle_tip's label, middle_tip ring_tip's and ring_tip index_tip's in frames 80-110: no
+    # exchange of two of them fits, the cycle does.
+    markers, capture = clean_take
+    names = list(markers.names)
+    i, m, r = (names.index(n) for n in ("index_tip", "middle_tip", "ring_tip"))
+    positions = markers.positions.copy()
+    frames = slice(80, 111)
+    positions[frames, [m, r, i]] = markers.positions[frames][:, [i, m, r]]  # column m holds index_tip's marker ...
+    cycled = MarkerSequence(positions, markers.names, markers.rate)
+    kept = _solve(cycled, capture.attachment, mend_swaps=False)
+    mended = _solve(cycled, capture.attachment)
+    right = _solve(markers, capture.attachment)
+    tips = [17, 18, 19]  # the index, middle and ring fingertips
+    truth = capture.hand_motion.joints[frames, tips]
+
+    def error(motion):
+        return np.linalg.norm(motion.joints[frames, tips] - truth, axis=-1).max()
+
+    said = [w for w in mended.warnings if "label swap" in w]
+    assert len(said) == 1 and "round a cycle (index_tip read from middle_tip's label, middle_tip from ring_tip's, " \
+        "ring_tip from index_tip's) in frames 80-110" in said[0], said
+    assert error(kept) > error(right) + 0.02 and error(mended) < error(right) + 0.001

@@ -13,11 +13,17 @@ the two labels exchanged. Where the hand then fits both within that limit, and :
 labelled, and the other markers as well as before, the labels are swapped there. The verdict is the hand's fit, not
 how far the markers strayed: the real Qualisys glove's markers stray up to 16 mm from the fitted hand (the glove
 slides on the skin), 77 times for 5 mm or more, and no swap is found in it.
+
+Three labels can also go round a cycle (three fingertips together in a fist: each takes its neighbour's label);
+exchanging two of them leaves one wrong, so no pair passes the verdict. Each cycle of a marker off the hand and
+two of its partners (off the hand too, or seen nearest to it: the solve can follow one of the three) whose
+positions lie near where the hand puts the next is tried too, after the pairs, with the same verdict.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import permutations
 
 import numpy as np
 
@@ -52,8 +58,9 @@ CANDIDATE_RATIO = 4.0
 
 @dataclass(frozen=True)
 class Swap:
-    """Two labels swapped in frames ``first`` to ``last`` (inclusive); residuals in metres (means over the
-    stretch of the two markers): as given, and with the labels exchanged."""
+    """Two labels swapped in frames ``first`` to ``last`` (inclusive), or three labels moved round a cycle (``c``
+    not -1: marker ``a`` carries ``b``'s label there, ``b`` carries ``c``'s and ``c`` carries ``a``'s); residuals in
+    metres (means over the stretch of its markers): as given, and with the labels exchanged."""
 
     a: int
     b: int
@@ -61,12 +68,26 @@ class Swap:
     last: int
     given: float
     exchanged: float
+    c: int = -1
+
+    @property
+    def markers(self) -> list[int]:
+        """The markers whose labels are exchanged."""
+        return [self.a, self.b] if self.c < 0 else [self.a, self.b, self.c]
+
+    @property
+    def sources(self) -> list[int]:
+        """For each of :attr:`markers`, the column it is read from once exchanged."""
+        return [self.b, self.a] if self.c < 0 else [self.b, self.c, self.a]
 
 
 def _stretches(far, seen, target, fit, residuals, limit):
-    """Candidate (a, b, first, last): a run of frames in which marker a is ``far`` from the fitted hand (runs a few
-    frames apart joined), with each marker b also far in its middle frame or among the :data:`PARTNERS` markers
-    seen nearest to it there (the solve can follow one of two swapped markers to within the limit)."""
+    """Candidate (rank, ratio, a, b, c, first, last): a run of frames in which marker a is ``far`` from the fitted
+    hand (runs a few frames apart joined), with each marker b also far in its middle frame or among the
+    :data:`PARTNERS` markers seen nearest to it there (the solve can follow one of two swapped markers to within
+    the limit), c -1; and, where two markers or more are far, each cycle of a and two of those markers (c not
+    -1). Rank: how many of its markers are not far (0 first), then ratio: how far each marker's position lies from
+    where the hand puts the one it is read as, over the largest residual (the closest exchanged first)."""
     out = set()
     for a in np.flatnonzero(far.any(axis=0)):
         ts = np.flatnonzero(far[:, a])
@@ -83,8 +104,21 @@ def _stretches(far, seen, target, fit, residuals, limit):
                     continue
                 cross = max(np.linalg.norm(target[t, a] - fit[t, b]), np.linalg.norm(target[t, b] - fit[t, a]))
                 ratio = cross / max(residuals[t, a], residuals[t, b])
-                if ratio <= CANDIDATE_RATIO:  # the likeliest first: both off the hand, then the closest exchanged
-                    out.add((not far[t, b], float(ratio), int(min(a, b)), int(max(a, b)), int(first), int(last)))
+                if ratio <= CANDIDATE_RATIO:  # the likeliest first: all off the hand, then the closest exchanged
+                    out.add((int(not far[t, b]), float(ratio), int(min(a, b)), int(max(a, b)), -1, int(first),
+                             int(last)))
+            if far[t].sum() < 2:  # three labels round a cycle leave two off the hand at least
+                continue
+            others = sorted(int(m) for m in set(np.flatnonzero(far[t])) | set(near[np.isfinite(gap[near])]) if m != a)
+            for b, c in permutations(others, 2):  # a read from b's label, b from c's, c from a's
+                cross = max(np.linalg.norm(target[t, b] - fit[t, a]), np.linalg.norm(target[t, c] - fit[t, b]),
+                            np.linalg.norm(target[t, a] - fit[t, c]))
+                ratio = cross / max(residuals[t, a], residuals[t, b], residuals[t, c])
+                if ratio <= CANDIDATE_RATIO:
+                    cycle = [a, b, c]
+                    start = int(np.argmin(cycle))  # one way of writing each cycle: its smallest marker first
+                    x, y, z = (int(cycle[(start + k) % 3]) for k in range(3))
+                    out.add((int(3 - far[t, cycle].sum()), float(ratio), x, y, z, int(first), int(last)))
     return sorted(out)
 
 
@@ -114,30 +148,34 @@ def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tup
     residuals = np.where(observed, np.linalg.norm(fit - np.nan_to_num(target), axis=-1), 0.0)
     far = observed & (residuals > limit)
     found, tried, spent, untried = [], [], 0, 0
-    for _, _, a, b, first, last in _stretches(far, observed, target, fit, residuals, limit):
-        if any((a, b) == (c, d) and first <= end and start <= last for c, d, start, end in tried):
-            continue  # the same pair from the other marker's stretch
-        tried.append((a, b, first, last))
+    for _, _, a, b, c, first, last in _stretches(far, observed, target, fit, residuals, limit):
+        if any((a, b, c) == key and first <= end and start <= last for key, start, end in tried):
+            continue  # the same pair (or cycle) from another marker's stretch
+        if any(len({a, b, c} & set(f.markers)) >= 2 and first <= f.last and f.first <= last for f in found):
+            continue  # two of its markers found swapped there already (a cycle leaves no pair fitting, nor a pair
+            # a cycle)
+        tried.append(((a, b, c), first, last))
         lo, hi = max(0, first - CONTEXT), min(len(target), last + 1 + CONTEXT)
         if spent + hi - lo > BUDGET * len(target):
             untried += 1
             continue
         spent += hi - lo
-        swap = Swap(a, b, first - lo, last - lo, 0.0, 0.0)
+        swap = Swap(a, b, first - lo, last - lo, 0.0, 0.0, c)
         swapped, seen = exchanged(target[lo:hi], observed[lo:hi], [swap])
         stretch = slice(swap.first, swap.last + 1)
         distance = np.linalg.norm(solve(swapped, seen)[stretch] - np.nan_to_num(swapped[stretch]), axis=-1)
         pair, seen = np.zeros(distance.shape[1], dtype=bool), seen[stretch]
-        pair[[a, b]] = True
+        pair[swap.markers] = True
         exchanged_fit, others = distance[seen & pair].mean(), distance[seen & ~pair]
         given, given_others = (residuals[first:last + 1][observed[first:last + 1] & pair].mean(),
                                residuals[first:last + 1][observed[first:last + 1] & ~pair])
         if exchanged_fit <= min(limit, given / CLOSER) and (not len(others) or
                                                             others.mean() <= given_others.mean() + OTHERS_WORSE):
-            found.append(Swap(a, b, first, last, float(given), float(exchanged_fit)))
+            found.append(Swap(a, b, first, last, float(given), float(exchanged_fit), c))
     kept = []
     for swap in sorted(found, key=lambda s: s.exchanged):  # a marker swapped with two others at once: the closer fit
-        if not any({swap.a, swap.b} & {k.a, k.b} and swap.first <= k.last and k.first <= swap.last for k in kept):
+        if not any(set(swap.markers) & set(k.markers) and swap.first <= k.last and k.first <= swap.last
+                   for k in kept):
             kept.append(swap)
     return sorted(kept, key=lambda s: s.first), untried
 
@@ -159,7 +197,7 @@ def exchanged(target, observed, swaps) -> tuple[np.ndarray, np.ndarray]:
     target, observed = np.array(target, copy=True), np.array(observed, copy=True)
     for s in swaps:
         for values in (target, observed):
-            values[s.first:s.last + 1, [s.a, s.b]] = values[s.first:s.last + 1, [s.b, s.a]]
+            values[s.first:s.last + 1, s.markers] = values[s.first:s.last + 1, s.sources]
     return target, observed
 
 
@@ -184,7 +222,13 @@ def swap_warnings(swaps, names, rate: float, untried: int = 0) -> list[str]:
            f"swaps (more than the search's budget of {BUDGET:g} of the take's frames)"] if untried else []
     if not swaps:
         return out
-    told = "; ".join(f"{names[s.a]} and {names[s.b]} in frames {s.first}-{s.last} ({s.first / rate:.2f}-"
+    def which(s):
+        if s.c < 0:
+            return f"{names[s.a]} and {names[s.b]}"
+        return (f"{names[s.a]}, {names[s.b]} and {names[s.c]} round a cycle ({names[s.a]} read from "
+                f"{names[s.b]}'s label, {names[s.b]} from {names[s.c]}'s, {names[s.c]} from {names[s.a]}'s)")
+
+    told = "; ".join(f"{which(s)} in frames {s.first}-{s.last} ({s.first / rate:.2f}-"
                      f"{s.last / rate:.2f} s: {MM * s.given:.1f} mm from the hand as labelled, "
                      f"{MM * s.exchanged:.1f} mm exchanged)" for s in swaps[:5])
     more = f"; and {len(swaps) - 5} more" if len(swaps) > 5 else ""
