@@ -65,8 +65,8 @@ def add_solve(verbs) -> None:
     p.add_argument("--filter-cutoff", type=float, default=None, help="low-pass the motion at this frequency, Hz")
     p.add_argument("--filter-order", type=int, default=2, help="Butterworth order (default %(default)s)")
     p.add_argument("--keep-swaps", action="store_true",
-                   help="solve two labels the hand finds swapped for a stretch of frames as they are labelled "
-                        "(default: solved exchanged there, with a warning that names them)")
+                   help="solve two labels the hand finds swapped for a stretch of frames (or three gone round a "
+                        "cycle) as they are labelled (default: solved exchanged there, with a warning that names them)")
     p.add_argument("--out", required=True, help="hand motion .npz")
     add_units(p)
     add_hand_model(p, "the attachment's")

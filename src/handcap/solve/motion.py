@@ -21,9 +21,10 @@ Per frame, the pose that brings the attached markers onto the observed ones
    by the anatomical priors instead: DIP follows PIP, PIP follows MCP, and a
    weak pull to the relaxed hand. A frame with no marker at all keeps the
    whole previous pose.
-6. Two labels swapped for a stretch of frames (both markers off the fitted
-   hand there, and the hand fitting them exchanged) are solved exchanged, with
-   a warning that names them (:mod:`handcap.solve.swaps`; ``mend_swaps``).
+6. Two labels swapped for a stretch of frames, or three gone round a cycle
+   (markers off the fitted hand there, and the hand fitting them exchanged),
+   are solved exchanged, with a warning that names them
+   (:mod:`handcap.solve.swaps`; ``mend_swaps``).
 
 Methods: ``lm`` (the above, default) and ``adam`` (the paper's optimiser,
 :mod:`handcap.solve.adam`), kept as the baseline.
@@ -116,7 +117,8 @@ def solve_hand(markers: MarkerSequence, attachment, hand=None, *, method: str = 
     filter_order : int
         Order of that filter.
     mend_swaps : bool
-        Two labels the hand finds swapped in some frames are solved exchanged there, with a warning (:mod:`.swaps`).
+        Two labels the hand finds swapped in some frames (or three gone round a cycle) are solved exchanged there,
+        with a warning (:mod:`.swaps`).
     progress : bool, optional
         Progress bar (default: on a terminal only).
 
