@@ -21,9 +21,11 @@ rigid shape itself, and on a real glove the back's markers stray from a rigid pa
 do (the real Qualisys glove: 34-44 correct ``hand_left`` labels over 10 mm).
 
 Measured with ``handcap label --offline`` (fingers untangled, then this check, its attachment calibrated as
-:data:`CALIBRATION_PRIOR` says) on synthetic ``joints-19`` takes (``benchmarks/labeling.py``): of another day
-(section 7), correct 99.21-99.79 % -> 99.42-99.85 %, wrong 0.027-0.045 % -> 0.009-0.023 %; of 11 other
-subjects (section 8), mean correct 99.65 -> 99.83 %, every subject's up and none's wrong labels up.
+:data:`CALIBRATION_PRIOR` says) on synthetic ``joints-19`` takes (``benchmarks/labeling.py``, 2026-12-02, the solve
+looking for swapped labels): of another day (section 7), correct 99.21-99.79 % -> 99.77-99.91 %, wrong
+0.027-0.045 % -> 0.000-0.018 %; of 11 other subjects (section 8), mean correct 99.65 -> 99.87 %, every subject's
+up and none's wrong labels up (subject 19: a 34-frame swap the untangling leaves, found by the solve: 99.45 / 0.33
+-> 99.95 / 0.014 % correct / wrong; 99.69 / 0.155 without the search).
 """
 
 from __future__ import annotations
