@@ -98,3 +98,14 @@ def test_the_stream_verb_warns_and_keeps_the_swaps_when_asked(grasp, tmp_path, c
     assert main([*argv, "--keep-swaps"]) == 0
     assert "exchanged" not in capsys.readouterr().err
     assert (tmp_path / "swapped.c3d").is_file()
+
+
+def test_markers_the_filler_predicted_are_not_exchanged(grasp):
+    # The same swapped frames, with the pair marked as predicted (not measured): no evidence of a swap.
+    capture, names, positions, pair = grasp
+    solver = FrameSolver(capture.attachment, OpenHand("right"))
+    measured = np.ones(len(names), dtype=bool)
+    measured[pair] = False
+    for frame in positions[:120]:
+        solver.solve(frame, measured)
+    assert solver.swaps == []

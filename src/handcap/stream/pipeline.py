@@ -93,8 +93,8 @@ class LivePipeline:
     smoothing : float
         The solve's pull towards the angles the frames before predict (:class:`FrameSolver`; 0: none).
     mend_swaps : bool
-        Labels the solved hand finds swapped are solved exchanged (:class:`FrameSolver`); the filler sees the
-        labels as given.
+        Labels the solved hand finds swapped are solved exchanged (:class:`FrameSolver`; measured markers only,
+        not those the filler predicted); the filler sees the labels as given.
     """
 
     def __init__(self, attachment, hand, *, rate: float, labeling=None, fill=None, iterations: int = ITERATIONS,
@@ -157,7 +157,8 @@ class LivePipeline:
             markers[columns[columns >= 0]] = points[kept][columns >= 0]
         else:
             markers = data.reshape(len(self.names), 3).copy()
-        seen = int(np.isfinite(markers).all(axis=1).sum())
+        measured = np.isfinite(markers).all(axis=1)
+        seen = int(measured.sum())
         labelled = clock()
         filled = 0
         if self.filler is not None:
@@ -168,7 +169,7 @@ class LivePipeline:
             markers[columns[hidden]] = predicted[hidden]
             filled = int(hidden.sum())
         completed = clock()
-        joints, phi, rms = self.solver.solve(markers)
+        joints, phi, rms = self.solver.solve(markers, measured)
         done = clock()
         self.last_ms = {"label": 1000 * (labelled - start), "fill": 1000 * (completed - labelled),
                         "solve": 1000 * (done - completed)}

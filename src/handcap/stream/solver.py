@@ -148,7 +148,7 @@ class FrameSolver:
         self.residuals, self.surprises = deque(maxlen=WINDOW), deque(maxlen=WINDOW)  # metres, radians
         self.pending = None  # the work :meth:`idle` does
         self.weight = None  # the pull's, metres per radian (None until WARMUP frames were measured)
-        self.mend_swaps, self.frames = mend_swaps, 0
+        self.mend_swaps, self.frames, self.measured = mend_swaps, 0, None
         self.order, self.swaps = np.arange(len(self.names)), []
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
@@ -160,13 +160,16 @@ class FrameSolver:
             self.kernel.solve(np.zeros(3), np.eye(3), self.rest, np.zeros((m, 3)), np.ones(m, bool), scale=SCALE,
                               iterations=1)
 
-    def solve(self, positions) -> tuple[np.ndarray, np.ndarray, float]:
+    def solve(self, positions, measured=None) -> tuple[np.ndarray, np.ndarray, float]:
         """One frame.
 
         Parameters
         ----------
         positions : ndarray (M, 3)
             The attachment's markers in its order, metres, NaN where not seen.
+        measured : ndarray (M,) bool, optional
+            Which of ``positions`` were measured (the others predicted, by the occlusion filler): only measured
+            markers are exchanged as swapped labels. Default: every marker given.
 
         Returns
         -------
@@ -181,6 +184,7 @@ class FrameSolver:
         self.frames += 1
         target = np.asarray(positions, dtype=np.float64).reshape(len(self.names), 3)[self.order][None]
         observed = np.isfinite(target).all(axis=2)
+        self.measured = observed[0] if measured is None else observed[0] & np.asarray(measured, bool)[self.order]
         if observed.sum() < 3:
             self.recent = []
             return np.full((21, 3), np.nan), np.full(27, np.nan), float("nan")
@@ -213,7 +217,7 @@ class FrameSolver:
         seen = observed[0]
         residual = np.zeros(len(seen))
         residual[seen] = result[3]
-        far = seen & (residual > MRE_LIMIT)
+        far = self.measured & (residual > MRE_LIMIT)  # a marker the filler predicted is no evidence of a swap
         if not far.any() or far.sum() > MAX_FAR or np.median(result[3]) > MRE_LIMIT / 2:
             return result, target
         pose = result[0]
@@ -221,7 +225,7 @@ class FrameSolver:
         points = target[0]
         pairs = set()
         for a in np.flatnonzero(far):
-            gap = np.where(seen, np.linalg.norm(points - points[a], axis=-1), np.inf)
+            gap = np.where(self.measured, np.linalg.norm(points - points[a], axis=-1), np.inf)
             gap[a] = np.inf
             near = np.argsort(gap)[:PARTNERS]
             for b in set(np.flatnonzero(far)) | set(near[np.isfinite(gap[near])]):
