@@ -17,7 +17,8 @@ slides on the skin), 77 times for 5 mm or more, and no swap is found in it.
 Three labels can also go round a cycle (three fingertips together in a fist: each takes its neighbour's label);
 exchanging two of them leaves one wrong, so no pair passes the verdict. Each cycle of a marker off the hand and
 two of its partners (off the hand too, or seen nearest to it: the solve can follow one of the three) whose
-positions lie near where the hand puts the next is tried too, after the pairs, with the same verdict.
+positions lie near where the hand puts the next is tried too, ranked with the pairs (those with more markers off
+the hand first, then those that come closer exchanged), with the same verdict.
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@ kept (:attr:`FrameSolver.swaps`) and named in a warning at the stream's end. Onl
 before are judged (a fresh start has no hand to judge by). ``benchmarks/swaps.py`` section 3 (2026-12-02): on the
 thirteen synthetic takes the 8 swaps ``synth`` made were found at their first frame and exchanged back at the frame
 after their last, none elsewhere, none on the real glove; p99 joint error 4.80 -> 2.71 mm (joints-19 grasp, 30 Hz),
-12.1 -> 7.3 mm (glove-13 grasp, 30 Hz), 4.10 -> 2.06 mm; the frame's p99 time on the real glove 0.52 -> 0.92 ms.
+12.1 -> 7.3 mm (glove-13 grasp, 30 Hz), 4.10 -> 2.06 mm; the frame's p99 time on the real glove 0.44 -> 0.85 ms.
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ class FrameSolver:
         self.residuals, self.surprises = deque(maxlen=WINDOW), deque(maxlen=WINDOW)  # metres, radians
         self.pending = None  # the work :meth:`idle` does
         self.weight = None  # the pull's, metres per radian (None until WARMUP frames were measured)
-        self.mend_swaps, self.frames, self.measured = mend_swaps, 0, None
+        self.mend_swaps, self.frames = mend_swaps, 0
         self.order, self.swaps = np.arange(len(self.names)), []
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
@@ -184,7 +184,6 @@ class FrameSolver:
         self.frames += 1
         target = np.asarray(positions, dtype=np.float64).reshape(len(self.names), 3)[self.order][None]
         observed = np.isfinite(target).all(axis=2)
-        self.measured = observed[0] if measured is None else observed[0] & np.asarray(measured, bool)[self.order]
         if observed.sum() < 3:
             self.recent = []
             return np.full((21, 3), np.nan), np.full(27, np.nan), float("nan")
@@ -199,7 +198,8 @@ class FrameSolver:
         pull = (prediction, self.weight) if prediction is not None and self.weight is not None else ()
         result = self._iterate(init, kin, target, observed, iterations, *pull)
         if self.mend_swaps and self.pose is not None:
-            result, target = self._swapped(result, init, kin, target, observed, iterations, pull)
+            measured = observed[0] if measured is None else observed[0] & np.asarray(measured, bool)[self.order]
+            result, target = self._swapped(result, init, kin, target, observed, measured, iterations, pull)
         if pull:
             self.pending = (init, kin, target, observed, iterations, prediction)  # the solve from the markers alone
         elif prediction is not None:
@@ -208,7 +208,7 @@ class FrameSolver:
         self.recent = [] if self.pose is None else [*self.recent[-1:], out[1]]
         return out
 
-    def _swapped(self, result, init, kin, target, observed, iterations, pull):
+    def _swapped(self, result, init, kin, target, observed, measured, iterations, pull):
         """The frame's result and markers, with two labels exchanged where the hand then fits both within
         ``MRE_LIMIT``, :data:`~handcap.solve.swaps.CLOSER` times closer than as given, and the other markers about
         as well (:mod:`handcap.solve.swaps`' verdict, on one frame). The pairs tried: a marker off the hand with
@@ -217,7 +217,7 @@ class FrameSolver:
         seen = observed[0]
         residual = np.zeros(len(seen))
         residual[seen] = result[3]
-        far = self.measured & (residual > MRE_LIMIT)  # a marker the filler predicted is no evidence of a swap
+        far = measured & (residual > MRE_LIMIT)  # a marker the filler predicted is no evidence of a swap
         if not far.any() or far.sum() > MAX_FAR or np.median(result[3]) > MRE_LIMIT / 2:
             return result, target
         pose = result[0]
@@ -225,7 +225,7 @@ class FrameSolver:
         points = target[0]
         pairs = set()
         for a in np.flatnonzero(far):
-            gap = np.where(self.measured, np.linalg.norm(points - points[a], axis=-1), np.inf)
+            gap = np.where(measured, np.linalg.norm(points - points[a], axis=-1), np.inf)
             gap[a] = np.inf
             near = np.argsort(gap)[:PARTNERS]
             for b in set(np.flatnonzero(far)) | set(near[np.isfinite(gap[near])]):
