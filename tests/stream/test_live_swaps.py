@@ -109,3 +109,21 @@ def test_markers_the_filler_predicted_are_not_exchanged(grasp):
     for frame in positions[:120]:
         solver.solve(frame, measured)
     assert solver.swaps == []
+
+
+def test_an_exchange_that_no_longer_fits_is_dropped(grasp):
+    # After the swap (frames 100-139) the labeller gets the two labels wrong another way: index_tip keeps middle_tip's
+    # point, middle_tip takes a point 50 mm off the hand. Neither the exchange nor exchanging it back fits the hand
+    # then: the exchange is dropped and the labels are read as given (nothing else is exchanged).
+    capture, names, positions, pair = grasp
+    later = positions.copy()
+    i, j = pair
+    later[140:180, i] = positions[140:180, j]  # middle_tip's point
+    later[140:180, j] = positions[140:180, j] + 0.05
+    solver = FrameSolver(capture.attachment, OpenHand("right"))
+    for frame in later[:180]:
+        solver.solve(frame)
+    assert [(s.frame, s.back) for s in solver.swaps] == [(100, False)]
+    assert solver.dropped == [140] and (solver.order == np.arange(len(names))).all()
+    assert "read as given again where they no longer fitted the hand, after frame(s) 140" in \
+        solver.swap_warnings(60.0)[0]

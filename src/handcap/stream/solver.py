@@ -37,10 +37,12 @@ the hand or seen nearest to it (the likeliest :data:`SWAP_TRIES` pairs), and whe
 the limit, :data:`~handcap.solve.swaps.CLOSER` times closer, and the others as well, the two labels are read
 exchanged from that frame on (:attr:`FrameSolver.order`) until the same verdict exchanges them back; each change is
 kept (:attr:`FrameSolver.swaps`) and named in a warning at the stream's end. Only frames solved from the frame
-before are judged (a fresh start has no hand to judge by). ``benchmarks/swaps.py`` section 3 (2026-12-02): on the
-thirteen synthetic takes the 8 swaps ``synth`` made were found at their first frame and exchanged back at the frame
-after their last, none elsewhere, none on the real glove; p99 joint error 4.80 -> 2.71 mm (joints-19 grasp, 30 Hz),
-12.1 -> 7.3 mm (glove-13 grasp, 30 Hz), 4.10 -> 2.06 mm; the frame's p99 time on the real glove 0.44 -> 0.85 ms.
+before are judged (a fresh start has no hand to judge by), and an exchange is dropped (:attr:`FrameSolver.dropped`)
+where the hand is lost or where its markers fit the hand neither way. ``benchmarks/swaps.py`` section 3
+(2026-12-02): on the thirteen synthetic takes the 8 swaps ``synth`` made were found at their first frame and
+exchanged back at the frame after their last, none elsewhere, none on the real glove; p99 joint error 4.80 -> 2.71
+mm (joints-19 grasp, 30 Hz), 12.1 -> 7.3 mm (glove-13 grasp, 30 Hz), 4.10 -> 2.06 mm; the frame's p99 time on the
+real glove 0.44 -> 0.85 ms.
 """
 
 from __future__ import annotations
@@ -130,6 +132,10 @@ class FrameSolver:
         far; ``arange(M)`` while none is).
     swaps : list of LiveSwap
         Every change of ``order``, in the order found.
+    dropped : list of int
+        Frames after which exchanges were dropped (their labels read as given again): the hand was lost (a fresh
+        start has no hand to judge them by), or an exchanged marker lay off the hand and exchanging it back did not
+        fit either (the labeller's labels changed otherwise). A swap still there is found again.
     """
 
     def __init__(self, attachment, hand, *, iterations: int = ITERATIONS, compiled: bool = True,
@@ -149,7 +155,7 @@ class FrameSolver:
         self.pending = None  # the work :meth:`idle` does
         self.weight = None  # the pull's, metres per radian (None until WARMUP frames were measured)
         self.mend_swaps, self.frames = mend_swaps, 0
-        self.order, self.swaps = np.arange(len(self.names)), []
+        self.order, self.swaps, self.dropped = np.arange(len(self.names)), [], []
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
         self.rest_joints, self.rest_tips = np.asarray(rest_joints), np.asarray(rest_tips)
@@ -182,6 +188,10 @@ class FrameSolver:
         """
         self.idle()
         self.frames += 1
+        if self.pose is None and (self.order != np.arange(len(self.order))).any():
+            # the hand was lost: the exchanges judged by it are stale; the labels are read as given again
+            self.order = np.arange(len(self.order))
+            self.dropped.append(self.frames - 1)
         target = np.asarray(positions, dtype=np.float64).reshape(len(self.names), 3)[self.order][None]
         observed = np.isfinite(target).all(axis=2)
         if observed.sum() < 3:
@@ -250,6 +260,13 @@ class FrameSolver:
                 self.swaps.append(LiveSwap(self.frames - 1, a, b, float(given), float(distance[pair].mean()),
                                            bool(self.order[a] == a and self.order[b] == b)))
                 return trial, swapped
+        stale = far & (self.order != np.arange(len(self.order)))
+        if stale.any():  # an exchange that no longer fits, nor does exchanging it back: labels as given from now on
+            for m in np.flatnonzero(stale):
+                while self.order[m] != m:  # the cycle of exchanges m is in, undone
+                    k = self.order[m]
+                    self.order[m], self.order[k] = self.order[k], k
+            self.dropped.append(self.frames - 1)
         return result, target
 
     def swap_warnings(self, rate: float) -> list[str]:
@@ -271,10 +288,14 @@ class FrameSolver:
                          f"{MM * s.given:.1f} mm from the hand as labelled, {MM * s.exchanged:.1f} mm exchanged)"
                          for s in self.swaps[:5])
         more = f"; and {len(self.swaps) - 5} more" if len(self.swaps) > 5 else ""
+        dropped = "" if not self.dropped else (f"; read as given again where they no longer fitted the hand, "
+                                                f"after frame(s) "
+                                                f"{', '.join(str(t) for t in self.dropped[:5])}"
+                                                f"{' ...' if len(self.dropped) > 5 else ''}")
         held = [f"{self.names[m]} from {self.names[c]}" for m, c in enumerate(self.order) if m != c]
         now = f"; at the end {', '.join(held)}'s label" if held else "; none exchanged at the end"
         return [f"live solve: labels exchanged {len(self.swaps)} time(s) where the hand fitted them swapped: "
-                f"{told}{more}{now}"]
+                f"{told}{more}{dropped}{now}"]
 
     def idle(self) -> None:
         """The last frame's solve from its markers alone, which only the pull's weight in later frames needs: call
