@@ -84,11 +84,8 @@ class Swap:
 
 def _stretches(far, seen, target, fit, residuals, limit):
     """Candidate (rank, ratio, a, b, c, first, last): a run of frames in which marker a is ``far`` from the fitted
-    hand (runs a few frames apart joined), with each marker b also far in its middle frame or among the
-    :data:`PARTNERS` markers seen nearest to it there (the solve can follow one of two swapped markers to within
-    the limit), c -1; and, where two markers or more are far, each cycle of a and two of those markers (c not
-    -1). Rank: how many of its markers are not far (0 first), then ratio: how far each marker's position lies from
-    where the hand puts the one it is read as, over the largest residual (the closest exchanged first)."""
+    hand (runs a few frames apart joined), with the exchanges :func:`exchange_candidates` finds for a in its middle
+    frame."""
     out = set()
     for a in np.flatnonzero(far.any(axis=0)):
         ts = np.flatnonzero(far[:, a])
@@ -97,30 +94,90 @@ def _stretches(far, seen, target, fit, residuals, limit):
             t = ts[np.searchsorted(ts, (first + last) // 2)]  # the middle frame, or the next where a is far
             if far[t].sum() > MAX_FAR or np.median(residuals[t, seen[t]]) > limit / 2:
                 continue
-            gap = np.linalg.norm(target[t] - target[t, a], axis=-1)
-            gap[a] = np.nan
-            near = np.argsort(np.where(np.isfinite(gap), gap, np.inf))[:PARTNERS]
-            for b in set(np.flatnonzero(far[t])) | set(near[np.isfinite(gap[near])]):
-                if b == a:
-                    continue
-                cross = max(np.linalg.norm(target[t, a] - fit[t, b]), np.linalg.norm(target[t, b] - fit[t, a]))
-                ratio = cross / max(residuals[t, a], residuals[t, b])
-                if ratio <= CANDIDATE_RATIO:  # the likeliest first: all off the hand, then the closest exchanged
-                    out.add((int(not far[t, b]), float(ratio), int(min(a, b)), int(max(a, b)), -1, int(first),
-                             int(last)))
-            if far[t].sum() < 2:  # three labels round a cycle leave two off the hand at least
-                continue
-            others = sorted(int(m) for m in set(np.flatnonzero(far[t])) | set(near[np.isfinite(gap[near])]) if m != a)
-            for b, c in permutations(others, 2):  # a read from b's label, b from c's, c from a's
-                cross = max(np.linalg.norm(target[t, b] - fit[t, a]), np.linalg.norm(target[t, c] - fit[t, b]),
-                            np.linalg.norm(target[t, a] - fit[t, c]))
-                ratio = cross / max(residuals[t, a], residuals[t, b], residuals[t, c])
-                if ratio <= CANDIDATE_RATIO:
-                    cycle = [a, b, c]
-                    start = int(np.argmin(cycle))  # one way of writing each cycle: its smallest marker first
-                    x, y, z = (int(cycle[(start + k) % 3]) for k in range(3))
-                    out.add((int(3 - far[t, cycle].sum()), float(ratio), x, y, z, int(first), int(last)))
+            for candidate in exchange_candidates(target[t], fit[t], residuals[t], far[t], seen[t], a):
+                out.add((*candidate, int(first), int(last)))
     return sorted(out)
+
+
+def exchange_candidates(points, fit, residuals, far, usable, a: int, *, cycles: bool = True) -> list[tuple]:
+    """The exchanges of labels worth trying for marker ``a``, off the hand in one frame.
+
+    Its partners are the other markers off the hand and the :data:`PARTNERS` usable markers nearest to it (the
+    solve can follow one of two swapped markers to within the limit). A pair ``(a, b)`` is a candidate, and with
+    ``cycles`` and two markers or more off the hand each cycle of ``a`` and two partners (``a`` read from ``b``'s
+    label, ``b`` from ``c``'s, ``c`` from ``a``'s), where each marker's position lies within
+    :data:`CANDIDATE_RATIO` times the largest residual of where the hand puts the one it is read as.
+
+    Parameters
+    ----------
+    points, fit : ndarray (M, 3)
+        The markers as labelled, and where the fitted hand puts them, metres.
+    residuals : ndarray (M,)
+        Their distances, metres.
+    far : ndarray (M,) bool
+        Markers off the hand.
+    usable : ndarray (M,) bool
+        Markers that may be partners (seen; measured, not predicted).
+    a : int
+    cycles : bool
+        Cycles of three too.
+
+    Returns
+    -------
+    list of (rank, ratio, a, b, c)
+        Rank: how many of its markers are not off the hand; ratio: as above; a pair has ``a < b`` and ``c = -1``, a
+        cycle starts at its smallest marker. Sorted, they are the likeliest first.
+    """
+    gap = np.where(usable, np.linalg.norm(points - points[a], axis=-1), np.inf)
+    gap[a] = np.inf
+    near = np.argsort(gap)[:PARTNERS]
+    partners = sorted(int(m) for m in set(np.flatnonzero(far)) | set(near[np.isfinite(gap[near])]) if m != a)
+    out = []
+    for b in partners:
+        ratio = max(np.linalg.norm(points[a] - fit[b]), np.linalg.norm(points[b] - fit[a])) / max(residuals[a],
+                                                                                                    residuals[b])
+        if ratio <= CANDIDATE_RATIO:
+            out.append((int(not far[b]), float(ratio), int(min(a, b)), int(max(a, b)), -1))
+    if not cycles or far.sum() < 2:  # three labels round a cycle leave two off the hand at least
+        return out
+    for b, c in permutations(partners, 2):  # a read from b's label, b from c's, c from a's
+        cross = max(np.linalg.norm(points[b] - fit[a]), np.linalg.norm(points[c] - fit[b]),
+                    np.linalg.norm(points[a] - fit[c]))
+        ratio = cross / max(residuals[a], residuals[b], residuals[c])
+        if ratio <= CANDIDATE_RATIO:
+            cycle = [int(a), b, c]
+            start = int(np.argmin(cycle))  # one way of writing each cycle: its smallest marker first
+            out.append((int(3 - far[cycle].sum()), float(ratio), *(cycle[(start + k) % 3] for k in range(3))))
+    return out
+
+
+def verdict(exchanged, exchanged_seen, given, given_seen, moved, limit: float = MRE_LIMIT) -> tuple[bool, float,
+                                                                                                     float]:
+    """Whether labels exchanged are the hand's: it fits the ``moved`` markers within ``limit``, :data:`CLOSER`
+    times closer than as given, and the other markers no further on average than as given plus
+    :data:`OTHERS_WORSE`.
+
+    Parameters
+    ----------
+    exchanged, given : ndarray (F, M)
+        Each marker's distance from the hand solved with the labels exchanged and as given, metres, over F frames.
+    exchanged_seen, given_seen : ndarray (F, M) bool
+        The markers seen either way.
+    moved : ndarray (M,) bool
+        The markers whose labels are exchanged.
+    limit : float
+        Metres.
+
+    Returns
+    -------
+    bool, float, float
+        The verdict, and the moved markers' mean distance as given and exchanged, metres.
+    """
+    fit, others = exchanged[exchanged_seen & moved].mean(), exchanged[exchanged_seen & ~moved]
+    before, before_others = given[given_seen & moved].mean(), given[given_seen & ~moved]
+    ok = fit <= min(limit, before / CLOSER) and (not len(others) or others.mean() <= before_others.mean()
+                                                 + OTHERS_WORSE)
+    return bool(ok), float(before), float(fit)
 
 
 def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tuple[list[Swap], int]:
@@ -165,14 +222,12 @@ def find_swaps(target, observed, fit, solve, *, limit: float = MRE_LIMIT) -> tup
         swapped, seen = exchanged(target[lo:hi], observed[lo:hi], [swap])
         stretch = slice(swap.first, swap.last + 1)
         distance = np.linalg.norm(solve(swapped, seen)[stretch] - np.nan_to_num(swapped[stretch]), axis=-1)
-        pair, seen = np.zeros(distance.shape[1], dtype=bool), seen[stretch]
-        pair[swap.markers] = True
-        exchanged_fit, others = distance[seen & pair].mean(), distance[seen & ~pair]
-        given, given_others = (residuals[first:last + 1][observed[first:last + 1] & pair].mean(),
-                               residuals[first:last + 1][observed[first:last + 1] & ~pair])
-        if exchanged_fit <= min(limit, given / CLOSER) and (not len(others) or
-                                                            others.mean() <= given_others.mean() + OTHERS_WORSE):
-            found.append(Swap(a, b, first, last, float(given), float(exchanged_fit), c))
+        moved = np.zeros(distance.shape[1], dtype=bool)
+        moved[swap.markers] = True
+        ok, given, fit_exchanged = verdict(distance, seen[stretch], residuals[first:last + 1],
+                                           observed[first:last + 1], moved, limit)
+        if ok:
+            found.append(Swap(a, b, first, last, given, fit_exchanged, c))
     kept = []
     for swap in sorted(found, key=lambda s: s.exchanged):  # a marker swapped with two others at once: the closer fit
         if not any(set(swap.markers) & set(k.markers) and swap.first <= k.last and k.first <= swap.last

@@ -61,7 +61,7 @@ from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
 from handcap.solve.continuity import predicted
 from handcap.solve.kernel import FrameKernel
-from handcap.solve.swaps import CANDIDATE_RATIO, CLOSER, MAX_FAR, OTHERS_WORSE, PARTNERS
+from handcap.solve.swaps import MAX_FAR, exchange_candidates, verdict
 
 #: Gauss-Newton iterations per streamed frame (from the frame before). One suffices: the frame before is close,
 #: and more fit the markers' noise. Measured on 20 s of synthetic random motion, 22 markers (joints vs truth,
@@ -232,32 +232,20 @@ class FrameSolver:
             return result, target
         pose = result[0]
         fit = self.model.positions(pose.transl, pose.rot, pose.phi)[0]
-        points = target[0]
-        pairs = set()
-        for a in np.flatnonzero(far):
-            gap = np.where(measured, np.linalg.norm(points - points[a], axis=-1), np.inf)
-            gap[a] = np.inf
-            near = np.argsort(gap)[:PARTNERS]
-            for b in set(np.flatnonzero(far)) | set(near[np.isfinite(gap[near])]):
-                if b == a:
-                    continue
-                cross = max(np.linalg.norm(points[a] - fit[b]), np.linalg.norm(points[b] - fit[a]))
-                ratio = cross / max(residual[a], residual[b])
-                if ratio <= CANDIDATE_RATIO:
-                    pairs.add((not far[b], float(ratio), int(min(a, b)), int(max(a, b))))
-        for _, _, a, b in sorted(pairs)[:SWAP_TRIES]:
+        pairs = {candidate for a in np.flatnonzero(far)
+                 for candidate in exchange_candidates(target[0], fit, residual, far, measured, a, cycles=False)}
+        for _, _, a, b, _ in sorted(pairs)[:SWAP_TRIES]:
             swapped = target.copy()
             swapped[0, [a, b]] = swapped[0, [b, a]]
             trial = self._iterate(init, kin, swapped, observed, iterations, *pull)
             distance = np.zeros(len(seen))
             distance[seen] = trial[3]
-            pair = np.zeros(len(seen), dtype=bool)
-            pair[[a, b]] = True
-            given, others = residual[pair].mean(), seen & ~pair
-            if (distance[pair].mean() <= min(MRE_LIMIT, given / CLOSER)
-                    and (not others.any() or distance[others].mean() <= residual[others].mean() + OTHERS_WORSE)):
+            moved = np.zeros(len(seen), dtype=bool)
+            moved[[a, b]] = True
+            ok, given, fit_exchanged = verdict(distance[None], observed, residual[None], observed, moved)
+            if ok:
                 self.order[[a, b]] = self.order[[b, a]]
-                self.swaps.append(LiveSwap(self.frames - 1, a, b, float(given), float(distance[pair].mean()),
+                self.swaps.append(LiveSwap(self.frames - 1, a, b, given, fit_exchanged,
                                            bool(self.order[a] == a and self.order[b] == b)))
                 return trial, swapped
         stale = far & (self.order != np.arange(len(self.order)))
