@@ -21,7 +21,10 @@ with 2 ghosts per second near the hand and 5 % extra random dropouts (seed 0):
    whose markers do not lie in a line, keep their spans or bend one way), then checked against the
    hand solved from them (the last two: what handcap label --offline adds). Targets: >= 99 % correct
    with <= 0.1 % wrong;
-8. the same offline columns on takes of 11 other subjects (odd seeds 3-25 but 5).
+8. the same offline columns on takes of 11 other subjects (odd seeds 3-25 but 5);
+9. the points labelled wrong online (adapting) on takes of 21 other subjects (odd seeds 3-45 but 5), with swaps
+   the tracks keep released to the spatial model (``OnlineLabeler(release=...)``, the default) and not: its
+   settings were chosen on seeds 3-25, seeds 27-45 were not looked at until then.
 
     .venv/bin/python benchmarks/labeling.py [--threads 2] [--skip-synthetic]
 """
@@ -206,6 +209,39 @@ def other_days(args) -> None:
         right = [float(c[k].split("/")[0]) for c in pooled]
         print(f"   {what}: mean {np.mean(right):.2f} % correct, {sum(r >= 99 for r in right)} of {len(right)} "
               "subjects at >= 99 %")
+    _released(model, layout, take, [s for s in range(3, 46, 2) if s != 5])
+
+
+def _released(model, layout, take, subjects) -> None:
+    """Section 9: points labelled wrong online (adapting) with swaps the tracks keep released and not."""
+    import warnings
+
+    import numpy as np
+
+    from handcap.core.errors import HandcapWarning
+    from handcap.labeling import corrupt, label_take, score_labels
+
+    print(f"\n== 9. takes of {len(subjects)} other subjects labelled online, adapting: swaps the tracks keep "
+          "released to the spatial model or not ==")
+    print("release's settings were chosen on seeds 3-25; points labelled wrong (correct %)")
+    print(f"{'subject':>8s} {'not released':>22s} {'released (default)':>22s} {'releases':>9s}")
+    totals = {25: np.zeros(2, int), 45: np.zeros(2, int)}
+    for subject in subjects:
+        unlabeled, truth = corrupt(take(21, subject, 1000), ghost_rate=2.0, dropout=0.05, seed=0)
+        cells, count = [], 0
+        for release in (np.inf, None):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", HandcapWarning)
+                result = label_take(unlabeled, model, **({} if release is None else {"release": release}))
+            score = score_labels(result.markers, truth)
+            cells.append((int(score.erroneous.sum()), 100 * score.fraction("correct")))
+            count = len(result.released)
+        for upto, total in totals.items():
+            if subject <= upto and (upto == 25 or subject > 25):
+                total += [cells[0][0], cells[1][0]]
+        print(f"{subject:8d} " + " ".join(f"{w:>12d} ({c:6.2f})" for w, c in cells) + f" {count:9d}")
+    for upto, (before, after) in totals.items():
+        print(f"   seeds {'3-25' if upto == 25 else '27-45'}: {before} -> {after} points labelled wrong")
 
 
 def _another_day(markers, model, layout, online=True) -> list:

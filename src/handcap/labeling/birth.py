@@ -12,6 +12,19 @@ updates, each inside the gate of the chain's prediction, is kinematically
 consistent: the labeler may start a label's track on it (a birth), see
 :class:`handcap.labeling.OnlineLabeler` (``birth``); :func:`birth_pairings`
 gives the label each such point would start.
+
+A born point takes the label without a track (never seen, warming up, or lost
+for over ``max_coast`` frames) whose spatial model explains it best, scored
+spatially at ``theta_min`` (as likely as the least likely pairing the model
+accepts: the chain is evidence that it is no clutter). Only while the labeler
+adapts to the take (``adapt``), once the take's rigid shape is checked and the
+model aligned: before, an unlikely point may as well mean a wrong hand frame;
+without adaptation (and in the offline second pass, whose model is refit to
+labels that include the born tracks) a birth started before any track was
+confirmed began a 400-frame swap of two fingers on a synthetic take. Off by
+default online: on another subject's synthetic take, where many points fit no
+label, born tracks took wrong labels (wrong 0.14 -> 1.79 %); off in the offline
+first pass too (``label_take``'s ``FIRST_PASS_BIRTH``).
 """
 
 from __future__ import annotations

@@ -23,17 +23,16 @@ This module owns the stream: the labeler's state from frame to frame (hand
 frame, filters, trellis, open frames) and its decisions; the hypotheses of
 steps 3-4 and their scores are built in :mod:`handcap.labeling.hypotheses`.
 
-Beyond the paper: each frame also gets the assignment that is best for spatial
-and temporal evidence together given the best previous hypothesis (a tracking
-hypothesis; from every previous hypothesis labels no better on the real glove
-and synthetic takes), so a correct but spatially unlikely assignment (a finger in a
-pose the training take barely covered) is not lost when it is outside the N
-spatially best; a track carries its label onto spatially filtered points for at
-most ``max_unlikely`` frames (a swap kept by continuity alone ends there). A
-point no label accepts spatially but that has moved as a marker for ``birth``
-frames may start the track of the best label without one
-(:mod:`handcap.labeling.birth`; the paper's tracks started from temporally
-consistent, spatially unlikely points; off by default, offline too: ``label_take``'s ``FIRST_PASS_BIRTH``).
+Beyond the paper: each frame also gets the assignment that is best for spatial and temporal evidence together
+given the best previous hypothesis (a tracking hypothesis; from every previous hypothesis labels no better on the
+real glove and synthetic takes), so a correct but spatially unlikely assignment (a finger in a pose the training
+take barely covered) is not lost when it is outside the N spatially best; a track carries its label onto
+spatially filtered points for at most ``max_unlikely`` frames (a swap kept by continuity alone ends there), and
+labels whose tracks hold points the spatial model would give them otherwise, frame after frame, are released to
+it (``release``, :mod:`handcap.labeling.release`: a swap of two plausible points, which the tracks' continuity
+would keep for good). A point no label accepts spatially but that has moved as a marker for ``birth`` frames may
+start the track of the best label without one (:mod:`handcap.labeling.birth`; the paper's tracks started from
+temporally consistent, spatially unlikely points; off by default).
 """
 
 from __future__ import annotations
@@ -50,6 +49,7 @@ from handcap.labeling.frame import HandFrameFinder, find_objects
 from handcap.labeling.hypotheses import emission_scores, spatial_hypotheses, tracking_hypothesis, transition_scores
 from handcap.labeling.kalman import KalmanBatch
 from handcap.labeling.model import LabelingModel
+from handcap.labeling.release import TrackEvidence
 from handcap.labeling.viterbi import backtrack, viterbi_step
 
 
@@ -115,6 +115,12 @@ class OnlineLabeler:
         lost: none rather than wrong.
     adapt_every : int
         Frames between re-estimations.
+    release, release_drift : float
+        Evidence (natural log) at which labels whose tracks hold other points
+        than the spatially best assignment gives them are released to the
+        spatial model (their filters restart in every hypothesis), and the
+        evidence taken off per frame (:mod:`handcap.labeling.release`; a swap
+        of two plausible points otherwise lasts as long as the tracks).
     max_unlikely : int
         Frames a track may carry a label on points the spatial model filters
         out (the tracking hypothesis); after that the spatial model decides
@@ -129,20 +135,9 @@ class OnlineLabeler:
     birth : int
         A point the spatial model filters out for every label may still
         start a track (the tracking hypothesis) when it has moved as a marker
-        moves for this many frames (:mod:`handcap.labeling.birth`): it takes
-        the label without a track (never seen, warming up, or lost for over
-        ``max_coast`` frames) whose spatial model explains it best, scored
-        spatially at ``theta_min`` (as likely as the least likely pairing
-        the model accepts: the chain is evidence that it is no clutter).
-        Only while the labeler adapts to the take (``adapt``), once the take's
-        rigid shape is checked and the model aligned: before, an unlikely
-        point may as well mean a wrong hand frame; without adaptation (and in
-        the offline second pass, whose model is refit to labels that include
-        the born tracks) a birth started before any track was confirmed began
-        a 400-frame swap of two fingers on a synthetic take. 0 (default):
-        never. Off by default online: on another subject's synthetic take,
-        where many points fit no label, born tracks took wrong labels (wrong
-        0.14 -> 1.79 %); off in the offline first pass too (``label_take``'s ``FIRST_PASS_BIRTH``).
+        moves for this many frames (:mod:`handcap.labeling.birth`, which says
+        when and why); only while adapting, once the model is aligned. 0
+        (default): never (offline first pass: ``label_take``'s ``FIRST_PASS_BIRTH``).
 
     Attributes
     ----------
@@ -151,13 +146,15 @@ class OnlineLabeler:
     lost_frames : list of int
         Frames where the hand frame could not be found (every free label
         reported as a gap there).
+    released : list of (int, tuple of str)
+        Frames where labels were released to the spatial model (``release``), and those labels.
     """
 
     def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
                  max_coast: int = 10, warmup: int = 2, gate: float = 6.0, jump_cost: float = 6.0,
                  tracking: bool = True, max_hold: int = 10, objects=(), adapt: bool = True,
                  adapt_every: int = 25, forget: float = 0.999, max_unlikely: int = 50, birth: int = 0,
-                 defer: bool = False):
+                 defer: bool = False, release: float = 1000.0, release_drift: float = 2.0):
         if not (isinstance(hypotheses, (int, np.integer)) and hypotheses >= 1):
             raise HandcapError(f"hypotheses must be a whole number >= 1, got {hypotheses}")
         if not (isinstance(lag, (int, np.integer)) and lag >= 0):
@@ -194,6 +191,8 @@ class OnlineLabeler:
         if not 0.0 < forget <= 1.0:
             raise HandcapError(f"forget must be in (0, 1], got {forget}")
         self.max_unlikely = int(max_unlikely)
+        self._evidence = TrackEvidence(self.n_free, release, release_drift)
+        self.released: list[tuple[int, tuple[str, ...]]] = []
         if not (isinstance(birth, (int, np.integer)) and birth >= 0):
             raise HandcapError(f"birth must be a whole number of frames >= 0, got {birth}")
         self.birth = int(birth)
@@ -353,6 +352,10 @@ class OnlineLabeler:
                                        self.jump_cost)  # (N_prev, N)
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
+        if pose is not None and len(world):  # before the filters step (now or deferred): a release restarts them
+            due = self._evidence.weigh(hyps, emission, int(np.argmax(scores)))
+            if due is not None:
+                self.released.append((self.frame_index, tuple(str(n) for n in np.array(self.model.free_names)[due])))
         if self.defer:
             self._step_filters = (back, obs)
         else:
@@ -428,6 +431,9 @@ class OnlineLabeler:
         n_free = obs.shape[1]
         index = (back[:, None] * n_free + np.arange(n_free)).ravel()
         self._filters = self._filters.successors(index, obs.reshape(-1, 3), self._predicted, self.max_coast)
+        released = self._evidence.take_pending()
+        if released.any():  # their filters start afresh: no transition scored for their next updates
+            self._filters.age.reshape(-1, n_free)[:, released] = 0
 
     # -- decisions ------------------------------------------------------------------------
     def _decide_oldest(self) -> np.ndarray:

@@ -85,6 +85,9 @@ class LabelResult:
     rigid : RigidSet or None
         The hand's rigid set as the labeler ended the take with it (re-learned from the take when its
         distances differed from training); None for several hands or without rigid markers.
+    released : tuple of (int, tuple of str)
+        Frames where labels whose tracks the spatial model disagreed with were released to it, and those
+        labels (:class:`OnlineLabeler`'s ``release``; the last pass offline).
     """
 
     markers: MarkerSequence
@@ -93,6 +96,7 @@ class LabelResult:
     warnings: tuple = ()
     model: LabelingModel | None = None
     rigid: RigidSet | None = None
+    released: tuple = ()
 
     def summary(self) -> str:
         """One line: frames, labels, the share of label-frames filled and the frames without a hand frame."""
@@ -302,7 +306,8 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
     finder = getattr(labeler, "finder", None)
     return LabelResult(MarkerSequence(positions, names, points.rate), labels,
                        np.array(getattr(labeler, "lost_frames", []), dtype=int),
-                       rigid=None if finder is None else finder.rigid)
+                       rigid=None if finder is None else finder.rigid,
+                       released=tuple(getattr(labeler, "released", ())))
 
 
 def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=()) -> LabelResult:
