@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from handcap import HandcapError
-from handcap.labeling import LabelingModel, OnlineLabeler
+from handcap.labeling import LabelingModel, OnlineLabeler, label_take
+from handcap.labeling.release import Release, release_warning
 from handcap.layouts import load_layout
 from handcap.synth.scene import SynthConfig, synthesize
 
@@ -54,9 +55,10 @@ def test_a_swap_kept_by_the_tracks_alone_is_released_to_the_spatial_model(model_
     assert kept[SWAP_AT:].all(axis=1).sum() > 0.8 * (len(take.positions) - SWAP_AT)
     assert kept[-50:].any(axis=1).mean() > 0.8
     # ... with it, both labels are released (measured: 239 frames, 2.0 s, after the swap) and right from there on.
-    released = [frame for frame, labels in labeler.released if {"middle_dip", "ring_tip"} & set(labels)]
-    assert released and SWAP_AT < released[0] < len(take.positions) - 50
-    assert not mended[released[-1] + 5:].any()
+    released = [r for r in labeler.released if {"middle_dip", "ring_tip"} & set(r.labels)]
+    assert len(released) == 1 and set(released[0].labels) == {"middle_dip", "ring_tip"}
+    assert SWAP_AT <= released[0].since < released[0].frame < len(take.positions) - 50
+    assert not mended[released[0].frame + 5:].any()
     assert mended.all(axis=1).sum() < 0.8 * kept.all(axis=1).sum()  # measured: 216 frames swapped against 302
 
 
@@ -65,3 +67,37 @@ def test_release_settings_are_checked(model_and_take):
     for options in ({"release": 0.0}, {"release": -1.0}, {"release_drift": -0.5}):
         with pytest.raises(HandcapError, match="release"):
             OnlineLabeler(model, **options)
+
+
+def test_releases_are_a_warning_stored_with_the_labels(model_and_take):
+    """A release says the labels were probably swapped before it: label_take stores and prints the line."""
+    model, take = model_and_take
+    with pytest.warns(UserWarning, match="released to the spatial model"):
+        result = label_take(take, model, release=30.0)  # a low threshold releases labels on an ordinary take
+    assert result.released
+    line = [w for w in result.warnings if "released to the spatial model" in w]
+    assert len(line) == 1 and line[0] in result.markers.warnings
+    first = result.released[0]
+    assert f"{' and '.join(first.labels)} at frame {first.frame} (since frame {first.since}:" in line[0]
+    assert not any("released" in w for w in label_take(take, model).warnings)  # the default: none here
+
+
+def test_several_hands_release_with_their_prefixes(model_and_take):
+    from handcap.labeling import MultiHandLabeler
+
+    model, take = model_and_take
+    one = OnlineLabeler(model, release=30.0)
+    both = MultiHandLabeler([model], prefixes=("R_",), release=30.0)
+    for frame in take.positions[:200]:
+        one.update(frame)
+        both.update(frame)
+    assert one.released and [(r.frame, r.since) for r in both.released] == [(r.frame, r.since) for r in one.released]
+    assert [r.labels for r in both.released] == [tuple("R_" + n for n in r.labels) for r in one.released]
+
+
+def test_release_warning_names_five_and_counts_the_rest():
+    releases = [Release(100 * k + 50, 100 * k, ("index_tip", "middle_tip")) for k in range(7)]
+    line = release_warning(releases, 100.0)
+    assert line.startswith("labels released to the spatial model 7 time(s)")
+    assert "index_tip and middle_tip at frame 50 (since frame 0: 0.00-0.50 s)" in line and "; and 2 more" in line
+    assert release_warning([], 100.0) is None

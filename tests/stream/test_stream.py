@@ -135,6 +135,25 @@ def test_unlabelled_points_are_labelled_filled_and_solved_frame_by_frame(unlabel
     assert stats.filled.sum() > 0 and (stats.seen + stats.filled >= 19).mean() > 0.95
 
 
+def test_labels_the_labeller_released_are_a_warning_of_the_stream(unlabelled, monkeypatch):
+    """A release says the labels were probably swapped before it (:mod:`handcap.labeling.release`)."""
+    import functools
+
+    import handcap.stream.pipeline as pipeline_module
+    from handcap.core.errors import HandcapWarning
+    from handcap.labeling import OnlineLabeler
+
+    take, model = unlabelled
+    hand = OpenHand("right")
+    assert not any("released" in w for w in stream(take.points, take.attachment, hand, realtime=False,
+                                                   labeling=model, seconds=2.0).warnings)
+    # A low threshold releases labels on this ordinary take.
+    monkeypatch.setattr(pipeline_module, "OnlineLabeler", functools.partial(OnlineLabeler, release=30.0))
+    with pytest.warns(HandcapWarning, match="labels released to the spatial model"):
+        stats = stream(take.points, take.attachment, hand, realtime=False, labeling=model, seconds=2.0)
+    assert sum("labels released to the spatial model" in w for w in stats.warnings) == 1
+
+
 def test_a_hidden_marker_is_filled_near_where_it_is(unlabelled):
     take, _ = unlabelled
     from handcap.stream import LivePipeline

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 
@@ -58,11 +59,18 @@ class MultiHandLabeler:
         self._offsets = np.cumsum([0] + [len(m.names) for m in models])
         self._object_pending: deque = deque()
         self.lag = self.hands[0].lag
+        self._prefixes = prefixes
 
     @property
     def lost_frames(self) -> list:
         """Frames where some hand's frame could not be found."""
         return sorted(set().union(*(h.lost_frames for h in self.hands)))
+
+    @property
+    def released(self) -> list:
+        """Every hand's labels released to its spatial model (``Release``, the labels prefixed), by frame."""
+        return sorted((replace(r, labels=tuple(p + n for n in r.labels)) for h, p in zip(self.hands, self._prefixes)
+                       for r in h.released), key=lambda r: r.frame)
 
     def update(self, points, transform=None):
         """Label one frame: as :meth:`OnlineLabeler.update`, with indices into :attr:`names`.

@@ -49,7 +49,7 @@ from handcap.labeling.frame import HandFrameFinder, find_objects
 from handcap.labeling.hypotheses import emission_scores, spatial_hypotheses, tracking_hypothesis, transition_scores
 from handcap.labeling.kalman import KalmanBatch
 from handcap.labeling.model import LabelingModel
-from handcap.labeling.release import TrackEvidence
+from handcap.labeling.release import Release, TrackEvidence
 from handcap.labeling.viterbi import backtrack, viterbi_step
 
 
@@ -146,8 +146,8 @@ class OnlineLabeler:
     lost_frames : list of int
         Frames where the hand frame could not be found (every free label
         reported as a gap there).
-    released : list of (int, tuple of str)
-        Frames where labels were released to the spatial model (``release``), and those labels.
+    released : list of Release
+        Labels released to the spatial model (``release``): when, since when, which.
     """
 
     def __init__(self, model: LabelingModel, *, hypotheses: int = 5, lag: int = 0, theta_min: float = -2.0,
@@ -191,8 +191,8 @@ class OnlineLabeler:
         if not 0.0 < forget <= 1.0:
             raise HandcapError(f"forget must be in (0, 1], got {forget}")
         self.max_unlikely = int(max_unlikely)
-        self._evidence = TrackEvidence(self.n_free, release, release_drift)
-        self.released: list[tuple[int, tuple[str, ...]]] = []
+        self._evidence = TrackEvidence(model.free_names, release, release_drift)
+        self.released: list[Release] = []
         if not (isinstance(birth, (int, np.integer)) and birth >= 0):
             raise HandcapError(f"birth must be a whole number of frames >= 0, got {birth}")
         self.birth = int(birth)
@@ -353,9 +353,9 @@ class OnlineLabeler:
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
         if pose is not None and len(world):  # before the filters step (now or deferred): a release restarts them
-            due = self._evidence.weigh(hyps, emission, int(np.argmax(scores)))
-            if due is not None:
-                self.released.append((self.frame_index, tuple(str(n) for n in np.array(self.model.free_names)[due])))
+            found = self._evidence.weigh(hyps, emission, int(np.argmax(scores)), self.frame_index)
+            if found is not None:
+                self.released.append(found)
         if self.defer:
             self._step_filters = (back, obs)
         else:

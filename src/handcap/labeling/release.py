@@ -18,14 +18,46 @@ two assignments place otherwise in that frame on at least half as much evidence
 (the rest of the swap: released one at a time, the other's track would take the
 point back). The labeler then restarts their filters in every hypothesis, so
 that their next updates score no transition: the spatial model decides their
-points, and their tracks follow from there.
+points, and their tracks follow from there. Each release is a :class:`Release`;
+:func:`release_warning` says them in one line (the labels were probably swapped
+before it).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from handcap.core.errors import HandcapError
+
+
+@dataclass(frozen=True)
+class Release:
+    """Labels released to the spatial model at ``frame``, their evidence adding up since frame ``since``."""
+
+    frame: int
+    since: int
+    labels: tuple
+
+
+def release_warning(releases, rate: float) -> str | None:
+    """One line naming the releases (at most five), None for none: the labels may be swapped before each.
+
+    Parameters
+    ----------
+    releases : sequence of Release
+    rate : float
+        Frames per second.
+    """
+    if not releases:
+        return None
+    told = "; ".join(f"{' and '.join(r.labels)} at frame {r.frame} (since frame {r.since}: {r.since / rate:.2f}-"
+                     f"{r.frame / rate:.2f} s)" for r in releases[:5])
+    more = f"; and {len(releases) - 5} more" if len(releases) > 5 else ""
+    return (f"labels released to the spatial model {len(releases)} time(s), their tracks having held points it gives "
+            f"other labels: {told}{more}; those labels are probably swapped in the frames named: check them, or "
+            "train on a take of this subject")
 
 
 class TrackEvidence:
@@ -33,22 +65,24 @@ class TrackEvidence:
 
     Parameters
     ----------
-    n_labels : int
-        Free labels F.
+    names : sequence of str
+        The free labels (F).
     release : float
         Evidence at which a label is released (``inf``: never).
     drift : float
         Evidence taken off per frame.
     """
 
-    def __init__(self, n_labels: int, release: float, drift: float):
+    def __init__(self, names, release: float, drift: float):
         if not (release > 0 and drift >= 0):
             raise HandcapError(f"release must be > 0 and release_drift >= 0, got {release} and {drift}")
+        self.names = np.array([str(n) for n in names])
         self.release, self.drift = float(release), float(drift)
-        self.evidence = np.zeros(n_labels)
-        self.pending = np.zeros(n_labels, dtype=bool)  # released, filters not yet restarted
+        self.evidence = np.zeros(len(self.names))
+        self.start = np.full(len(self.names), -1)  # frame each label's evidence began to add up, -1 at 0
+        self.pending = np.zeros(len(self.names), dtype=bool)  # released, filters not yet restarted
 
-    def weigh(self, hyps, emission, best: int) -> np.ndarray | None:
+    def weigh(self, hyps, emission, best: int, frame: int) -> Release | None:
         """Add one frame's evidence; the labels released by it.
 
         Parameters
@@ -59,10 +93,12 @@ class TrackEvidence:
             Their spatial scores (natural log).
         best : int
             The hypothesis the labeler rates best (spatial and temporal evidence).
+        frame : int
+            The frame's index.
 
         Returns
         -------
-        ndarray (F,) bool or None
+        Release or None
             The labels released in this frame (also kept in ``pending``), None when none is.
         """
         top = int(np.argmax(emission))
@@ -70,13 +106,16 @@ class TrackEvidence:
         other = (mine != theirs) & (mine >= 0) & (theirs >= 0)
         gain = float(emission[top] - emission[best])
         self.evidence = np.maximum(self.evidence + np.where(other, gain, 0.0) - self.drift, 0.0)
+        self.start = np.where(self.evidence > 0, np.where(self.start < 0, frame, self.start), -1)
         due = self.evidence >= self.release
         if not due.any():
             return None
         due |= other & (self.evidence >= 0.5 * self.release)
+        found = Release(int(frame), int(self.start[due].min()), tuple(str(n) for n in self.names[due]))
         self.evidence[due] = 0.0
+        self.start[due] = -1
         self.pending |= due
-        return due
+        return found
 
     def take_pending(self) -> np.ndarray:
         """The labels (F,) bool released since the last call, whose filters restart now; cleared."""

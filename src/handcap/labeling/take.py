@@ -23,6 +23,7 @@ from handcap.labeling.model import LabelingModel, rigid_transforms
 from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
 from handcap.labeling.realign import adapt_means, register_to_model
+from handcap.labeling.release import release_warning
 from handcap.labeling.relearn import largest_change, rigid_from_take
 from handcap.labeling.rigid_set import RigidSet
 
@@ -85,9 +86,9 @@ class LabelResult:
     rigid : RigidSet or None
         The hand's rigid set as the labeler ended the take with it (re-learned from the take when its
         distances differed from training); None for several hands or without rigid markers.
-    released : tuple of (int, tuple of str)
-        Frames where labels whose tracks the spatial model disagreed with were released to it, and those
-        labels (:class:`OnlineLabeler`'s ``release``; the last pass offline).
+    released : tuple of Release
+        Labels whose tracks the spatial model disagreed with, released to it (:class:`OnlineLabeler`'s
+        ``release``; the last pass offline): the labels are probably swapped before each, and a warning says so.
     """
 
     markers: MarkerSequence
@@ -344,6 +345,9 @@ def _with_warnings(result: LabelResult, points, model, trained=None, found_wider
                           f"plausible <= {100 * LOST_WARNING:.0f} %): the rigid markers were not found at their "
                           f"trained distances; check the layout's rigid markers or train on a take of this session",
                           stacklevel=3))
+    released = release_warning(result.released, points.rate)
+    if released:
+        lines.append(warn(released, stacklevel=3))
     share = _labelled_share(result, points)
     if share < LABELLED_WARNING:  # False for NaN: no points, nothing to label
         lines.append(warn(f"labels for {100 * share:.1f} % of the points in the stream (plausible >= "

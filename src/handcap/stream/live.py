@@ -22,6 +22,7 @@ from tqdm import tqdm
 from handcap.core.errors import HandcapError, warn
 from handcap.core.points import PointCloudSequence
 from handcap.core.markers import MarkerSequence
+from handcap.labeling.release import release_warning
 from handcap.stream.pipeline import LivePipeline
 from handcap.stream.solver import SMOOTHING
 from handcap.stream.sources import ReplaySource
@@ -207,7 +208,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     n = rows.count
     stage_ms = {k: v[:n].astype(np.float64) for k, v in rows.stage_ms.items()}
     solved = rows.solved[:n] if keep_solved else np.zeros((0, 21, 3))
-    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate))
+    released = [] if pipeline.labeler is None else [release_warning(pipeline.labeler.released, source.rate)]
+    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate) + released if line)
     return StreamStats(n, rows.latency[:n].astype(np.float64), tuple(memory), solved, stage_ms, rows.seen[:n],
                        rows.filled[:n], found)
 
