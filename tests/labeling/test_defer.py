@@ -3,18 +3,14 @@ step and the periodic re-alignment between frames, which must leave every label 
 
 import numpy as np
 
-from handcap.labeling import LabelingModel, OnlineLabeler
-from handcap.layouts import load_layout
+from handcap.labeling import OnlineLabeler
 from handcap.synth.scene import SynthConfig, synthesize
 
 
-def test_deferred_work_gives_the_same_labels():
-    layout = load_layout("joints-19")
-    rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=600, rate=120.0, seed=11,
-                                 subject_seed=3), progress=False)
-    take = synthesize(SynthConfig(layout=layout.name, motion="grasp", frames=310, rate=120.0, seed=4,
+def test_deferred_work_gives_the_same_labels(joints_model):
+    model = joints_model
+    take = synthesize(SynthConfig(layout="joints-19", motion="grasp", frames=310, rate=120.0, seed=4,
                                   subject_seed=3), progress=False)
-    model = LabelingModel.train(rom.markers, layout.names, layout.rigid)
     points = take.points.padded()
     runs = []
     for defer, idle in ((False, False), (True, False), (True, True)):

@@ -9,22 +9,18 @@ import numpy as np
 import pytest
 
 from handcap import HandcapError
-from handcap.labeling import LabelingModel, OnlineLabeler, label_take
+from handcap.labeling import OnlineLabeler, label_take
 from handcap.labeling.release import Release, release_warning
-from handcap.layouts import load_layout
 from handcap.synth.scene import SynthConfig, synthesize
 
 SWAP_AT = 60
 
 
 @pytest.fixture(scope="module")
-def model_and_take():
-    layout = load_layout("joints-19")
-    rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=600, rate=120.0, seed=11,
-                                 subject_seed=3), progress=False)
-    take = synthesize(SynthConfig(layout=layout.name, motion="random", frames=400, rate=120.0, seed=4,
+def model_and_take(joints_model):
+    take = synthesize(SynthConfig(layout="joints-19", motion="random", frames=400, rate=120.0, seed=4,
                                   subject_seed=3), progress=False)
-    return LabelingModel.train(rom.markers, layout.names, layout.rigid), take.labeled_points(layout.names)
+    return joints_model, take.labeled_points(joints_model.names)
 
 
 def _swapped_frames(model, take, a, b, **options):
