@@ -15,7 +15,8 @@ Prints:
 3. The same, live (``handcap.stream.FrameSolver``, each frame judged on its own): on the real glove the changes of
    labels found (none expected) and the p50 / p99 time of a frame; on each synthetic take the changes found (the
    frame a swap starts and the frame after its last) and the joints' median / p99 distance from the truth and the
-   p99 time of a frame, labels as given -> swaps mended.
+   p99 time of a frame, labels as given -> swaps mended; then the made-up cycles of section 2, streamed: the changes
+   found and the worst joint's distance from the truth in the cycle's frames, labels as given -> mended.
 4. The live pipeline with the labeller in the loop (``handcap.stream.LivePipeline``: label, fill, solve), on the take
    of ``benchmarks/stream.py`` (joints-19, 120 Hz, 20 s, its points unlabelled; the labelling model trained on
    another take of the subject): the labels wrong against the truth as the labeller gave them and as the solve read
@@ -68,8 +69,7 @@ def main() -> None:
         return np.array(joints), np.array(ms), solver
 
     def changes(solver):
-        return "; ".join(f"{solver.names[s.a]} and {solver.names[s.b]} {'back ' if s.back else ''}at {s.frame}"
-                         for s in solver.swaps) or "none"
+        return "; ".join(f"{solver.named(s)} {'back ' if s.back else ''}at {s.frame}" for s in solver.swaps) or "none"
 
     def found(motion):
         return [w.split(": ", 1)[1].split("; the input file")[0] for w in motion.warnings if "label swap" in w]
@@ -94,6 +94,7 @@ def main() -> None:
     made = hits = extra = 0
     cycles = [0, 0]  # made up, found
     lines = []  # section 3's
+    live_cycles = []  # section 3's made-up cycles: (line, found at its first frame and back after its last)
     for layout_name, motion_name, rate, seed in TAKES:
         capture = synthesize(SynthConfig(layout=layout_name, motion=motion_name, frames=int(args.seconds * rate),
                                          rate=rate, seed=seed, subject_seed=3), progress=False)
@@ -130,6 +131,14 @@ def main() -> None:
             cycles[1] += any(cycle in w and "index_tip read from middle_tip's label" in w for w in told)
             print(f"      a made-up cycle of index_tip, middle_tip and ring_tip {cycle}: p99 {cells[0]} -> {cells[1]};"
                   f" found: {'; '.join(told) or 'none'}", flush=True)
+            worst = []
+            for mend in (False, True):
+                joints, _, solver = live(cycled, capture.attachment, mend)
+                worst.append(np.nanmax(np.linalg.norm(joints[span] - capture.hand_motion.joints[span], axis=-1)) * 1000)
+            hit = [(s.frame, s.back) for s in solver.swaps if s.c >= 0] == [(span.start, False), (span.stop, True)]
+            live_cycles.append((f"  {layout_name:13s} {motion_name:6s} {rate:5g} Hz seed {seed:2d}: the cycle {cycle}, "
+                                f"worst joint there {worst[0]:5.1f} -> {worst[1]:5.1f} mm; found: {changes(solver)}",
+                                hit))
         cells = []
         for mend in (False, True):
             joints, ms, solver = live(markers, capture.attachment, mend)
@@ -155,6 +164,11 @@ def main() -> None:
         print(f"{line}\n{listed}")
     print(f"live: changes at a swap's first frame or the frame after its last: {sum(x[3] for x in lines)} of "
           f"{sum(x[2] for x in lines)}; elsewhere: {sum(x[4] for x in lines)}")
+    print("made-up cycles of index_tip, middle_tip and ring_tip (as in section 2), live: labels as given -> mended")
+    for line, _ in live_cycles:
+        print(line)
+    print(f"live: made-up cycles read round the cycle from their first frame and back after their last: "
+          f"{sum(hit for _, hit in live_cycles)} of {len(live_cycles)}")
     labelled_loop(np)
 
 
@@ -196,7 +210,7 @@ def labelled_loop(np) -> None:
             return int((both & (np.linalg.norm(np.nan_to_num(markers - truth), axis=-1) > 1e-6)).sum())
 
         error = np.linalg.norm(np.array(joints) - capture.hand_motion.joints, axis=-1) * 1000
-        changes = "; ".join(f"{names[s.a]} and {names[s.b]} {'back ' if s.back else ''}at {s.frame}"
+        changes = "; ".join(f"{pipeline.solver.named(s)} {'back ' if s.back else ''}at {s.frame}"
                             for s in pipeline.solver.swaps) or "none"
         cells.append(f"labels wrong as given {wrong(given)}, as solved {wrong(read)}; joints median / p99 "
                      f"{np.nanmedian(error):.2f} / {np.nanpercentile(error, 99):.2f} mm; changes: {changes}")

@@ -69,6 +69,23 @@ def test_synths_own_swaps_are_found_where_it_made_them():
     assert np.percentile(error, 99) < 0.8 * np.percentile(kept_error, 99)
 
 
+@pytest.mark.parametrize("trio", [("index_pip", "middle_pip", "ring_pip"), ("thumb_tip", "index_tip", "middle_tip")])
+def test_three_labels_round_a_cycle_are_read_exchanged(grasp, trio):
+    """Measured: pairs alone found nothing in either (worst joint in the stretch 10.8 and 26.1 mm from the truth);
+    the cycle is found at the stretch's first frame and moved back after its last (1.7 mm)."""
+    capture, names, _, _ = grasp
+    positions = capture.markers.select(names).positions.copy()
+    columns = [names.index(n) for n in trio]
+    positions[SWAPPED, columns] = positions[SWAPPED][:, columns[1:] + columns[:1]]  # each read from the next's
+    solver, error = _streamed(capture, positions, True)
+    _, kept_error = _streamed(capture, positions, False)
+    assert [(s.frame, s.back) for s in solver.swaps] == [(100, False), (140, True)]
+    assert all(s.c >= 0 and {s.a, s.b, s.c} == set(columns) for s in solver.swaps)
+    assert kept_error[SWAPPED].max() > 10 and error[SWAPPED].max() < 3
+    assert (solver.order == np.arange(len(names))).all()
+    assert "round a cycle at frame 100" in solver.swap_warnings(60.0)[0]
+
+
 def test_the_real_glove_has_no_swap(real_glove):
     take, attachment = real_glove
     solver = FrameSolver(attachment, OpenHand("right"))

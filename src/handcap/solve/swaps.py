@@ -74,12 +74,25 @@ class Swap:
     @property
     def markers(self) -> list[int]:
         """The markers whose labels are exchanged."""
-        return [self.a, self.b] if self.c < 0 else [self.a, self.b, self.c]
+        return exchange_columns(self.a, self.b, self.c)[0]
 
     @property
     def sources(self) -> list[int]:
         """For each of :attr:`markers`, the column it is read from once exchanged."""
-        return [self.b, self.a] if self.c < 0 else [self.b, self.c, self.a]
+        return exchange_columns(self.a, self.b, self.c)[1]
+
+
+def exchange_columns(a: int, b: int, c: int = -1) -> tuple[list[int], list[int]]:
+    """The markers of a pair ``(a, b)`` or a cycle ``(a, b, c)`` (``a`` read from ``b``'s label, ``b`` from ``c``'s,
+    ``c`` from ``a``'s), and for each the column it is read from once exchanged.
+
+    Parameters
+    ----------
+    a, b : int
+    c : int
+        -1 for a pair.
+    """
+    return ([a, b], [b, a]) if c < 0 else ([a, b, c], [b, c, a])
 
 
 def _stretches(far, seen, target, fit, residuals, limit):

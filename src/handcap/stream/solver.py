@@ -33,16 +33,17 @@ Two labels swapped (a labeller confusing two fingertips that pass close) bend th
 loss hides it in the frame's residual. The batch solver finds such stretches from the whole take
 (:mod:`handcap.solve.swaps`); a live frame is judged on its own, with the batch verdict: where a marker lies over
 ``MRE_LIMIT`` from the warm-started hand, the frame is solved again with its label exchanged with another marker off
-the hand or seen nearest to it (the likeliest :data:`SWAP_TRIES` pairs), and where the hand then fits both within
-the limit, :data:`~handcap.solve.swaps.CLOSER` times closer, and the others as well, the two labels are read
-exchanged from that frame on (:attr:`FrameSolver.order`) until the same verdict exchanges them back; each change is
-kept (:attr:`FrameSolver.swaps`) and named in a warning at the stream's end. Only frames solved from the frame
-before are judged (a fresh start has no hand to judge by), and an exchange is dropped (:attr:`FrameSolver.dropped`)
-where the hand is lost or where its markers fit the hand neither way. ``benchmarks/swaps.py`` section 3
-(2026-12-02): on the thirteen synthetic takes the 8 swaps ``synth`` made were found at their first frame and
-exchanged back at the frame after their last, none elsewhere, none on the real glove; p99 joint error 4.80 -> 2.71
-mm (joints-19 grasp, 30 Hz), 12.1 -> 7.3 mm (glove-13 grasp, 30 Hz), 4.10 -> 2.06 mm; the frame's p99 time on the
-real glove 0.44 -> 0.85 ms.
+the hand or seen nearest to it, or moved round a cycle of three with two such markers (the likeliest
+:data:`SWAP_TRIES`), and where the hand then fits them within the limit, :data:`~handcap.solve.swaps.CLOSER` times
+closer, and the others as well, the labels are read exchanged from that frame on (:attr:`FrameSolver.order`) until
+the same verdict exchanges them back; each change is kept (:attr:`FrameSolver.swaps`) and named in a warning at the
+stream's end. Only frames solved from the frame before are judged (a fresh start has no hand to judge by), and an
+exchange is dropped (:attr:`FrameSolver.dropped`) where the hand is lost or where its markers fit the hand neither
+way. ``benchmarks/swaps.py`` section 3 (2026-12-02): on the thirteen synthetic takes the 8 swaps ``synth`` made were
+found at their first frame and exchanged back at the frame after their last, none elsewhere, none on the real glove;
+p99 joint error 4.80 -> 2.71 mm (joints-19 grasp, 30 Hz), 12.1 -> 7.3 mm (glove-13 grasp, 30 Hz), 4.10 -> 2.06 mm;
+the frame's p99 time on the real glove 0.44 -> 0.85 ms; made-up cycles of three fingertips read round the cycle from
+their first frame and back after their last in 7 of 12 takes (pairs alone: 0).
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
 from handcap.solve.continuity import predicted
 from handcap.solve.kernel import FrameKernel
-from handcap.solve.swaps import MAX_FAR, exchange_candidates, verdict
+from handcap.solve.swaps import MAX_FAR, exchange_candidates, exchange_columns, verdict
 
 #: Gauss-Newton iterations per streamed frame (from the frame before). One suffices: the frame before is close,
 #: and more fit the markers' noise. Measured on 20 s of synthetic random motion, 22 markers (joints vs truth,
@@ -86,15 +87,16 @@ SMOOTHING = 0.5
 WINDOW = 256
 #: Frames of both medians before the pull starts.
 WARMUP = 10
-#: Pairs of labels tried exchanged in one frame at most (the likeliest first; each costs a solve of the frame).
+#: Exchanges of labels (pairs, cycles of three) tried in one frame at most (the likeliest first; each costs a solve
+#: of the frame).
 SWAP_TRIES = 2
 
 
 @dataclass(frozen=True)
 class LiveSwap:
-    """Two labels found exchanged from ``frame`` on (``back``: exchanged back, as given again): markers ``a``
-    and ``b`` (the attachment's order) lay ``given`` metres from the hand as labelled (their mean) and
-    ``exchanged`` metres with their labels exchanged."""
+    """Two labels found exchanged from ``frame`` on, or three moved round a cycle (``c`` not -1: ``a`` read from
+    ``b``'s label, ``b`` from ``c``'s, ``c`` from ``a``'s), the attachment's order (``back``: as given again): their
+    markers lay ``given`` metres from the hand as labelled (their mean) and ``exchanged`` metres exchanged."""
 
     frame: int
     a: int
@@ -102,6 +104,7 @@ class LiveSwap:
     given: float
     exchanged: float
     back: bool = False
+    c: int = -1
 
 
 class FrameSolver:
@@ -219,11 +222,12 @@ class FrameSolver:
         return out
 
     def _swapped(self, result, init, kin, target, observed, measured, iterations, pull):
-        """The frame's result and markers, with two labels exchanged where the hand then fits both within
+        """The frame's result and markers, with labels exchanged where the hand then fits them within
         ``MRE_LIMIT``, :data:`~handcap.solve.swaps.CLOSER` times closer than as given, and the other markers about
-        as well (:mod:`handcap.solve.swaps`' verdict, on one frame). The pairs tried: a marker off the hand with
-        each other marker off it, or seen nearest to it, whose positions lie near where the hand puts the other's
-        (the likeliest first, :data:`SWAP_TRIES` at most)."""
+        as well (:mod:`handcap.solve.swaps`' verdict, on one frame). The exchanges tried
+        (:func:`~handcap.solve.swaps.exchange_candidates`): a marker off the hand with each other marker off it, or
+        seen nearest to it, and cycles of three with two markers off it, whose positions lie near where the hand
+        puts the others' (the likeliest first, :data:`SWAP_TRIES` at most)."""
         seen = observed[0]
         residual = np.zeros(len(seen))
         residual[seen] = result[3]
@@ -232,21 +236,22 @@ class FrameSolver:
             return result, target
         pose = result[0]
         fit = self.model.positions(pose.transl, pose.rot, pose.phi)[0]
-        pairs = {candidate for a in np.flatnonzero(far)
-                 for candidate in exchange_candidates(target[0], fit, residual, far, measured, a, cycles=False)}
-        for _, _, a, b, _ in sorted(pairs)[:SWAP_TRIES]:
+        candidates = {candidate for a in np.flatnonzero(far)
+                      for candidate in exchange_candidates(target[0], fit, residual, far, measured, a)}
+        for _, _, a, b, c in sorted(candidates)[:SWAP_TRIES]:
+            markers, sources = exchange_columns(a, b, c)
             swapped = target.copy()
-            swapped[0, [a, b]] = swapped[0, [b, a]]
+            swapped[0, markers] = target[0, sources]
             trial = self._iterate(init, kin, swapped, observed, iterations, *pull)
             distance = np.zeros(len(seen))
             distance[seen] = trial[3]
             moved = np.zeros(len(seen), dtype=bool)
-            moved[[a, b]] = True
+            moved[markers] = True
             ok, given, fit_exchanged = verdict(distance[None], observed, residual[None], observed, moved)
             if ok:
-                self.order[[a, b]] = self.order[[b, a]]
+                self.order[markers] = self.order[sources]
                 self.swaps.append(LiveSwap(self.frames - 1, a, b, given, fit_exchanged,
-                                           bool(self.order[a] == a and self.order[b] == b)))
+                                           bool((self.order[markers] == markers).all()), c))
                 return trial, swapped
         stale = far & (self.order != np.arange(len(self.order)))
         if stale.any():  # an exchange that no longer fits, nor does exchanging it back: labels as given from now on
@@ -271,7 +276,7 @@ class FrameSolver:
         """
         if not self.swaps:
             return []
-        told = "; ".join(f"{self.names[s.a]} and {self.names[s.b]} {'back ' if s.back else ''}at frame {s.frame} "
+        told = "; ".join(f"{self.named(s)} {'back ' if s.back else ''}at frame {s.frame} "
                          f"({s.frame / rate:.2f} s: "
                          f"{MM * s.given:.1f} mm from the hand as labelled, {MM * s.exchanged:.1f} mm exchanged)"
                          for s in self.swaps[:5])
@@ -284,6 +289,18 @@ class FrameSolver:
         now = f"; at the end {', '.join(held)}'s label" if held else "; none exchanged at the end"
         return [f"live solve: labels exchanged {len(self.swaps)} time(s) where the hand fitted them swapped: "
                 f"{told}{more}{dropped}{now}"]
+
+    def named(self, swap: LiveSwap) -> str:
+        """The labels of an exchange: 'a and b', or 'a, b and c round a cycle'.
+
+        Parameters
+        ----------
+        swap : LiveSwap
+            One of :attr:`swaps`.
+        """
+        if swap.c < 0:
+            return f"{self.names[swap.a]} and {self.names[swap.b]}"
+        return f"{self.names[swap.a]}, {self.names[swap.b]} and {self.names[swap.c]} round a cycle"
 
     def idle(self) -> None:
         """The last frame's solve from its markers alone, which only the pull's weight in later frames needs: call
