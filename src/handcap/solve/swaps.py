@@ -112,12 +112,12 @@ def _stretches(far, seen, target, fit, residuals, limit):
     return sorted(out)
 
 
-def exchange_candidates(points, fit, residuals, far, usable, a: int, *, cycles: bool = True) -> list[tuple]:
+def exchange_candidates(points, fit, residuals, far, usable, a: int) -> list[tuple]:
     """The exchanges of labels worth trying for marker ``a``, off the hand in one frame.
 
     Its partners are the other markers off the hand and the :data:`PARTNERS` usable markers nearest to it (the
     solve can follow one of two swapped markers to within the limit). A pair ``(a, b)`` is a candidate, and with
-    ``cycles`` and two markers or more off the hand each cycle of ``a`` and two partners (``a`` read from ``b``'s
+    two markers or more off the hand each cycle of ``a`` and two partners (``a`` read from ``b``'s
     label, ``b`` from ``c``'s, ``c`` from ``a``'s), where each marker's position lies within
     :data:`CANDIDATE_RATIO` times the largest residual of where the hand puts the one it is read as.
 
@@ -132,8 +132,6 @@ def exchange_candidates(points, fit, residuals, far, usable, a: int, *, cycles: 
     usable : ndarray (M,) bool
         Markers that may be partners (seen; measured, not predicted).
     a : int
-    cycles : bool
-        Cycles of three too.
 
     Returns
     -------
@@ -151,7 +149,7 @@ def exchange_candidates(points, fit, residuals, far, usable, a: int, *, cycles: 
                                                                                                     residuals[b])
         if ratio <= CANDIDATE_RATIO:
             out.append((int(not far[b]), float(ratio), int(min(a, b)), int(max(a, b)), -1))
-    if not cycles or far.sum() < 2:  # three labels round a cycle leave two off the hand at least
+    if far.sum() < 2:  # three labels round a cycle leave two off the hand at least
         return out
     for b, c in permutations(partners, 2):  # a read from b's label, b from c's, c from a's
         cross = max(np.linalg.norm(points[b] - fit[a]), np.linalg.norm(points[c] - fit[b]),
