@@ -42,7 +42,7 @@ class StreamAdaptation:
 
     Keeps the recent frames' points in the take's hand frame and the labels
     the labeler gave them; every ``every`` frames re-estimates the transform
-    to the trained model's frame and the mixture means, and sets the
+    to the trained model's frame (rigidly: the means stay as trained), and sets the
     labeler's ``spatial`` to the result. Also watches the hand frame: when it
     is lost in most recent frames, the rigid set is re-learned from them.
     """
@@ -191,7 +191,7 @@ class StreamAdaptation:
             self.update()
 
     def update(self) -> None:
-        """Re-estimate the transform and the means from the frames gathered."""
+        """Re-estimate the transform from the frames gathered."""
         if not self.checked and len(self.raw) == self.raw.maxlen and self.labeler.finder is not None:
             # Once, when a second or so of frames shows which shapes recur: is the rigid set the shape it
             # was in training?

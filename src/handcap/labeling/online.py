@@ -106,8 +106,8 @@ class OnlineLabeler:
         (:mod:`handcap.labeling.adapt`): after ``adapt_every`` frames, a
         label-free registration of the points seen so far; then every
         ``adapt_every`` frames, a registration of the labelled points of the
-        recent frames (weighted by ``forget`` per frame of age) and the
-        mixture means moved toward them. When the hand frame is lost in most
+        recent frames (weighted by ``forget`` per frame of age; the mixture
+        means stay as trained online). When the hand frame is lost in most
         recent frames, the rigid markers' shape is re-learned from them.
         Strictly online (``lag`` 0), until this has settled, a frame whose
         points fit the model far worse than it typically fits
