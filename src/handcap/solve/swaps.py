@@ -95,6 +95,28 @@ def exchange_columns(a: int, b: int, c: int = -1) -> tuple[list[int], list[int]]
     return ([a, b], [b, a]) if c < 0 else ([a, b, c], [b, c, a])
 
 
+def exchange_name(names, a: int, b: int, c: int = -1, *, detail: bool = False) -> str:
+    """The labels of a pair, 'a and b', or of a cycle, 'a, b and c round a cycle' (with ``detail``, which label each
+    is read from).
+
+    Parameters
+    ----------
+    names : sequence of str
+        The markers' names.
+    a, b, c : int
+        The markers (``c`` -1 for a pair; see :func:`exchange_columns`).
+    detail : bool
+        Say which label each marker of a cycle is read from.
+    """
+    if c < 0:
+        return f"{names[a]} and {names[b]}"
+    told = f"{names[a]}, {names[b]} and {names[c]} round a cycle"
+    if detail:
+        told += (f" ({names[a]} read from {names[b]}'s label, {names[b]} from {names[c]}'s, {names[c]} from "
+                 f"{names[a]}'s)")
+    return told
+
+
 def _stretches(far, seen, target, fit, residuals, limit):
     """Candidate (rank, ratio, a, b, c, first, last): a run of frames in which marker a is ``far`` from the fitted
     hand (runs a few frames apart joined), with the exchanges :func:`exchange_candidates` finds for a in its middle
@@ -289,14 +311,8 @@ def swap_warnings(swaps, names, rate: float, untried: int = 0) -> list[str]:
            f"swaps (more than the search's budget of {BUDGET:g} of the take's frames)"] if untried else []
     if not swaps:
         return out
-    def which(s):
-        if s.c < 0:
-            return f"{names[s.a]} and {names[s.b]}"
-        return (f"{names[s.a]}, {names[s.b]} and {names[s.c]} round a cycle ({names[s.a]} read from "
-                f"{names[s.b]}'s label, {names[s.b]} from {names[s.c]}'s, {names[s.c]} from {names[s.a]}'s)")
-
-    told = "; ".join(f"{which(s)} in frames {s.first}-{s.last} ({s.first / rate:.2f}-"
-                     f"{s.last / rate:.2f} s: {MM * s.given:.1f} mm from the hand as labelled, "
+    told = "; ".join(f"{exchange_name(names, s.a, s.b, s.c, detail=True)} in frames {s.first}-{s.last} "
+                     f"({s.first / rate:.2f}-{s.last / rate:.2f} s: {MM * s.given:.1f} mm from the hand as labelled, "
                      f"{MM * s.exchanged:.1f} mm exchanged)" for s in swaps[:5])
     more = f"; and {len(swaps) - 5} more" if len(swaps) > 5 else ""
     return out + [f"solve: {len(swaps)} label swap(s) found by the hand and solved exchanged: {told}{more}; "

@@ -62,7 +62,7 @@ from handcap.solve.markers import MarkerModel
 from handcap.solve.rigid_start import rigid_start
 from handcap.solve.continuity import predicted
 from handcap.solve.kernel import FrameKernel
-from handcap.solve.swaps import MAX_FAR, exchange_candidates, exchange_columns, verdict
+from handcap.solve.swaps import MAX_FAR, exchange_candidates, exchange_columns, exchange_name, verdict
 
 #: Gauss-Newton iterations per streamed frame (from the frame before). One suffices: the frame before is close,
 #: and more fit the markers' noise. Measured on 20 s of synthetic random motion, 22 markers (joints vs truth,
@@ -298,9 +298,7 @@ class FrameSolver:
         swap : LiveSwap
             One of :attr:`swaps`.
         """
-        if swap.c < 0:
-            return f"{self.names[swap.a]} and {self.names[swap.b]}"
-        return f"{self.names[swap.a]}, {self.names[swap.b]} and {self.names[swap.c]} round a cycle"
+        return exchange_name(self.names, swap.a, swap.b, swap.c)
 
     def idle(self) -> None:
         """The last frame's solve from its markers alone, which only the pull's weight in later frames needs: call
