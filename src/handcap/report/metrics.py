@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import existing_file, load_npz
+from handcap.core.geometry import signed_distance
 from handcap.core.rotations import matrix_from_axis_angle
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
@@ -163,11 +164,9 @@ def _mesh_frame_warnings(object_motion, mesh, path) -> list[str]:
     """A warning when the object's markers (its ``canonical``, in the motion's object frame) do not lie on the
     mesh's surface: penetration into a mesh in another frame means nothing. ``track-object`` learns the frame from
     the take (centred on its markers) unless ``--canonical`` gives the markers in the mesh's frame."""
-    import trimesh  # noqa: PLC0415 (slow to import: only where a mesh is given)
-
     canonical = np.asarray(object_motion.canonical, dtype=np.float64)
-    distance = np.abs(trimesh.proximity.signed_distance(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False),
-                                                        canonical))
+    distance = np.abs(signed_distance(canonical, np.asarray(mesh.vertices), np.asarray(mesh.faces)))
+    distance = distance[np.isfinite(distance)]
     if not len(distance) or distance.max() <= MESH_MARKER_LIMIT:
         return []
     return [f"object {object_motion.name!r}: its markers lie up to {1000 * distance.max():.0f} mm (median "
