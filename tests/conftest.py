@@ -28,7 +28,10 @@ SHARED_FIXTURE_GROUPS = {
         "tests/detect/test_pyramid.py", "tests/solve/test_cli_solve.py", "tests/multiview/test_clean.py",
         "tests/markerless/test_grasp.py", "tests/markerless/test_contact.py", "tests/test_cli_bad_input.py",
         # a rendered, detected take of 8 cameras (10 s), built on both workers before
-        "tests/detect/test_seek.py")},
+        "tests/detect/test_seek.py",
+        # rendered sheets and their readings (3.5 s), a labelled take, takes solved with their swaps (1-3 s each)
+        "tests/detect/test_adapt.py", "tests/labeling/test_release.py", "tests/stream/test_live_swaps.py",
+        "tests/solve/test_swaps.py")},
 }
 
 
@@ -46,12 +49,11 @@ SLOW_FIRST = (
     "tests/detect/test_pyramid.py", "tests/solve/test_relabel.py",
     "tests/occlusion/test_generalise.py::test_augmentation_generalises_from_synthetic_hands_to_the_real_glove",
     "tests/labeling/test_adapt.py",
-    "tests/detect/test_adapt.py::test_the_adapted_reader_vouches_for_more_tags_and_none_wrong",
+    "tests/detect/test_adapt.py",
     "tests/detect/test_capture.py::test_cameras_in_processes_or_on_dask_give_the_same_detections",
     "tests/markerless/test_grasp.py", "tests/labeling/test_fingers.py",
     "tests/objects/test_cube_track.py::test_four_camera_synthetic_takes_read_right_or_say_so",
     "tests/labeling/test_cli_label.py",
-    "tests/detect/test_adapt.py::test_the_command_adapts_the_reader_when_asked_and_says_so",
     "tests/detect/test_seek.py", "tests/detect/test_real_images.py::test_real_images_without_patches_read_no_tag",
     "tests/detect/test_refine.py::test_training_command_writes_weights_and_starts_from_others",
     "tests/report/test_html.py", "tests/synth/test_scene.py",

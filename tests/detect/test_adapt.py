@@ -47,7 +47,8 @@ def take():
 
 @pytest.fixture(scope="module")
 def detector():
-    return Detector(load_corner_net(int8=True), load_reader(), alphabet=DEXTERCAP_ALPHABET, refiner=load_refiner())
+    return Detector(load_corner_net(int8=True), load_reader(), alphabet=DEXTERCAP_ALPHABET,
+                    refiner=load_refiner(int8=True))
 
 
 @pytest.fixture(scope="module")

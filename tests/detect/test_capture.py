@@ -25,8 +25,8 @@ def detector():
     from handcap.detect.networks import load_corner_net, load_reader, load_refiner  # loads torch
     from handcap.detect.pipeline import Detector
 
-    return Detector(load_corner_net(), load_reader(), session_pattern(("right",), (), alphabet=DEXTERCAP),
-                    refiner=load_refiner())
+    return Detector(load_corner_net(int8=True), load_reader(), session_pattern(("right",), (), alphabet=DEXTERCAP),
+                    refiner=load_refiner(int8=True))
 
 
 def _film(scene, folder, shifts=SHIFTS):

@@ -91,7 +91,7 @@ def test_a_saved_checker_gives_the_same_probabilities(tmp_path):
 
 
 def _read(scene):
-    corner_net, refiner, reader = load_corner_net(int8=True), load_refiner(), load_reader()
+    corner_net, refiner, reader = load_corner_net(int8=True), load_refiner(int8=True), load_reader()
     xy, score = locate_corners(corner_net, refiner, scene.image)
     quads, _ = white_blocks(scene.image, xy, candidate_quads(xy, score=score))
     text, _, rotation, bscore = read_blocks(reader, scene.image, xy[quads], PATTERN.alphabet)
@@ -145,7 +145,7 @@ def test_the_detector_with_the_shipped_checker_reads_no_wrong_tag(scenes):
     checker = load_checker()
     if checker is None:
         pytest.skip("no checker ships with these weights")
-    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner())
+    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner(int8=True))
     # Within 3 px of the truth, not the benchmark's 2: a square whose corner the finger's outline hides is read right
     # with that corner where the outline crosses its side, 2-3 px off (2 of 171 tags here, 2.2-2.3 px; the benchmark
     # counts them wrong, 0.1-0.3 % of its hand scenes' tags). Any other wrong tag or name fails.
@@ -158,7 +158,7 @@ def test_the_detector_with_the_shipped_checker_reads_no_wrong_tag(scenes):
 def test_the_detector_looks_at_each_white_square_once(scenes):
     # The vote's probability of a tag the reader did not read comes from the heads it read the square with: the
     # reader network runs once per image, and the tags are those of a second look at the squares.
-    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner())
+    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner(int8=True))
     for checker in (load_checker(), None):
         detector = Detector(**networks, pattern=PATTERN, checker=checker, pyramid=False)
         once, calls = _counted(detector, scenes)

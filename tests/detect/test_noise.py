@@ -38,7 +38,7 @@ def test_the_most_noise_learned_is_the_renders():
 
 
 def test_noisy_frames_are_denoised_first_and_clean_ones_left(scenes):
-    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner(),
+    networks = dict(corner_net=load_corner_net(int8=True), reader=load_reader(), refiner=load_refiner(int8=True),
                     checker=load_checker(), pattern=PATTERN, pyramid=False)
     on, off = Detector(**networks), Detector(**networks, denoise=False)
     for scene in scenes:  # clean renders: under the noise learned, searched as they are

@@ -20,7 +20,7 @@ from handcap.synth.pages import PageLook
 
 @pytest.fixture(scope="module")
 def networks():
-    return {"corner_net": load_corner_net(int8=True), "reader": load_reader(), "refiner": load_refiner()}
+    return {"corner_net": load_corner_net(int8=True), "reader": load_reader(), "refiner": load_refiner(int8=True)}
 
 
 @pytest.fixture(scope="module")

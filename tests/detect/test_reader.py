@@ -208,7 +208,8 @@ def test_without_a_template_only_readings_sure_in_an_unseen_font_are_reported(sc
     from handcap.detect.train import load_reader as shipped_reader
 
     reader = shipped_reader()
-    alone = Detector(load_corner_net(), reader, alphabet=scenes[0].alphabet, refiner=load_refiner())
+    alone = Detector(load_corner_net(int8=True), reader, alphabet=scenes[0].alphabet,
+                     refiner=load_refiner(int8=True))
     found = [alone.image(s.image) for s in scenes]
     scores = np.concatenate([f.block_score for f in found])
     assert len(scores) >= 5 and (scores >= UNSEEN_FONT_GATE).all()

@@ -35,7 +35,7 @@ def _frames(shared_data):
 
 def test_real_images_without_patches_read_no_tag(shared_data):
     nets = load_corner_net(None, int8=True), load_reader(None)
-    refiner = load_refiner(None)
+    refiner = load_refiner(None, int8=True)  # as handcap detect runs
     voted = Detector(*nets, session_pattern(), refiner=refiner)
     checked = Detector(*nets, session_pattern(), refiner=refiner, checker=load_checker())  # as handcap detect runs
     alone = Detector(*nets, alphabet=DEXTERCAP_ALPHABET, refiner=refiner)
