@@ -70,6 +70,7 @@ class StreamAdaptation:
         self.deferred = False  # the labeler's defer: a due re-estimation waits for catch_up()
         self.due = False
         self.typical = self.base.typical_fit() if labeler.finder is not None else None
+        self.trained_rigid = None if labeler.finder is None else labeler.finder.rigid  # re-learned near it
 
     @property
     def settled(self) -> bool:
@@ -133,9 +134,9 @@ class StreamAdaptation:
     def relearn_rigid(self, frames) -> bool:
         """Re-learn the rigid set from ``frames`` (:func:`rigid_from_take`); True when it changed."""
         lab = self.labeler
-        rigid = lab.finder.rigid
-        new = rigid_from_take(rigid, frames, spatial=self.base, width=max(0.01, 3 * rigid.tolerance),
-                              min_share=0.5)
+        rigid, trained = lab.finder.rigid, self.trained_rigid
+        new = rigid_from_take(trained, frames, spatial=self.base, width=max(0.01, 3 * trained.tolerance),
+                              min_share=0.5, current=rigid)
         if new is None or largest_change(new, rigid) <= 0.5 * rigid.tolerance:
             return False
         lab.finder = HandFrameFinder(new, max_hold=lab.finder.max_hold)

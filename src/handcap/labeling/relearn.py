@@ -23,7 +23,7 @@ from handcap.objects.rigid import canonical_from_markers, kabsch
 
 
 def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = None, width: float = 0.01,
-                    min_share: float = 0.3, max_frames: int = 400) -> RigidSet | None:
+                    min_share: float = 0.3, max_frames: int = 400, current: RigidSet | None = None) -> RigidSet | None:
     """The rigid set's shape as an unlabelled take shows it, or None when no shape recurs.
 
     Parameters
@@ -45,6 +45,11 @@ def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = N
         A shape must be seen in at least this share of the frames searched.
     max_frames : int
         Frames searched (evenly spread over the take).
+    current : RigidSet, optional
+        A set re-learned before and in use (the online labeler's): judged by the spatial fit with the shapes
+        found, which are still searched for near the trained set. Searched for near the set in use instead, one
+        wrong set re-learned from a take's first few frames led the next search further off (seed 45 of
+        ``benchmarks/labeling.py`` section 9: 7 mm from the trained shape, then 12, then 21).
 
     Returns
     -------
@@ -64,7 +69,7 @@ def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = N
         return None
     if spatial is None:
         return candidates[0]
-    every = candidates + [rigid]
+    every = candidates + [rigid] + ([current] if current is not None and current is not rigid else [])
     fits = [_fit_in_frames(spatial, c, use) for c in every]
     return every[int(np.argmax(fits))]
 
