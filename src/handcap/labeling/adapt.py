@@ -31,7 +31,7 @@ import numpy as np
 from handcap.labeling.frame import HandFrameFinder
 from handcap.labeling.realign import (MAX_SHIFT, MAX_TURN_DEG, OUTLIER_SHARE, OUTLIER_VOLUME, adapt_means,
                                       register_to_model)
-from handcap.labeling.relearn import largest_change, rigid_from_take
+from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
 
 __all__ = ["MAX_SHIFT", "MAX_TURN_DEG", "OUTLIER_SHARE", "OUTLIER_VOLUME", "StreamAdaptation", "adapt_means",
            "largest_change", "register_to_model", "rigid_from_take"]
@@ -135,7 +135,7 @@ class StreamAdaptation:
         """Re-learn the rigid set from ``frames`` (:func:`rigid_from_take`); True when it changed."""
         lab = self.labeler
         rigid, trained = lab.finder.rigid, self.trained_rigid
-        new = rigid_from_take(trained, frames, spatial=self.base, width=max(0.01, 3 * trained.tolerance),
+        new = rigid_from_take(trained, frames, spatial=self.base, width=max(RELEARN_WIDTH, 3 * trained.tolerance),
                               min_share=0.5, current=rigid)
         if new is None or largest_change(new, rigid) <= 0.5 * rigid.tolerance:
             return False

@@ -6,8 +6,10 @@ no longer finds the hand frame. :func:`rigid_from_take` estimates the shape
 from the take itself: every frame's triangles of points whose distances are
 near the trained ones (within ``width``) are pooled; the triangle shape that
 recurs in most frames (within the trained tolerance) is the rigid set,
-re-learned. :func:`largest_change` measures how far a re-learned set is from
-the trained one.
+re-learned. A triangle recurs as often whichever of its corners is taken for
+which marker, so every naming within ``width`` is a candidate, and the spatial
+model tells them apart. :func:`largest_change` measures how far a re-learned
+set is from the trained one.
 """
 
 from __future__ import annotations
@@ -74,6 +76,12 @@ def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = N
     return every[int(np.argmax(fits))]
 
 
+#: How far (metres) each side of the rigid set's anchor triangle is searched for from the trained one, when its
+#: tolerance is tighter: a marker stuck on again a few millimetres away, another glove or subject. Searched 20 mm
+#: wide, look-alike triangles of finger and knuckle markers won on 3 of 21 other subjects (section 9 of
+#: benchmarks/labeling.py: seed 27, its triad 7.5 mm off, 48 -> 7,948 points labelled wrong online).
+RELEARN_WIDTH = 0.01
+
 #: Recurring shapes judged by the spatial fit. In a short stretch of frames the fingers keep their shape too, and
 #: triangles of finger and knuckle markers recur as often as the rigid set's own: with 5, a triad 8 % larger
 #: re-learned online from its first frames was missed among them (taken for a look-alike, labels withheld for
@@ -93,8 +101,9 @@ def _anchor(canonical):
 
 
 def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = CANDIDATES) -> list:
-    """Shapes of the rigid set that recur in the frames ``use``: most frequent first (at most ``most``, each
-    seen in at least 80 % as many frames as the first), each a RigidSet."""
+    """Shapes of the rigid set that recur in the frames ``use``: most frequent first (at most ``most`` triangles,
+    each seen in at least 80 % as many frames as the first, in each naming of its corners within ``width`` of the
+    trained sides), each a RigidSet."""
     c, tol = rigid.canonical, rigid.tolerance
     (a, b, e), trained = _anchor(c)
     sides, owner, where = [], [], []
@@ -125,16 +134,33 @@ def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = CANDID
     # Most frequent first; among shapes seen as often (a short stretch of frames, where fingers keep their
     # shape too), the nearest the trained shape first.
     offset = np.abs(sides[probe] - trained).max(axis=1)
+    triangles = 0
     for p in np.lexsort((offset, -frames_with)):
-        if frames_with[p] < 0.8 * frames_with.max() or len(out) == most:
+        if frames_with[p] < 0.8 * frames_with.max() or triangles == most:
             break
-        shape = sides[probe[p]]
-        if any((np.abs(shape - other) < tol).all() for other in chosen):
+        if any((np.abs(sides[probe[p]] - other) < tol).all() for other in chosen):
             continue
-        found = _shape_in_frames(rigid, use, sides, owner, where, shape, (a, b, e), width)
-        if found is not None:
-            chosen.append(shape)
-            out.append(found)
+        triangles += 1
+        # The same triangle with its corners named otherwise recurs as often: the spatial fit tells them apart.
+        for shape in _orderings(sides[probe[p]], trained, width):
+            if any((np.abs(shape - other) < tol).all() for other in chosen):
+                continue
+            found = _shape_in_frames(rigid, use, sides, owner, where, shape, (a, b, e), width)
+            if found is not None:
+                chosen.append(shape)
+                out.append(found)
+    return out
+
+
+def _orderings(shape, trained, width) -> list:
+    """A triangle's side lengths (ab, ae, be) for each naming of its corners whose sides lie within ``width`` of
+    ``trained``'s, the given naming first."""
+    length = {(0, 1): shape[0], (0, 2): shape[1], (1, 2): shape[2]}
+    out = []
+    for x, y, z in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
+        named = np.array([length[tuple(sorted(pair))] for pair in ((x, y), (x, z), (y, z))])
+        if (np.abs(named - trained) < width).all():
+            out.append(named)
     return out
 
 

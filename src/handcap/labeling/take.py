@@ -24,7 +24,7 @@ from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
 from handcap.labeling.realign import adapt_means, register_to_model
 from handcap.labeling.release import release_warning
-from handcap.labeling.relearn import largest_change, rigid_from_take
+from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
 from handcap.labeling.rigid_set import RigidSet
 
 
@@ -221,7 +221,7 @@ def _labelled_share(result: LabelResult, points) -> float:
 def _rigid_from_take(model: LabelingModel, frames) -> LabelingModel:
     """The model with its rigid set re-learned from the take when the take's shape differs from training."""
     rigid = model.rigid
-    new = rigid_from_take(rigid, frames, spatial=model.spatial, width=max(0.01, 3 * rigid.tolerance))
+    new = rigid_from_take(rigid, frames, spatial=model.spatial, width=max(RELEARN_WIDTH, 3 * rigid.tolerance))
     if new is None:
         return model
     if largest_change(new, rigid) <= 0.5 * rigid.tolerance:
