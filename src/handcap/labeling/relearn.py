@@ -78,8 +78,8 @@ def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = N
 
 #: How far (metres) each side of the rigid set's anchor triangle is searched for from the trained one, when its
 #: tolerance is tighter: a marker stuck on again a few millimetres away, another glove or subject. Searched 20 mm
-#: wide, look-alike triangles of finger and knuckle markers won on 3 of 21 other subjects (section 9 of
-#: benchmarks/labeling.py: seed 27, its triad 7.5 mm off, 48 -> 7,948 points labelled wrong online).
+#: wide, a look-alike triangle of finger and knuckle markers won on seed 27 of section 9 of benchmarks/labeling.py
+#: (its triad 7.5 mm off: 48 -> 7,948 points labelled wrong online), and seeds 31 and 35 were labelled worse.
 RELEARN_WIDTH = 0.01
 
 #: Recurring shapes judged by the spatial fit. In a short stretch of frames the fingers keep their shape too, and
