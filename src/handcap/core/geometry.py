@@ -133,11 +133,11 @@ def signed_distance(points, vertices, faces) -> np.ndarray:
     seen = np.isfinite(points).all(axis=1)
     if seen.any():
         query = np.ascontiguousarray(points[seen])
-        distance = igl.signed_distance(query, vertices, faces, sign_type=igl.SIGNED_DISTANCE_TYPE_UNSIGNED)[0]
-        # The winding number's side only: libigl scales its distance by 1 - 2 w, which is not +-1 where the mesh is
-        # open (w fractional).
-        side = igl.signed_distance(query, vertices, faces, sign_type=igl.SIGNED_DISTANCE_TYPE_WINDING_NUMBER)[0]
-        out[seen] = np.where(side < 0, 1.0, -1.0) * np.abs(distance)  # libigl's side is negative inside
+        side, _, closest, _ = igl.signed_distance(query, vertices, faces,
+                                                  sign_type=igl.SIGNED_DISTANCE_TYPE_WINDING_NUMBER)
+        # The winding number's side only, and the distance to the closest point: libigl scales its distance by
+        # 1 - 2 w, which is not +-1 where the mesh is open (w fractional).
+        out[seen] = np.where(side < 0, 1.0, -1.0) * np.linalg.norm(query - closest, axis=1)  # its side: < 0 inside
     return out
 
 
