@@ -1,6 +1,10 @@
+import re
+
 import numpy as np
+import pytest
 import trimesh
 
+from handcap import HandcapError
 from handcap.core.geometry import (
     closest_points_on_mesh,
     closest_points_on_triangles,
@@ -39,6 +43,19 @@ def test_signed_distance_to_a_box_is_exact_and_positive_inside():
     out = signed_distance(points, box.vertices, box.faces)
     assert np.isnan(out[3]) and np.isfinite(np.delete(out, 3)).all()
     assert (signed_distance(points[:2], box.vertices, np.zeros((0, 3), int)) == -np.inf).all()
+
+
+@pytest.mark.parametrize("vertices, faces, said", [
+    (np.zeros((4, 3)), [[0, 1, 2], [0, 1, 4]], "index vertices 0 to 4, but it has 4"),
+    (np.zeros((4, 3)), [[0, 1, 2], [0, -1, 3]], "index vertices -1 to 3"),
+    (np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0], [0, 0, 1.0]]), [[0, 1, 2]], "1 of the mesh's 4 vertices"),
+    (np.zeros((4, 2)), [[0, 1, 2]], "(V, 3) coordinates"),
+    (np.zeros((4, 3)), [[0.0, 1.0, 2.0]], "(F, 3) vertex indices"),
+])
+def test_a_damaged_mesh_is_an_error_not_a_crash(vertices, faces, said):
+    # libigl reads wherever a bad index points (the Python process died with a segmentation fault).
+    with pytest.raises(HandcapError, match=re.escape(said)):
+        signed_distance(np.zeros((2, 3)), vertices, np.asarray(faces))
 
 
 def test_signed_distance_keeps_its_side_through_a_small_hole():

@@ -56,3 +56,28 @@ def test_a_mesh_in_millimetres_is_read_so_and_said(grasp, tmp_path):
     assert millimetres.result["penetration_mm"] == pytest.approx(metres.result["penetration_mm"], abs=1e-4)
     said = [w for w in millimetres.warnings if "read in mm" in w]
     assert len(said) == 1 and not any("surface of" in w for w in millimetres.warnings), millimetres.warnings
+
+
+def test_a_damaged_mesh_is_one_line_and_exit_2(grasp, tmp_path, capsys):
+    # A face that names a vertex the file does not have, or a vertex that is NaN: libigl, which measures the
+    # penetration, would read memory outside the mesh (a crash, not an error), so the mesh is checked first.
+    from handcap.cli import main
+
+    folder, truth = grasp
+    ply = (folder / "object.ply").read_bytes()
+    mesh = trimesh.load(folder / "object.ply", force="mesh", process=False)
+    faces = mesh.faces.copy()
+    faces[5, 1] = len(mesh.vertices) + 7
+    trimesh.Trimesh(mesh.vertices, faces, process=False).export(tmp_path / "faces.ply")
+    vertices = mesh.vertices.copy()
+    vertices[3] = float("nan")
+    trimesh.Trimesh(vertices, mesh.faces, process=False).export(tmp_path / "nan.ply")
+    for name, said in (("faces.ply", f"faces index vertices 0 to {len(mesh.vertices) + 7}"),
+                       ("nan.ply", "1 of the mesh's")):
+        before = (tmp_path / name).read_bytes()
+        assert main(["metrics", str(truth), "--object", str(folder / "true_object.npz"), "--object-mesh",
+                     str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and name in err and said in err, err
+        assert (tmp_path / name).read_bytes() == before  # the input untouched
+    assert (folder / "object.ply").read_bytes() == ply

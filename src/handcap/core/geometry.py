@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from handcap.core.errors import HandcapError
+
 
 def closest_points_on_triangles(points, triangles):
     """Closest point of each triangle to each matching point.
@@ -95,6 +97,41 @@ def closest_points_on_mesh(points, vertices, faces, candidates: int = 16):
     return closest[rows], idx[np.arange(len(points)), best], bary[rows]
 
 
+def check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """A triangle mesh as contiguous float64 vertices and int64 faces, checked.
+
+    Parameters
+    ----------
+    vertices : array_like (V, 3)
+    faces : array_like (F, 3) int
+
+    Returns
+    -------
+    vertices : ndarray (V, 3) float64
+    faces : ndarray (F, 3) int64
+
+    Raises
+    ------
+    HandcapError
+        Vertices that are not finite (V, 3) coordinates, or faces that are not (F, 3) indices of them.
+    """
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    if faces.size == 0:
+        faces = np.zeros((0, 3), np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise HandcapError(f"a mesh's vertices must be (V, 3) coordinates, got shape {vertices.shape}")
+    if not np.isfinite(vertices).all():
+        raise HandcapError(f"{int((~np.isfinite(vertices)).any(axis=1).sum())} of the mesh's {len(vertices)} "
+                           "vertices are NaN or infinite")
+    if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer):
+        raise HandcapError(f"a mesh's faces must be (F, 3) vertex indices, got {faces.dtype} of shape {faces.shape}")
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise HandcapError(f"the mesh's faces index vertices {faces.min()} to {faces.max()}, but it has "
+                           f"{len(vertices)} (0 to {len(vertices) - 1})")
+    return vertices, np.ascontiguousarray(faces, dtype=np.int64)
+
+
 def signed_distance(points, vertices, faces) -> np.ndarray:
     """Signed distance of each point to a closed triangle mesh, positive inside (trimesh's sign).
 
@@ -114,6 +151,11 @@ def signed_distance(points, vertices, faces) -> np.ndarray:
     ndarray (N,)
         Same unit as the points; NaN for a missing point, ``-inf`` for every point when the mesh has no faces.
 
+    Raises
+    ------
+    HandcapError
+        Vertices that are not finite (V, 3) coordinates, or faces that are not (F, 3) indices of them.
+
     References
     ----------
     Jacobson A., Kavan L., Sorkine-Hornung O. (2013) Robust inside-outside segmentation using generalized winding
@@ -122,8 +164,7 @@ def signed_distance(points, vertices, faces) -> np.ndarray:
     import igl  # noqa: PLC0415 (a compiled library: loaded where a mesh is measured)
 
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    vertices, faces = check_mesh(vertices, faces)  # libigl reads where a bad index points: a crash, not an error
     if len(faces) == 0:
         return np.where(np.isfinite(points).all(axis=1), -np.inf, np.nan)
     a, b, c = (vertices[faces[:, k]] for k in range(3))

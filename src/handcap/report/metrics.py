@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from handcap.core.errors import HandcapError
 from handcap.core.files import existing_file, load_npz
-from handcap.core.geometry import signed_distance
+from handcap.core.geometry import check_mesh, signed_distance
 from handcap.core.rotations import matrix_from_axis_angle
 from handcap.hand import OpenHand
 from handcap.hand.attachment import MarkerAttachment
@@ -94,6 +94,10 @@ def motion_metrics(motion_path, *, truth=None, markers=None, obj=None, object_me
         mesh = read_mesh(object_mesh)
         if len(getattr(mesh, "faces", ())) == 0:
             raise HandcapError(f"{object_mesh}: holds no mesh faces; give the object's surface mesh")
+        try:
+            check_mesh(mesh.vertices, mesh.faces)
+        except HandcapError as err:
+            raise HandcapError(f"{object_mesh}: {err}") from None
         out["warnings"] = _mesh_unit_warnings(object_motion, mesh, object_mesh)
         out["warnings"] += _mesh_frame_warnings(object_motion, mesh, object_mesh)
         hand = _hand_for(motion, hand)
