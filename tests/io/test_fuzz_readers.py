@@ -26,6 +26,7 @@ from hypothesis import strategies as st
 
 from handcap import HandcapError, MarkerSequence
 from handcap.core.cameras import Camera, CameraRig
+from handcap.core.geometry import signed_distance
 from handcap.core.motion import HandMotion, ObjectMotion
 from handcap.core.points import PointCloudSequence
 from handcap.detect.sources import read_image
@@ -34,6 +35,7 @@ from handcap.occlusion.model import OcclusionModel
 from handcap.io import (
     read_hand_motion,
     read_markers,
+    read_mesh,
     read_object_motion,
     read_points,
     read_rig,
@@ -160,6 +162,21 @@ def _image(suffix: str) -> bytes:
 
 
 # name: (seed bytes builder, file name, reader, kind of mutation)
+def _mesh(suffix: str) -> bytes:
+    """A small closed mesh (an icosphere) as an object's surface file: PLY (binary) or OBJ (text)."""
+    import trimesh
+
+    return trimesh.creation.icosphere(subdivisions=1, radius=0.03).export(file_type=suffix)
+
+
+def _object_mesh(path):
+    """The mesh as ``handcap metrics --object-mesh`` reads and measures it: read, then the penetration's signed
+    distance (libigl, which reads wherever a bad face index points: a crash is what this looks for)."""
+    mesh = read_mesh(path)
+    return signed_distance(np.zeros((2, 3)), getattr(mesh, "vertices", np.zeros((0, 3))),
+                           getattr(mesh, "faces", np.zeros((0, 3), int)))
+
+
 READERS = {
     "png-image": (lambda: _image(".png"), "frame.png", read_image, "binary"),
     "jpeg-image": (lambda: _image(".jpg"), "frame.jpg", read_image, "binary"),
@@ -195,6 +212,8 @@ READERS = {
                             "model.npz", OcclusionModel.load, "npz"),
     "layout-toml": (_layout, "layout.toml", load_layout, "text"),
     "uci-postures-csv": (_uci, "Postures.csv", read_uci_postures, "text"),
+    "object-mesh-ply": (lambda: _mesh("ply"), "object.ply", _object_mesh, "binary"),
+    "object-mesh-obj": (lambda: _mesh("obj").encode(), "object.obj", _object_mesh, "text"),
 }
 
 
