@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from handcap.labeling.frame import HandFrameFinder, RigidSet
+from handcap.labeling.frame import HandFrameFinder, RigidSet, triangles_within
 
 TRIAD = np.array([[0.0, 0.03, 0.0], [-0.03, -0.02, 0.0], [0.035, -0.015, 0.0]])
 
@@ -77,3 +77,49 @@ def test_a_suspect_frame_is_searched_afresh_and_leaves_a_look_alike():
     assert (finder.find(both, fit).points == [0, 1, 2]).all()
     finder.suspect = True
     assert (finder.find(both, fit).points == [3, 4, 5]).all()
+
+
+def test_triangles_within_lists_what_the_whole_cube_of_tests_lists():
+    # The pair-then-third search against the brute (K, K, K) test, in its order, for one frame and for a batch.
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-0.05, 0.05, (4, 30, 3))
+    points[2, 25:] = np.nan  # a shorter frame, padded
+    dist = np.linalg.norm(points[:, :, None] - points[:, None], axis=-1)
+    sides, tol = np.array([0.04, 0.05, 0.045]), 0.004
+    e = [np.abs(dist - s) < tol for s in sides]
+    brute = np.argwhere(e[0][..., :, :, None] & e[1][..., :, None, :] & e[2][..., None, :, :])
+    assert len(brute) > 50
+    np.testing.assert_array_equal(triangles_within(dist, sides, tol), brute)
+    np.testing.assert_array_equal(triangles_within(dist[1], sides, tol), brute[brute[:, 0] == 1, 1:])
+    assert not (triangles_within(dist, sides, tol)[:, 1:] >= 25)[brute[:, 0] == 2].any()
+
+
+def test_search_each_gives_what_find_gives_after_reset():
+    # Frames of a triad among clutter (some without it, some with a look-alike, one of two points): the batched
+    # search finds the same points and poses as the finder frame by frame.
+    rng = np.random.default_rng(8)
+    canonical = TRIAD - TRIAD.mean(0)
+    finder = HandFrameFinder(RigidSet(("a", "b", "c"), canonical, 0.003), max_hold=0)
+    frames = []
+    for t in range(40):
+        hand, _ = place(canonical, rng.normal(size=3), rng.normal(scale=0.1, size=3) + [0, 0, 1])
+        clutter = rng.uniform(-0.1, 0.1, (rng.integers(0, 25), 3)) + hand.mean(0)
+        parts = [hand + rng.normal(scale=0.0007, size=hand.shape)] if t % 5 else []
+        if t % 7 == 0:
+            parts.append(place(canonical, rng.normal(size=3), hand.mean(0) + [0.05, 0, 0])[0])
+        pts = np.concatenate(parts + [clutter])
+        frames.append(pts[rng.permutation(len(pts))])
+    frames.append(frames[1][:2])
+    batched = finder.search_each(frames)
+    found = 0
+    for pts, pose in zip(frames, batched):
+        finder.reset()
+        alone = finder.find(pts)
+        assert (alone is None) == (pose is None)
+        if pose is not None:
+            found += 1
+            np.testing.assert_array_equal(pose.points, alone.points)
+            np.testing.assert_allclose(pose.rotation, alone.rotation, atol=1e-12)
+            np.testing.assert_allclose(pose.translation, alone.translation, atol=1e-12)
+    assert 30 <= found < len(frames)
+    assert finder.search_each([]) == [] and finder.search_each([frames[1][:2]]) == [None]

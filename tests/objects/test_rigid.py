@@ -151,3 +151,19 @@ def test_bad_inputs():
     ok = MarkerSequence(np.random.default_rng(0).normal(size=(4, 3, 3)), ["a", "b", "c"], 100)
     with pytest.raises(HandcapError, match="canonical positions must have shape"):
         track_rigid(ok, canonical=np.zeros((2, 3)))
+
+
+def test_canonical_shapes_estimated_side_by_side_as_each_alone():
+    rng = np.random.default_rng(2)
+    takes = []
+    for _ in range(6):
+        body = rng.normal(scale=0.03, size=(5, 3))
+        rot = Rotation.random(25, random_state=rng).as_matrix()
+        take = np.einsum("tij,mj->tmi", rot, body) + rng.normal(size=(25, 1, 3))
+        take += rng.normal(scale=5e-4, size=take.shape)
+        take[rng.random((25, 5)) < 0.3] = np.nan
+        takes.append(take)
+    together = canonical_from_markers(np.stack(takes).reshape(2, 3, 25, 5, 3))
+    assert together.shape == (2, 3, 5, 3)
+    for take, shape in zip(takes, together.reshape(6, 5, 3)):
+        np.testing.assert_allclose(shape, canonical_from_markers(take), atol=1e-12)

@@ -35,7 +35,8 @@ from handcap.labeling.rigid_set import OBJECT_MIN_TOLERANCE, RigidSet, objects_f
 from handcap.objects.rigid import kabsch
 
 # RigidSet and its helpers live in handcap.labeling.rigid_set; re-exported here so older imports keep working.
-__all__ = ["OBJECT_MIN_TOLERANCE", "HandFrameFinder", "HandPose", "RigidSet", "objects_from_take"]
+__all__ = ["OBJECT_MIN_TOLERANCE", "HandFrameFinder", "HandPose", "RigidSet", "objects_from_take", "padded_distances",
+           "triangles_within"]
 
 
 def _kabsch(source, target, weights=None):
@@ -66,6 +67,52 @@ class HandPose:
     translation: np.ndarray
     points: np.ndarray
     found: bool
+
+
+def triangles_within(dist, sides, tol):
+    """Every triangle of points whose side lengths are within ``tol`` of ``sides``.
+
+    Parameters
+    ----------
+    dist : ndarray (..., K, K)
+        Distances between the points (of each frame), metres; NaN never matches.
+    sides : sequence of 3 float
+        The wanted lengths of sides ab, ad and bd, metres.
+    tol : float
+        How far each side may be off, metres.
+
+    Returns
+    -------
+    ndarray (n, dist.ndim + 1) int
+        The leading indices (a frame's), then the points a, b, d: in ``np.argwhere``'s order over
+        ``(...)[a, b, d]``, as the whole (..., K, K, K) test would list them.
+    """
+    ab = np.argwhere(np.abs(dist - sides[0]) < tol)  # few pairs: then only their third points are tested
+    lead, a, b = tuple(ab[:, :-2].T), ab[:, -2], ab[:, -1]
+    third = (np.abs(dist[(*lead, a)] - sides[1]) < tol) & (np.abs(dist[(*lead, b)] - sides[2]) < tol)
+    row, d = np.nonzero(third)
+    return np.column_stack([ab[row], d])
+
+
+def padded_distances(frames):
+    """The frames' points side by side, padded with NaN, and the distances between each frame's points.
+
+    Parameters
+    ----------
+    frames : sequence of ndarray (K, 3)
+        Points per frame, metres (at least one frame).
+
+    Returns
+    -------
+    points : ndarray (F, K_max, 3)
+        NaN past each frame's own points.
+    dist : ndarray (F, K_max, K_max)
+        Metres; NaN where either point is padding.
+    """
+    points = np.full((len(frames), max(len(f) for f in frames), 3), np.nan)
+    for f, pts in enumerate(frames):
+        points[f, :len(pts)] = pts
+    return points, np.linalg.norm(points[:, :, None] - points[:, None], axis=-1)
 
 
 class HandFrameFinder:
@@ -191,9 +238,7 @@ class HandFrameFinder:
         dist = np.linalg.norm(points[:, None] - points[None], axis=-1)
         cands, anchors = [], []
         for a, b, d in self._anchors:
-            e_ab, e_ad, e_bd = (np.abs(dist - self._canon_dist[x, y]) for x, y in ((a, b), (a, d), (b, d)))
-            ok = (e_ab < tol)[:, :, None] & (e_ad < tol)[:, None, :] & (e_bd < tol)[None, :, :]
-            found = np.argwhere(ok)  # (n, 3): points for markers a, b, d
+            found = triangles_within(dist, self._canon_dist[[a, a, b], [b, d, d]], tol)  # points for a, b, d
             cands.append(found)
             anchors.append(np.broadcast_to((a, b, d), found.shape))
         cand, anchor = np.concatenate(cands), np.concatenate(anchors)
@@ -229,6 +274,61 @@ class HandFrameFinder:
         index = np.full(len(c), -1)
         index[anchor[best]] = cand[best]
         return self._complete(points, rot[best], trans[best], index)
+
+    def search_each(self, frames, padded=None) -> list:
+        """Each frame's pose searched afresh, as :meth:`find` gives it after :meth:`reset` without a fit, but
+        batched over the frames (re-learning the rigid set judges many candidate sets in the same frames).
+
+        Parameters
+        ----------
+        frames : sequence of ndarray (K, 3)
+            Points per frame (no NaN), metres.
+        padded : tuple, optional
+            :func:`padded_distances` of ``frames``, when several finders search the same frames.
+
+        Returns
+        -------
+        list of HandPose or None
+            One per frame; None where the set is not found.
+        """
+        c, tol = self.rigid.canonical, self.rigid.tolerance
+        out: list = [None] * len(frames)
+        sizes = np.array([len(f) for f in frames], dtype=int)
+        if not len(frames) or sizes.max() < 3:
+            return out
+        pts, dist = padded_distances(frames) if padded is None else padded  # NaN: never within a tolerance
+        few = (sizes < 3)[:, None, None]
+        if few.any():  # (a frame of fewer than 3 points is not searched)
+            pts, dist = np.where(few, np.nan, pts), np.where(few, np.nan, dist)
+        cands, anchors = [], []
+        for a, b, d in self._anchors:
+            found = triangles_within(dist, self._canon_dist[[a, a, b], [b, d, d]], tol)
+            cands.append(found)  # (n, 4): frame, then the points for markers a, b, d
+            anchors.append(np.broadcast_to((a, b, d), (len(found), 3)))
+        cand, anchor = np.concatenate(cands), np.concatenate(anchors)
+        order = np.argsort(cand[:, 0], kind="stable")  # frame by frame, each in _search's order
+        cand, anchor = cand[order], anchor[order]
+        if not len(cand):
+            return out
+        frame, cand = cand[:, 0], cand[:, 1:]
+        target = pts[frame[:, None], cand]
+        src = c[anchor]
+        rot, trans = kabsch(src, target)
+        resid = np.linalg.norm(np.einsum("nij,nrj->nri", rot, src) + trans[:, None] - target, axis=-1)
+        score = (resid**2).sum(axis=1) / tol**2
+        score[resid.max(axis=1) > tol] = np.inf
+        placed = np.einsum("nij,rj->nri", rot, c) + trans[:, None]
+        gap = np.linalg.norm(placed[:, :, None] - pts[frame][:, None], axis=-1)
+        support = (np.where(np.isnan(gap), np.inf, gap).min(axis=2) < tol).sum(axis=1)
+        score[support < min(self.min_found, len(c))] = np.inf
+        score -= 2.0 * support
+        first = np.lexsort((np.arange(len(score)), score, frame))  # each frame's lowest score, first of ties
+        first = first[np.r_[True, frame[first][1:] != frame[first][:-1]]]
+        for n in first[np.isfinite(score[first])]:
+            index = np.full(len(c), -1)
+            index[anchor[n]] = cand[n]
+            out[frame[n]] = self._complete(frames[frame[n]], rot[n], trans[n], index)
+        return out
 
     def _complete(self, points, rot, trans, index) -> HandPose:
         """Add the other rigid markers near their predicted places and refit on all found."""

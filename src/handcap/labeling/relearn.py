@@ -17,8 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from handcap.labeling.frame import HandFrameFinder
-from handcap.labeling.realign import register_to_model
+from handcap.labeling.frame import HandFrameFinder, padded_distances, triangles_within
 from handcap.labeling.rigid_set import RigidSet
 from handcap.labeling.spatial import SpatialModel
 from handcap.objects.rigid import canonical_from_markers, kabsch
@@ -72,8 +71,7 @@ def rigid_from_take(rigid: RigidSet, frames, *, spatial: SpatialModel | None = N
     if spatial is None:
         return candidates[0]
     every = candidates + [rigid] + ([current] if current is not None and current is not rigid else [])
-    fits = [_fit_in_frames(spatial, c, use) for c in every]
-    return every[int(np.argmax(fits))]
+    return every[int(np.argmax(_fits_in_frames(spatial, every, use)))]
 
 
 #: How far (metres) each side of the rigid set's anchor triangle is searched for from the trained one, when its
@@ -106,21 +104,13 @@ def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = CANDID
     trained sides), each a RigidSet."""
     c, tol = rigid.canonical, rigid.tolerance
     (a, b, e), trained = _anchor(c)
-    sides, owner, where = [], [], []
-    for t, pts in enumerate(use):
-        dist = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
-        ok = ((np.abs(dist - trained[0]) < width)[:, :, None] & (np.abs(dist - trained[1]) < width)[:, None, :]
-              & (np.abs(dist - trained[2]) < width)[None, :, :])
-        found = np.argwhere(ok)
-        if not len(found):
-            continue
-        sides.append(np.stack([dist[found[:, 0], found[:, 1]], dist[found[:, 0], found[:, 2]],
-                               dist[found[:, 1], found[:, 2]]], axis=1))
-        owner.append(np.full(len(found), t))
-        where.append(found)
-    if not sides:
+    points, dist = padded_distances(use)
+    found = triangles_within(dist, trained, width)  # (n, 4): the frame, then the points a, b, e
+    if not len(found):
         return []
-    sides, owner, where = np.concatenate(sides), np.concatenate(owner), np.concatenate(where)
+    owner, where = found[:, 0], found[:, 1:]
+    sides = np.stack([dist[owner, where[:, 0], where[:, 1]], dist[owner, where[:, 0], where[:, 2]],
+                      dist[owner, where[:, 1], where[:, 2]]], axis=1)
     # For every candidate shape, in how many frames a triangle of that shape (within the tolerance) appears.
     probe = np.linspace(0, len(sides) - 1, min(len(sides), 300)).astype(int)
     near = cKDTree(sides).query_ball_point(sides[probe], r=tol, p=np.inf)  # the shapes within tol, side by side
@@ -145,11 +135,15 @@ def _recurring_shapes(rigid: RigidSet, use, width, min_share, most: int = CANDID
         for shape in _orderings(sides[probe[p]], trained, width):
             if any((np.abs(shape - other) < tol).all() for other in chosen):
                 continue
-            found = _shape_in_frames(rigid, use, sides, owner, where, shape, (a, b, e), width)
+            found = _shape_in_frames(rigid, use, points, sides, owner, where, shape, (a, b, e), width)
             if found is not None:
                 chosen.append(shape)
                 out.append(found)
-    return out
+    if not out:
+        return []
+    # Every shape's markers estimated at once (each as alone), then turned onto the trained shape.
+    shapes = canonical_from_markers(np.stack(out))
+    return [RigidSet(rigid.names, new @ rot.T + trans, tol) for new in shapes for rot, trans in [kabsch(new, c)]]
 
 
 def _orderings(shape, trained, width) -> list:
@@ -164,62 +158,67 @@ def _orderings(shape, trained, width) -> list:
     return out
 
 
-def _shape_in_frames(rigid, use, sides, owner, where, shape, anchor, width) -> RigidSet | None:
-    """The rigid set from the triangles of one shape, one per frame (and the other markers near their places)."""
+def _shape_in_frames(rigid, use, points, sides, owner, where, shape, anchor, width) -> np.ndarray | None:
+    """The rigid set's markers (T, R, 3) in each frame of ``use`` (``points``: the same, padded) from the triangles
+    of one shape, one per frame (and the other markers near their places), NaN where not seen. None when fewer
+    than three frames show the shape or some marker is never seen."""
     c, tol = rigid.canonical, rigid.tolerance
     n = len(c)
     a, b, e = anchor
-    members = (np.abs(sides - shape) < tol).all(axis=-1)
-    err = np.abs(sides - shape).max(axis=1)
-    positions = np.full((len(use), n, 3), np.nan)
-    for t in np.unique(owner[members]):
-        rows = np.flatnonzero(members & (owner == t))
-        i, j, k = where[rows[np.argmin(err[rows])]]
-        pts = use[t]
-        positions[t, [a, b, e]] = pts[[i, j, k]]
-        if n > 3:  # the other markers: the point nearest where the trained shape puts them
-            rot, trans = kabsch(c[[a, b, e]], pts[[i, j, k]])
-            taken = {int(i), int(j), int(k)}
-            for r in range(n):
-                if r in (a, b, e):
-                    continue
-                d = np.linalg.norm(pts - (rot @ c[r] + trans), axis=1)
-                d[list(taken)] = np.inf
-                p = int(np.argmin(d))
-                if d[p] < width:
-                    positions[t, r] = pts[p]
-                    taken.add(p)
-    seen = ~np.isnan(positions[..., 0])
-    if (seen.sum(axis=1) >= 3).sum() < 3 or not seen.any(axis=0).all():
+    rows = np.flatnonzero((np.abs(sides - shape) < tol).all(axis=-1))
+    if len(np.unique(owner[rows])) < 3:
         return None
-    new = canonical_from_markers(positions[seen.sum(axis=1) >= 3])
-    rot, trans = kabsch(new, c)
-    return RigidSet(rigid.names, new @ rot.T + trans, rigid.tolerance)
+    err = np.abs(sides[rows] - shape).max(axis=1)
+    rows = rows[np.lexsort((err, owner[rows]))]  # by frame, then error (ties in row order: lexsort is stable)
+    rows = rows[np.r_[True, owner[rows][1:] != owner[rows][:-1]]]  # each frame's closest triangle
+    positions = np.full((len(use), n, 3), np.nan)
+    positions[owner[rows][:, None], [a, b, e]] = points[owner[rows][:, None], where[rows]]
+    for t, (i, j, k) in zip(owner[rows], where[rows]) if n > 3 else ():
+        # The other markers: the point nearest where the trained shape puts them.
+        pts = use[t]
+        rot, trans = kabsch(c[[a, b, e]], pts[[i, j, k]])
+        taken = {int(i), int(j), int(k)}
+        for r in range(n):
+            if r in (a, b, e):
+                continue
+            d = np.linalg.norm(pts - (rot @ c[r] + trans), axis=1)
+            d[list(taken)] = np.inf
+            p = int(np.argmin(d))
+            if d[p] < width:
+                positions[t, r] = pts[p]
+                taken.add(p)
+    if not (~np.isnan(positions[..., 0])).any(axis=0).all():
+        return None
+    return positions
 
 
-def _fit_in_frames(spatial: SpatialModel, rigid: RigidSet, use, *, most: int = 20,
-                   floor: float = -2.0, iterations: int = 0) -> float:
-    """How well the other points of frames ``use`` fit the spatial model in the hand frame ``rigid`` gives
-    (after ``iterations`` of label-free registration; none by default: the candidates' shapes are turned onto
-    the trained one, and a registration lets a wrong frame fit too): the mean over points of the best label's
-    log-likelihood (at least ``floor``), frames without the set counting every point at the floor."""
-    finder = HandFrameFinder(rigid, max_hold=0)
-    local, missing = [], 0
-    for pts in use[:: max(1, len(use) // most)]:
-        finder.reset()
-        pose = finder.find(pts)
-        if pose is None or not pose.found:
-            missing += len(pts)
-            continue
-        others = np.delete(pts, pose.points[pose.points >= 0], axis=0)
-        local.append((others - pose.translation) @ pose.rotation)
-    if not local:
-        return -np.inf
-    local = np.concatenate(local)
-    rot, trans = register_to_model(spatial, local, iterations=iterations) if iterations else (np.eye(3), np.zeros(3))
-    ll = spatial.log_likelihood(local @ rot.T + trans)
-    best = np.maximum(ll.max(axis=0), floor)
-    return float((best.sum() + floor * missing) / (len(best) + missing))
+def _fits_in_frames(spatial: SpatialModel, sets, use, *, most: int = 20, floor: float = -2.0) -> np.ndarray:
+    """How well the other points of frames ``use`` fit the spatial model in the hand frame each of ``sets``
+    gives: the mean over points of the best label's log-likelihood (at least ``floor``), frames without the set
+    counting every point at the floor; -inf for a set found in none. No label-free registration first: the
+    candidates' shapes are turned onto the trained one, and a registration lets a wrong frame fit too."""
+    frames = use[:: max(1, len(use) // most)]
+    local, owner = [], []
+    missing, found = np.zeros(len(sets)), np.zeros(len(sets), bool)
+    padded = padded_distances(frames)
+    for s, rigid in enumerate(sets):
+        for pts, pose in zip(frames, HandFrameFinder(rigid, max_hold=0).search_each(frames, padded)):
+            if pose is None:
+                missing[s] += len(pts)
+                continue
+            found[s] = True
+            others = np.delete(pts, pose.points[pose.points >= 0], axis=0)
+            local.append((others - pose.translation) @ pose.rotation)
+            owner.append(np.full(len(others), s))
+    fits = np.full(len(sets), -np.inf)
+    if not found.any():
+        return fits
+    best = np.maximum(spatial.log_likelihood(np.concatenate(local)).max(axis=0), floor)  # every set's at once
+    owner = np.concatenate(owner)
+    for s in np.flatnonzero(found):
+        mine = best[owner == s]
+        fits[s] = (mine.sum() + floor * missing[s]) / (len(mine) + missing[s])
+    return fits
 
 
 def largest_change(a: RigidSet, b: RigidSet) -> float:

@@ -215,34 +215,40 @@ def canonical_from_markers(positions, *, iterations: int = 10) -> np.ndarray:
 
     Parameters
     ----------
-    positions : ndarray (T, M, 3)
-        NaN where missing.
+    positions : ndarray (..., T, M, 3)
+        NaN where missing; leading axes hold several takes (or candidate sets) estimated side by side, each as
+        if alone.
+    iterations : int
+        Rounds of aligning every frame onto the shape and averaging.
 
     Returns
     -------
-    canonical : ndarray (M, 3)
+    canonical : ndarray (..., M, 3)
         Centred on the mean marker position; axes along the first frame with
         all markers seen (or most markers seen).
     """
+    positions = np.asarray(positions, dtype=np.float64)
+    lead = positions.shape[:-3]
+    positions = positions.reshape((-1,) + positions.shape[-3:])
     seen = ~np.isnan(positions[..., 0])
-    counts = seen.sum(axis=1)
-    if counts.max() < 3:
+    counts = seen.sum(axis=-1)
+    if (counts.max(axis=-1) < 3).any():
         raise HandcapError("no frame sees 3 or more of the object's markers; cannot estimate its shape")
-    never = ~seen.any(axis=0)
+    never = ~seen.any(axis=-2)
     if never.any():
-        raise HandcapError(f"markers {np.flatnonzero(never).tolist()} are never seen; cannot place them on the object")
-    shape = _chained_shape(positions, seen, counts)
-    shape = shape - shape.mean(axis=0)
-    usable = counts >= 3
-    data = np.where(seen[..., None], positions, 0.0)[usable]
-    weights = seen[usable].astype(float)
+        raise HandcapError(f"markers {np.flatnonzero(never.any(axis=0)).tolist()} are never seen; "
+                           "cannot place them on the object")
+    shape = np.stack([_chained_shape(*item) for item in zip(positions, seen, counts)])
+    shape = shape - shape.mean(axis=-2, keepdims=True)
+    data = np.where(seen[..., None], positions, 0.0)
+    weights = (seen & (counts >= 3)[..., None]).astype(float)  # frames of fewer than 3 markers weigh nothing
     for _ in range(iterations):
-        rot, trans = kabsch(np.broadcast_to(shape, data.shape), data, weights)
-        local = np.einsum("tji,tnj->tni", rot, data - trans[:, None])  # R^T (x - t)
-        total = (local * weights[..., None]).sum(axis=0)
-        shape = total / weights.sum(axis=0)[:, None]
-        shape -= shape.mean(axis=0)
-    return shape
+        rot, trans = kabsch(np.broadcast_to(shape[:, None], data.shape), data, weights)
+        local = np.einsum("btji,btnj->btni", rot, data - trans[:, :, None])  # R^T (x - t)
+        total = (local * weights[..., None]).sum(axis=1)
+        shape = total / weights.sum(axis=1)[..., None]
+        shape -= shape.mean(axis=-2, keepdims=True)
+    return shape.reshape(lead + shape.shape[-2:])
 
 
 @dataclass(frozen=True)
