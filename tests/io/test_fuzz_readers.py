@@ -115,6 +115,20 @@ def _motive() -> bytes:
     return ("\r\n".join(lines) + "\r\n").encode()
 
 
+def _vicon() -> bytes:
+    """A Vicon Nexus CSV export: a Devices section, then the Trajectories (missing samples empty)."""
+    m = _markers()
+    lines = ["", "", "Devices", "1000", ",,Plate - Force,,", "Frame,Sub Frame,Fx,Fy,Fz", ",,N,N,N"]
+    lines += [f"{t + 1},{s},1.0,2.0,700.0" for t in range(2) for s in range(10)]
+    lines += ["", "Trajectories", "100", ",".join(["", ""] + [c for n in m.names for c in (n, "", "")]),
+              ",".join(["Frame", "Sub Frame"] + ["X", "Y", "Z"] * m.n_markers),
+              ",".join(["", ""] + ["mm"] * 3 * m.n_markers)]
+    for t in range(m.n_frames):
+        lines.append(",".join([str(t + 1), "0"] + ["" if np.isnan(v) else f"{1000 * v:.5f}"
+                                                   for v in m.positions[t].ravel()]))
+    return ("\r\n".join(lines) + "\r\n").encode()
+
+
 def _uci() -> bytes:
     """Rows of the UCI hand-postures table: class, user, 12 points (X, Y, Z mm), '?' for absent points."""
     rng = np.random.default_rng(2)
@@ -184,6 +198,7 @@ READERS = {
     "trc": (lambda: _written(lambda p: write_trc(_markers(), p), ".trc"), "take.trc", read_markers, "text"),
     "qualisys-tsv": (_tsv, "take.tsv", read_markers, "text"),
     "motive-csv": (_motive, "take.csv", read_markers, "text"),
+    "vicon-csv": (_vicon, "trial.csv", read_markers, "text"),
     "markers-npz": (lambda: _written(lambda p: write_markers_npz(_markers(), p), ".npz"), "take.npz",
                     read_markers, "npz"),
     "points-npz": (lambda: _written(lambda p: write_points_npz(PointCloudSequence.from_markers(_markers()), p),

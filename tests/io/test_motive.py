@@ -236,7 +236,7 @@ def test_uci_table_is_not_a_motive_export(shared_data):
 
 @pytest.mark.parametrize("content, match", [
     (b"", "empty file"),
-    (b"a,b,c\n1,2,3\n", "not an OptiTrack Motive CSV export"),
+    (b"a,b,c\n1,2,3\n", "not a marker CSV handcap reads: an OptiTrack Motive CSV export starts"),
     (b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR", "binary data"),
 ])
 def test_files_that_are_not_motive_exports(tmp_path, content, match):

@@ -7,7 +7,8 @@ suffix    format                             read / write
 ========  =================================  ==============
 ``.c3d``  C3D (ezc3d), POINT:UNITS honoured   read, write
 ``.tsv``  Qualisys QTM TSV export            read
-``.csv``  OptiTrack Motive CSV (1.2x)        read
+``.csv``  OptiTrack Motive CSV (1.2x),       read
+          Vicon Nexus CSV (Trajectories)
 ``.trc``  TRC (OpenSim / Motion Analysis)    read, write
 ``.npz``  handcap's own                      read, write
 ========  =================================  ==============
@@ -56,8 +57,33 @@ from handcap.io.npz import (
 from handcap.io.qualisys import read_qualisys_tsv
 from handcap.io.trc import read_trc, write_trc
 from handcap.io.uci import UciPostures, read_uci_postures
+from handcap.io.vicon import is_vicon_csv, read_vicon_csv
 
-MARKER_READERS = {".c3d": read_c3d, ".tsv": read_qualisys_tsv, ".csv": read_motive_csv,
+
+
+def read_marker_csv(path, *, units: str | None = None, hand=None) -> MarkerSequence:
+    """Read a marker CSV: a Vicon Nexus export (:func:`read_vicon_csv`; its first line names a section, such as
+    ``Trajectories``) or else an OptiTrack Motive one (:func:`read_motive_csv`).
+
+    Parameters
+    ----------
+    path : str or Path
+    units : {"mm", "cm", "m"}, optional
+        The unit of the coordinates, overriding the file's.
+    hand : sequence of str, optional
+        Names of one hand's markers, whose spread tells the unit when the file's is implausible.
+
+    Returns
+    -------
+    MarkerSequence
+        Positions (T, M, 3) in metres, NaN where missing.
+    """
+    with open(existing_file(path), "rb") as file:
+        head = file.read(65536).decode("utf-8-sig", errors="replace")
+    return (read_vicon_csv if is_vicon_csv(head) else read_motive_csv)(path, units=units, hand=hand)
+
+
+MARKER_READERS = {".c3d": read_c3d, ".tsv": read_qualisys_tsv, ".csv": read_marker_csv,
                   ".trc": read_trc, ".npz": read_markers_npz}
 MARKER_WRITERS = {".c3d": write_c3d, ".trc": write_trc, ".npz": write_markers_npz}
 
@@ -215,9 +241,9 @@ def convert(source, target, *, partial: bool = False, units: str | None = None) 
 __all__ = [
     "UNITS", "UciPostures", "atomic_output", "check_not_input", "check_output", "check_output_folder", "convert",
     "existing_file", "load_npz", "marker_suffix", "npz_kind",
-    "read_c3d", "read_hand_motion", "read_markers", "read_markers_npz", "read_mesh", "read_motive_csv",
-    "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig", "read_scan_points",
-    "read_trc",
+    "read_c3d", "read_hand_motion", "read_marker_csv", "read_markers", "read_markers_npz", "read_mesh",
+    "read_motive_csv", "read_object_motion", "read_points", "read_points_npz", "read_qualisys_tsv", "read_rig",
+    "read_scan_points", "read_trc", "read_vicon_csv",
     "read_uci_postures", "save_npz", "write_c3d", "write_hand_motion", "write_markers", "write_markers_npz",
     "write_object_motion", "write_points", "write_points_npz", "write_rig", "write_trc",
 ]

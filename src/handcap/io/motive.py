@@ -48,7 +48,8 @@ def _metadata(first: list[str], path) -> dict:
         if [c.strip() for c in first[:3]] == ["Class", "User", "X0"]:
             raise HandcapError(f"{path}: this is the UCI hand-postures table, not {_WHAT}; "
                                "read it with handcap.io.read_uci_postures")
-        raise HandcapError(f"{path}: not {_WHAT} (its first line should start with 'Format Version')")
+        raise HandcapError(f"{path}: not a marker CSV handcap reads: {_WHAT} starts with 'Format Version', a Vicon "
+                           "Nexus export with a section name (Trajectories)")
     cells = [c.strip() for c in first]
     meta = dict(zip(cells[0::2], cells[1::2]))
     if not meta.get("Format Version", "").startswith("1.2"):
