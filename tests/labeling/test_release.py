@@ -97,3 +97,24 @@ def test_release_warning_names_five_and_counts_the_rest():
     assert line.startswith("labels released to the spatial model 7 time(s)")
     assert "index_tip and middle_tip at frame 50 (since frame 0: 0.00-0.50 s)" in line and "; and 2 more" in line
     assert release_warning([], 100.0) is None
+
+
+def test_released_labels_take_over_the_tracks_that_hold_their_points():
+    # Two frames of a swap: the best hypothesis gives labels a and b each other's points, the spatial model's the
+    # points the other way round. At the release each takes over the filter that followed its point, in every
+    # hypothesis where a released label's track holds it; a label whose point no released track holds starts afresh.
+    from handcap.labeling.release import TrackEvidence
+
+    world = np.arange(30.0).reshape(10, 3)
+    evidence = TrackEvidence(["a", "b", "c", "d"], release=1000.0, drift=0.0)
+    hyps = np.array([[5, 7, 9, 2], [7, 5, 9, 3]])  # best: a and b swapped; top: right, and d on another point
+    assert evidence.weigh(hyps, np.array([0.0, 600.0]), 0, 10, world) is None
+    found = evidence.weigh(hyps, np.array([0.0, 600.0]), 0, 11, world)
+    assert found.labels == ("a", "b", "d") and found.since == 10
+    released = evidence.take_pending()
+    obs = np.where((hyps >= 0)[..., None], world[hyps], np.nan)
+    index, fresh = evidence.hand_over(obs, released)
+    # Hypothesis 0 (swapped): a takes b's filter and b a's; c keeps its own; d's point (3) is held by no track there.
+    # Hypothesis 1 (right): every label keeps its own filter.
+    np.testing.assert_array_equal(index, [1, 0, 2, 3, 4, 5, 6, 7])
+    np.testing.assert_array_equal(fresh, [[False, False, False, True], [False, False, False, False]])

@@ -214,6 +214,18 @@ class KalmanBatch:
         self.age = other.age[index].copy()
         self.missed = other.missed[index].copy()
 
+    def take_over(self, index, fresh) -> None:
+        """Each filter replaced by filter ``index`` (B,) of this batch, then those ``fresh`` (B,) made to start
+        afresh: age 0, so that their next update scores no transition.
+
+        Parameters
+        ----------
+        index : ndarray (B,) int
+        fresh : ndarray (B,) bool (any shape of B elements)
+        """
+        self.copy_from(self, index)
+        self.age[np.ravel(fresh)] = 0
+
     def predicted(self) -> tuple[np.ndarray, np.ndarray]:
         """Predicted state and covariance one frame ahead (nothing changed)."""
         f = self._f

@@ -353,7 +353,7 @@ class OnlineLabeler:
         scores, back = viterbi_step(self._scores, transition, emission)
         scores -= scores.max()
         if pose is not None and len(world):  # before the filters step (now or deferred): a release restarts them
-            found = self._evidence.weigh(hyps, emission, int(np.argmax(scores)), self.frame_index)
+            found = self._evidence.weigh(hyps, emission, int(np.argmax(scores)), self.frame_index, world)
             if found is not None:
                 self.released.append(found)
         if self.defer:
@@ -432,8 +432,8 @@ class OnlineLabeler:
         index = (back[:, None] * n_free + np.arange(n_free)).ravel()
         self._filters = self._filters.successors(index, obs.reshape(-1, 3), self._predicted, self.max_coast)
         released = self._evidence.take_pending()
-        if released.any():  # their filters start afresh: no transition scored for their next updates
-            self._filters.age.reshape(-1, n_free)[:, released] = 0
+        if released.any():  # each takes over the track that holds its point, or starts afresh (no transition)
+            self._filters.take_over(*self._evidence.hand_over(obs, released))
 
     # -- decisions ------------------------------------------------------------------------
     def _decide_oldest(self) -> np.ndarray:

@@ -16,9 +16,15 @@ the sum never drops below 0 (an ambiguity the spatial model barely prefers never
 adds up). At the threshold the label is released together with the labels the
 two assignments place otherwise in that frame on at least half as much evidence
 (the rest of the swap: released one at a time, the other's track would take the
-point back). The labeler then restarts their filters in every hypothesis, so
-that their next updates score no transition: the spatial model decides their
-points, and their tracks follow from there. Each release is a :class:`Release`;
+point back). In every hypothesis, each released label then takes over the
+track of the released label that holds the point the spatial model gives it
+(:meth:`TrackEvidence.hand_over`): a swap is exchanged, and continuity keeps it
+right. A released label whose point no released track holds starts afresh, its
+next updates scoring no transition, so that the spatial model decides its
+point. (Restarted instead, both labels of a swap were left to the spatial model
+frame by frame, whose preference is a few units, noisy: on seed 39 of
+``benchmarks/labeling.py`` section 9 the tracks took the swap back after each
+release.) Each release is a :class:`Release`;
 :func:`release_warning` says them in one line (the labels were probably swapped
 before it).
 """
@@ -81,8 +87,9 @@ class TrackEvidence:
         self.evidence = np.zeros(len(self.names))
         self.start = np.full(len(self.names), -1)  # frame each label's evidence began to add up, -1 at 0
         self.pending = np.zeros(len(self.names), dtype=bool)  # released, filters not yet restarted
+        self.target = np.full((len(self.names), 3), np.nan)  # each pending label's point as the spatial model puts it
 
-    def weigh(self, hyps, emission, best: int, frame: int) -> Release | None:
+    def weigh(self, hyps, emission, best: int, frame: int, world=None) -> Release | None:
         """Add one frame's evidence; the labels released by it.
 
         Parameters
@@ -95,6 +102,8 @@ class TrackEvidence:
             The hypothesis the labeler rates best (spatial and temporal evidence).
         frame : int
             The frame's index.
+        world : ndarray (K, 3), optional
+            The frame's candidate points (metres): where a released label's point is, for :meth:`hand_over`.
 
         Returns
         -------
@@ -115,6 +124,8 @@ class TrackEvidence:
         self.evidence[due] = 0.0
         self.start[due] = -1
         self.pending |= due
+        if world is not None:
+            self.target[due] = np.where((theirs[due] >= 0)[:, None], world[np.maximum(theirs[due], 0)], np.nan)
         return found
 
     def take_pending(self) -> np.ndarray:
@@ -122,3 +133,32 @@ class TrackEvidence:
         out = self.pending.copy()
         self.pending[:] = False
         return out
+
+    def hand_over(self, obs, released) -> tuple[np.ndarray, np.ndarray]:
+        """Which filter each label keeps once ``released`` labels are released: a released label takes over the
+        track of the released label that holds its point (in each hypothesis), so that a swap is exchanged
+        rather than decided afresh by the spatial model in the noisy frames after it; one whose point no
+        released track holds starts afresh.
+
+        Parameters
+        ----------
+        obs : ndarray (N, F, 3)
+            Each new hypothesis's point per label (metres, NaN for none), which its filters were stepped with.
+        released : ndarray (F,) bool
+            The labels released (:meth:`take_pending`).
+
+        Returns
+        -------
+        index : ndarray (N * F,) int
+            The filter (of the N x F, hypothesis-major) each takes.
+        fresh : ndarray (N, F) bool
+            Filters to start afresh.
+        """
+        n, f = obs.shape[:2]
+        index = np.arange(n * f).reshape(n, f)
+        holds = (obs[:, None] == self.target[None, :, None]).all(axis=-1) & released[None, None, :]  # (N, x, y)
+        holds &= released[None, :, None]
+        found = holds.any(axis=2)
+        index = np.where(found, index[:, :1] + holds.argmax(axis=2), index)
+        self.target[released] = np.nan
+        return index.ravel(), released[None, :] & ~found
