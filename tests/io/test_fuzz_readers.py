@@ -199,6 +199,7 @@ READERS = {
     "qualisys-tsv": (_tsv, "take.tsv", read_markers, "text"),
     "motive-csv": (_motive, "take.csv", read_markers, "text"),
     "vicon-csv": (_vicon, "trial.csv", read_markers, "text"),
+    "vicon-txt": (lambda: _vicon().replace(b",", b"\t"), "trial.txt", read_markers, "text"),
     "markers-npz": (lambda: _written(lambda p: write_markers_npz(_markers(), p), ".npz"), "take.npz",
                     read_markers, "npz"),
     "points-npz": (lambda: _written(lambda p: write_points_npz(PointCloudSequence.from_markers(_markers()), p),

@@ -119,6 +119,21 @@ def test_skipped_frame_numbers_become_missing_frames_with_a_warning(tmp_path):
     assert any("have no row" in w for w in markers.warnings)
 
 
+def test_a_tab_separated_txt_export_reads_the_same(tmp_path):
+    take = _take()
+    sections = devices() + [""] + trajectories(take, first=7) + [""] + model_outputs()
+    lines = [line.replace(",", "\t") for line in sections]
+    path = tmp_path / "trial.txt"
+    path.write_text("\n".join(lines) + "\n")
+    markers = read_markers(path)
+    assert markers.names == tuple(NAMES)
+    np.testing.assert_allclose(markers.positions, take * 1e-3, atol=5e-9, equal_nan=True)
+    other = tmp_path / "notes.txt"
+    other.write_text("a note\n")
+    with pytest.raises(HandcapError, match="not a Vicon Nexus CSV export"):
+        read_markers(other)
+
+
 def test_a_motive_csv_is_still_read_as_motive(tmp_path):
     path = tmp_path / "take.csv"
     path.write_text("Format Version,1.23,Export Frame Rate,120.0,Total Exported Frames,2,Length Units,Millimeters\n\n"
@@ -141,7 +156,7 @@ def _bad(tmp_path, lines, name="bad.csv"):
     (lambda lines: lines[:5], "holds no frames"),
     (lambda lines: lines[:1] + ["fast"] + lines[2:], "frame rate in Hz"),
     (lambda lines: lines[:1] + ["0"] + lines[2:], "frame rate is 0"),
-    (lambda lines: lines[:3] + [lines[3].replace("Sub Frame", "Time")] + lines[4:], "Frame,Sub Frame"),
+    (lambda lines: lines[:3] + [lines[3].replace("Sub Frame", "Time")] + lines[4:], "Frame and Sub Frame"),
     (lambda lines: lines[:3] + [lines[3][::-1].replace("Z", "W", 1)[::-1]] + lines[4:], "lacks some of its X, Y, Z"),
     (lambda lines: lines[:2] + [lines[2].replace("RH_LEFT", "RH_TOP")] + lines[3:], "names marker 'Sub:RH_TOP' twice"),
     (lambda lines: lines[:2] + [",,,,,"] + lines[3:], "names no marker"),

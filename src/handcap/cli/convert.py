@@ -14,11 +14,12 @@ def _cmd_convert(args):
 
 
 def add_convert(verbs) -> None:
-    p = verbs.add_parser("convert", help="convert a marker file (.c3d .tsv .csv .trc .npz) to another format",
+    p = verbs.add_parser("convert", help="convert a marker file (.c3d .tsv .csv .txt .trc .npz) to another format",
                          description="Convert a marker file; the formats come from the extensions. "
-                                     "Reads C3D, Qualisys TSV, OptiTrack Motive CSV, Vicon Nexus CSV, TRC and .npz; "
-                                     "writes C3D, TRC and .npz. Units become metres (.npz) or millimetres (C3D, TRC).")
-    p.add_argument("input", help="a marker file (.c3d .tsv .csv .trc .npz)")
+                                     "Reads C3D, Qualisys TSV, OptiTrack Motive CSV, Vicon Nexus CSV or .txt, TRC "
+                                     "and .npz; writes C3D, TRC and .npz. Units become metres (.npz) or millimetres "
+                                     "(C3D, TRC).")
+    p.add_argument("input", help="a marker file (.c3d .tsv .csv .txt .trc .npz)")
     p.add_argument("output", nargs="?", help="the file to write (.c3d .trc .npz); or give it with --out")
     p.add_argument("--out", help="the file to write, as the other verbs take it")
     p.add_argument("--partial", action="store_true",

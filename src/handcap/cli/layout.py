@@ -53,7 +53,7 @@ def add_layout(verbs) -> None:
                                     "of one segment, not in a line, as far apart in the take as in the layout) and "
                                     "what will be estimated.")
     q.add_argument("layout", help=f"layout: {', '.join(SHIPPED)} or a .toml file")
-    q.add_argument("take", nargs="?", help="a labeled take of this marker set (.c3d .tsv .csv .trc .npz)")
+    q.add_argument("take", nargs="?", help="a labeled take of this marker set (.c3d .tsv .csv .txt .trc .npz)")
     q.add_argument("--side", choices=("right", "left"), default=None, help="hand side (default: the layout's)")
     add_units(q, "the take's coordinates")
     q.set_defaults(run=_cmd_layout_check)

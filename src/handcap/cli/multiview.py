@@ -78,7 +78,7 @@ def add_clean(verbs) -> None:
                                      "sliding window, then fill interior gaps by the rigid motion of the patch, "
                                      "linear and spline interpolation, each up to its own gap length. Nothing is "
                                      "extrapolated past the ends of a marker's data; longer gaps stay missing.")
-    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .txt .trc .npz)")
     p.add_argument("--layout", help=f"marker layout for clustering and the rigid fill: {', '.join(SHIPPED)} or a "
                                     ".toml file (default: none, those steps are skipped)")
     p.add_argument("--radius-mm", type=float, help="cluster radius for every patch, millimetres (default: from "

@@ -54,7 +54,7 @@ def add_occlusion(verbs) -> None:
                          description="linear/spline interpolate interior gaps; lk, ma, ac and nn are the real-time "
                                      "paper's predictors, run forwards and backwards and blended so the fill meets "
                                      "both ends of a gap. Gaps longer than --max-gap stay missing.")
-    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .txt .trc .npz)")
     p.add_argument("--method", choices=FILL_METHODS, default="nn", help="default %(default)s")
     p.add_argument("--model", help=f"occlusion model .npz, or a shipped one: {', '.join(SHIPPED_MODELS)} (nn)")
     p.add_argument("--max-gap", type=float, default=0.5, metavar="SECONDS",

@@ -33,7 +33,7 @@ def add_solve(verbs) -> None:
     p = verbs.add_parser("calibrate-markers", help="find where the markers sit on the hand from a calibration take",
                          description="Calibrate the marker attachment (triangle, barycentric coordinates, offset of "
                                      "every marker on its segment) from a take of an open hand slowly turned.")
-    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .txt .trc .npz)")
     p.add_argument("--layout", required=True, help=f"marker layout: {', '.join(SHIPPED)} or a .toml file")
     p.add_argument("--side", choices=("right", "left"), default=None,
                    help="hand side (default: the one the markers' left: or right: prefixes name, else the layout's)")
@@ -59,7 +59,7 @@ def add_solve(verbs) -> None:
 
     p = verbs.add_parser("solve", help="solve hand motion from labeled markers",
                          description="Per-frame hand pose from labeled markers with a calibrated attachment.")
-    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .trc .npz)")
+    p.add_argument("input", help="labeled markers (.c3d .tsv .csv .txt .trc .npz)")
     p.add_argument("--attachment", required=True, help="attachment .npz from calibrate-markers")
     p.add_argument("--method", choices=METHODS, default="lm", help="lm (default) or adam (the paper's, slow)")
     p.add_argument("--filter-cutoff", type=float, default=None, help="low-pass the motion at this frequency, Hz")

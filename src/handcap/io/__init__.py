@@ -9,6 +9,7 @@ suffix    format                             read / write
 ``.tsv``  Qualisys QTM TSV export            read
 ``.csv``  OptiTrack Motive CSV (1.2x),       read
           Vicon Nexus CSV (Trajectories)
+``.txt``  Vicon Nexus ASCII (tab-separated)  read
 ``.trc``  TRC (OpenSim / Motion Analysis)    read, write
 ``.npz``  handcap's own                      read, write
 ========  =================================  ==============
@@ -83,7 +84,7 @@ def read_marker_csv(path, *, units: str | None = None, hand=None) -> MarkerSeque
     return (read_vicon_csv if is_vicon_csv(head) else read_motive_csv)(path, units=units, hand=hand)
 
 
-MARKER_READERS = {".c3d": read_c3d, ".tsv": read_qualisys_tsv, ".csv": read_marker_csv,
+MARKER_READERS = {".c3d": read_c3d, ".tsv": read_qualisys_tsv, ".csv": read_marker_csv, ".txt": read_vicon_csv,
                   ".trc": read_trc, ".npz": read_markers_npz}
 MARKER_WRITERS = {".c3d": write_c3d, ".trc": write_trc, ".npz": write_markers_npz}
 

@@ -1,6 +1,6 @@
-"""Vicon Nexus CSV exports of marker trajectories.
+"""Vicon Nexus CSV exports of marker trajectories (and its tab-separated ``.txt`` exports).
 
-Layout, as Nexus 2 writes it (Export ASCII, or File > Export > CSV)::
+Layout, as Nexus 2 writes it (Export ASCII, or File > Export > CSV; a ``.txt`` export has tabs for commas)::
 
     Devices                              <- other sections, before or after: skipped
     1000
@@ -28,6 +28,7 @@ missing samples, and a warning says how many there were.
 from __future__ import annotations
 
 import csv
+import re
 
 import numpy as np
 
@@ -42,7 +43,7 @@ SECTIONS = ("Trajectories", "Devices", "Model Outputs", "Joints", "Segments", "T
 
 
 def is_vicon_csv(text: str) -> bool:
-    """Whether ``text`` (a CSV file's decoded text) starts, after blank lines, with a Nexus section name.
+    """Whether ``text`` (a CSV or ``.txt`` file's decoded text) starts, after blank lines, with a Nexus section name.
 
     Parameters
     ----------
@@ -54,17 +55,23 @@ def is_vicon_csv(text: str) -> bool:
     """
     for line in text.splitlines()[:50]:
         if line.strip(" ,\t"):
-            return line.split(",")[0].strip() in SECTIONS
+            return re.split("[,\t]", line)[0].strip() in SECTIONS
     return False
 
 
-def _section(lines: list[str], path) -> int:
+def _separator(lines: list[str]) -> str:
+    """A tab where the file's first lines hold more tabs than commas (a ``.txt`` export), else a comma."""
+    head = "".join(lines[:30])
+    return "\t" if head.count("\t") > head.count(",") else ","
+
+
+def _section(lines: list[str], sep: str, path) -> int:
     """The line index of the ``Trajectories`` section's name."""
     for k, line in enumerate(lines):
-        cells = line.split(",")
+        cells = line.split(sep)
         if cells[0].strip() == "Trajectories" and not "".join(cells[1:]).strip():
             return k
-    found = sorted({line.split(",")[0].strip() for line in lines if line.split(",")[0].strip() in SECTIONS})
+    found = sorted({line.split(sep)[0].strip() for line in lines if line.split(sep)[0].strip() in SECTIONS})
     raise HandcapError(f"{path}: {_WHAT} without a Trajectories section (it holds {', '.join(found) or 'none'}); "
                        "export again with Trajectories ticked")
 
@@ -131,19 +138,21 @@ def read_vicon_csv(path, *, units: str | None = None, hand=None) -> MarkerSequen
     lines = text.splitlines()
     if not is_vicon_csv(text):
         raise HandcapError(f"{path}: not {_WHAT} (its first line should name a section, such as Trajectories)")
-    top = _section(lines, path)
+    sep = _separator(lines)
+    top = _section(lines, sep, path)
     if top + 4 >= len(lines):
         raise HandcapError(f"{path}: the Trajectories section stops within its header rows; the file is cut")
-    rate = _rate(lines[top + 1].split(",")[0], path, top + 2)
-    names, roles = (next(csv.reader([lines[top + k]])) for k in (2, 3))
+    rate = _rate(lines[top + 1].split(sep)[0], path, top + 2)
+    names, roles = (next(csv.reader([lines[top + k]], delimiter=sep)) for k in (2, 3))
     if [c.strip() for c in roles[:2]] != ["Frame", "Sub Frame"]:
-        raise HandcapError(f"{path}: line {top + 4} should start with 'Frame,Sub Frame'; the file is damaged")
+        raise HandcapError(f"{path}: line {top + 4} should start with the columns Frame and Sub Frame; "
+                           "the file is damaged")
     columns = _markers(names, roles, path, top + 3)
     xyz = [k for axes in columns.values() for k in axes]
     first = top + 4
     if not lines[first].strip(" ,\t"):
         raise HandcapError(f"{path}: the Trajectories section holds no frames")
-    unit_cells = next(csv.reader([lines[first]]))
+    unit_cells = next(csv.reader([lines[first]], delimiter=sep))
     declared = "mm"
     if not unit_cells[0].strip():  # the units row (Nexus 2 always writes it)
         found = {unit_cells[k].strip() for k in xyz if k < len(unit_cells)}
@@ -160,7 +169,7 @@ def read_vicon_csv(path, *, units: str | None = None, hand=None) -> MarkerSequen
     if end == len(lines):
         check_complete(text, path, "the CSV file")
     width = len(roles)
-    rows = uniform_rows([line.split(",") for line in lines[first:end]], width, path, first + 1)
+    rows = uniform_rows([line.split(sep) for line in lines[first:end]], width, path, first + 1)
     take = xyz + [0]
     cells = np.array(rows, dtype=str).reshape(len(rows), width)[:, take]
     values = floats(cells, path, lambda r, c: f"line {first + r + 1}, column {take[c] + 1} "

@@ -81,7 +81,7 @@ truth = "{name}/truth.npz"
 
 TAKE = '''[[takes]]
 name = "{name}"
-kind = "markers"             # labelled markers (.c3d .trc .tsv .csv .npz)
+kind = "markers"             # labelled markers (.c3d .trc .tsv .csv .txt .npz)
 markers = "{name}/markers.c3d"
 calibration = "calibration/markers.c3d"   # or attachment = "attachment.npz"
 truth = "{name}/truth.npz"   # synthetic takes only: the metrics compare against it

@@ -22,7 +22,7 @@ def convert(path, out, *, partial: bool = False, units: str | None = None) -> St
     Parameters
     ----------
     path, out : str or Path
-        Marker files (.c3d .tsv .csv .trc .npz in; .c3d .trc .npz out); ``out`` must not be ``path``.
+        Marker files (.c3d .tsv .csv .txt .trc .npz in; .c3d .trc .npz out); ``out`` must not be ``path``.
     partial : bool
         C3D: keep the complete frames of a file shorter than its header promises.
     units : {'mm', 'cm', 'm'} or None
