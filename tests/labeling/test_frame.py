@@ -4,6 +4,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from handcap.labeling.frame import HandFrameFinder, RigidSet, triangles_within
+from handcap.labeling.relearn import search_frames
 
 TRIAD = np.array([[0.0, 0.03, 0.0], [-0.03, -0.02, 0.0], [0.035, -0.015, 0.0]])
 
@@ -94,32 +95,35 @@ def test_triangles_within_lists_what_the_whole_cube_of_tests_lists():
     assert not (triangles_within(dist, sides, tol)[:, 1:] >= 25)[brute[:, 0] == 2].any()
 
 
-def test_search_each_gives_what_find_gives_after_reset():
-    # Frames of a triad among clutter (some without it, some with a look-alike, one of two points): the batched
-    # search finds the same points and poses as the finder frame by frame.
+def test_search_frames_gives_what_find_gives_after_reset():
+    # Frames of a triad among clutter (some without it, some with a look-alike, one of two points), searched for
+    # three sets at once (the triad, one a little larger, one of other sides): each set's poses are those its
+    # finder finds frame by frame.
     rng = np.random.default_rng(8)
     canonical = TRIAD - TRIAD.mean(0)
-    finder = HandFrameFinder(RigidSet(("a", "b", "c"), canonical, 0.003), max_hold=0)
+    sets = [RigidSet(("a", "b", "c"), c, 0.003) for c in (canonical, canonical * 1.08, canonical[[0, 2, 1]] * 0.9)]
     frames = []
     for t in range(40):
         hand, _ = place(canonical, rng.normal(size=3), rng.normal(scale=0.1, size=3) + [0, 0, 1])
         clutter = rng.uniform(-0.1, 0.1, (rng.integers(0, 25), 3)) + hand.mean(0)
         parts = [hand + rng.normal(scale=0.0007, size=hand.shape)] if t % 5 else []
         if t % 7 == 0:
-            parts.append(place(canonical, rng.normal(size=3), hand.mean(0) + [0.05, 0, 0])[0])
+            parts.append(place(canonical * 1.08, rng.normal(size=3), hand.mean(0) + [0.05, 0, 0])[0])
         pts = np.concatenate(parts + [clutter])
         frames.append(pts[rng.permutation(len(pts))])
     frames.append(frames[1][:2])
-    batched = finder.search_each(frames)
-    found = 0
-    for pts, pose in zip(frames, batched):
-        finder.reset()
-        alone = finder.find(pts)
-        assert (alone is None) == (pose is None)
-        if pose is not None:
-            found += 1
-            np.testing.assert_array_equal(pose.points, alone.points)
-            np.testing.assert_allclose(pose.rotation, alone.rotation, atol=1e-12)
-            np.testing.assert_allclose(pose.translation, alone.translation, atol=1e-12)
-    assert 30 <= found < len(frames)
-    assert finder.search_each([]) == [] and finder.search_each([frames[1][:2]]) == [None]
+    batched = search_frames(sets, frames)
+    counts = []
+    for rigid, poses in zip(sets, batched):
+        finder = HandFrameFinder(rigid, max_hold=0)
+        for pts, pose in zip(frames, poses):
+            finder.reset()
+            alone = finder.find(pts)
+            assert (alone is None) == (pose is None)
+            if pose is not None:
+                np.testing.assert_array_equal(pose.points, alone.points)
+                np.testing.assert_allclose(pose.rotation, alone.rotation, atol=1e-12)
+                np.testing.assert_allclose(pose.translation, alone.translation, atol=1e-12)
+        counts.append(sum(p is not None for p in poses))
+    assert 30 <= counts[0] < len(frames) and counts[1] >= 5
+    assert search_frames(sets, []) == [[], [], []] and search_frames(sets[:1], [frames[1][:2]]) == [[None]]

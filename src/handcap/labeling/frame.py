@@ -35,8 +35,8 @@ from handcap.labeling.rigid_set import OBJECT_MIN_TOLERANCE, RigidSet, objects_f
 from handcap.objects.rigid import kabsch
 
 # RigidSet and its helpers live in handcap.labeling.rigid_set; re-exported here so older imports keep working.
-__all__ = ["OBJECT_MIN_TOLERANCE", "HandFrameFinder", "HandPose", "RigidSet", "objects_from_take", "padded_distances",
-           "triangles_within"]
+__all__ = ["OBJECT_MIN_TOLERANCE", "HandFrameFinder", "HandPose", "RigidSet", "anchor_triangles", "complete_pose",
+           "objects_from_take", "padded_distances", "triangles_within"]
 
 
 def _kabsch(source, target, weights=None):
@@ -115,6 +115,49 @@ def padded_distances(frames):
     return points, np.linalg.norm(points[:, :, None] - points[:, None], axis=-1)
 
 
+def anchor_triangles(canonical) -> np.ndarray:
+    """The triangles (A, 3) of a rigid set's markers (R, 3) that anchor the search: the largest, then for each of
+    its markers the largest without it, so that one hidden marker does not hide an object."""
+    c = np.asarray(canonical, dtype=np.float64)
+    n = len(c)
+    tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
+    order = tri[np.argsort(-np.linalg.norm(np.cross(c[tri[:, 1]] - c[tri[:, 0]], c[tri[:, 2]] - c[tri[:, 0]]),
+                                           axis=1), kind="stable")]
+    anchors = [order[0]] + [order[~(order == m).any(axis=1)][0] for m in order[0] if n > 3]
+    return np.unique(np.array(anchors), axis=0)
+
+
+def complete_pose(points, rigid: RigidSet, rot, trans, index) -> HandPose:
+    """A pose found from an anchor triangle, with the set's other markers added near their predicted places
+    (within the tolerance, a point each) and refitted on all found.
+
+    Parameters
+    ----------
+    points : ndarray (K, 3)
+        The frame's points, metres.
+    rigid : RigidSet
+    rot, trans : ndarray (3, 3), ndarray (3,)
+        The anchor's pose, ``world = rot @ local + trans``.
+    index : ndarray (R,) int
+        Each marker's point, -1 where not yet placed (changed in place).
+    """
+    c = rigid.canonical
+    predicted = c @ rot.T + trans
+    taken = set(index[index >= 0].tolist())
+    for r in np.flatnonzero(index < 0):
+        d = np.linalg.norm(points - predicted[r], axis=1)
+        for p in np.argsort(d):
+            if d[p] > rigid.tolerance:
+                break
+            if p not in taken:
+                index[r] = p
+                taken.add(int(p))
+                break
+    found = index >= 0
+    if found.sum() > 3:
+        rot, trans = _kabsch(c[found], points[index[found]])
+    return HandPose(rot, trans, index, True)
+
 class HandFrameFinder:
     """Finds a hand's rigid markers frame after frame (keeps the previous pose).
 
@@ -159,15 +202,8 @@ class HandFrameFinder:
         self._rows = np.arange(n)
         self._pair_i, self._pair_j = np.triu_indices(n, 1)
         self._pair_dist = self._canon_dist[self._pair_i, self._pair_j]
-        # The triangles of largest area anchor the search (several, so that one hidden marker does not
-        # hide an object); a candidate must then explain at least min_found markers.
-        tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
-        order = tri[np.argsort(-np.linalg.norm(np.cross(c[tri[:, 1]] - c[tri[:, 0]], c[tri[:, 2]] - c[tri[:, 0]]),
-                                               axis=1), kind="stable")]
-        # The largest, then for each of its markers the largest without it: any one hidden marker leaves one.
-        anchors = [order[0]] + [order[~(order == m).any(axis=1)][0] for m in order[0] if n > 3]
-        self._anchors = np.unique(np.array(anchors), axis=0)
-        self.min_found = 3 if n <= 4 else 4
+        self._anchors = anchor_triangles(c)
+        self.min_found = 3 if n <= 4 else 4  # markers a candidate must explain
 
     def reset(self) -> None:
         """Forget the previous pose: the next frame is searched afresh."""
@@ -275,79 +311,9 @@ class HandFrameFinder:
         index[anchor[best]] = cand[best]
         return self._complete(points, rot[best], trans[best], index)
 
-    def search_each(self, frames, padded=None) -> list:
-        """Each frame's pose searched afresh, as :meth:`find` gives it after :meth:`reset` without a fit, but
-        batched over the frames (re-learning the rigid set judges many candidate sets in the same frames).
-
-        Parameters
-        ----------
-        frames : sequence of ndarray (K, 3)
-            Points per frame (no NaN), metres.
-        padded : tuple, optional
-            :func:`padded_distances` of ``frames``, when several finders search the same frames.
-
-        Returns
-        -------
-        list of HandPose or None
-            One per frame; None where the set is not found.
-        """
-        c, tol = self.rigid.canonical, self.rigid.tolerance
-        out: list = [None] * len(frames)
-        sizes = np.array([len(f) for f in frames], dtype=int)
-        if not len(frames) or sizes.max() < 3:
-            return out
-        pts, dist = padded_distances(frames) if padded is None else padded  # NaN: never within a tolerance
-        few = (sizes < 3)[:, None, None]
-        if few.any():  # (a frame of fewer than 3 points is not searched)
-            pts, dist = np.where(few, np.nan, pts), np.where(few, np.nan, dist)
-        cands, anchors = [], []
-        for a, b, d in self._anchors:
-            found = triangles_within(dist, self._canon_dist[[a, a, b], [b, d, d]], tol)
-            cands.append(found)  # (n, 4): frame, then the points for markers a, b, d
-            anchors.append(np.broadcast_to((a, b, d), (len(found), 3)))
-        cand, anchor = np.concatenate(cands), np.concatenate(anchors)
-        order = np.argsort(cand[:, 0], kind="stable")  # frame by frame, each in _search's order
-        cand, anchor = cand[order], anchor[order]
-        if not len(cand):
-            return out
-        frame, cand = cand[:, 0], cand[:, 1:]
-        target = pts[frame[:, None], cand]
-        src = c[anchor]
-        rot, trans = kabsch(src, target)
-        resid = np.linalg.norm(np.einsum("nij,nrj->nri", rot, src) + trans[:, None] - target, axis=-1)
-        score = (resid**2).sum(axis=1) / tol**2
-        score[resid.max(axis=1) > tol] = np.inf
-        placed = np.einsum("nij,rj->nri", rot, c) + trans[:, None]
-        gap = np.linalg.norm(placed[:, :, None] - pts[frame][:, None], axis=-1)
-        support = (np.where(np.isnan(gap), np.inf, gap).min(axis=2) < tol).sum(axis=1)
-        score[support < min(self.min_found, len(c))] = np.inf
-        score -= 2.0 * support
-        first = np.lexsort((np.arange(len(score)), score, frame))  # each frame's lowest score, first of ties
-        first = first[np.r_[True, frame[first][1:] != frame[first][:-1]]]
-        for n in first[np.isfinite(score[first])]:
-            index = np.full(len(c), -1)
-            index[anchor[n]] = cand[n]
-            out[frame[n]] = self._complete(frames[frame[n]], rot[n], trans[n], index)
-        return out
-
     def _complete(self, points, rot, trans, index) -> HandPose:
         """Add the other rigid markers near their predicted places and refit on all found."""
-        c = self.rigid.canonical
-        predicted = c @ rot.T + trans
-        taken = set(index[index >= 0].tolist())
-        for r in np.flatnonzero(index < 0):
-            d = np.linalg.norm(points - predicted[r], axis=1)
-            for p in np.argsort(d):
-                if d[p] > self.rigid.tolerance:
-                    break
-                if p not in taken:
-                    index[r] = p
-                    taken.add(int(p))
-                    break
-        found = index >= 0
-        if found.sum() > 3:
-            rot, trans = _kabsch(c[found], points[index[found]])
-        return HandPose(rot, trans, index, True)
+        return complete_pose(points, self.rigid, rot, trans, index)
 
     def _from_previous(self, points) -> HandPose | None:
         """Two or more rigid markers near their previous places: correct the previous transform."""

@@ -17,7 +17,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from handcap.labeling.frame import HandFrameFinder, padded_distances, triangles_within
+from handcap.labeling.frame import (
+    anchor_triangles,
+    complete_pose,
+    padded_distances,
+    triangles_within,
+)
 from handcap.labeling.rigid_set import RigidSet
 from handcap.labeling.spatial import SpatialModel
 from handcap.objects.rigid import canonical_from_markers, kabsch
@@ -196,29 +201,95 @@ def _fits_in_frames(spatial: SpatialModel, sets, use, *, most: int = 20, floor: 
     """How well the other points of frames ``use`` fit the spatial model in the hand frame each of ``sets``
     gives: the mean over points of the best label's log-likelihood (at least ``floor``), frames without the set
     counting every point at the floor; -inf for a set found in none. No label-free registration first: the
-    candidates' shapes are turned onto the trained one, and a registration lets a wrong frame fit too."""
+    candidates' shapes are turned onto the trained one, and a registration lets a wrong frame fit too. Every
+    ``len(use) // most``-th frame is judged (all of 10 to 39 frames: with at most 20 of 35, seed 37 of
+    ``benchmarks/labeling.py`` section 9 re-learned a look-alike, 345 -> 7,166 points labelled wrong)."""
     frames = use[:: max(1, len(use) // most)]
-    local, owner = [], []
-    missing, found = np.zeros(len(sets)), np.zeros(len(sets), bool)
     padded = padded_distances(frames)
-    for s, rigid in enumerate(sets):
-        for pts, pose in zip(frames, HandFrameFinder(rigid, max_hold=0).search_each(frames, padded)):
-            if pose is None:
-                missing[s] += len(pts)
-                continue
-            found[s] = True
-            others = np.delete(pts, pose.points[pose.points >= 0], axis=0)
-            local.append((others - pose.translation) @ pose.rotation)
-            owner.append(np.full(len(others), s))
+    poses = [(s, f, pose) for s, row in enumerate(search_frames(sets, frames, padded))
+             for f, pose in enumerate(row) if pose is not None]
+    sizes = np.array([len(pts) for pts in frames])
     fits = np.full(len(sets), -np.inf)
-    if not found.any():
+    if not poses:
         return fits
-    best = np.maximum(spatial.log_likelihood(np.concatenate(local)).max(axis=0), floor)  # every set's at once
-    owner = np.concatenate(owner)
-    for s in np.flatnonzero(found):
-        mine = best[owner == s]
+    owner, frame = (np.array(column) for column in list(zip(*poses))[:2])
+    missing = sizes.sum() - np.bincount(owner, weights=sizes[frame], minlength=len(sets))
+    rot = np.stack([pose.rotation for _, _, pose in poses])
+    trans = np.stack([pose.translation for _, _, pose in poses])
+    local = np.einsum("pkj,pji->pki", padded[0][frame] - trans[:, None], rot)  # every pose's points, hand frame
+    others = ~np.isnan(local[..., 0])
+    used = np.stack([pose.points for _, _, pose in poses])  # the set's own markers are not judged
+    row, column = np.nonzero(used >= 0)
+    others[row, used[row, column]] = False
+    best = np.maximum(spatial.log_likelihood(local[others]).max(axis=0), floor)  # every set's at once
+    point_owner = np.broadcast_to(owner[:, None], others.shape)[others]
+    for s in np.unique(owner):
+        mine = best[point_owner == s]
         fits[s] = (mine.sum() + floor * missing[s]) / (len(mine) + missing[s])
     return fits
+
+
+def search_frames(rigids, frames, padded=None) -> list:
+    """Each rigid set's pose in each frame searched afresh (as :meth:`handcap.labeling.frame.HandFrameFinder.find`
+    gives it after a reset, without a fit: anchor triangles by distances, scored by their fit and support), batched
+    over the sets and the frames: re-learning the rigid set judges many candidate sets in the same frames.
+
+    Parameters
+    ----------
+    rigids : sequence of RigidSet
+        Sets of the same number of markers.
+    frames : sequence of ndarray (K, 3)
+        Points per frame (no NaN), metres.
+    padded : tuple, optional
+        :func:`handcap.labeling.frame.padded_distances` of ``frames``, when the caller has it.
+
+    Returns
+    -------
+    list of list of HandPose or None
+        Per set, one per frame; None where the set is not found.
+    """
+    out: list = [[None] * len(frames) for _ in rigids]
+    sizes = np.array([len(f) for f in frames], dtype=int)
+    if not len(frames) or not len(rigids) or sizes.max() < 3:
+        return out
+    pts, dist = padded_distances(frames) if padded is None else padded  # NaN: never within a tolerance
+    few = (sizes < 3)[:, None, None]
+    if few.any():  # (a frame of fewer than 3 points is not searched)
+        pts, dist = np.where(few, np.nan, pts), np.where(few, np.nan, dist)
+    canon = np.stack([r.canonical for r in rigids])  # (S, R, 3)
+    tol = np.array([r.tolerance for r in rigids])
+    found, anchor, owner = [], [], []
+    for s, c in enumerate(canon):
+        sides = np.linalg.norm(c[:, None] - c[None], axis=-1)
+        for a, b, d in anchor_triangles(c):
+            found.append(triangles_within(dist, sides[[a, a, b], [b, d, d]], tol[s]))  # frame, points for a, b, d
+            anchor.append(np.broadcast_to((a, b, d), (len(found[-1]), 3)))
+            owner.append(np.full(len(found[-1]), s))
+    cand, anchor, owner = np.concatenate(found), np.concatenate(anchor), np.concatenate(owner)
+    if not len(cand):
+        return out
+    order = np.lexsort((cand[:, 0], owner))  # set by set, frame by frame, each in the finder's order (stable)
+    cand, anchor, owner = cand[order], anchor[order], owner[order]
+    frame, cand = cand[:, 0], cand[:, 1:]
+    target, src, t = pts[frame[:, None], cand], canon[owner[:, None], anchor], tol[owner]
+    rot, trans = kabsch(src, target)
+    resid = np.linalg.norm(np.einsum("nij,nrj->nri", rot, src) + trans[:, None] - target, axis=-1)
+    score = (resid**2).sum(axis=1) / t**2
+    score[resid.max(axis=1) > t] = np.inf
+    # Each candidate's markers where it puts them: how many have a point there (its support).
+    placed = np.einsum("nij,nrj->nri", rot, canon[owner]) + trans[:, None]
+    gap = np.linalg.norm(placed[:, :, None] - pts[frame][:, None], axis=-1)
+    support = (np.where(np.isnan(gap), np.inf, gap).min(axis=2) < t[:, None]).sum(axis=1)
+    score[support < (3 if canon.shape[1] <= 4 else 4)] = np.inf
+    score -= 2.0 * support
+    key = owner * len(frames) + frame
+    first = np.lexsort((np.arange(len(score)), score, key))  # each set's and frame's lowest score, first of ties
+    first = first[np.r_[True, key[first][1:] != key[first][:-1]]]
+    for m in first[np.isfinite(score[first])]:
+        index = np.full(canon.shape[1], -1)
+        index[anchor[m]] = cand[m]
+        out[owner[m]][frame[m]] = complete_pose(frames[frame[m]], rigids[owner[m]], rot[m], trans[m], index)
+    return out
 
 
 def largest_change(a: RigidSet, b: RigidSet) -> float:
