@@ -154,6 +154,28 @@ def test_labels_the_labeller_released_are_a_warning_of_the_stream(unlabelled, mo
     assert sum("labels released to the spatial model" in w for w in stats.warnings) == 1
 
 
+def test_a_model_of_another_subject_is_a_warning_of_the_stream(unlabelled):
+    """Labels streamed with another subject's model are said doubtful at the end, as label_take says them: the rigid
+    set re-learned, the hand frame often lost, few points labelled (before, only the releases were said)."""
+    from handcap.core.errors import HandcapWarning
+
+    take, model = unlabelled
+    hand = OpenHand("right")
+    plausibility = ("rigid markers' distances", "hand frame lost", "labelled in", "labels for")
+    same = stream(take.points, take.attachment, hand, realtime=False, labeling=model, seconds=3.0)
+    assert not any(p in w for w in same.warnings for p in plausibility)
+    layout = load_layout("joints-19")
+    rom = synthesize(SynthConfig(layout=layout.name, motion="random", frames=600, rate=120.0, seed=11,
+                                 subject_seed=43), progress=False)
+    other = LabelingModel.train(rom.markers, layout.names, layout.rigid)
+    with pytest.warns(HandcapWarning, match="rigid markers' distances in this take differ from training"):
+        stats = stream(take.points, take.attachment, hand, realtime=False, labeling=other, seconds=3.0)
+    said = " | ".join(stats.warnings)
+    assert "rigid markers' distances" in said and "labels for" in said, said
+    share = float(re.search(r"labels for ([0-9.]+) % of the points", said).group(1))
+    assert share < 95.0
+
+
 def test_a_hidden_marker_is_filled_near_where_it_is(unlabelled):
     take, _ = unlabelled
     from handcap.stream import LivePipeline

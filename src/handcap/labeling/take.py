@@ -23,7 +23,7 @@ from handcap.labeling.model import LabelingModel, rigid_transforms
 from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
 from handcap.labeling.realign import adapt_means, register_to_model
-from handcap.labeling.release import release_warning
+from handcap.labeling.plausible import LABELLED_WARNING, label_warnings, missing_labels
 from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
 from handcap.labeling.rigid_set import RigidSet
 
@@ -47,22 +47,14 @@ FIRST_PASS_BIRTH = 0
 #: (synthetic subject 7, its triad 12 mm off: 54.1 -> 93.7 % correct, 76 -> 94 % of the points labelled), and
 #: the online pass can too (subject 9: 73 % labelled against the search's 94 %).
 ONLINE_RIGID_MARGIN = 0.01
-#: Offline, a label given in fewer than this share of the frames the median label is given in was not found where
-#: the training take puts it (another subject's knuckle marker 15 mm off, its components 1 mm wide). The take is
-#: then labelled again with every component widened by ``MISSING_SPREAD`` (metres) in the first pass and the
-#: means moved to those labels, and that is kept when it labels ``ONLINE_RIGID_MARGIN`` more of the points.
-#: Chosen on synthetic subjects 7, 9 and 11 of the labeling benchmark (correct % of the points, offline): 3 and
-#: 5 mm gave the same, 8 mm confused neighbouring labels (subject 7: 96.9 % at 5 mm, 85.8 % at 8 mm).
-MISSING_SHARE = 0.5
+#: Offline, a label given in fewer than :data:`~handcap.labeling.plausible.MISSING_SHARE` of the frames the median
+#: label is given in was not found where the training take puts it (another subject's knuckle marker 15 mm off, its
+#: components 1 mm wide). The take is then labelled again with every component widened by ``MISSING_SPREAD``
+#: (metres) in the first pass and the means moved to those labels, and that is kept when it labels
+#: ``ONLINE_RIGID_MARGIN`` more of the points. Chosen on synthetic subjects 7, 9 and 11 of the labeling benchmark
+#: (correct % of the points, offline): 3 and 5 mm gave the same, 8 mm confused neighbouring labels (subject 7:
+#: 96.9 % at 5 mm, 85.8 % at 8 mm).
 MISSING_SPREAD = 0.005
-#: Warn when the hand frame is lost in more than this share of the frames.
-LOST_WARNING = 0.05
-#: Warn when fewer than this share of the points in the stream get a label.
-LABELLED_WARNING = 0.95
-#: Warn when the rigid markers' distances in the take differ from training by more than this (metres): the
-#: rigid set was re-learned from the take (a marker stuck back elsewhere, another glove or subject), and the
-#: labels rest on that.
-RIGID_CHANGE_WARNING = 0.002
 
 
 @dataclass(frozen=True)
@@ -208,8 +200,7 @@ def _given_shares(markers: MarkerSequence, model: LabelingModel) -> np.ndarray:
 def _missing_labels(markers: MarkerSequence, model: LabelingModel) -> np.ndarray:
     """Mask (M,) over ``model.spatial.names``: labels given in under ``MISSING_SHARE`` of the frames the median
     label is given in."""
-    given = _given_shares(markers, model)
-    return given < MISSING_SHARE * np.median(given)
+    return missing_labels(_given_shares(markers, model))
 
 
 def _labelled_share(result: LabelResult, points) -> float:
@@ -312,8 +303,9 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
 
 
 def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=()) -> LabelResult:
-    """The result with its warnings (issued and stored on it and on its markers); ``model`` the adapted model
-    (offline), ``trained`` the one given, ``found_wider`` the labels found only by a wider search."""
+    """The result with its warnings (:func:`~handcap.labeling.plausible.label_warnings`, issued and stored on it
+    and on its markers); ``model`` the adapted model (offline), ``trained`` the one given, ``found_wider`` the
+    labels found only by a wider search."""
     lines = []
     if found_wider:
         lines.append(warn(f"{', '.join(found_wider)} not found where the training take puts "
@@ -321,36 +313,10 @@ def _with_warnings(result: LabelResult, points, model, trained=None, found_wider
                           f"{1000 * MISSING_SPREAD:.0f} mm wider (another subject or marker placement): check "
                           f"{'these labels' if len(found_wider) > 1 else 'this label'}, or train on a take of this "
                           "subject", stacklevel=3))
-    if isinstance(trained, LabelingModel) and trained.rigid is not None and result.rigid is not None:
-        change = largest_change(trained.rigid, result.rigid)
-        if change > RIGID_CHANGE_WARNING:
-            lines.append(warn(f"the rigid markers' distances in this take differ from training by up to "
-                              f"{1000 * change:.1f} mm (re-learned from the take; plausible <= "
-                              f"{1000 * RIGID_CHANGE_WARNING:.0f} mm): a marker moved, or another glove or subject; "
-                              f"check the labels, or train on a take of this session", stacklevel=3))
-    if isinstance(trained, LabelingModel) and result.markers.n_frames:
-        missing = _missing_labels(result.markers, trained)
-        if missing.any():
-            names = [n for n, m in zip(trained.spatial.names, missing) if m]
-            given = _given_shares(result.markers, trained)
-            lines.append(warn(f"{', '.join(names)} labelled in {', '.join(f'{100 * g:.0f}' for g in given[missing])} "
-                              f"% of the frames, against {100 * np.median(given):.0f} % for the median label: "
-                              "hidden most of the take, missing from it, or far from where the training take puts "
-                              f"{'them' if len(names) > 1 else 'it'}; check the markers, or train on a take of this "
-                              "subject", stacklevel=3))
-    n_frames = max(points.n_frames, 1)
-    lost = len(result.lost_frames)
-    if lost > LOST_WARNING * n_frames:
-        lines.append(warn(f"hand frame lost in {100 * lost / n_frames:.1f} % of the frames ({lost} of {n_frames}; "
-                          f"plausible <= {100 * LOST_WARNING:.0f} %): the rigid markers were not found at their "
-                          f"trained distances; check the layout's rigid markers or train on a take of this session",
-                          stacklevel=3))
-    released = release_warning(result.released, points.rate)
-    if released:
-        lines.append(warn(released, stacklevel=3))
-    share = _labelled_share(result, points)
-    if share < LABELLED_WARNING:  # False for NaN: no points, nothing to label
-        lines.append(warn(f"labels for {100 * share:.1f} % of the points in the stream (plausible >= "
-                          f"{100 * LABELLED_WARNING:.0f} %): many points fit no label; check the layout and the "
-                          f"training take", stacklevel=3))
+    one = isinstance(trained, LabelingModel)
+    given = _given_shares(result.markers, trained) if one and result.markers.n_frames else np.zeros(0)
+    lines += [warn(line, stacklevel=3) for line in label_warnings(
+        trained.spatial.names if one else (), given, trained_rigid=trained.rigid if one else None, rigid=result.rigid,
+        lost=len(result.lost_frames), frames=points.n_frames, labelled=_labelled_share(result, points),
+        released=result.released, rate=points.rate)]
     return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)

@@ -22,7 +22,6 @@ from tqdm import tqdm
 from handcap.core.errors import HandcapError, warn
 from handcap.core.points import PointCloudSequence
 from handcap.core.markers import MarkerSequence
-from handcap.labeling.release import release_warning
 from handcap.stream.pipeline import LivePipeline
 from handcap.stream.solver import SMOOTHING
 from handcap.stream.sources import ReplaySource
@@ -51,8 +50,10 @@ class StreamStats:
     seen, filled : ndarray (frames,) int
         Markers measured (labelled) and predicted in each frame.
     warnings : tuple of str
-        Labels the solve found swapped and solved exchanged (:meth:`FrameSolver.swap_warnings`), printed as
-        :class:`~handcap.HandcapWarning` at the stream's end.
+        Labels the solve found swapped and solved exchanged (:meth:`FrameSolver.swap_warnings`), and the labels'
+        plausibility (:meth:`LivePipeline.label_warnings`: a rigid set re-learned, the hand frame often lost,
+        labels hardly given, few points labelled, labels released), printed as :class:`~handcap.HandcapWarning`
+        at the stream's end.
     """
 
     frames: int
@@ -208,8 +209,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     n = rows.count
     stage_ms = {k: v[:n].astype(np.float64) for k, v in rows.stage_ms.items()}
     solved = rows.solved[:n] if keep_solved else np.zeros((0, 21, 3))
-    released = [] if pipeline.labeler is None else [release_warning(pipeline.labeler.released, source.rate)]
-    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate) + released if line)
+    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate)
+                  + pipeline.label_warnings(source.rate) if line)
     return StreamStats(n, rows.latency[:n].astype(np.float64), tuple(memory), solved, stage_ms, rows.seen[:n],
                        rows.filled[:n], found)
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.labeling import LabelingModel, OnlineLabeler, lap
+from handcap.labeling.plausible import LabelTally, label_warnings
 from handcap.occlusion import OcclusionFiller, OcclusionModel
 from handcap.stream.solver import ITERATIONS, SMOOTHING, FrameSolver
 
@@ -103,7 +104,7 @@ class LivePipeline:
         self.names = tuple(attachment.marker_names)
         self.solver = FrameSolver(attachment, hand, iterations=iterations, smoothing=smoothing,
                                   mend_swaps=mend_swaps)
-        self.labeler = self.label_columns = None
+        self.labeler = self.label_columns = self.tally = None
         if labeling is not None:
             model = labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)
             self.labeler = OnlineLabeler(model, lag=0, hypotheses=hypotheses,
@@ -114,6 +115,7 @@ class LivePipeline:
             if (self.label_columns < 0).all():
                 raise HandcapError(f"the labelling model's markers ({', '.join(model.names[:4])}...) are not the "
                                    f"attachment's ({', '.join(self.names[:4])}...): give the model of this layout")
+            self.tally = LabelTally(len(self.labeler.names))  # what the labels add up to: label_warnings()
         self.filler = self.fill_columns = None
         if fill is not None:
             model = OcclusionModel.resolve(fill)
@@ -151,6 +153,7 @@ class LivePipeline:
         if self.labeler is not None:
             points = data.reshape(-1, 3)
             labels = self.labeler.update(points)
+            self.tally.add(labels, np.isfinite(points).all(axis=1))
             markers = np.full((len(self.names), 3), np.nan)
             kept = labels >= 0  # one label per point given, -1 for no marker (and for NaN rows)
             columns = self.label_columns[labels[kept]]
@@ -174,6 +177,25 @@ class LivePipeline:
         self.last_ms = {"label": 1000 * (labelled - start), "fill": 1000 * (completed - labelled),
                         "solve": 1000 * (done - completed)}
         return LiveFrame(joints, phi, markers[self.solver.order], seen, filled, rms)
+
+    def label_warnings(self, rate: float) -> list[str]:
+        """The labels' plausibility so far, one line each (:func:`~handcap.labeling.plausible.label_warnings`: a
+        rigid set re-learned, the hand frame often lost, labels hardly given, few points labelled, releases);
+        empty without a labelling model.
+
+        Parameters
+        ----------
+        rate : float
+            Frames per second.
+        """
+        if self.labeler is None:
+            return []
+        lab, model = self.labeler, self.labeler.model
+        free = model.spatial.names
+        return label_warnings(free, self.tally.shares([lab.names.index(n) for n in free]),
+                              trained_rigid=model.rigid, rigid=None if lab.finder is None else lab.finder.rigid,
+                              lost=len(lab.lost_frames), frames=self.tally.frames,
+                              labelled=self.tally.labelled_share, released=lab.released, rate=rate)
 
     def idle(self) -> None:
         """The work the last frame left for before the next one (the labeler's filters and its periodic

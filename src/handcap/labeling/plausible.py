@@ -1,0 +1,143 @@
+"""Whether a labelling is plausible: the warnings a labelled take, offline or streamed live, carries.
+
+A labeler given another subject, another glove or a marker stuck back elsewhere still labels, and its labels
+may be wrong without any error. What shows it is counted as it labels: the rigid set re-learned from the take
+(its distances more than :data:`RIGID_CHANGE_WARNING` from training), the hand frame lost in more than
+:data:`LOST_WARNING` of the frames, a label given in under :data:`MISSING_SHARE` as many frames as the median
+label (hidden, missing, or far from where training puts it), fewer than :data:`LABELLED_WARNING` of the points
+labelled, and labels released to the spatial model (:mod:`handcap.labeling.release`). :func:`label_warnings`
+says each in one line; :func:`handcap.labeling.label_take` stores them with its result, and a live stream
+(:class:`LabelTally` counting frame by frame) prints them at its end.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handcap.labeling.release import release_warning
+from handcap.labeling.relearn import largest_change
+
+#: A label given in fewer than this share of the frames the median label is given in was not found where the
+#: training take puts it (another subject's knuckle marker 15 mm off, its components 1 mm wide): warned, and
+#: offline searched for wider (:data:`handcap.labeling.take.MISSING_SPREAD`).
+MISSING_SHARE = 0.5
+#: Warn when the hand frame is lost in more than this share of the frames.
+LOST_WARNING = 0.05
+#: Warn when fewer than this share of the points in the stream get a label.
+LABELLED_WARNING = 0.95
+#: Warn when the rigid markers' distances in the take differ from training by more than this (metres): the
+#: rigid set was re-learned from the take (a marker stuck back elsewhere, another glove or subject), and the
+#: labels rest on that.
+RIGID_CHANGE_WARNING = 0.002
+
+
+def missing_labels(given) -> np.ndarray:
+    """Mask (M,) of labels given in under :data:`MISSING_SHARE` of the frames the median label is given in.
+
+    Parameters
+    ----------
+    given : ndarray (M,)
+        Share of the frames each label is given in.
+    """
+    given = np.asarray(given, dtype=np.float64)
+    return given < MISSING_SHARE * np.median(given)
+
+
+def label_warnings(names, given, *, trained_rigid=None, rigid=None, lost: int = 0, frames: int = 0,
+                   labelled=float("nan"), released=(), rate: float = 1.0) -> list[str]:
+    """The one-line warnings of a labelling (not issued: the caller warns and stores them).
+
+    Parameters
+    ----------
+    names : sequence of str (M,)
+        The free labels (the spatial model's).
+    given : ndarray (M,)
+        Share of the frames each is given in.
+    trained_rigid, rigid : RigidSet, optional
+        The rigid set trained and the one the labels rest on (re-learned from the take, or the same).
+    lost : int
+        Frames in which the hand frame was lost.
+    frames : int
+        Frames labelled.
+    labelled : float
+        Share of the points that got a label (NaN: no points).
+    released : sequence of Release
+        Labels released to the spatial model.
+    rate : float
+        Frames per second (for the releases' times).
+
+    Returns
+    -------
+    list of str
+    """
+    lines = []
+    if trained_rigid is not None and rigid is not None:
+        change = largest_change(trained_rigid, rigid)
+        if change > RIGID_CHANGE_WARNING:
+            lines.append(f"the rigid markers' distances in this take differ from training by up to "
+                         f"{1000 * change:.1f} mm (re-learned from the take; plausible <= "
+                         f"{1000 * RIGID_CHANGE_WARNING:.0f} mm): a marker moved, or another glove or subject; "
+                         "check the labels, or train on a take of this session")
+    given = np.asarray(given, dtype=np.float64)
+    if frames and len(given):
+        missing = missing_labels(given)
+        if missing.any():
+            starved = [n for n, m in zip(names, missing) if m]
+            them = "them" if len(starved) > 1 else "it"
+            lines.append(f"{', '.join(starved)} labelled in {', '.join(f'{100 * g:.0f}' for g in given[missing])} "
+                         f"% of the frames, against {100 * np.median(given):.0f} % for the median label: hidden most "
+                         f"of the take, missing from it, or far from where the training take puts {them}; check the "
+                         "markers, or train on a take of this subject")
+    if lost > LOST_WARNING * max(frames, 1):
+        lines.append(f"hand frame lost in {100 * lost / max(frames, 1):.1f} % of the frames ({lost} of {frames}; "
+                     f"plausible <= {100 * LOST_WARNING:.0f} %): the rigid markers were not found at their trained "
+                     "distances; check the layout's rigid markers or train on a take of this session")
+    line = release_warning(released, rate)
+    if line:
+        lines.append(line)
+    if labelled < LABELLED_WARNING:  # False for NaN: no points, nothing to label
+        lines.append(f"labels for {100 * labelled:.1f} % of the points in the stream (plausible >= "
+                     f"{100 * LABELLED_WARNING:.0f} %): many points fit no label; check the layout and the "
+                     "training take")
+    return lines
+
+
+class LabelTally:
+    """What a stream's labels add up to, frame by frame, for :func:`label_warnings` at its end.
+
+    Parameters
+    ----------
+    labels : int
+        Labels (the labeler's ``names``), each frame's labels index them.
+    """
+
+    def __init__(self, labels: int):
+        self.frames = 0
+        self.given = np.zeros(labels, dtype=np.int64)  # frames each label was given in
+        self.points = self.labelled = 0
+
+    def add(self, labels, valid=None) -> None:
+        """Count one frame's labels.
+
+        Parameters
+        ----------
+        labels : ndarray (K,) int
+            Each point's label, -1 for none.
+        valid : ndarray (K,) bool, optional
+            The points that were points (not NaN rows); default every one.
+        """
+        labels = np.asarray(labels)
+        self.frames += 1
+        self.points += int(len(labels) if valid is None else np.count_nonzero(valid))
+        given = labels[labels >= 0]
+        self.labelled += len(given)
+        self.given[np.unique(given)] += 1
+
+    def shares(self, columns) -> np.ndarray:
+        """Share of the frames each of the labels ``columns`` (indices) was given in."""
+        return self.given[np.asarray(columns, dtype=int)] / max(self.frames, 1)
+
+    @property
+    def labelled_share(self) -> float:
+        """Share of the points that got a label (NaN for none)."""
+        return self.labelled / self.points if self.points else float("nan")

@@ -1,0 +1,34 @@
+"""The plausibility warnings of a labelling (handcap.labeling.plausible), from counts with known answers."""
+
+import numpy as np
+
+from handcap.labeling.frame import RigidSet
+from handcap.labeling.plausible import LabelTally, label_warnings, missing_labels
+from handcap.labeling.release import Release
+
+TRIAD = np.array([[0.0, 0.03, 0.0], [-0.03, -0.02, 0.0], [0.035, -0.015, 0.0]])
+
+
+def test_a_tally_counts_frames_points_and_labels():
+    tally = LabelTally(4)
+    tally.add(np.array([0, 2, -1, 2]))  # a label given twice in a frame counts one frame
+    tally.add(np.array([1, -1, -1]), np.array([True, True, False]))  # a NaN row is no point
+    assert tally.frames == 2 and tally.points == 6 and tally.labelled == 4
+    np.testing.assert_array_equal(tally.given, [1, 1, 1, 0])
+    np.testing.assert_allclose(tally.shares([2, 3]), [0.5, 0.0])
+    assert tally.labelled_share == 4 / 6
+    assert np.isnan(LabelTally(2).labelled_share)
+
+
+def test_each_implausible_figure_is_one_line_and_a_plausible_labelling_none():
+    names = ("a", "b", "c", "d")
+    rigid = RigidSet(("x", "y", "z"), TRIAD - TRIAD.mean(0), 0.0005)
+    assert label_warnings(names, np.array([0.9, 0.95, 0.9, 0.92]), trained_rigid=rigid, rigid=rigid, lost=10,
+                          frames=1000, labelled=0.97) == []
+    moved = RigidSet(rigid.names, rigid.canonical * 1.1, 0.0005)  # the longest side (65.2 mm) 6.5 mm longer
+    lines = label_warnings(names, np.array([0.9, 0.01, 0.9, 0.92]), trained_rigid=rigid, rigid=moved, lost=60,
+                           frames=1000, labelled=0.9, released=[Release(500, 300, ("a", "c"))], rate=100.0)
+    assert len(lines) == 5 and all("\n" not in line for line in lines)
+    assert "up to 6.5 mm" in lines[0] and "b labelled in 1 %" in lines[1] and "6.0 % of the frames" in lines[2]
+    assert "a and c at frame 500" in lines[3] and "labels for 90.0 %" in lines[4]
+    np.testing.assert_array_equal(missing_labels([0.9, 0.44, 0.9, 0.95, 0.46]), [False, True, False, False, False])
