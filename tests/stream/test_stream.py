@@ -80,6 +80,25 @@ def test_streamed_joints_agree_with_the_batch_solver_and_the_truth(capture):
     assert np.median(np.linalg.norm(stats.solved - capture.hand_motion.joints, axis=-1)) < 0.002
 
 
+def test_an_implausible_fit_and_a_lost_hand_are_warnings_of_the_stream(capture):
+    """The live solve says what handcap solve says of a take: a mean marker error above 5 mm (here a hand 30 %
+    larger than its attachment's), and frames with too few markers to place the hand."""
+    from handcap import MarkerSequence
+
+    hand = OpenHand("right")
+    markers = capture.markers
+    assert stream(markers, capture.attachment, hand, realtime=False).warnings == ()
+    centre = np.nanmean(markers.positions, axis=1, keepdims=True)
+    larger = MarkerSequence(centre + 1.3 * (markers.positions - centre), markers.names, markers.rate)
+    said = stream(larger, capture.attachment, hand, realtime=False).warnings
+    mre = [float(m) for w in said for m in re.findall(r"live solve MRE ([0-9.]+) mm is above 5 mm", w)]
+    assert len(mre) == 1 and mre[0] > 8.0, said  # measured 12.3 mm
+    few = markers.positions.copy()
+    few[100:200, 2:] = np.nan
+    said = stream(MarkerSequence(few, markers.names, markers.rate), capture.attachment, hand, realtime=False).warnings
+    assert any("hand frame is lost in 100 of 240 frames" in w for w in said), said
+
+
 def test_stream_verb_and_bad_inputs(capture, tmp_path, capsys):
     write_capture(capture, tmp_path)
     capture.attachment.save(tmp_path / "attachment.npz")

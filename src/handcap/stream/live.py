@@ -20,6 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from handcap.core.errors import HandcapError, warn
+from handcap.quality.fit_checks import lost_frame_warnings
 from handcap.core.points import PointCloudSequence
 from handcap.core.markers import MarkerSequence
 from handcap.stream.pipeline import LivePipeline
@@ -50,10 +51,11 @@ class StreamStats:
     seen, filled : ndarray (frames,) int
         Markers measured (labelled) and predicted in each frame.
     warnings : tuple of str
-        Labels the solve found swapped and solved exchanged (:meth:`FrameSolver.swap_warnings`), and the labels'
+        Printed as :class:`~handcap.HandcapWarning` at the stream's end: labels the solve found swapped and solved
+        exchanged (:meth:`FrameSolver.swap_warnings`), the solve's mean marker error above 5 mm
+        (:meth:`FrameSolver.fit_warnings`), frames with too few markers to place the hand, and the labels'
         plausibility (:meth:`LivePipeline.label_warnings`: a rigid set re-learned, the hand frame often lost,
-        labels hardly given, few points labelled, labels released), printed as :class:`~handcap.HandcapWarning`
-        at the stream's end.
+        labels hardly given, few points labelled, labels released).
     """
 
     frames: int
@@ -209,8 +211,8 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     n = rows.count
     stage_ms = {k: v[:n].astype(np.float64) for k, v in rows.stage_ms.items()}
     solved = rows.solved[:n] if keep_solved else np.zeros((0, 21, 3))
-    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate)
-                  + pipeline.label_warnings(source.rate) if line)
+    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate) + pipeline.solver.fit_warnings()
+                  + lost_frame_warnings(rows.seen[:n]) + pipeline.label_warnings(source.rate) if line)
     return StreamStats(n, rows.latency[:n].astype(np.float64), tuple(memory), solved, stage_ms, rows.seen[:n],
                        rows.filled[:n], found)
 

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from handcap.core.errors import HandcapError
+from handcap.quality.fit_checks import residual_warnings
 from handcap.quality.limits import MM, MRE_LIMIT
 from handcap.hand.anatomy import TIP_PARENTS
 from handcap.hand.kinematics import attached_points
@@ -158,6 +159,7 @@ class FrameSolver:
         self.pending = None  # the work :meth:`idle` does
         self.weight = None  # the pull's, metres per radian (None until WARMUP frames were measured)
         self.mend_swaps, self.frames = mend_swaps, 0
+        self.error_sum, self.errors = 0.0, 0  # every solved frame's marker distances, summed (metres) and counted
         self.order, self.swaps, self.dropped = np.arange(len(self.names)), [], []
         # the joints of the take's shape at rest, once (forward() would rebuild them every frame)
         _, rest_joints, rest_tips = hand.rest(np.asarray(self.model.betas, dtype=np.float64))
@@ -262,6 +264,18 @@ class FrameSolver:
             self.dropped.append(self.frames - 1)
         return result, target
 
+    def fit_warnings(self) -> list[str]:
+        """The solve's mean marker error over every frame solved so far, one line where it is above
+        :data:`~handcap.quality.limits.MRE_LIMIT` (as ``handcap solve`` warns: wrong labels, another subject's
+        attachment, another unit), none otherwise.
+
+        Returns
+        -------
+        list of str
+        """
+        mre = self.error_sum / self.errors if self.errors else 0.0
+        return residual_warnings(np.array([[mre]]), what="live solve MRE") if self.errors else []
+
     def swap_warnings(self, rate: float) -> list[str]:
         """One line for the labels exchanged so far (at most five changes named), none when none was.
 
@@ -340,6 +354,7 @@ class FrameSolver:
     def _finish(self, pose, kin, joints, distance):
         """Keep the pose for the next frame unless the hand was lost; the frame's joints, angles and RMS."""
         rms = float(np.sqrt(np.mean(distance ** 2)))
+        self.error_sum, self.errors = self.error_sum + float(distance.sum()), self.errors + len(distance)
         # Lost when most markers are off, not when a few are (a mislabelled or swapped marker is an outlier
         # that the robust loss already discounts): the next frame then starts afresh.
         lost = float(np.median(distance)) > LOST
