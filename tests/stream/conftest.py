@@ -27,10 +27,13 @@ def _packet(kind: QRTPacketType, body: bytes) -> bytes:
 
 
 class FakeQtm:
-    """Serve ``positions`` (T, K, 3) metres with ``names`` at ``rate`` on 127.0.0.1 (``port``)."""
+    """Serve ``positions`` (T, K, 3) metres with ``names`` at ``rate`` on 127.0.0.1 (``port``), numbered ``numbers``
+    (T,) (default 0 to T - 1)."""
 
-    def __init__(self, positions, names, rate: float):
+    def __init__(self, positions, names, rate: float, numbers=None):
         self.positions, self.names, self.rate = np.asarray(positions), list(names), float(rate)
+        # each frame's number as QTM sends it (default 0, 1, 2, ...): skipped numbers are frames QTM fell behind on
+        self.numbers = np.arange(len(self.positions)) if numbers is None else np.asarray(numbers)
         self.commands = []
         self.loop = asyncio.new_event_loop()
         ready = threading.Event()
@@ -61,7 +64,8 @@ class FakeQtm:
             body = b"".join(RT3DMarkerPositionNoLabel.format.pack(*p, k) for k, p in enumerate(seen))
             count = len(seen)
         component = RT3DComponent.format.pack(count, 0, 0) + body
-        data = (RTDataQRTPacket.pack(int(t * 1e6 / self.rate), t, 1)
+        number = int(self.numbers[t])
+        data = (RTDataQRTPacket.pack(int(number * 1e6 / self.rate), number, 1)
                 + RTComponentData.pack(RTComponentData.size + len(component), kind.value) + component)
         return _packet(QRTPacketType.PacketData, data)
 
@@ -104,8 +108,8 @@ def fake_qtm():
         pytest.skip("the fake QTM server needs qtm-rt (the extra 'stream')")
     servers = []
 
-    def start(positions, names, rate):
-        servers.append(FakeQtm(positions, names, rate))
+    def start(positions, names, rate, numbers=None):
+        servers.append(FakeQtm(positions, names, rate, numbers))
         return servers[-1]
 
     yield start

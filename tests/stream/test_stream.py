@@ -282,6 +282,37 @@ def test_qtm_unlabelled_points_are_labelled_live(unlabelled, fake_qtm):
     assert np.nanmedian(error) < 0.0015
 
 
+def test_frames_qtm_skipped_are_stepped_over_and_said(capture, fake_qtm):
+    """QTM's real-time output falls behind under heavy processing and skips frame numbers: the stages step over
+    each skipped frame as one of no marker (the filters and the solve keep time), nothing is sent for it, and the
+    stream's end says how many. Numbers that do not rise are said too."""
+    from handcap.stream.live import stream_source
+    from handcap.stream.sources import QtmSource
+
+    names = ["Subject:" + n for n in capture.markers.names]
+    kept = np.r_[0:100, 105:240]  # frames 100-104 never sent
+    server = fake_qtm(capture.markers.positions[kept], names, 120.0, numbers=kept)
+    source = QtmSource(f"127.0.0.1:{server.port}")
+    sent = []
+    try:
+        stats = stream_source(source, capture.attachment, OpenHand("right"), outputs=[lambda t, *_: sent.append(t)])
+    finally:
+        source.close()
+    assert stats.frames == 235 and sent == kept.tolist()  # sent under their own frame numbers
+    assert [w for w in stats.warnings if w.startswith("QTM:")] == [stats.warnings[0]]
+    assert stats.warnings[0].startswith("QTM: 5 frame(s) skipped")
+    replay = stream(capture.markers, capture.attachment, OpenHand("right"), realtime=False)
+    error = np.linalg.norm(stats.solved - replay.solved[kept], axis=-1)
+    assert np.nanmax(error[100:]) < 0.002  # the solve goes on as if the frames had come without markers
+    stuck = fake_qtm(capture.markers.positions[:60], names, 120.0, numbers=np.ones(60, int))
+    source = QtmSource(f"127.0.0.1:{stuck.port}")
+    try:
+        stats = stream_source(source, capture.attachment, OpenHand("right"))
+    finally:
+        source.close()
+    assert stats.frames == 60 and any("59 frame(s) came with a number not after" in w for w in stats.warnings)
+
+
 def test_stream_verb_from_qtm_and_its_bad_addresses(capture, fake_qtm, tmp_path, capsys):
     server = fake_qtm(capture.markers.positions[:60], capture.markers.names, 120.0)
     capture.attachment.save(tmp_path / "attachment.npz")

@@ -192,15 +192,21 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
         for t, (arrived, frame) in enumerate(frames):
             if limit is not None and t >= limit:
                 break
+            lost = frame is None  # a frame the source lost: every stage steps over it (the filters keep time)
+            if lost:
+                frame = np.full((0 if labeling is not None else len(source.names), 3), np.nan)
             if columns is not None:
                 frame = np.where(columns[:, None] >= 0, np.asarray(frame)[np.maximum(columns, 0)], np.nan)
             live = pipeline.frame(frame)
+            if lost:  # ... and nothing is sent or counted
+                pipeline.idle()
+                continue
             sending = time.perf_counter()
             for send in outputs:
                 send(t, t / source.rate, live.joints, live.phi)
             sent = time.perf_counter()
             pipeline.idle()  # what only the next frame needs, between frames
-            rows.add(t, (sent - arrived) * 1000, {**pipeline.last_ms, "send": (sent - sending) * 1000}, live)
+            rows.add(rows.count, (sent - arrived) * 1000, {**pipeline.last_ms, "send": (sent - sending) * 1000}, live)
             if t == minute:
                 memory[0] = resident_mb()
     finally:
@@ -211,8 +217,9 @@ def stream_source(source, attachment, hand, outputs=(), *, seconds: float | None
     n = rows.count
     stage_ms = {k: v[:n].astype(np.float64) for k, v in rows.stage_ms.items()}
     solved = rows.solved[:n] if keep_solved else np.zeros((0, 21, 3))
-    found = tuple(warn(line) for line in pipeline.solver.swap_warnings(source.rate) + pipeline.solver.fit_warnings()
-                  + lost_frame_warnings(rows.seen[:n]) + pipeline.label_warnings(source.rate) if line)
+    said = getattr(source, "warnings", list)() + pipeline.solver.swap_warnings(source.rate) \
+        + pipeline.solver.fit_warnings() + lost_frame_warnings(rows.seen[:n]) + pipeline.label_warnings(source.rate)
+    found = tuple(warn(line) for line in said if line)
     return StreamStats(n, rows.latency[:n].astype(np.float64), tuple(memory), solved, stage_ms, rows.seen[:n],
                        rows.filled[:n], found)
 

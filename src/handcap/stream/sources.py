@@ -2,8 +2,10 @@
 Manager's real-time server (:class:`QtmSource`, through Qualisys's own client ``qtm-rt``).
 
 A source is an iterable of ``(arrived, frame)``: the ``time.perf_counter()`` at which the frame arrived (the
-latency of a frame is counted from there) and its points, ``(K, 3)`` metres with NaN rows for markers not seen.
-It has ``names`` (the K columns' marker names, or None for unlabelled points) and ``rate`` (frames per second).
+latency of a frame is counted from there) and its points, ``(K, 3)`` metres with NaN rows for markers not seen,
+or None for a frame the source lost (QTM skipped its number: the stages step over it, so that the filters keep
+time, and nothing is sent). It has ``names`` (the K columns' marker names, or None for unlabelled points),
+``rate`` (frames per second) and ``warnings()`` (one line each, said at the stream's end).
 """
 
 from __future__ import annotations
@@ -23,6 +25,9 @@ from handcap.core.errors import HandcapError
 QTM_PORT = 22223
 #: Version of the real-time protocol asked for.
 QTM_PROTOCOL = "1.25"
+#: Frame numbers QTM skipped are stepped over as frames of no marker up to this many seconds of them; a longer jump
+#: is a paused or restarted measurement, not frames lost.
+MAX_SKIPPED = 1.0
 
 
 class ReplaySource:
@@ -54,6 +59,10 @@ class ReplaySource:
                 if wait > 0:
                     time.sleep(wait)
             yield time.perf_counter(), frame
+
+    def warnings(self) -> list[str]:
+        """None: a replay loses no frame."""
+        return []
 
     def close(self) -> None:
         """Nothing to release."""
@@ -121,6 +130,8 @@ class QtmSource:
         except ImportError:
             raise HandcapError("streaming from QTM needs qtm-rt: pip install 'handcap[stream]'") from None
         self.qtm_rt, self.labelled, self.timeout = qtm_rt, labelled, float(timeout)
+        self.last = None  # the last frame number QTM sent
+        self.lost = self.jumps = self.unordered = 0  # frames skipped and stepped over; longer gaps; numbers not rising
         self.host, self.port = _endpoint(address)
         self.frames = queue.Queue()
         self.loop = asyncio.new_event_loop()
@@ -156,7 +167,7 @@ class QtmSource:
         else:
             markers = packet.get_3d_markers_no_label()
         points = np.array([m[:3] for m in markers[1]], dtype=np.float64).reshape(-1, 3) / 1000.0
-        self.frames.put((arrived, points))
+        self.frames.put((arrived, points, int(packet.framenumber)))
 
     def __iter__(self):
         component = "3d" if self.labelled else "3dnolabels"
@@ -168,7 +179,39 @@ class QtmSource:
                 return  # QTM stopped sending
             if item is None:
                 return  # disconnected
-            yield item
+            arrived, points, number = item
+            skipped = 0 if self.last is None else number - self.last - 1
+            if skipped < 0:
+                self.unordered += 1  # a frame number not after the last (QTM restarted, or its numbers stuck)
+            elif skipped > MAX_SKIPPED * self.rate:
+                self.jumps += 1  # QTM paused or restarted its measurement: not frames to step over
+            else:
+                self.lost += skipped
+                for _ in range(skipped):
+                    yield arrived, None
+            self.last = number
+            yield arrived, points
+
+    def warnings(self) -> list[str]:
+        """Frames QTM skipped (its real-time output falling behind: its frame numbers jump), and frame numbers that
+        did not rise, one line each; none when every frame came in order.
+
+        Returns
+        -------
+        list of str
+        """
+        out = []
+        if self.lost:
+            out.append(f"QTM: {self.lost} frame(s) skipped in its real-time output (frame numbers jumped; QTM falls "
+                       "behind when its processing is heavy, e.g. AIM or skeleton solving): stepped over as frames "
+                       "of no marker (their joints not sent); lower the real-time frequency or QTM's processing")
+        if self.jumps:
+            out.append(f"QTM: its frame numbers jumped by over {MAX_SKIPPED:g} s {self.jumps} time(s) (a paused or "
+                       "restarted measurement): the stream went on from there")
+        if self.unordered:
+            out.append(f"QTM: {self.unordered} frame(s) came with a number not after the frame before (a restarted "
+                       "measurement, or numbers that do not count): streamed as they came")
+        return out
 
     def close(self) -> None:
         """Stop the stream and disconnect."""
