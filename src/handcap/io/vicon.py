@@ -39,7 +39,7 @@ from handcap.io._units import check_units, metres_per_unit, settle_marker_units,
 
 _WHAT = "a Vicon Nexus CSV export"
 #: Section names Nexus writes; a file that shows one of them first is a Nexus export.
-SECTIONS = ("Trajectories", "Devices", "Model Outputs", "Joints", "Segments", "Trajectory Count")
+SECTIONS = ("Trajectories", "Devices", "Model Outputs", "Joints", "Segments")
 
 
 def is_vicon_csv(text: str) -> bool:
