@@ -62,3 +62,7 @@ def test_widened_mixture_is_the_mixture_of_wider_gaussians():
     # A point 15 mm from a 1 mm wide label: hopeless before, plausible after.
     far = model.means[1, 0] + [0.015, 0.0, 0.0]
     assert model.log_likelihood(far[None])[1, 0] < -30 < 0 < wide.log_likelihood(far[None])[1, 0]  # theta_min: -2
+    # Only some labels widened (the online search of a label hardly given): the others as they were.
+    some = model.widened(0.005, np.array([False, True]))
+    np.testing.assert_allclose(some.log_likelihood(query)[0], model.log_likelihood(query)[0], rtol=1e-12)
+    np.testing.assert_allclose(some.log_likelihood(query)[1], wide.log_likelihood(query)[1], rtol=1e-12)

@@ -16,6 +16,10 @@ subject's. Three corrections, each estimated from the take itself:
 3. :func:`adapt_means` (:mod:`handcap.labeling.realign`): the mixture means
    moved toward the take's labelled points (MAP with a relevance factor).
 
+Strictly online, a label hardly given in the frames gathered (another subject's knuckle marker a few millimetres
+from the training subject's) is also searched :data:`~handcap.labeling.plausible.MISSING_SPREAD` wider, on trial,
+as the offline second pass searches it (:meth:`StreamAdaptation._widen`).
+
 :meth:`SpatialModel.moved` then expresses the model in the take's hand frame.
 This module owns their use by the online labeler, frame by frame
 (:class:`StreamAdaptation`); the offline two passes use them in
@@ -31,7 +35,14 @@ import numpy as np
 from handcap.labeling.frame import HandFrameFinder
 from handcap.labeling.realign import (MAX_SHIFT, MAX_TURN_DEG, OUTLIER_SHARE, OUTLIER_VOLUME, adapt_means,
                                       register_to_model)
+from handcap.labeling.plausible import MISSING_SPREAD, missing_labels
 from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
+
+#: Frames with labelled points the window must hold before a label hardly given in them is searched for wider, and
+#: frames after that a wider search is judged on.
+WIDEN_AFTER = 200
+#: A wider search is kept where it labels this much more of the points (as offline, ``take.ONLINE_RIGID_MARGIN``).
+WIDEN_MARGIN = 0.01
 
 __all__ = ["MAX_SHIFT", "MAX_TURN_DEG", "OUTLIER_SHARE", "OUTLIER_VOLUME", "StreamAdaptation", "adapt_means",
            "largest_change", "register_to_model", "rigid_from_take"]
@@ -70,6 +81,12 @@ class StreamAdaptation:
         self.deferred = False  # the labeler's defer: a due re-estimation waits for catch_up()
         self.due = False
         self.typical = self.base.typical_fit() if labeler.finder is not None else None
+        self.wide = np.zeros(n_free, bool)  # labels searched for wider: hardly given in the window
+        self.blocked = np.zeros(n_free, bool)  # ... whose wider search labelled no more of the points: not again
+        self.trial = None  # (labels, labelled share before) of the labels widened last, on trial
+        self.judged = -1  # the frame count at which the last trial began or was judged
+        self.points = np.zeros(self.window, dtype=np.int64)  # each slot's frame: candidate points, labels given
+        self.given = np.zeros(self.window, dtype=np.int64)
         self.trained_rigid = None if labeler.finder is None else labeler.finder.rigid  # re-learned near it
 
     @property
@@ -144,8 +161,33 @@ class StreamAdaptation:
         self._restart()
         return True
 
+    def _widen(self, valid) -> None:
+        """Strictly online, a label hardly given in the window (``valid`` (W, F): its labelled points) is searched
+        :data:`MISSING_SPREAD` wider, on trial: kept where the frames after label :data:`WIDEN_MARGIN` more of
+        their points than the window before, as offline keeps its wider pass; else undone for good (the label
+        took a neighbour's point, and the neighbour would be next)."""
+        live = (self.stamp >= 0) & (self.stamp > self.judged)  # frames since the last trial was judged
+        if self.trial is not None:
+            labels, before = self.trial
+            if live.sum() < WIDEN_AFTER:
+                return
+            if self.given[live].sum() / max(self.points[live].sum(), 1) < before + WIDEN_MARGIN:
+                self.wide &= ~labels
+                self.blocked |= labels
+            self.trial, self.judged = None, self.count  # (a trial undone leaves its neighbours starved a while)
+        elif live.sum() >= WIDEN_AFTER:
+            frames = valid & live[:, None]
+            starved = missing_labels(frames.sum(axis=0) / live.sum()) & ~self.wide & ~self.blocked
+            if starved.any():
+                self.trial = (starved, self.given[live].sum() / max(self.points[live].sum(), 1))
+                self.wide |= starved
+                self.judged = self.count
+        self.labeler.widened = tuple(np.array(self.base.names)[self.wide])
+
     def _restart(self) -> None:
         """The hand frame changed meaning: forget what was gathered in the old one."""
+        self.wide[:] = self.blocked[:] = False
+        self.trial, self.judged, self.labeler.widened = None, -1, ()
         self.local[:] = np.nan
         self.stamp[:] = -1
         self.unlabelled.clear()
@@ -180,6 +222,7 @@ class StreamAdaptation:
                 row[ok] = local[best[ok]]
             self.local[slot] = row
             self.stamp[slot] = self.count
+            self.points[slot], self.given[slot] = len(world), int(seen.sum())
         if self.count % self.every == 0:
             self.due = True
             if not self.deferred:
@@ -224,4 +267,7 @@ class StreamAdaptation:
         weights = self.forget ** (self.count - self.stamp[slots])
         self.rotation, self.translation = register_to_model(self.base, local, labels, weights=weights, anneal=0.0,
                                                             iterations=2, start=(self.rotation, self.translation))
-        self.labeler.spatial = self.base.moved(self.rotation, self.translation)
+        if not self.labeler.lag:  # (offline, a second pass searches wider: take.py)
+            self._widen(valid)
+        moved = self.base.moved(self.rotation, self.translation)
+        self.labeler.spatial = moved.widened(MISSING_SPREAD, self.wide) if self.wide.any() else moved

@@ -175,8 +175,7 @@ class OnlineLabeler:
         self.n_rigid = 0 if model.rigid is None else len(model.rigid.names)
         self.n_free = len(model.free_names)
         self.finder = None if model.rigid is None else HandFrameFinder(model.rigid, max_hold=max_hold)
-        self.lost_frames: list[int] = []
-        self.frame_index = 0
+        self.lost_frames, self.frame_index = [], 0  # frames whose hand frame was lost; frames taken so far
         self._filters = KalmanBatch(model.kalman, self.n_free)  # one hypothesis to start with
         self._scores = np.zeros(1)
         self._unlikely = np.zeros((1, self.n_free), dtype=np.int64)  # (P, F) frames on spatially filtered points
@@ -193,6 +192,7 @@ class OnlineLabeler:
         self.max_unlikely = int(max_unlikely)
         self._evidence = TrackEvidence(model.free_names, release, release_drift)
         self.released: list[Release] = []
+        self.widened: tuple = ()  # labels hardly given and so searched for wider (StreamAdaptation, strictly online)
         if not (isinstance(birth, (int, np.integer)) and birth >= 0):
             raise HandcapError(f"birth must be a whole number of frames >= 0, got {birth}")
         self.birth = int(birth)

@@ -19,8 +19,12 @@ from handcap.labeling.relearn import largest_change
 
 #: A label given in fewer than this share of the frames the median label is given in was not found where the
 #: training take puts it (another subject's knuckle marker 15 mm off, its components 1 mm wide): warned, and
-#: offline searched for wider (:data:`handcap.labeling.take.MISSING_SPREAD`).
+#: searched for ``MISSING_SPREAD`` wider.
 MISSING_SHARE = 0.5
+#: How much wider (metres, isotropic standard deviation added to each component) such a label is searched for.
+#: Chosen offline on synthetic subjects 7, 9 and 11 of the labeling benchmark (correct % of the points): 3 and 5 mm
+#: gave the same, 8 mm confused neighbouring labels (subject 7: 96.9 % at 5 mm, 85.8 % at 8 mm).
+MISSING_SPREAD = 0.005
 #: Warn when the hand frame is lost in more than this share of the frames.
 LOST_WARNING = 0.05
 #: Warn when fewer than this share of the points in the stream get a label.
@@ -44,7 +48,7 @@ def missing_labels(given) -> np.ndarray:
 
 
 def label_warnings(names, given, *, trained_rigid=None, rigid=None, lost: int = 0, frames: int = 0,
-                   labelled=float("nan"), released=(), rate: float = 1.0) -> list[str]:
+                   labelled=float("nan"), released=(), rate: float = 1.0, found_wider=()) -> list[str]:
     """The one-line warnings of a labelling (not issued: the caller warns and stores them).
 
     Parameters
@@ -65,12 +69,20 @@ def label_warnings(names, given, *, trained_rigid=None, rigid=None, lost: int = 
         Labels released to the spatial model.
     rate : float
         Frames per second (for the releases' times).
+    found_wider : sequence of str
+        Labels searched for :data:`MISSING_SPREAD` wider than training (hardly given otherwise).
 
     Returns
     -------
     list of str
     """
     lines = []
+    if len(found_wider):
+        these = "these labels" if len(found_wider) > 1 else "this label"
+        lines.append(f"{', '.join(found_wider)} not found where the training take puts "
+                     f"{'them' if len(found_wider) > 1 else 'it'}; labelled after a search {1000 * MISSING_SPREAD:.0f} "
+                     f"mm wider (another subject or marker placement): check {these}, or train on a take of this "
+                     "subject")
     if trained_rigid is not None and rigid is not None:
         change = largest_change(trained_rigid, rigid)
         if change > RIGID_CHANGE_WARNING:

@@ -154,8 +154,8 @@ class SpatialModel:
         chol = np.linalg.cholesky(rot.T @ precision @ rot)  # a rotation keeps the determinant
         return SpatialModel(self.names, self.weights, means, chol, self.log_norm)
 
-    def widened(self, spread: float) -> "SpatialModel":
-        """The same mixtures, every component widened by ``spread`` of isotropic standard deviation.
+    def widened(self, spread: float, labels=None) -> "SpatialModel":
+        """The same mixtures, every component (of ``labels``) widened by ``spread`` of isotropic standard deviation.
 
         A search wider than training allows: another subject's marker can sit
         15 mm from where the training subject's did, many standard deviations
@@ -165,6 +165,8 @@ class SpatialModel:
         ----------
         spread : float
             Metres; each covariance becomes ``Sigma + spread^2 I``.
+        labels : ndarray (M,) bool, optional
+            The labels widened (default: every one).
 
         Returns
         -------
@@ -172,7 +174,8 @@ class SpatialModel:
             Same names, weights and means.
         """
         precision = self.precision_chol @ np.swapaxes(self.precision_chol, -1, -2)
-        covariance = np.linalg.inv(precision) + float(spread) ** 2 * np.eye(3)
+        extra = np.ones(len(self.names)) if labels is None else np.asarray(labels, dtype=np.float64)
+        covariance = np.linalg.inv(precision) + float(spread) ** 2 * extra[:, None, None, None] * np.eye(3)
         chol = np.linalg.cholesky(np.linalg.inv(covariance))
         return SpatialModel(self.names, self.weights, self.means, chol, _log_norm(self.weights, chol))
 

@@ -23,7 +23,7 @@ from handcap.labeling.model import LabelingModel, rigid_transforms
 from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
 from handcap.labeling.realign import adapt_means, register_to_model
-from handcap.labeling.plausible import LABELLED_WARNING, label_warnings, missing_labels
+from handcap.labeling.plausible import LABELLED_WARNING, MISSING_SPREAD, label_warnings, missing_labels
 from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
 from handcap.labeling.rigid_set import RigidSet
 
@@ -48,13 +48,9 @@ FIRST_PASS_BIRTH = 0
 #: the online pass can too (subject 9: 73 % labelled against the search's 94 %).
 ONLINE_RIGID_MARGIN = 0.01
 #: Offline, a label given in fewer than :data:`~handcap.labeling.plausible.MISSING_SHARE` of the frames the median
-#: label is given in was not found where the training take puts it (another subject's knuckle marker 15 mm off, its
-#: components 1 mm wide). The take is then labelled again with every component widened by ``MISSING_SPREAD``
-#: (metres) in the first pass and the means moved to those labels, and that is kept when it labels
-#: ``ONLINE_RIGID_MARGIN`` more of the points. Chosen on synthetic subjects 7, 9 and 11 of the labeling benchmark
-#: (correct % of the points, offline): 3 and 5 mm gave the same, 8 mm confused neighbouring labels (subject 7:
-#: 96.9 % at 5 mm, 85.8 % at 8 mm).
-MISSING_SPREAD = 0.005
+#: label is given in was not found where the training take puts it. The take is then labelled again with every
+#: component widened by :data:`~handcap.labeling.plausible.MISSING_SPREAD` in the first pass and the means moved to
+#: those labels, and that is kept when it labels ``ONLINE_RIGID_MARGIN`` more of the points.
 
 
 @dataclass(frozen=True)
@@ -81,6 +77,8 @@ class LabelResult:
     released : tuple of Release
         Labels whose tracks the spatial model disagreed with, released to it (:class:`OnlineLabeler`'s
         ``release``; the last pass offline): the labels are probably swapped before each, and a warning says so.
+    widened : tuple of str
+        Labels hardly given and so searched for wider, online (``OnlineLabeler.widened``); a warning says so.
     """
 
     markers: MarkerSequence
@@ -90,6 +88,7 @@ class LabelResult:
     model: LabelingModel | None = None
     rigid: RigidSet | None = None
     released: tuple = ()
+    widened: tuple = ()
 
     def summary(self) -> str:
         """One line: frames, labels, the share of label-frames filled and the frames without a hand frame."""
@@ -299,24 +298,18 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
     return LabelResult(MarkerSequence(positions, names, points.rate), labels,
                        np.array(getattr(labeler, "lost_frames", []), dtype=int),
                        rigid=None if finder is None else finder.rigid,
-                       released=tuple(getattr(labeler, "released", ())))
+                       released=tuple(getattr(labeler, "released", ())),
+                       widened=tuple(getattr(labeler, "widened", ())))
 
 
 def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=()) -> LabelResult:
     """The result with its warnings (:func:`~handcap.labeling.plausible.label_warnings`, issued and stored on it
     and on its markers); ``model`` the adapted model (offline), ``trained`` the one given, ``found_wider`` the
     labels found only by a wider search."""
-    lines = []
-    if found_wider:
-        lines.append(warn(f"{', '.join(found_wider)} not found where the training take puts "
-                          f"{'them' if len(found_wider) > 1 else 'it'}; labelled after a search "
-                          f"{1000 * MISSING_SPREAD:.0f} mm wider (another subject or marker placement): check "
-                          f"{'these labels' if len(found_wider) > 1 else 'this label'}, or train on a take of this "
-                          "subject", stacklevel=3))
     one = isinstance(trained, LabelingModel)
     given = _given_shares(result.markers, trained) if one and result.markers.n_frames else np.zeros(0)
-    lines += [warn(line, stacklevel=3) for line in label_warnings(
+    lines = [warn(line, stacklevel=3) for line in label_warnings(
         trained.spatial.names if one else (), given, trained_rigid=trained.rigid if one else None, rigid=result.rigid,
         lost=len(result.lost_frames), frames=points.n_frames, labelled=_labelled_share(result, points),
-        released=result.released, rate=points.rate)]
+        released=result.released, rate=points.rate, found_wider=found_wider or result.widened)]
     return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)

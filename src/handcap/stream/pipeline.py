@@ -195,7 +195,8 @@ class LivePipeline:
         return label_warnings(free, self.tally.shares([lab.names.index(n) for n in free]),
                               trained_rigid=model.rigid, rigid=None if lab.finder is None else lab.finder.rigid,
                               lost=len(lab.lost_frames), frames=self.tally.frames,
-                              labelled=self.tally.labelled_share, released=lab.released, rate=rate)
+                              labelled=self.tally.labelled_share, released=lab.released, rate=rate,
+                              found_wider=lab.widened)
 
     def idle(self) -> None:
         """The work the last frame left for before the next one (the labeler's filters and its periodic
