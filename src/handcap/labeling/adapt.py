@@ -176,8 +176,8 @@ class StreamAdaptation:
                 self.blocked |= labels
             self.trial, self.judged = None, self.count  # (a trial undone leaves its neighbours starved a while)
         elif live.sum() >= WIDEN_AFTER:
-            frames = valid & live[:, None]
-            starved = missing_labels(frames.sum(axis=0) / live.sum()) & ~self.wide & ~self.blocked
+            labelled = valid & live[:, None]  # each label's labelled points in the frames since
+            starved = missing_labels(labelled.sum(axis=0) / live.sum()) & ~self.wide & ~self.blocked
             if starved.any():
                 self.trial = (starved, self.given[live].sum() / max(self.points[live].sum(), 1))
                 self.wide |= starved
