@@ -3,7 +3,7 @@
 import numpy as np
 
 from handcap.labeling.frame import RigidSet
-from handcap.labeling.plausible import LabelTally, label_warnings, missing_labels
+from handcap.labeling.plausible import REVERSED_LEAST, LabelTally, label_warnings, missing_labels, reversed_pairs
 from handcap.labeling.release import Release
 
 TRIAD = np.array([[0.0, 0.03, 0.0], [-0.03, -0.02, 0.0], [0.035, -0.015, 0.0]])
@@ -32,3 +32,21 @@ def test_each_implausible_figure_is_one_line_and_a_plausible_labelling_none():
     assert "up to 6.5 mm" in lines[0] and "b labelled in 1 %" in lines[1] and "6.0 % of the frames" in lines[2]
     assert "a and c at frame 500" in lines[3] and "labels for 90.0 %" in lines[4]
     np.testing.assert_array_equal(missing_labels([0.9, 0.44, 0.9, 0.95, 0.46]), [False, True, False, False, False])
+
+
+def test_reversed_pairs_are_the_labels_holding_each_others_markers():
+    # Four knuckles 20 mm apart in a row (the model's means); another subject's 25 % wider and 3 mm off, moving
+    # 5 mm about. Labels 1 and 2 holding each other's markers are the one pair reversed; labels given in too few
+    # frames are not judged, and a row that is only shorter is not reversed.
+    rng = np.random.default_rng(0)
+    expected = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.0], [0.04, 0.0, 0.0], [0.06, 0.0, 0.0]])
+    frames = REVERSED_LEAST + 20
+    points = 1.25 * expected + [0.0, 0.003, 0.0] + rng.normal(0.0, 0.005, (frames, 4, 3))
+    assert not reversed_pairs(expected, points).any()
+    assert not reversed_pairs(expected, 0.2 * points).any()
+    swapped = points[:, [0, 2, 1, 3]]
+    want = np.zeros((4, 4), dtype=bool)
+    want[1, 2] = want[2, 1] = True
+    np.testing.assert_array_equal(reversed_pairs(expected, swapped), want)
+    swapped[21:, 2] = np.nan  # label 2 given in 21 frames only
+    assert not reversed_pairs(expected, swapped).any()

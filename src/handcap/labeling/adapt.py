@@ -18,7 +18,9 @@ subject's. Three corrections, each estimated from the take itself:
 
 Strictly online, a label hardly given in the frames gathered (another subject's knuckle marker a few millimetres
 from the training subject's) is also searched :data:`~handcap.labeling.plausible.MISSING_SPREAD` wider, on trial,
-as the offline second pass searches it (:meth:`StreamAdaptation._widen`).
+as the offline second pass searches it (:meth:`StreamAdaptation._widen`); where it then lies the other way round than
+the model's means say with a neighbour (:func:`~handcap.labeling.plausible.reversed_pairs`), the two labels held
+each other's markers, and their tracks are exchanged.
 
 :meth:`SpatialModel.moved` then expresses the model in the take's hand frame.
 This module owns their use by the online labeler, frame by frame
@@ -35,7 +37,8 @@ import numpy as np
 from handcap.labeling.frame import HandFrameFinder
 from handcap.labeling.realign import (MAX_SHIFT, MAX_TURN_DEG, OUTLIER_SHARE, OUTLIER_VOLUME, adapt_means,
                                       register_to_model)
-from handcap.labeling.plausible import MISSING_SPREAD, missing_labels
+from handcap.labeling.plausible import MISSING_SPREAD, missing_labels, reversed_pairs
+from handcap.labeling.release import Release
 from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
 
 #: Frames with labelled points the window must hold before a label hardly given in them is searched for wider, and
@@ -88,6 +91,8 @@ class StreamAdaptation:
         self.points = np.zeros(self.window, dtype=np.int64)  # each slot's frame: candidate points, labels given
         self.given = np.zeros(self.window, dtype=np.int64)
         self.trained_rigid = None if labeler.finder is None else labeler.finder.rigid  # re-learned near it
+        weights = self.base.weights[..., None]
+        self.expected = (weights * self.base.means).sum(axis=1) / weights.sum(axis=1)  # (F, 3) each label's mean
 
     @property
     def settled(self) -> bool:
@@ -165,16 +170,18 @@ class StreamAdaptation:
         """Strictly online, a label hardly given in the window (``valid`` (W, F): its labelled points) is searched
         :data:`MISSING_SPREAD` wider, on trial: kept where the frames after label :data:`WIDEN_MARGIN` more of
         their points than the window before, as offline keeps its wider pass; else undone for good (the label
-        took a neighbour's point, and the neighbour would be next)."""
+        took a neighbour's point, and the neighbour would be next). A label whose points then lie the other way
+        round than the model's means say with another label's (:func:`reversed_pairs`) took that label's marker,
+        which held its own (so it was hardly given): the two are exchanged (:meth:`_reversed`)."""
         live = (self.stamp >= 0) & (self.stamp > self.judged)  # frames since the last trial was judged
         if self.trial is not None:
             labels, before = self.trial
-            if live.sum() < WIDEN_AFTER:
-                return
-            if self.given[live].sum() / max(self.points[live].sum(), 1) < before + WIDEN_MARGIN:
-                self.wide &= ~labels
-                self.blocked |= labels
-            self.trial, self.judged = None, self.count  # (a trial undone leaves its neighbours starved a while)
+            self._reversed(live, labels)
+            if live.sum() >= WIDEN_AFTER:
+                if self.given[live].sum() / max(self.points[live].sum(), 1) < before + WIDEN_MARGIN:
+                    self.wide &= ~labels
+                    self.blocked |= labels
+                self.trial, self.judged = None, self.count  # (a trial undone leaves its neighbours starved a while)
         elif live.sum() >= WIDEN_AFTER:
             labelled = valid & live[:, None]  # each label's labelled points in the frames since
             starved = missing_labels(labelled.sum(axis=0) / live.sum()) & ~self.wide & ~self.blocked
@@ -183,6 +190,35 @@ class StreamAdaptation:
                 self.wide |= starved
                 self.judged = self.count
         self.labeler.widened = tuple(np.array(self.base.names)[self.wide])
+
+    def _reversed(self, live, labels) -> None:
+        """Labels on trial (``labels`` (F,) bool, updated) that lie the other way round than the model's means say
+        with another label (:func:`reversed_pairs`) in the ``live`` frames (W,) bool: with one label not on trial,
+        the two are exchanged (:meth:`_exchange`); else the label on trial is undone for good."""
+        local = self.local[live] @ self.rotation.T + self.translation  # in the model's frame
+        pairs = reversed_pairs(self.expected, local) & labels[:, None]
+        for a in np.flatnonzero(pairs.any(axis=1)):
+            b = np.flatnonzero(pairs[a])
+            if len(b) == 1 and not labels[b[0]]:
+                self._exchange(a, int(b[0]))
+            else:
+                self.wide[a], self.blocked[a] = False, True
+            labels[a] = False
+
+    def _exchange(self, a: int, b: int) -> None:
+        """Labels ``a`` (widened on trial) and ``b`` lie the other way round (:func:`reversed_pairs`): each holds the
+        other's marker (``b`` held ``a``'s, so ``a`` was hardly given, and ``a`` searched wider took ``b``'s).
+        Their tracks are exchanged in every hypothesis, and both are searched wider (``b``'s marker was not where
+        the model puts it either). Kept as a :class:`Release` of the two."""
+        lab = self.labeler
+        index = np.arange(lab._filters.age.size).reshape(-1, lab.n_free)
+        index[:, [a, b]] = index[:, [b, a]]
+        lab._filters.take_over(index.ravel(), np.zeros(index.size, dtype=bool))
+        lab._unlikely[:, [a, b]] = lab._unlikely[:, [b, a]]
+        self.local[:, [a, b]] = self.local[:, [b, a]]
+        self.wide[[a, b]] = True
+        since = lab.frame_index - (self.count - self.judged)  # the trial's first frame
+        lab.released.append(Release(lab.frame_index, since, (str(self.base.names[a]), str(self.base.names[b]))))
 
     def _restart(self) -> None:
         """The hand frame changed meaning: forget what was gathered in the old one."""
