@@ -45,3 +45,16 @@ def test_object_markers_are_the_hard_case_without_the_object(grasp):
     alone = score_labels(label_take(PointCloudSequence(tuple(frames), take.points.rate), model).markers, truth)
     assert alone.fraction("correct") > 0.995
     assert without.fraction("erroneous") > alone.fraction("erroneous")
+
+
+def test_an_unknown_objects_markers_do_not_lose_the_hand(grasp):
+    # The cylinder's markers, unknown to the labeler, fit no label. Counted over the points alone, the frames' fit
+    # put the hand frame in doubt until the adaptation settled, and the online labeler lost frames 0-84 (67 frames,
+    # 87.1 % correct, 11.1 % of the points hidden). Each label still finds its own marker: counted over the
+    # labels too, no frame is lost (98.2 % correct, the same 1.7 % wrong: object markers taken for fingers').
+    layout, model, take, truth = grasp
+    result = label_take(take.points, model)
+    score = score_labels(result.markers, truth)
+    assert len(result.lost_frames) <= 5
+    assert score.fraction("false_occlusion") < 0.01 and score.fraction("correct") > 0.97
+    # (A look-alike hand frame is still doubted: tests/labeling/test_adapt.py, the look-alike in the first frame.)

@@ -128,8 +128,11 @@ class StreamAdaptation:
     def doubtful(self, ll) -> bool:
         """Whether a frame's hand frame is in doubt, before the adaptation has settled: its points fit the
         model far worse (median best log-likelihood more than the labeler's ``suspect_drop`` below) than the
-        model's points typically do (:meth:`SpatialModel.typical_fit`): a model not yet aligned to the take,
-        or a set of points that looks like the rigid one (its markers moved, another subject). Once the model
+        model's points typically do (:meth:`SpatialModel.typical_fit`), and its labels find no better points
+        (their median best log-likelihood: an unknown object's markers fit no label, yet the hand's labels find
+        theirs; counted over the points alone, a synthetic glove grasp lost its first 100 frames): a model not
+        yet aligned to the take, or a set of points that looks like the rigid one (its markers moved, another
+        subject). Once the model
         is aligned, such a frame counts as lost, so that the rigid set is re-learned when most recent frames
         are (before, a take whose glove sits otherwise fits poorly in the right frame too). Strictly online
         only (``lag`` 0): with a look-ahead the frame is decided later, and offline a second pass labels
@@ -147,7 +150,7 @@ class StreamAdaptation:
         lab = self.labeler
         if self.typical is None or lab.lag or self.settled or ll.shape[1] < max(3, lab.n_free // 2):
             return False
-        if float(np.median(ll.max(axis=0))) >= self.typical - lab.suspect_drop:
+        if max(np.median(ll.max(axis=0)), np.median(ll.max(axis=1))) >= self.typical - lab.suspect_drop:
             return False
         if self.lost and self.aligned:
             self.lost[-1] = True

@@ -388,11 +388,10 @@ class OnlineLabeler:
         """Flag the hand finder when the points fit far worse than they usually do in the hand frame: a wrong
         set of back markers can be tracked as well as the right one, so the next frame is searched afresh.
 
-        Two yardsticks, each ``suspect_drop`` below: the take's running level (mean best log-likelihood per
-        point), and the model's own (the median best log-likelihood against
-        :meth:`SpatialModel.typical_fit`). The running level alone starts where the take starts: a look-alike
-        set of finger markers found while a back marker was hidden in the first frame set it, and was tracked
-        for 50 frames with no finger labelled (another subject's synthetic takes: 4 % of the points lost).
+        Two yardsticks, each ``suspect_drop`` below: the take's running level (mean best log-likelihood per point),
+        and the model's own (:meth:`SpatialModel.typical_fit`) against the better median best log-likelihood, the
+        points' or the labels' (an unknown object's markers fit no label). The running level alone starts with the
+        take: a look-alike set found in the first frame set it, and was tracked for 50 frames with no finger labelled.
         """
         if self.finder is None or not self._last_ll.size:
             return
@@ -404,7 +403,8 @@ class OnlineLabeler:
         if not suspect and len(best) >= max(3, self.n_free // 2):
             if self._typical_fit is None:
                 self._typical_fit = self.spatial.typical_fit()
-            suspect = float(np.median(best)) < self._typical_fit - self.suspect_drop
+            fits = max(np.median(best), np.median(self._last_ll.max(axis=1)))
+            suspect = bool(fits < self._typical_fit - self.suspect_drop)
         self.finder.suspect = suspect
         if not suspect:
             self._fit_level += 0.05 * (fit - self._fit_level)
