@@ -24,7 +24,9 @@ with 2 ghosts per second near the hand and 5 % extra random dropouts (seed 0):
 8. the same offline columns on takes of 11 other subjects (odd seeds 3-25 but 5);
 9. the points labelled wrong online (adapting) on takes of 21 other subjects (odd seeds 3-45 but 5), with swaps
    the tracks keep released to the spatial model (``OnlineLabeler(release=...)``, the default) and not: its
-   settings were chosen on seeds 3-25, seeds 27-45 were not looked at until then.
+   settings were chosen on seeds 3-25, seeds 27-45 were not looked at until then;
+10. takes of 30, 60, 120 and 240 Hz (subject 5, seeds 22-25) labelled by the 100 Hz model, with the filters
+    stepping the take's frame time (``LabelingModel.at_rate``, the default) and the training's.
 
     .venv/bin/python benchmarks/labeling.py [--threads 2] [--skip-synthetic]
 """
@@ -210,6 +212,7 @@ def other_days(args) -> None:
         print(f"   {what}: mean {np.mean(right):.2f} % correct, {sum(r >= 99 for r in right)} of {len(right)} "
               "subjects at >= 99 %")
     _released(model, layout, take, [s for s in range(3, 46, 2) if s != 5])
+    _rates(model, layout)
 
 
 def _released(model, layout, take, subjects) -> None:
@@ -242,6 +245,43 @@ def _released(model, layout, take, subjects) -> None:
         print(f"{subject:8d} " + " ".join(f"{w:>12d} ({c:6.2f})" for w, c in cells) + f" {count:9d}")
     for upto, (before, after) in totals.items():
         print(f"   seeds {'3-25' if upto == 25 else '27-45'}: {before} -> {after} points labelled wrong")
+
+
+def _rates(model, layout) -> None:
+    """Section 10: takes of other frame rates, labelled with filters stepping the take's frame time and the
+    training's."""
+    import warnings
+
+    import numpy as np
+
+    from handcap.core.errors import HandcapWarning
+    from handcap.labeling import LabelingModel, corrupt, label_take, score_labels
+    from handcap.synth.scene import SynthConfig, synthesize
+
+    seeds = (22, 23, 24, 25)
+    print(f"\n== 10. takes of other frame rates (the model trained at {1 / model.kalman.dt:.0f} Hz; subject 5, 10 s "
+          f"takes, seeds {seeds[0]}-{seeds[-1]}), online, adapting: the filters stepping the take's frame time "
+          "(the default) and the training's ==")
+    print(f"{'rate':>6s} {'take (default)':>24s} {'training':>24s}  correct / wrong % (points wrong)")
+    at_rate = LabelingModel.at_rate
+    for rate in (30.0, 60.0, 120.0, 240.0):
+        totals = np.zeros((2, 3))
+        for seed in seeds:
+            config = SynthConfig(layout="joints-19", motion="random", object="none", frames=int(10 * rate), rate=rate,
+                                 seed=seed, subject_seed=5, cameras=8)
+            points = synthesize(config, progress=False).labeled_points(layout.names)
+            unlabeled, truth = corrupt(points, ghost_rate=2.0, dropout=0.05, seed=0)
+            for k, step in enumerate((at_rate, lambda self, rate: self)):
+                LabelingModel.at_rate = step
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", HandcapWarning)
+                        score = score_labels(label_take(unlabeled, model).markers, truth)
+                finally:
+                    LabelingModel.at_rate = at_rate
+                totals[k] += [score.correct.sum(), score.erroneous.sum(), score.instances]
+        cells = [f"{100 * c / n:6.2f} / {100 * w / n:5.3f} ({int(w):4d})" for c, w, n in totals]
+        print(f"{rate:6.0f} " + " ".join(f"{c:>24s}" for c in cells))
 
 
 def _another_day(markers, model, layout, online=True) -> list:

@@ -326,3 +326,13 @@ def test_stream_verb_from_qtm_and_its_bad_addresses(capture, fake_qtm, tmp_path,
         assert main(["stream", "--qtm", address, "--attachment", str(tmp_path / "attachment.npz")]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_live_labeler_steps_the_streams_frame_time(unlabelled):
+    # The model was trained at 120 Hz; a stream of 60 Hz is labelled with filters stepping 1/60 s.
+    take, model = unlabelled
+    from handcap.stream import LivePipeline
+
+    assert LivePipeline(take.attachment, OpenHand("right"), rate=60.0, labeling=model).labeler.model.kalman.dt == (
+        1 / 60)
+    assert LivePipeline(take.attachment, OpenHand("right"), rate=120.0, labeling=model).labeler.model is model

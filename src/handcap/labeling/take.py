@@ -146,6 +146,7 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         raise HandcapError(f"unknown labeling method {method!r}; choose viterbi or nearest")
     if method == "nearest" and not isinstance(model, LabelingModel):
         raise HandcapError("the nearest-neighbour baseline labels one hand")
+    model = model.at_rate(points.rate) if isinstance(model, LabelingModel) else [m.at_rate(points.rate) for m in model]
     two_pass = (offline and adapt and method == "viterbi" and isinstance(model, LabelingModel)
                 and model.rigid is not None and transforms is None)
     adapted, trained = None, model

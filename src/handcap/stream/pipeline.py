@@ -106,7 +106,7 @@ class LivePipeline:
                                   mend_swaps=mend_swaps)
         self.labeler = self.label_columns = self.tally = None
         if labeling is not None:
-            model = labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)
+            model = (labeling if isinstance(labeling, LabelingModel) else LabelingModel.load(labeling)).at_rate(rate)
             self.labeler = OnlineLabeler(model, lag=0, hypotheses=hypotheses,
                                          adapt_every=max(1, int(round(adapt_seconds * rate))), defer=True)
             lap.prepare()  # the compiled ranking of assignments, before the first frame
