@@ -12,7 +12,8 @@ with 2 ghosts per second near the hand and 5 % extra random dropouts (seed 0):
 4. the effect of the look-ahead (lag 5, offline) and of the tracking hypothesis;
 5. two hands in one stream (a mirrored later range of the same recording as the left hand);
 6. synthetic joints-19 and glove-13 grasps of a cylinder (occlusion by the hand and the object, ghosts,
-   dropouts), with the cylinder's marker layout known and not (``--skip-synthetic`` leaves it out);
+   dropouts), with the cylinder's marker layout known and not (online; and offline, where its markers are found by
+   their shape: ``handcap.labeling.discover``; ``--skip-synthetic`` leaves it out);
 7. issue 14's takes of another day (synthetic joints-19, known truth; ``--skip-synthetic`` leaves it out):
    trained on one take, labelled on a take of the same subject and day, one whose back triad sits
    13 degrees / 13 mm elsewhere relative to the fingers, one whose triad distances grew by 3-5 mm, and
@@ -161,6 +162,11 @@ def main() -> None:
             s = score_labels(label_take(grasp.points, syn_model, objects=objects).markers, syn_truth)
             print(f"{name:10s} {label:>24s} {100 * s.fraction('correct'):9.2f} {100 * s.fraction('erroneous'):11.3f} "
                   f"{100 * s.fraction('false_marker'):14.3f} {100 * s.fraction('false_occlusion'):13.3f}")
+        found = label_take(grasp.points, syn_model, offline=True)  # the object found by its shape, offline
+        s = score_labels(found.markers, syn_truth)
+        label = f"found offline ({sum(n.startswith('object:') for n in found.markers.names)} markers)"
+        print(f"{name:10s} {label:>24s} {100 * s.fraction('correct'):9.2f} {100 * s.fraction('erroneous'):11.3f} "
+              f"{100 * s.fraction('false_marker'):14.3f} {100 * s.fraction('false_occlusion'):13.3f}")
     other_days(args)
 
 

@@ -3,7 +3,8 @@
 import numpy as np
 
 from handcap.labeling.frame import RigidSet
-from handcap.labeling.plausible import REVERSED_LEAST, LabelTally, label_warnings, missing_labels, reversed_pairs
+from handcap.labeling.plausible import (REVERSED_LEAST, LabelTally, label_warnings, missing_labels, reversed_pairs,
+                                        unnamed_body_warning)
 from handcap.labeling.release import Release
 
 TRIAD = np.array([[0.0, 0.03, 0.0], [-0.03, -0.02, 0.0], [0.035, -0.015, 0.0]])
@@ -50,3 +51,24 @@ def test_reversed_pairs_are_the_labels_holding_each_others_markers():
     np.testing.assert_array_equal(reversed_pairs(expected, swapped), want)
     swapped[21:, 2] = np.nan  # label 2 given in 21 frames only
     assert not reversed_pairs(expected, swapped).any()
+
+
+def test_a_tally_keeps_the_points_left_and_finds_a_rigid_body_among_them():
+    # A stream whose four unlabelled points are a rigid body turning about, besides six labelled hand points.
+    from scipy.spatial.transform import Rotation
+
+    body = np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 0.08, 0.0], [0.03, 0.02, 0.06]])
+    rng = np.random.default_rng(0)
+    tally, labelled = LabelTally(6), LabelTally(6)
+    for t in range(2000):
+        hand = rng.uniform(-0.5, 0.5, (6, 3))
+        obj = body @ Rotation.random(random_state=t).as_matrix().T + rng.uniform(-0.5, 0.5, 3)
+        tally.add(np.r_[np.arange(6), [-1] * 4], points=np.vstack([hand, obj]))
+        labelled.add(np.arange(6), points=hand)
+    assert len(tally.left) == 200 and len(tally.left[0]) == 4 and tally.labelled_share == 0.6
+    found = tally.unnamed_body()
+    assert found is not None and len(found.names) == 4 and found.names[0] == "object:0"
+    line = unnamed_body_warning(found, False)
+    assert "4 of the points no label was given" in line and "object:0-3" in line and "\n" not in line
+    assert "labelled object:0-object:3" in unnamed_body_warning(found, True)
+    assert labelled.unnamed_body() is None  # every point labelled: nothing searched

@@ -336,3 +336,18 @@ def test_the_live_labeler_steps_the_streams_frame_time(unlabelled):
     assert LivePipeline(take.attachment, OpenHand("right"), rate=60.0, labeling=model).labeler.model.kalman.dt == (
         1 / 60)
     assert LivePipeline(take.attachment, OpenHand("right"), rate=120.0, labeling=model).labeler.model is model
+
+
+def test_a_stream_with_an_objects_markers_names_the_rigid_body_at_its_end():
+    # A glove-13 grasp of a cylinder streamed with the hand's labelling model only: the cylinder's markers are left
+    # without labels, and the stream's end names them as a rigid body (an object not given).
+    layout = load_layout("glove-13")
+    rom = synthesize(SynthConfig(layout="glove-13", motion="random", frames=1200, seed=11, subject_seed=5),
+                     progress=False)
+    grasp = synthesize(SynthConfig(layout="glove-13", motion="grasp", frames=600, seed=12, subject_seed=5),
+                       progress=False)
+    model = LabelingModel.train(rom.labeled_points(layout.names), layout.names, layout.rigid)
+    stats = stream(grasp.points, grasp.attachment, OpenHand("right"), realtime=False, labeling=model)
+    named = [w for w in stats.warnings if "keep their distances, as a rigid body's markers do" in w]
+    assert len(named) == 1 and "label the take offline" in named[0]
+    assert int(named[0].split(" of the points")[0]) >= 3

@@ -12,9 +12,13 @@ says each in one line; :func:`handcap.labeling.label_take` stores them with its 
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
+from handcap.labeling.discover import find_rigid_body
 from handcap.labeling.release import release_warning
+from handcap.labeling.rigid_set import RigidSet
 from handcap.labeling.relearn import largest_change
 
 #: A label given in fewer than this share of the frames the median label is given in was not found where the
@@ -33,10 +37,36 @@ LABELLED_WARNING = 0.95
 #: rigid set was re-learned from the take (a marker stuck back elsewhere, another glove or subject), and the
 #: labels rest on that.
 RIGID_CHANGE_WARNING = 0.002
+#: Where the labels leave more than ``1 - LABELLED_WARNING`` of the points, a rigid body among the points left (an
+#: object not given, :func:`~handcap.labeling.discover.find_rigid_body`) is named in a warning; offline
+#: (``label_take``) its markers are then labelled ``object:0``, ``object:1``, ... as a known object's: a synthetic
+#: glove-13 grasp of a cylinder (9 of its 10 markers found) 98.81 / 0.831 -> 99.98 / 0.000 % correct / wrong.
+UNNAMED = "object"
+#: A live stream keeps every this-many-th frame's points left without a label ...
+LEFT_EVERY = 10
+#: ... of the last this-many such frames, for :meth:`LabelTally.unnamed_body`.
+LEFT_KEPT = 300
 #: Points each of two labels needs before :func:`reversed_pairs` compares where they lie: half of a widening trial's
 #: 200 frames, several poses (in a few dozen frames, one pose, a curled finger can hold its tip behind its DIP:
 #: judged on 30 points, section 9's seed 13 exchanged ``pinky_tip`` and ``pinky_dip`` wrongly).
 REVERSED_LEAST = 100
+
+
+def unnamed_body_warning(body: RigidSet, labelled: bool) -> str:
+    """One line naming a rigid body found among the points no label was given (:func:`find_rigid_body`).
+
+    Parameters
+    ----------
+    body : RigidSet
+        The body found, its markers named ``object:0``, ...
+    labelled : bool
+        Whether its markers were then labelled as an object's (offline), or only found (online, live).
+    """
+    return (f"{len(body.names)} of the points no label was given keep their distances, as a rigid body's markers do "
+            "(an object not given to the labeler?): " + (
+                f"labelled {body.names[0]}-{body.names[-1]} and kept out of the hand's labels" if labelled else
+                f"they may pass for the hand's markers; label the take offline, which labels them {UNNAMED}:0-"
+                f"{len(body.names) - 1}, or give the object"))
 
 
 def missing_labels(given) -> np.ndarray:
@@ -160,8 +190,16 @@ class LabelTally:
         self.frames = 0
         self.given = np.zeros(labels, dtype=np.int64)  # frames each label was given in
         self.points = self.labelled = 0
+        self.left: deque = deque(maxlen=LEFT_KEPT)  # points left without a label, every LEFT_EVERY-th frame
 
-    def add(self, labels, valid=None) -> None:
+    def unnamed_body(self) -> RigidSet | None:
+        """A rigid body among the points left without a label (:func:`find_rigid_body`), where the labels leave
+        more than ``1 - LABELLED_WARNING`` of the points; else None."""
+        if not self.labelled_share < LABELLED_WARNING or not self.left:
+            return None
+        return find_rigid_body(list(self.left), name=UNNAMED)
+
+    def add(self, labels, valid=None, points=None) -> None:
         """Count one frame's labels.
 
         Parameters
@@ -170,8 +208,14 @@ class LabelTally:
             Each point's label, -1 for none.
         valid : ndarray (K,) bool, optional
             The points that were points (not NaN rows); default every one.
+        points : ndarray (K, 3), optional
+            The points (metres): every :data:`LEFT_EVERY`-th frame's points left without a label are kept (the
+            last :data:`LEFT_KEPT` such frames) for :meth:`unnamed_body`.
         """
         labels = np.asarray(labels)
+        if points is not None and self.frames % LEFT_EVERY == 0:
+            left = labels < 0 if valid is None else (labels < 0) & np.asarray(valid, dtype=bool)
+            self.left.append(np.asarray(points, dtype=np.float64)[left])
         self.frames += 1
         self.points += int(len(labels) if valid is None else np.count_nonzero(valid))
         given = labels[labels >= 0]

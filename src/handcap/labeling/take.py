@@ -19,11 +19,13 @@ from handcap.core.errors import HandcapError, warn
 from handcap.core.markers import MarkerSequence
 from handcap.core.points import PointCloudSequence
 from handcap.labeling.baseline import NearestNeighbourLabeler
+from handcap.labeling.discover import find_rigid_body
 from handcap.labeling.model import LabelingModel, rigid_transforms
 from handcap.labeling.multihand import MultiHandLabeler
 from handcap.labeling.online import OnlineLabeler
 from handcap.labeling.realign import adapt_means, register_to_model
-from handcap.labeling.plausible import LABELLED_WARNING, MISSING_SPREAD, label_warnings, missing_labels
+from handcap.labeling.plausible import (LABELLED_WARNING, MISSING_SPREAD, UNNAMED, label_warnings, missing_labels,
+                                        unnamed_body_warning)
 from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
 from handcap.labeling.rigid_set import RigidSet
 
@@ -122,7 +124,8 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         the re-learned set is not the trained one (or the labels leave over
         5 % of the points), the set a strictly online pass re-learned is tried
         too and kept when its labels cover ``ONLINE_RIGID_MARGIN`` more of the
-        points.
+        points. Without ``objects``, a rigid body found among the points left
+        (:data:`~handcap.labeling.plausible.UNNAMED`) is labelled as a known object's markers are.
     method : {"viterbi", "nearest"}
         The labeler, or the nearest-neighbour baseline
         (:class:`handcap.labeling.baseline.NearestNeighbourLabeler`).
@@ -138,7 +141,8 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
     LabelResult
         With warnings (also issued as :class:`handcap.core.errors.HandcapWarning`)
         when the hand frame is lost in more than 5 % of the frames or fewer
-        than 95 % of the points are labelled.
+        than 95 % of the points are labelled, and one naming a rigid body
+        found among the points left (an object not given).
     """
     if isinstance(points, MarkerSequence):
         points = PointCloudSequence.from_markers(points)
@@ -147,9 +151,23 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
     if method == "nearest" and not isinstance(model, LabelingModel):
         raise HandcapError("the nearest-neighbour baseline labels one hand")
     model = model.at_rate(points.rate) if isinstance(model, LabelingModel) else [m.at_rate(points.rate) for m in model]
+    result, adapted, found_wider = _labelled(points, model, transforms, offline, method, progress, adapt, options)
+    body = None
+    if method == "viterbi" and isinstance(model, LabelingModel) and not options.get("objects"):
+        if _labelled_share(result, points) < LABELLED_WARNING:
+            body = find_rigid_body([f[lab < 0] for f, lab in zip(points.frames, result.labels)], name=UNNAMED)
+        if body is not None and offline:
+            options = {**options, "objects": [body]}
+            result, adapted, found_wider = _labelled(points, model, transforms, offline, method, progress, adapt,
+                                                     options)
+    return _with_warnings(result, points, adapted, model, found_wider, body)
+
+
+def _labelled(points, model, transforms, offline, method, progress, adapt, options):
+    """:func:`label_take`'s labelling: the result, the model as adapted (offline) and the labels found wider."""
     two_pass = (offline and adapt and method == "viterbi" and isinstance(model, LabelingModel)
                 and model.rigid is not None and transforms is None)
-    adapted, trained = None, model
+    adapted = None
     found_wider = ()
     if two_pass:
         chosen = _rigid_from_take(model, points.frames)
@@ -174,7 +192,7 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         if method == "viterbi":
             options["adapt"] = adapt
         result = _run(points, model, transforms, offline, method, progress, options)
-    return _with_warnings(result, points, adapted, trained, found_wider)
+    return result, adapted, found_wider
 
 
 def _two_passes(points, model, progress, options, missing=None) -> tuple[LabelResult, LabelingModel]:
@@ -303,14 +321,17 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
                        widened=tuple(getattr(labeler, "widened", ())))
 
 
-def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=()) -> LabelResult:
+def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=(), body=None) -> LabelResult:
     """The result with its warnings (:func:`~handcap.labeling.plausible.label_warnings`, issued and stored on it
     and on its markers); ``model`` the adapted model (offline), ``trained`` the one given, ``found_wider`` the
-    labels found only by a wider search."""
+    labels found only by a wider search, ``body`` a rigid body found among the points left (its markers labelled
+    offline, only named online)."""
     one = isinstance(trained, LabelingModel)
     given = _given_shares(result.markers, trained) if one and result.markers.n_frames else np.zeros(0)
     lines = [warn(line, stacklevel=3) for line in label_warnings(
         trained.spatial.names if one else (), given, trained_rigid=trained.rigid if one else None, rigid=result.rigid,
         lost=len(result.lost_frames), frames=points.n_frames, labelled=_labelled_share(result, points),
         released=result.released, rate=points.rate, found_wider=found_wider or result.widened)]
+    if body is not None:
+        lines.append(warn(unnamed_body_warning(body, body.names[0] in result.markers.names), stacklevel=3))
     return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)

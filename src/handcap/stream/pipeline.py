@@ -22,7 +22,7 @@ import numpy as np
 
 from handcap.core.errors import HandcapError
 from handcap.labeling import LabelingModel, OnlineLabeler, lap
-from handcap.labeling.plausible import LabelTally, label_warnings
+from handcap.labeling.plausible import LabelTally, label_warnings, unnamed_body_warning
 from handcap.occlusion import OcclusionFiller, OcclusionModel
 from handcap.stream.solver import ITERATIONS, SMOOTHING, FrameSolver
 
@@ -153,7 +153,7 @@ class LivePipeline:
         if self.labeler is not None:
             points = data.reshape(-1, 3)
             labels = self.labeler.update(points)
-            self.tally.add(labels, np.isfinite(points).all(axis=1))
+            self.tally.add(labels, np.isfinite(points).all(axis=1), points)
             markers = np.full((len(self.names), 3), np.nan)
             kept = labels >= 0  # one label per point given, -1 for no marker (and for NaN rows)
             columns = self.label_columns[labels[kept]]
@@ -180,8 +180,8 @@ class LivePipeline:
 
     def label_warnings(self, rate: float) -> list[str]:
         """The labels' plausibility so far, one line each (:func:`~handcap.labeling.plausible.label_warnings`: a
-        rigid set re-learned, the hand frame often lost, labels hardly given, few points labelled, releases);
-        empty without a labelling model.
+        rigid set re-learned, the hand frame often lost, labels hardly given, few points labelled, releases, a rigid
+        body among the points left: an object not given); empty without a labelling model.
 
         Parameters
         ----------
@@ -192,11 +192,12 @@ class LivePipeline:
             return []
         lab, model = self.labeler, self.labeler.model
         free = model.spatial.names
+        body = self.tally.unnamed_body()
         return label_warnings(free, self.tally.shares([lab.names.index(n) for n in free]),
                               trained_rigid=model.rigid, rigid=None if lab.finder is None else lab.finder.rigid,
                               lost=len(lab.lost_frames), frames=self.tally.frames,
                               labelled=self.tally.labelled_share, released=lab.released, rate=rate,
-                              found_wider=lab.widened)
+                              found_wider=lab.widened) + ([] if body is None else [unnamed_body_warning(body, False)])
 
     def idle(self) -> None:
         """The work the last frame left for before the next one (the labeler's filters and its periodic
