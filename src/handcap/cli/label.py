@@ -54,7 +54,8 @@ def add_label(verbs) -> None:
     p.add_argument("--object", action="append", metavar="NAMES",
                    help="a rigid object in the stream: comma-separated names of its markers in ROM, or a pattern "
                         "such as 'pillow_*' (its shape is learned there); it is found by that shape, labelled, and "
-                        "kept from the fingers (repeat for several)")
+                        "kept from the fingers (repeat for several). Without it, a rigid body among the points "
+                        "the labels leave is named in a warning and, with --offline, labelled object:0, object:1, ...")
     p.add_argument("--out", required=True, help="labeled markers (.c3d .trc .npz)")
     add_units(p, "the input's and --train's coordinates")
     p.set_defaults(run=_cmd_label)
