@@ -36,3 +36,13 @@ def test_ghosts_alone_or_a_body_seen_too_rarely_are_no_body():
     rare = [f if t % 5 == 0 else f[:0] for t, f in enumerate(_body_frames(body, ghosts=0))]  # in 20 % of frames
     assert find_rigid_body(rare) is None and find_rigid_body(rare, min_share=0.15) is not None
     assert find_rigid_body([]) is None and find_rigid_body([np.zeros((0, 3))] * 5) is None
+
+
+def test_markers_in_a_line_do_not_anchor_the_body_but_are_found_in_its_frame():
+    # Three markers on a straight stick (a flat triangle has no frame) and one off it: the one triangle off the
+    # line anchors the body, and the fourth marker is found in its frame.
+    body = np.array([[0.0, 0.0, 0.0], [0.04, 0.0, 0.0], [0.11, 0.0, 0.0], [0.03, 0.05, 0.0]])
+    found = find_rigid_body(_body_frames(body, ghosts=1))
+    assert found is not None and np.isfinite(found.canonical).all() and len(found.names) == 4
+    np.testing.assert_allclose(np.sort(pdist(found.canonical)), np.sort(pdist(body)), atol=0.0005)
+    assert find_rigid_body(_body_frames(body[:3], ghosts=0)) is None  # the stick alone: no frame, no body

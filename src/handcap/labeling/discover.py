@@ -6,8 +6,9 @@ taken for fingertips) where it is 0 % with the cylinder known. The object keeps 
 set of the hand's leftover points or ghosts does over a whole take. :func:`find_rigid_body` finds it:
 
 1. in frames spread over the take, every triangle of leftover points (sides
-   :data:`MIN_SIDE`-:data:`MAX_SIDE`, no two sides within :data:`SIDE_TOLERANCE`, so its corners are told
-   apart by the sides opposite them) is pooled by its sorted sides;
+   :data:`MIN_SIDE`-:data:`MAX_SIDE`, at least half :data:`MIN_SIDE` high over its longest side, no two sides
+   within 2 :data:`SIDE_TOLERANCE`, so its corners are told apart by the sides opposite them) is pooled by its
+   sorted sides;
 2. the shape seen (within :data:`SIDE_TOLERANCE` on each side) in most frames, at least ``min_share`` of them,
    anchors the body;
 3. in the frame of that triangle, the other leftover points that sit at one spot (within
@@ -107,8 +108,10 @@ def _triangles(frames):
                           np.linalg.norm(p[:, 0] - p[:, 1], axis=1)], axis=1)  # side c opposite corner c
         order = np.argsort(sides, axis=1)
         sides = np.take_along_axis(sides, order, axis=1)
-        ok = (sides[:, 0] >= MIN_SIDE) & (sides[:, 2] <= MAX_SIDE) & (np.diff(sides, axis=1).min(axis=1) > 2 *
-                                                                            SIDE_TOLERANCE)
+        height = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) / np.maximum(sides[:, 2],
+                                                                                                      1e-12)
+        ok = ((sides[:, 0] >= MIN_SIDE) & (sides[:, 2] <= MAX_SIDE) & (height >= 0.5 * MIN_SIDE)
+              & (np.diff(sides, axis=1).min(axis=1) > 2 * SIDE_TOLERANCE))
         shapes.append(sides[ok])
         corners.append(np.take_along_axis(tri, order, axis=1)[ok])
         owners.append(np.full(int(ok.sum()), f))
