@@ -81,3 +81,22 @@ def test_an_unknown_object_is_found_by_its_shape_named_online_and_labelled_offli
     near = np.linalg.norm(cylinder[:, None] - got[:, :, None], axis=-1)  # (T, found, cylinder markers)
     given = ~np.isnan(got[..., 0])
     assert given.mean() > 0.5 and (np.nanmin(near, axis=2)[given] < 0.002).mean() > 0.99
+
+
+def test_two_unknown_objects_are_found_one_after_the_other_offline(grasp):
+    # Besides the held cylinder, a tool of five markers turns slowly half a metre away; neither is given.
+    from scipy.spatial.transform import Rotation
+
+    layout, model, take, truth = grasp
+    tool = np.array([[0.0, 0.0, 0.0], [0.06, 0.0, 0.0], [0.0, 0.09, 0.0], [0.04, 0.03, 0.05], [0.1, 0.07, 0.02]])
+    t = np.arange(take.points.n_frames) / take.points.rate
+    turns = Rotation.from_rotvec(np.outer(0.8 * t, [0.3, 0.9, 0.3])).as_matrix()
+    centre = np.mean([f.mean(axis=0) for f in take.points.frames if len(f)], axis=0) + [0.5, 0.0, 0.1]
+    frames = tuple(np.vstack([f, tool @ turns[k].T + centre + [0.1 * np.sin(t[k]), 0.0, 0.0]])
+                   for k, f in enumerate(take.points.frames))
+    result = label_take(PointCloudSequence(frames, take.points.rate), model, offline=True)
+    sizes = sorted(sum(n.startswith(f"{body}:") for n in result.markers.names) for body in ("object", "object2"))
+    assert sizes[0] == len(tool) and sizes[1] <= len(take.object_motion.marker_names)  # in either order
+    assert sum("keep their distances, as a rigid body's markers do" in w for w in result.warnings) == 2
+    score = score_labels(result.markers, truth)
+    assert score.fraction("correct") > 0.995 and score.fraction("erroneous") < 0.001

@@ -65,8 +65,8 @@ def unnamed_body_warning(body: RigidSet, labelled: bool) -> str:
     return (f"{len(body.names)} of the points no label was given keep their distances, as a rigid body's markers do "
             "(an object not given to the labeler?): " + (
                 f"labelled {body.names[0]}-{body.names[-1]} and kept out of the hand's labels" if labelled else
-                f"they may pass for the hand's markers; label the take offline, which labels them {UNNAMED}:0-"
-                f"{len(body.names) - 1}, or give the object"))
+                f"they may pass for the hand's markers; label the take offline, which labels them "
+                f"{body.names[0].split(':')[0]}:0-{len(body.names) - 1}, or give the object"))
 
 
 def missing_labels(given) -> np.ndarray:

@@ -49,6 +49,9 @@ FIRST_PASS_BIRTH = 0
 #: (synthetic subject 7, its triad 12 mm off: 54.1 -> 93.7 % correct, 76 -> 94 % of the points labelled), and
 #: the online pass can too (subject 9: 73 % labelled against the search's 94 %).
 ONLINE_RIGID_MARGIN = 0.01
+#: Offline, the rigid bodies found one after the other among the points the labels leave (objects not given,
+#: :data:`~handcap.labeling.plausible.UNNAMED`), each labelled before the next is searched for, at most this many.
+MOST_BODIES = 3
 #: Offline, a label given in fewer than :data:`~handcap.labeling.plausible.MISSING_SHARE` of the frames the median
 #: label is given in was not found where the training take puts it. The take is then labelled again with every
 #: component widened by :data:`~handcap.labeling.plausible.MISSING_SPREAD` in the first pass and the means moved to
@@ -124,8 +127,9 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         the re-learned set is not the trained one (or the labels leave over
         5 % of the points), the set a strictly online pass re-learned is tried
         too and kept when its labels cover ``ONLINE_RIGID_MARGIN`` more of the
-        points. Without ``objects``, a rigid body found among the points left
-        (:data:`~handcap.labeling.plausible.UNNAMED`) is labelled as a known object's markers are.
+        points. Without ``objects``, rigid bodies found among the points left
+        (:data:`~handcap.labeling.plausible.UNNAMED`, :data:`MOST_BODIES`) are labelled as known objects'
+        markers are.
     method : {"viterbi", "nearest"}
         The labeler, or the nearest-neighbour baseline
         (:class:`handcap.labeling.baseline.NearestNeighbourLabeler`).
@@ -152,15 +156,18 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         raise HandcapError("the nearest-neighbour baseline labels one hand")
     model = model.at_rate(points.rate) if isinstance(model, LabelingModel) else [m.at_rate(points.rate) for m in model]
     result, adapted, found_wider = _labelled(points, model, transforms, offline, method, progress, adapt, options)
-    body = None
-    if method == "viterbi" and isinstance(model, LabelingModel) and not options.get("objects"):
-        if _labelled_share(result, points) < LABELLED_WARNING:
-            body = find_rigid_body([f[lab < 0] for f, lab in zip(points.frames, result.labels)], name=UNNAMED)
-        if body is not None and offline:
-            options = {**options, "objects": [body]}
-            result, adapted, found_wider = _labelled(points, model, transforms, offline, method, progress, adapt,
-                                                     options)
-    return _with_warnings(result, points, adapted, model, found_wider, body)
+    bodies, search = [], method == "viterbi" and isinstance(model, LabelingModel) and not options.get("objects")
+    while search and len(bodies) < MOST_BODIES and _labelled_share(result, points) < LABELLED_WARNING:
+        name = f"{UNNAMED}{len(bodies) + 1 if bodies else ''}"  # object, object2, ...
+        body = find_rigid_body([f[lab < 0] for f, lab in zip(points.frames, result.labels)], name=name)
+        if body is None:  # (rigid bodies found among the points left: objects not given)
+            break
+        bodies.append(body)
+        if not offline:  # online, only named: the points of one body are not told from another's
+            break
+        options = {**options, "objects": list(bodies)}
+        result, adapted, found_wider = _labelled(points, model, transforms, offline, method, progress, adapt, options)
+    return _with_warnings(result, points, adapted, model, found_wider, bodies)
 
 
 def _labelled(points, model, transforms, offline, method, progress, adapt, options):
@@ -321,17 +328,16 @@ def _run(points, model, transforms, offline, method, progress, options) -> Label
                        widened=tuple(getattr(labeler, "widened", ())))
 
 
-def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=(), body=None) -> LabelResult:
+def _with_warnings(result: LabelResult, points, model, trained=None, found_wider=(), bodies=()) -> LabelResult:
     """The result with its warnings (:func:`~handcap.labeling.plausible.label_warnings`, issued and stored on it
     and on its markers); ``model`` the adapted model (offline), ``trained`` the one given, ``found_wider`` the
-    labels found only by a wider search, ``body`` a rigid body found among the points left (its markers labelled
-    offline, only named online)."""
+    labels found only by a wider search, ``bodies`` the rigid bodies found among the points left (their markers
+    labelled offline, only named online)."""
     one = isinstance(trained, LabelingModel)
     given = _given_shares(result.markers, trained) if one and result.markers.n_frames else np.zeros(0)
     lines = [warn(line, stacklevel=3) for line in label_warnings(
         trained.spatial.names if one else (), given, trained_rigid=trained.rigid if one else None, rigid=result.rigid,
         lost=len(result.lost_frames), frames=points.n_frames, labelled=_labelled_share(result, points),
         released=result.released, rate=points.rate, found_wider=found_wider or result.widened)]
-    if body is not None:
-        lines.append(warn(unnamed_body_warning(body, body.names[0] in result.markers.names), stacklevel=3))
+    lines += [warn(unnamed_body_warning(b, b.names[0] in result.markers.names), stacklevel=3) for b in bodies]
     return replace(result, markers=result.markers.with_warnings(*lines), warnings=tuple(lines), model=model)
