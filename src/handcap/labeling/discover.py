@@ -10,7 +10,7 @@ set of the hand's leftover points or ghosts does over a whole take. :func:`find_
    within 2 :data:`SIDE_TOLERANCE`, so its corners are told apart by the sides opposite them) is pooled by its
    sorted sides;
 2. the shape seen (within :data:`SIDE_TOLERANCE` on each side) in most frames, at least ``min_share`` of them,
-   anchors the body;
+   and once in a frame (:data:`AMBIGUOUS`), anchors the body;
 3. in the frame of that triangle, the other leftover points that sit at one spot (within
    :data:`SPOT_RADIUS`) in at least ``min_share`` of the anchored frames are the body's other markers.
 
@@ -31,6 +31,11 @@ MIN_SIDE, MAX_SIDE = 0.01, 0.3
 SIDE_TOLERANCE = 0.001
 #: How near its spot a further marker must be in the anchor triangle's frame (metres).
 SPOT_RADIUS = 0.002
+#: A shape matched by more than one triangle in more than this share of its frames (congruent triangles of a body
+#: partly symmetric, such as markers round a cylinder) may be anchored on other markers from frame to frame, and the
+#: body's other markers found in its frame then come out doubled: such a shape anchors the body only where every
+#: shape seen as often is (a body symmetric as a whole, whose other markers fall on one another).
+AMBIGUOUS = 0.1
 #: Frames with more leftover points than this are not searched (their triangles grow as the cube of the count).
 MOST_POINTS = 30
 #: Most triangles pooled (fewer frames are searched where they hold many points): about a second's search.
@@ -70,15 +75,18 @@ def find_rigid_body(frames, *, min_share: float = 0.3, max_frames: int = 300, na
     shapes, owners, corners = _triangles(searched)
     if not len(shapes):
         return None
-    tree = cKDTree(shapes)
-    near = tree.query_ball_point(shapes, SIDE_TOLERANCE, p=np.inf)
-    counts = np.array([len(np.unique(owners[n])) for n in near])
-    best = int(np.argmax(counts))
-    if counts[best] < min_share * len(pick):
+    candidates = []  # (members, ambiguous) of the shapes seen in enough frames, the most first
+    for centre in _most_frames(shapes, owners):
+        members = np.flatnonzero(np.abs(shapes - centre).max(axis=1) <= SIDE_TOLERANCE)
+        held, times = np.unique(owners[members], return_counts=True)
+        if len(held) >= min_share * len(pick):
+            candidates.append((centre, members, (times > 1).mean() > AMBIGUOUS))
+    if not candidates:
         return None
+    # The first seen once a frame; else (a body symmetric as a whole, every triangle twice) the first.
+    centre, members, _ = next((c for c in candidates if not c[2]), candidates[0])
     # One matching triangle per frame (the nearest shape), its corners in a fixed order.
-    members = np.array(near[best])
-    order = np.argsort(np.abs(shapes[members] - shapes[best]).max(axis=1), kind="stable")
+    order = np.argsort(np.abs(shapes[members] - centre).max(axis=1), kind="stable")
     _, first = np.unique(owners[members[order]], return_index=True)
     chosen = members[order[first]]
     local, spots = [], []
@@ -116,6 +124,24 @@ def _triangles(frames):
         corners.append(np.take_along_axis(tri, order, axis=1)[ok])
         owners.append(np.full(int(ok.sum()), f))
     return np.concatenate(shapes), np.concatenate(owners), np.concatenate(corners)
+
+
+def _most_frames(shapes, owners, most: int = 10) -> list:
+    """The shapes (3,) seen in most frames, the most first: on a grid of :data:`SIDE_TOLERANCE` cells, the ``most``
+    cells whose blocks of 3 x 3 x 3 cells hold shapes of most frames; the median of each block's shapes."""
+    cells = np.floor(shapes / SIDE_TOLERANCE).astype(np.int64) + 1  # 1 .. side / tolerance + 1
+    size, frames = int(cells.max()) + 2, int(owners.max()) + 1
+    offsets = np.stack(np.meshgrid(*([np.arange(-1, 2)] * 3), indexing="ij"), axis=-1).reshape(-1, 3)
+    block = ((cells[:, None] + offsets[None]) @ np.array([size * size, size, 1])).ravel()  # each block a shape is in
+    pairs = np.sort(block * frames + np.repeat(owners, len(offsets)))
+    pairs = pairs[np.r_[True, pairs[1:] != pairs[:-1]]] // frames  # each (block, frame) once: its block
+    starts = np.flatnonzero(np.r_[True, pairs[1:] != pairs[:-1]])  # pairs are sorted by block
+    seen = np.diff(np.r_[starts, len(pairs)])
+    out = []
+    for k in np.argsort(-seen, kind="stable")[:most]:
+        best = np.array(np.unravel_index(int(pairs[starts[k]]), (size, size, size)))
+        out.append(np.median(shapes[(np.abs(cells - best) <= 1).all(axis=1)], axis=0))
+    return out
 
 
 def _triangle_frame(corners):

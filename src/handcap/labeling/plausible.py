@@ -40,7 +40,7 @@ RIGID_CHANGE_WARNING = 0.002
 #: Where the labels leave more than ``1 - LABELLED_WARNING`` of the points, a rigid body among the points left (an
 #: object not given, :func:`~handcap.labeling.discover.find_rigid_body`) is named in a warning; offline
 #: (``label_take``) its markers are then labelled ``object:0``, ``object:1``, ... as a known object's: a synthetic
-#: glove-13 grasp of a cylinder (9 of its 10 markers found) 98.81 / 0.831 -> 99.98 / 0.000 % correct / wrong.
+#: glove-13 grasp of a cylinder (its 10 markers found) 98.81 / 0.831 -> 100.00 / 0.000 % correct / wrong.
 UNNAMED = "object"
 #: A live stream keeps every this-many-th frame's points left without a label ...
 LEFT_EVERY = 10

@@ -50,7 +50,8 @@ FIRST_PASS_BIRTH = 0
 #: the online pass can too (subject 9: 73 % labelled against the search's 94 %).
 ONLINE_RIGID_MARGIN = 0.01
 #: Offline, the rigid bodies found one after the other among the points the labels leave (objects not given,
-#: :data:`~handcap.labeling.plausible.UNNAMED`), each labelled before the next is searched for, at most this many.
+#: :data:`~handcap.labeling.plausible.UNNAMED`), each labelled before the next is searched for (and kept where its
+#: labels cover ``ONLINE_RIGID_MARGIN`` more of the points), at most this many.
 MOST_BODIES = 3
 #: Offline, a label given in fewer than :data:`~handcap.labeling.plausible.MISSING_SHARE` of the frames the median
 #: label is given in was not found where the training take puts it. The take is then labelled again with every
@@ -162,11 +163,15 @@ def label_take(points, model: LabelingModel, *, transforms=None, offline: bool =
         body = find_rigid_body([f[lab < 0] for f, lab in zip(points.frames, result.labels)], name=name)
         if body is None:  # (rigid bodies found among the points left: objects not given)
             break
-        bodies.append(body)
         if not offline:  # online, only named: the points of one body are not told from another's
+            bodies.append(body)
             break
-        options = {**options, "objects": list(bodies)}
-        result, adapted, found_wider = _labelled(points, model, transforms, offline, method, progress, adapt, options)
+        again = _labelled(points, model, transforms, offline, method, progress, adapt,
+                          {**options, "objects": bodies + [body]})
+        if _labelled_share(again[0], points) < _labelled_share(result, points) + ONLINE_RIGID_MARGIN:
+            break  # its shape found too few of its points to be a body
+        bodies.append(body)
+        result, adapted, found_wider = again
     return _with_warnings(result, points, adapted, model, found_wider, bodies)
 
 
