@@ -164,7 +164,7 @@ def main() -> None:
                   f"{100 * s.fraction('false_marker'):14.3f} {100 * s.fraction('false_occlusion'):13.3f}")
         found = label_take(grasp.points, syn_model, offline=True)  # the object found by its shape, offline
         s = score_labels(found.markers, syn_truth)
-        label = f"found offline ({sum(n.startswith('object:') for n in found.markers.names)} markers)"
+        label = f"found offline ({sum(n.startswith('object:') for n in found.markers.names)})"
         print(f"{name:10s} {label:>24s} {100 * s.fraction('correct'):9.2f} {100 * s.fraction('erroneous'):11.3f} "
               f"{100 * s.fraction('false_marker'):14.3f} {100 * s.fraction('false_occlusion'):13.3f}")
     other_days(args)

@@ -75,7 +75,7 @@ def find_rigid_body(frames, *, min_share: float = 0.3, max_frames: int = 300, na
     shapes, owners, corners = _triangles(searched)
     if not len(shapes):
         return None
-    candidates = []  # (members, ambiguous) of the shapes seen in enough frames, the most first
+    candidates = []  # (centre, members, ambiguous) of the shapes seen in enough frames, the most first
     for centre in _most_frames(shapes, owners):
         members = np.flatnonzero(np.abs(shapes - centre).max(axis=1) <= SIDE_TOLERANCE)
         held, times = np.unique(owners[members], return_counts=True)
