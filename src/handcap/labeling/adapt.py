@@ -40,6 +40,7 @@ from handcap.labeling.realign import (MAX_SHIFT, MAX_TURN_DEG, OUTLIER_SHARE, OU
 from handcap.labeling.plausible import MISSING_SPREAD, missing_labels, reversed_pairs
 from handcap.labeling.release import Release
 from handcap.labeling.relearn import RELEARN_WIDTH, largest_change, rigid_from_take
+from handcap.labeling.spatial import median_fit
 
 #: Frames with labelled points the window must hold before a label hardly given in them is searched for wider, and
 #: frames after that a wider search is judged on.
@@ -150,7 +151,7 @@ class StreamAdaptation:
         lab = self.labeler
         if self.typical is None or lab.lag or self.settled or ll.shape[1] < max(3, lab.n_free // 2):
             return False
-        if max(np.median(ll.max(axis=0)), np.median(ll.max(axis=1))) >= self.typical - lab.suspect_drop:
+        if median_fit(ll) >= self.typical - lab.suspect_drop:
             return False
         if self.lost and self.aligned:
             self.lost[-1] = True

@@ -50,6 +50,7 @@ from handcap.labeling.hypotheses import emission_scores, spatial_hypotheses, tra
 from handcap.labeling.kalman import KalmanBatch
 from handcap.labeling.model import LabelingModel
 from handcap.labeling.release import Release, TrackEvidence
+from handcap.labeling.spatial import median_fit
 from handcap.labeling.viterbi import backtrack, viterbi_step
 
 
@@ -403,8 +404,7 @@ class OnlineLabeler:
         if not suspect and len(best) >= max(3, self.n_free // 2):
             if self._typical_fit is None:
                 self._typical_fit = self.spatial.typical_fit()
-            fits = max(np.median(best), np.median(self._last_ll.max(axis=1)))
-            suspect = bool(fits < self._typical_fit - self.suspect_drop)
+            suspect = median_fit(self._last_ll) < self._typical_fit - self.suspect_drop
         self.finder.suspect = suspect
         if not suspect:
             self._fit_level += 0.05 * (fit - self._fit_level)

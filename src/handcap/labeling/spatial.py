@@ -219,6 +219,20 @@ class SpatialModel:
                    np.asarray(data[f"{prefix}means"], dtype=np.float64), chols, _log_norm(weights, chols))
 
 
+def median_fit(ll) -> float:
+    """How well a frame's points fit the labels: the better of the points' median best log-likelihood and the
+    labels' (each label's best point). A held object's markers, not given to the labeler, fit no label and pull the
+    points' median down, while the hand's labels still find their markers (:meth:`SpatialModel.typical_fit` is the
+    yardstick).
+
+    Parameters
+    ----------
+    ll : ndarray (M, K)
+        Log-likelihood of every label for each of the frame's K points (K >= 1).
+    """
+    return float(max(np.median(ll.max(axis=0)), np.median(ll.max(axis=1))))
+
+
 def _log_norm(weights, chols) -> np.ndarray:
     """``log w - 1.5 log(2 pi) + log det P`` (M, L) of weights (M, L) and precision Cholesky factors (M, L, 3, 3)."""
     log_det = np.log(np.diagonal(chols, axis1=2, axis2=3)).sum(axis=-1)
