@@ -34,14 +34,16 @@ def test_the_real_glove_keeps_its_course(shared_data, unmended):
 
     layout = load_layout("glove-13")
     markers = read_markers(shared_data / "markers/hand_embodiment_glove/recording.tsv").select(layout.names)
-    take = markers.frames(0, 1500)
+    # Its first 30 s: how many excursions a stretch holds depends on the floating-point path to each frame's
+    # solution (its first 15 s alone: 18 spikes unmended on one machine, 6 on an AMD EPYC), 30 s hold dozens.
+    take = markers.frames(0, 3000)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HandcapWarning)
         attachment = calibrate_attachment(take, layout).attachment
         before, after = unmended(take, attachment), solve_hand(take, attachment)
     spikes_before, spikes_after = len(jerk_spikes(before.joints, 100.0)), len(jerk_spikes(after.joints, 100.0))
-    # measured: 18 -> 2 spikes, MSNR 2.6 -> 6.3 dB, MRE 1.206 -> 1.211 mm (the whole recording: 184 -> 9 spikes,
-    # 0.2 -> 7.1 dB, 1.316 -> 1.323 mm)
+    # measured (AMD EPYC, 2026-12-02): 55 -> 1 spikes, MSNR 1.5 -> 6.7 dB, MRE 1.119 -> 1.126 mm (the whole
+    # recording, on another machine: 184 -> 9 spikes, 0.2 -> 7.1 dB, 1.316 -> 1.323 mm)
     assert spikes_before >= 10 and spikes_after <= spikes_before / 5, (spikes_before, spikes_after)
     assert msnr(after.joints) > msnr(before.joints) + 3.0
     assert np.nanmean(after.marker_residuals) < np.nanmean(before.marker_residuals) + 0.00002  # the fit as good
