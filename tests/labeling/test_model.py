@@ -64,13 +64,13 @@ def test_a_model_labels_a_take_of_another_rate_with_the_takes_frame_time(monkeyp
     assert model.at_rate(30.0).kalman.jerk == model.kalman.jerk
     with pytest.raises(HandcapError, match="positive"):
         model.at_rate(-30.0)
+    takes = [corrupt(take(seed, 300, 30.0), ghost_rate=2.0, dropout=0.05, seed=0) for seed in (21, 22, 23)]
     scores = {}
     for fixed in (True, False):
         if not fixed:
             monkeypatch.setattr(LabelingModel, "at_rate", lambda self, rate: self)
         scores[fixed] = np.zeros(2)
-        for seed in (21, 22, 23):
-            points, truth = corrupt(take(seed, 300, 30.0), ghost_rate=2.0, dropout=0.05, seed=0)
+        for points, truth in takes:
             s = score_labels(label_take(points, model).markers, truth)
             scores[fixed] += [s.fraction("correct"), s.fraction("erroneous")]
     assert scores[True][0] > scores[False][0] + 0.04
