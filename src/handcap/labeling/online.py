@@ -103,12 +103,11 @@ class OnlineLabeler:
         fingertip is a plausible finger marker that moves smoothly with the
         hand.
     adapt : bool
-        Re-align the spatial model to the take as it streams in
-        (:mod:`handcap.labeling.adapt`): after ``adapt_every`` frames, a
-        label-free registration of the points seen so far; then every
-        ``adapt_every`` frames, a registration of the labelled points of the
-        recent frames (weighted by ``forget`` per frame of age; the mixture
-        means stay as trained online). When the hand frame is lost in most
+        Re-align the spatial model to the take as it streams in (:mod:`handcap.labeling.adapt`): after
+        ``adapt_every`` frames, a label-free registration of the points seen so far (provisional ones every 10
+        frames before it: ``adapt.PROVISIONAL_EVERY``); then every ``adapt_every`` frames, a registration of the
+        labelled points of the recent frames (weighted by ``forget`` per frame of age; the mixture means stay as
+        trained online). When the hand frame is lost in most
         recent frames, the rigid markers' shape is re-learned from them.
         Strictly online (``lag`` 0), until this has settled, a frame whose
         points fit the model far worse than it typically fits
