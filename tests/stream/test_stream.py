@@ -73,6 +73,24 @@ def test_every_frame_reaches_osc_and_websocket(capture):
     assert stats.latency_ms.shape == (240,) and (stats.latency_ms > 0).all()
 
 
+def test_a_replayed_frame_taken_late_counts_its_wait():
+    # A replay at 100 Hz whose reader is held up 0.2 s after frame 2: frames 3-22 are taken late, as a live system's
+    # queue would hand them on, and each is stamped with its own time in the take, so the wait counts as latency.
+    from handcap.stream.sources import ReplaySource
+
+    stamps, taken = [], []
+    for t, (arrived, _) in enumerate(ReplaySource(np.zeros((30, 1, 3)), 100.0)):
+        stamps.append(arrived)
+        taken.append(time.perf_counter())
+        if t == 2:
+            time.sleep(0.2)
+    stamps, taken = np.array(stamps) - stamps[0], np.array(taken) - stamps[0]
+    assert np.allclose(stamps, np.arange(30) / 100.0)
+    assert taken[3] > 0.2 > stamps[3] + 0.15  # taken 0.2 s after it arrived
+    fast = [arrived for arrived, _ in ReplaySource(np.zeros((3, 1, 3)), 100.0, realtime=False)]
+    assert fast[-1] - fast[0] < 0.01  # as fast as taken: stamped when taken
+
+
 def test_streamed_joints_agree_with_the_batch_solver_and_the_truth(capture):
     stats = stream(capture.markers, capture.attachment, OpenHand("right"), realtime=False)
     batch = solve_hand(capture.markers, capture.attachment, OpenHand("right")).joints

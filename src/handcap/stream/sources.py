@@ -42,7 +42,8 @@ class ReplaySource:
     names : sequence of str or None
         The K columns' names (None: unlabelled points).
     realtime : bool
-        Hand frames over at ``rate`` (False: each as soon as the one before is taken).
+        Hand frames over at ``rate``, each stamped as arrived at its time in the take, however late it is taken
+        (False: each as soon as the one before is taken, stamped then).
     """
 
     def __init__(self, frames, rate: float, names=None, *, realtime: bool = True):
@@ -54,11 +55,16 @@ class ReplaySource:
     def __iter__(self):
         start = time.perf_counter()
         for t, frame in enumerate(self.frames):
-            if self.realtime:
-                wait = start + t / self.rate - time.perf_counter()
-                if wait > 0:
-                    time.sleep(wait)
-            yield time.perf_counter(), frame
+            if not self.realtime:
+                yield time.perf_counter(), frame
+                continue
+            due = start + t / self.rate
+            wait = due - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            # Stamped with its own time: a frame taken late (the frames before took longer than the rate allows)
+            # waited for the stream from then on, as a live system's frame waits in its queue.
+            yield due, frame
 
     def warnings(self) -> list[str]:
         """None: a replay loses no frame."""
