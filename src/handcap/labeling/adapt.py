@@ -50,8 +50,8 @@ WIDEN_MARGIN = 0.01
 #: Frames between the provisional alignments made until the first one the schedule (``every``) makes: each from
 #: every point gathered so far, the one before as its start. The live stream re-aligns once a second; waiting that
 #: long for its first alignment, it labelled another subject's first second hardly at all (section 9 of
-#: ``benchmarks/labeling.py`` labelled as the stream labels: 88.3 -> 91.9 % and 86.3 -> 89.3 % of the points
-#: right with them, 5,333 -> 5,220 wrong).
+#: ``benchmarks/labeling.py`` labelled as the stream labels: 88.3 -> 91.7 % and 86.3 -> 89.3 % of the points
+#: right with them, 5,333 -> 4,845 wrong).
 PROVISIONAL_EVERY = 10
 
 __all__ = ["MAX_SHIFT", "MAX_TURN_DEG", "OUTLIER_SHARE", "OUTLIER_VOLUME", "StreamAdaptation", "adapt_means",
